@@ -1,0 +1,77 @@
+# fxstream — build, run, test, bench.
+#
+# Sources are picked up by wildcard so adding a module, a unit test (tests/unit/test_*.c)
+# or a benchmark (tests/bench/bench_*.c) needs no edit here. Everything lands in build/.
+
+CC      ?= cc
+BUILD   := build
+PKGS    := libwebsockets libcjson OpenCL
+EXRLIB  := $(filter -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
+CFLAGS  ?= -O2 -g
+CFLAGS  += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -pthread \
+           $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Iserver -Iclients/c
+LDLIBS  += $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXRLIB) -lm -lpthread
+
+SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c))
+SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
+CLIENT_OBJ  := $(BUILD)/obj/clients/c/fxclient.o
+REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
+UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
+BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))
+KERNELS     := $(wildcard kernels/*.cl)
+
+.PHONY: all deps run test bench clean unit
+all: $(BUILD)/fxstreamd $(BUILD)/fxctl
+
+deps:
+	@deploy/install-deps.sh
+
+run: deps all
+	$(BUILD)/fxstreamd $(RUN_ARGS)
+
+test: deps all $(UNIT_BIN)
+	@tests/run.sh
+
+bench: deps all $(BENCH_BIN)
+	@tests/bench/run.sh
+
+unit: $(UNIT_BIN)
+
+clean:
+	rm -rf $(BUILD)
+
+$(BUILD)/gen/kernels.c: $(KERNELS) tools/embed_kernels.sh
+	@mkdir -p $(@D)
+	tools/embed_kernels.sh $(KERNELS) > $@
+
+$(BUILD)/obj/gen/%.o: $(BUILD)/gen/%.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -c $< -o $@
+
+$(BUILD)/obj/%.o: %.c
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) -c $< -o $@
+
+$(BUILD)/libfxserver.a: $(SERVER_OBJ)
+	@rm -f $@
+	ar rcs $@ $^
+
+$(BUILD)/libfxclient.a: $(CLIENT_OBJ)
+	@rm -f $@
+	ar rcs $@ $^
+
+$(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
+	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+
+$(BUILD)/fxctl: $(BUILD)/obj/clients/c/fxctl.o $(BUILD)/libfxclient.a
+	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+
+$(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
+	@mkdir -p $(@D)
+	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+
+-include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

@@ -1,0 +1,34 @@
+#!/bin/sh
+# install-deps.sh — installs the Debian 12 packages fxstream needs, and only those missing.
+#
+# Idempotent and quick when everything is present (no apt-get update then). Runs apt-get
+# as root, or through sudo when available. Set FXS_NO_INSTALL=1 to only check.
+set -eu
+
+PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo
+libwebsockets-dev libopenexr-dev openexr libcjson-dev python3 python3-websockets python3-numpy"
+
+missing=""
+for p in $PKGS; do
+    if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed"; then
+        missing="$missing $p"
+    fi
+done
+[ -z "$missing" ] && exit 0
+
+echo "install-deps: installing:$missing"
+if [ "${FXS_NO_INSTALL:-0}" = 1 ]; then
+    echo "install-deps: FXS_NO_INSTALL=1, not installing" >&2
+    exit 1
+fi
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then
+    if command -v sudo >/dev/null 2>&1; then SUDO=sudo; else
+        echo "install-deps: need root (or sudo) to install:$missing" >&2
+        exit 1
+    fi
+fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+# shellcheck disable=SC2086
+$SUDO apt-get install -y -q --no-install-recommends $missing

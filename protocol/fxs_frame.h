@@ -1,0 +1,114 @@
+/* fxs_frame.h — the 64-byte binary frame header of protocol fxstream.v1.
+ *
+ * Shared verbatim by the daemon and the C client library, so both sides agree on
+ * one definition. The header is little-endian on the wire; these helpers pack and
+ * unpack it byte by byte so the code is correct on any host byte order and never
+ * depends on struct layout or alignment. See protocol/PROTOCOL.md for the spec. */
+#ifndef FXS_FRAME_H
+#define FXS_FRAME_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#define FXS_MAGIC "FXS1"
+#define FXS_HEADER_BYTES 64u
+
+enum fxs_kind {
+    FXS_KIND_PARTICLES = 1,
+    FXS_KIND_TEXTURE = 2,
+    FXS_KIND_LIGHT_RIG = 3,
+    FXS_KIND_LUT = 4,
+};
+#define FXS_KIND_MAX 4
+
+/* Codecs of kind 2 (texture) payloads. */
+enum fxs_texture_codec {
+    FXS_CODEC_EXR = 1, /* payload is a complete OpenEXR file */
+};
+
+struct fxs_header {
+    uint16_t header_bytes;
+    uint16_t kind;
+    uint32_t channel;
+    uint32_t param_rev;
+    uint64_t seq;
+    double sim_time;
+    uint64_t server_time_us;
+    uint32_t codec;
+    uint32_t payload_bytes;
+    uint32_t count_or_width;
+    uint32_t height;
+    uint32_t flags;
+};
+
+static inline void fxs_put_u16(uint8_t *p, uint16_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); }
+static inline void fxs_put_u32(uint8_t *p, uint32_t v)
+{
+    for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
+}
+static inline void fxs_put_u64(uint8_t *p, uint64_t v)
+{
+    for (int i = 0; i < 8; i++) p[i] = (uint8_t)(v >> (8 * i));
+}
+static inline uint16_t fxs_get_u16(const uint8_t *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
+static inline uint32_t fxs_get_u32(const uint8_t *p)
+{
+    uint32_t v = 0;
+    for (int i = 3; i >= 0; i--) v = (v << 8) | p[i];
+    return v;
+}
+static inline uint64_t fxs_get_u64(const uint8_t *p)
+{
+    uint64_t v = 0;
+    for (int i = 7; i >= 0; i--) v = (v << 8) | p[i];
+    return v;
+}
+
+/* Writes the 64 header bytes at out. */
+static inline void fxs_header_pack(const struct fxs_header *h, uint8_t out[FXS_HEADER_BYTES])
+{
+    uint64_t t;
+    memset(out, 0, FXS_HEADER_BYTES);
+    memcpy(out, FXS_MAGIC, 4);
+    fxs_put_u16(out + 4, FXS_HEADER_BYTES);
+    fxs_put_u16(out + 6, h->kind);
+    fxs_put_u32(out + 8, h->channel);
+    fxs_put_u32(out + 12, h->param_rev);
+    fxs_put_u64(out + 16, h->seq);
+    memcpy(&t, &h->sim_time, 8);
+    fxs_put_u64(out + 24, t);
+    fxs_put_u64(out + 32, h->server_time_us);
+    fxs_put_u32(out + 40, h->codec);
+    fxs_put_u32(out + 44, h->payload_bytes);
+    fxs_put_u32(out + 48, h->count_or_width);
+    fxs_put_u32(out + 52, h->height);
+    fxs_put_u32(out + 56, h->flags);
+}
+
+/* Parses a frame of len bytes. Returns 0 and fills h, or -1 when the bytes are not a
+ * valid v1 frame: short buffer, bad magic, header_bytes < 64 or beyond the buffer, or
+ * a payload_bytes that does not match what follows the header. */
+static inline int fxs_header_unpack(const uint8_t *buf, size_t len, struct fxs_header *h)
+{
+    uint64_t t;
+    if (len < FXS_HEADER_BYTES || memcmp(buf, FXS_MAGIC, 4) != 0) return -1;
+    h->header_bytes = fxs_get_u16(buf + 4);
+    if (h->header_bytes < FXS_HEADER_BYTES || h->header_bytes > len) return -1;
+    h->kind = fxs_get_u16(buf + 6);
+    h->channel = fxs_get_u32(buf + 8);
+    h->param_rev = fxs_get_u32(buf + 12);
+    h->seq = fxs_get_u64(buf + 16);
+    t = fxs_get_u64(buf + 24);
+    memcpy(&h->sim_time, &t, 8);
+    h->server_time_us = fxs_get_u64(buf + 32);
+    h->codec = fxs_get_u32(buf + 40);
+    h->payload_bytes = fxs_get_u32(buf + 44);
+    h->count_or_width = fxs_get_u32(buf + 48);
+    h->height = fxs_get_u32(buf + 52);
+    h->flags = fxs_get_u32(buf + 56);
+    if ((size_t)h->payload_bytes != len - h->header_bytes) return -1;
+    return 0;
+}
+
+#endif

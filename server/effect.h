@@ -1,0 +1,65 @@
+/* effect.h — the small interface every effect implements.
+ *
+ * An effect owns its simulation or generator state and its OpenCL objects; it runs
+ * only on the engine thread and never sees sockets. It declares its parameters as a
+ * param_def table (params.h), and each step emits zero or more encoded payloads
+ * through a callback; the engine wraps each one into a frame (header + payload) once,
+ * and the hub fans that frame out to every subscriber. */
+#ifndef FX_EFFECT_H
+#define FX_EFFECT_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <cjson/cJSON.h>
+
+#include "err.h"
+#include "params.h"
+
+struct ocl;
+
+/* One encoded output of a step. The payload is copied by the engine before emit returns. */
+struct effect_frame {
+    uint16_t kind;           /* enum fxs_kind */
+    uint32_t codec;          /* kind-specific codec id (protocol/PROTOCOL.md) */
+    uint32_t count_or_width; /* particles, or texture width */
+    uint32_t height;         /* texture height, or 0 */
+    uint32_t flags;
+    const void *payload;
+    size_t payload_bytes;
+    double encode_ms;        /* time spent encoding this payload, for /metrics */
+};
+
+typedef int (*effect_emit_fn)(void *ctx, const struct effect_frame *frame);
+
+struct effect_ops {
+    const char *name;             /* protocol name, e.g. "energy_wave" */
+    const char *doc;              /* one paragraph for describe */
+    const struct param_def *params; /* {0}-terminated; must contain "fps" (PARAM_FLOAT) */
+    const char *outputs_json;     /* JSON array describing the outputs, for describe */
+
+    /* Cross-parameter rules beyond the table (may be NULL). Called on every merged
+     * document before it is accepted; code bad_param with err->param set. */
+    int (*check)(const cJSON *params, struct fx_err *err);
+
+    /* Creates the state from a complete validated document. Returns NULL and fills err
+     * (code internal, with the OpenCL build log when a build fails). */
+    void *(*create)(struct ocl *ocl, const cJSON *params, struct fx_err *err);
+
+    /* Applies a new complete document between two steps (live change). A parameter
+     * flagged PARAM_RESTART never reaches apply: the engine re-creates instead. */
+    int (*apply)(void *self, const cJSON *params, struct fx_err *err);
+
+    /* Advances to sim_time (dt seconds after the previous step) and emits frames. */
+    int (*step)(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err);
+
+    /* Restarts the state as if just created (the protocol's `reset`). */
+    int (*reset)(void *self, struct fx_err *err);
+
+    void (*destroy)(void *self);
+};
+
+/* The registry (effects/registry.c). */
+const struct effect_ops *effect_find(const char *name);
+const struct effect_ops *const *effect_all(void); /* NULL-terminated */
+
+#endif

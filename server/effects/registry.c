@@ -1,0 +1,23 @@
+/* registry.c — the list of effects the daemon can run.
+ *
+ * Adding an effect is one line here plus its module; the protocol (`hello`,
+ * `describe`, `create`) reads everything else from the effect's own table. */
+#include <string.h>
+
+#include "../effect.h"
+
+extern const struct effect_ops energy_wave_effect;
+
+static const struct effect_ops *const registry_effects[] = {
+    &energy_wave_effect,
+    NULL,
+};
+
+const struct effect_ops *const *effect_all(void) { return registry_effects; }
+
+const struct effect_ops *effect_find(const char *name)
+{
+    for (int i = 0; registry_effects[i]; i++)
+        if (strcmp(registry_effects[i]->name, name) == 0) return registry_effects[i];
+    return NULL;
+}
