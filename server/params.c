@@ -1,0 +1,305 @@
+/* params.c — validation, defaults, merging and description of effect parameters.
+ *
+ * Everything is driven by an effect's param_def table (params.h). Validation builds a
+ * normalised copy of each value (list items completed with field defaults) so the live
+ * document is only ever replaced by a fully checked one: a bad value anywhere leaves
+ * nothing half-applied. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "params.h"
+
+static cJSON *params_check_value(const struct param_def *d, const cJSON *v, const char *path,
+                                 struct fx_err *err);
+
+static const char *const params_type_names[] = {
+    [PARAM_FLOAT] = "float",           [PARAM_INT] = "int",     [PARAM_BOOL] = "bool",
+    [PARAM_ENUM] = "enum",             [PARAM_VEC3] = "vec3",   [PARAM_COLOR] = "color",
+    [PARAM_FLOAT_LIST] = "float_list", [PARAM_OBJECT_LIST] = "object_list",
+};
+
+static const struct param_def *params_find(const struct param_def *defs, const char *name)
+{
+    for (; defs->name; defs++)
+        if (strcmp(defs->name, name) == 0) return defs;
+    return NULL;
+}
+
+/* A finite number within [min, max]; returns the value through *out. */
+static int params_check_number(const struct param_def *d, const cJSON *v, const char *path, double *out,
+                               struct fx_err *err)
+{
+    if (!cJSON_IsNumber(v)) return fx_fail(err, "bad_param", path, "%s: expected a number", path);
+    double x = v->valuedouble;
+    if (!isfinite(x)) return fx_fail(err, "bad_param", path, "%s: must be finite", path);
+    if (x < d->min || x > d->max)
+        return fx_fail(err, "bad_param", path, "%s: %g is out of range [%g, %g]", path, x, d->min, d->max);
+    *out = x;
+    return 0;
+}
+
+static cJSON *params_check_scalar(const struct param_def *d, const cJSON *v, const char *path,
+                                  struct fx_err *err)
+{
+    double x;
+    if (params_check_number(d, v, path, &x, err)) return NULL;
+    if (d->type == PARAM_INT) {
+        if (x != floor(x)) {
+            fx_fail(err, "bad_param", path, "%s: expected an integer, got %g", path, x);
+            return NULL;
+        }
+        if ((d->flags & PARAM_EVEN) && fmod(x, 2.0) != 0.0) {
+            fx_fail(err, "bad_param", path, "%s: must be even, got %g", path, x);
+            return NULL;
+        }
+    }
+    return cJSON_CreateNumber(x);
+}
+
+static cJSON *params_check_enum(const struct param_def *d, const cJSON *v, const char *path,
+                                struct fx_err *err)
+{
+    if (cJSON_IsString(v))
+        for (const char *const *c = d->choices; *c; c++)
+            if (strcmp(*c, v->valuestring) == 0) return cJSON_CreateString(*c);
+    char list[256] = "";
+    for (const char *const *c = d->choices; *c; c++) {
+        size_t n = strlen(list);
+        snprintf(list + n, sizeof list - n, "%s\"%s\"", n ? ", " : "", *c);
+    }
+    fx_fail(err, "bad_param", path, "%s: expected one of %s", path, list);
+    return NULL;
+}
+
+/* Arrays of numbers: vectors, colours and float lists. */
+static cJSON *params_check_numbers(const struct param_def *d, const cJSON *v, const char *path, int min_len,
+                                   int max_len, struct fx_err *err)
+{
+    if (!cJSON_IsArray(v)) {
+        fx_fail(err, "bad_param", path, "%s: expected an array", path);
+        return NULL;
+    }
+    int n = cJSON_GetArraySize(v);
+    if (n < min_len || n > max_len) {
+        if (min_len == max_len)
+            fx_fail(err, "bad_param", path, "%s: expected %d numbers, got %d", path, min_len, n);
+        else
+            fx_fail(err, "bad_param", path, "%s: length %d is out of range [%d, %d]", path, n, min_len, max_len);
+        return NULL;
+    }
+    cJSON *out = cJSON_CreateArray();
+    double norm2 = 0;
+    int i = 0;
+    for (const cJSON *e = v->child; e; e = e->next, i++) {
+        char sub[96];
+        double x;
+        snprintf(sub, sizeof sub, "%s[%d]", path, i);
+        if (params_check_number(d, e, sub, &x, err)) {
+            cJSON_Delete(out);
+            return NULL;
+        }
+        norm2 += x * x;
+        cJSON_AddItemToArray(out, cJSON_CreateNumber(x));
+    }
+    if ((d->flags & PARAM_NONZERO) && !(norm2 > 1e-24)) {
+        cJSON_Delete(out);
+        fx_fail(err, "bad_param", path, "%s: must not be the zero vector", path);
+        return NULL;
+    }
+    return out;
+}
+
+/* One list item: known fields checked, missing ones defaulted. */
+static cJSON *params_check_item(const struct param_def *fields, const cJSON *v, const char *path,
+                                struct fx_err *err)
+{
+    if (!cJSON_IsObject(v)) {
+        fx_fail(err, "bad_param", path, "%s: expected an object", path);
+        return NULL;
+    }
+    char sub[96];
+    for (const cJSON *e = v->child; e; e = e->next) {
+        if (!params_find(fields, e->string)) {
+            snprintf(sub, sizeof sub, "%s.%s", path, e->string);
+            fx_fail(err, "bad_param", sub, "%s: unknown field", sub);
+            return NULL;
+        }
+    }
+    cJSON *out = cJSON_CreateObject();
+    for (const struct param_def *f = fields; f->name; f++) {
+        snprintf(sub, sizeof sub, "%s.%s", path, f->name);
+        const cJSON *given = cJSON_GetObjectItemCaseSensitive(v, f->name);
+        cJSON *parsed = given ? NULL : cJSON_Parse(f->def);
+        cJSON *val = params_check_value(f, given ? given : parsed, sub, err);
+        cJSON_Delete(parsed);
+        if (!val) {
+            cJSON_Delete(out);
+            return NULL;
+        }
+        cJSON_AddItemToObject(out, f->name, val);
+    }
+    return out;
+}
+
+static cJSON *params_check_objects(const struct param_def *d, const cJSON *v, const char *path,
+                                   struct fx_err *err)
+{
+    if (!cJSON_IsArray(v)) {
+        fx_fail(err, "bad_param", path, "%s: expected an array of objects", path);
+        return NULL;
+    }
+    int n = cJSON_GetArraySize(v);
+    if (n < d->min_len || n > d->max_len) {
+        fx_fail(err, "bad_param", path, "%s: %d items is out of range [%d, %d]", path, n, d->min_len, d->max_len);
+        return NULL;
+    }
+    cJSON *out = cJSON_CreateArray();
+    int i = 0;
+    for (const cJSON *e = v->child; e; e = e->next, i++) {
+        char sub[96];
+        snprintf(sub, sizeof sub, "%s[%d]", path, i);
+        cJSON *item = params_check_item(d->fields, e, sub, err);
+        if (!item) {
+            cJSON_Delete(out);
+            return NULL;
+        }
+        cJSON_AddItemToArray(out, item);
+    }
+    return out;
+}
+
+/* Returns a normalised copy of v, or NULL with err. */
+static cJSON *params_check_value(const struct param_def *d, const cJSON *v, const char *path,
+                                 struct fx_err *err)
+{
+    if (!v) {
+        fx_fail(err, "bad_param", path, "%s: missing value", path);
+        return NULL;
+    }
+    switch (d->type) {
+    case PARAM_FLOAT:
+    case PARAM_INT: return params_check_scalar(d, v, path, err);
+    case PARAM_BOOL:
+        if (cJSON_IsBool(v)) return cJSON_CreateBool(cJSON_IsTrue(v));
+        fx_fail(err, "bad_param", path, "%s: expected true or false", path);
+        return NULL;
+    case PARAM_ENUM: return params_check_enum(d, v, path, err);
+    case PARAM_VEC3:
+    case PARAM_COLOR: return params_check_numbers(d, v, path, 3, 3, err);
+    case PARAM_FLOAT_LIST: return params_check_numbers(d, v, path, d->min_len, d->max_len, err);
+    case PARAM_OBJECT_LIST: return params_check_objects(d, v, path, err);
+    }
+    fx_fail(err, "internal", path, "%s: unknown parameter type", path);
+    return NULL;
+}
+
+cJSON *params_defaults(const struct param_def *defs)
+{
+    cJSON *doc = cJSON_CreateObject();
+    for (const struct param_def *d = defs; d->name; d++) {
+        cJSON *parsed = cJSON_Parse(d->def);
+        cJSON *val = params_check_value(d, parsed, d->name, NULL);
+        cJSON_Delete(parsed);
+        if (!val) {
+            cJSON_Delete(doc);
+            return NULL;
+        }
+        cJSON_AddItemToObject(doc, d->name, val);
+    }
+    return doc;
+}
+
+int params_merge(const struct param_def *defs, const cJSON *current, const cJSON *partial, cJSON **out,
+                 struct fx_err *err)
+{
+    *out = NULL;
+    if (!cJSON_IsObject(partial)) return fx_fail(err, "bad_request", "params", "params: expected an object");
+    cJSON *doc = cJSON_Duplicate(current, 1);
+    if (!doc) return fx_fail(err, "internal", NULL, "out of memory");
+    for (const cJSON *e = partial->child; e; e = e->next) {
+        const struct param_def *d = params_find(defs, e->string);
+        cJSON *val = NULL;
+        if (!d)
+            fx_fail(err, "bad_param", e->string, "%s: unknown parameter", e->string);
+        else
+            val = params_check_value(d, e, e->string, err);
+        if (!val) {
+            cJSON_Delete(doc);
+            return -1;
+        }
+        cJSON_ReplaceItemInObjectCaseSensitive(doc, d->name, val);
+    }
+    *out = doc;
+    return 0;
+}
+
+bool params_restart_changed(const struct param_def *defs, const cJSON *a, const cJSON *b)
+{
+    for (const struct param_def *d = defs; d->name; d++)
+        if ((d->flags & PARAM_RESTART) &&
+            !cJSON_Compare(cJSON_GetObjectItemCaseSensitive(a, d->name),
+                           cJSON_GetObjectItemCaseSensitive(b, d->name), 1))
+            return true;
+    return false;
+}
+
+static cJSON *params_describe_one(const struct param_def *d)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "name", d->name);
+    cJSON_AddStringToObject(o, "type", params_type_names[d->type]);
+    cJSON_AddItemToObject(o, "default", cJSON_Parse(d->def));
+    if (d->type != PARAM_BOOL && d->type != PARAM_ENUM && d->type != PARAM_OBJECT_LIST) {
+        cJSON_AddNumberToObject(o, "min", d->min);
+        cJSON_AddNumberToObject(o, "max", d->max);
+    }
+    if (d->type == PARAM_FLOAT_LIST || d->type == PARAM_OBJECT_LIST) {
+        cJSON_AddNumberToObject(o, "min_len", d->min_len);
+        cJSON_AddNumberToObject(o, "max_len", d->max_len);
+    }
+    if (d->type == PARAM_ENUM) {
+        cJSON *c = cJSON_AddArrayToObject(o, "choices");
+        for (const char *const *s = d->choices; *s; s++) cJSON_AddItemToArray(c, cJSON_CreateString(*s));
+    }
+    if (d->type == PARAM_OBJECT_LIST) cJSON_AddItemToObject(o, "fields", params_describe(d->fields));
+    if (d->flags & PARAM_EVEN) cJSON_AddTrueToObject(o, "even");
+    if (d->flags & PARAM_NONZERO) cJSON_AddTrueToObject(o, "nonzero");
+    cJSON_AddStringToObject(o, "unit", d->unit ? d->unit : "");
+    cJSON_AddStringToObject(o, "update", (d->flags & PARAM_RESTART) ? "restart" : "live");
+    cJSON_AddStringToObject(o, "doc", d->doc ? d->doc : "");
+    return o;
+}
+
+cJSON *params_describe(const struct param_def *defs)
+{
+    cJSON *arr = cJSON_CreateArray();
+    for (const struct param_def *d = defs; d->name; d++) cJSON_AddItemToArray(arr, params_describe_one(d));
+    return arr;
+}
+
+double params_num(const cJSON *obj, const char *name)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(obj, name);
+    return cJSON_IsNumber(v) ? v->valuedouble : 0.0;
+}
+
+bool params_bool(const cJSON *obj, const char *name)
+{
+    return cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(obj, name));
+}
+
+const char *params_str(const cJSON *obj, const char *name)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(obj, name);
+    return cJSON_IsString(v) ? v->valuestring : "";
+}
+
+void params_vec3(const cJSON *obj, const char *name, double out[3])
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(obj, name);
+    for (int i = 0; i < 3; i++) {
+        const cJSON *e = cJSON_IsArray(v) ? cJSON_GetArrayItem(v, i) : NULL;
+        out[i] = cJSON_IsNumber(e) ? e->valuedouble : 0.0;
+    }
+}
