@@ -455,7 +455,7 @@ static double ref_gk15(energy_ref_fn f, void *ctx, double a, double b, double *e
 static double ref_adapt(energy_ref_fn f, void *ctx, double a, double b, double tol, int depth)
 {
     double err, v = ref_gk15(f, ctx, a, b, &err, NULL);
-    if (err <= tol * (b - a) || depth >= 60 || b - a < 1e-13) return v;
+    if (err <= tol * (b - a) || depth >= 60 || b - a < 1e-10) return v;
     double m = 0.5 * (a + b);
     return ref_adapt(f, ctx, a, m, tol, depth + 1) + ref_adapt(f, ctx, m, b, tol, depth + 1);
 }
