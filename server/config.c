@@ -1,0 +1,247 @@
+/* config.c — see config.h. */
+#include <getopt.h>
+#include <libgen.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "config.h"
+#include "log.h"
+
+void config_usage(FILE *out)
+{
+    fputs("usage: fxstreamd [options]\n"
+          "Real-time effects server: runs OpenCL effects and streams their frames over WebSockets.\n"
+          "\n"
+          "  --port N           TCP port for HTTP and WebSocket (default 7681; 0 picks a free port)\n"
+          "  --listen ADDR      address to bind (default 127.0.0.1)\n"
+          "  --config FILE      JSON configuration file (see README.md); flags override it\n"
+          "  --state-dir DIR    keep streams and parameters in DIR/streams.json across restarts\n"
+          "  --device SPEC      OpenCL device: auto (default: a GPU if any, else the CPU), cpu, gpu,\n"
+          "                     or P:D (platform index:device index, as `clinfo -l` lists them)\n"
+          "  --web-root DIR     static files served at / (default: clients/web next to the binary)\n"
+          "  --log-level LEVEL  error, warn, info (default) or debug\n"
+          "  --help             this text\n"
+          "\n"
+          "Endpoints: GET /healthz (JSON), GET /metrics (Prometheus), WebSocket /v1/ws\n"
+          "(subprotocol fxstream.v1; protocol/PROTOCOL.md).\n",
+          out);
+}
+
+static void config_defaults(struct config *cfg)
+{
+    memset(cfg, 0, sizeof *cfg);
+    snprintf(cfg->listen, sizeof cfg->listen, "127.0.0.1");
+    cfg->port = 7681;
+    snprintf(cfg->device, sizeof cfg->device, "auto");
+    cfg->log_level = LOG_INFO;
+    cfg->pause_idle = true;
+    cfg->limits = (struct limits){
+        .max_connections = 1024,
+        .max_streams = 64,
+        .max_subscriptions = 16,
+        .max_message_bytes = 64 * 1024,
+        .max_json_depth = 32,
+        .max_control_per_sec = 100,
+        .max_queued_messages = 1024,
+    };
+    /* The web client next to the binary: <dir of fxstreamd>/../clients/web. */
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    struct stat st;
+    if (n > 0) {
+        exe[n] = 0;
+        snprintf(cfg->web_root, sizeof cfg->web_root, "%s/../clients/web", dirname(exe));
+        if (stat(cfg->web_root, &st) || !S_ISDIR(st.st_mode)) cfg->web_root[0] = 0;
+    }
+}
+
+static int config_int(const char *s, int min, int max, int *out)
+{
+    char *end;
+    long v = strtol(s, &end, 10);
+    if (!*s || *end || v < min || v > max) return -1;
+    *out = (int)v;
+    return 0;
+}
+
+static int config_str(char *dst, size_t cap, const char *src, const char *what, struct fx_err *err)
+{
+    if (strlen(src) >= cap) return fx_fail(err, "bad_request", what, "%s is too long", what);
+    snprintf(dst, cap, "%s", src);
+    return 0;
+}
+
+static int config_device(const char *spec, char *dst, size_t cap, struct fx_err *err)
+{
+    int p, d;
+    char extra;
+    bool ok = !strcmp(spec, "auto") || !strcmp(spec, "cpu") || !strcmp(spec, "gpu") ||
+              (sscanf(spec, "%d:%d%c", &p, &d, &extra) == 2 && p >= 0 && d >= 0);
+    if (!ok) return fx_fail(err, "bad_request", "device", "--device: expected auto, cpu, gpu or P:D, got \"%s\"", spec);
+    return config_str(dst, cap, spec, "device", err);
+}
+
+/* ---- the JSON file ---- */
+
+struct config_limit_key {
+    const char *name;
+    size_t offset;
+    int min, max;
+};
+
+static const struct config_limit_key config_limit_keys[] = {
+    {"max_connections", offsetof(struct limits, max_connections), 1, 100000},
+    {"max_streams", offsetof(struct limits, max_streams), 1, 10000},
+    {"max_subscriptions", offsetof(struct limits, max_subscriptions), 1, 1024},
+    {"max_message_bytes", offsetof(struct limits, max_message_bytes), 1024, 16 * 1024 * 1024},
+    {"max_json_depth", offsetof(struct limits, max_json_depth), 4, 1000},
+    {"max_control_per_sec", offsetof(struct limits, max_control_per_sec), 1, 1000000},
+    {"max_queued_messages", offsetof(struct limits, max_queued_messages), 16, 1000000},
+};
+
+static int config_limits(const cJSON *obj, struct limits *l, struct fx_err *err)
+{
+    if (!cJSON_IsObject(obj)) return fx_fail(err, "bad_request", "limits", "limits: expected an object");
+    for (const cJSON *e = obj->child; e; e = e->next) {
+        const struct config_limit_key *k = NULL;
+        for (size_t i = 0; i < sizeof config_limit_keys / sizeof *config_limit_keys; i++)
+            if (!strcmp(config_limit_keys[i].name, e->string)) k = &config_limit_keys[i];
+        if (!k) return fx_fail(err, "bad_request", e->string, "limits: unknown key \"%s\"", e->string);
+        double v = e->valuedouble;
+        if (!cJSON_IsNumber(e) || v != (int)v || v < k->min || v > k->max)
+            return fx_fail(err, "bad_request", e->string, "limits.%s: expected an integer in [%d, %d]", k->name,
+                           k->min, k->max);
+        *(int *)((char *)l + k->offset) = (int)v;
+    }
+    return 0;
+}
+
+static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *err)
+{
+    const char *k = e->string;
+    if (!strcmp(k, "limits")) return config_limits(e, &cfg->limits, err);
+    if (!strcmp(k, "streams")) {
+        if (!cJSON_IsArray(e)) return fx_fail(err, "bad_request", k, "streams: expected an array");
+        cfg->streams = cJSON_Duplicate(e, 1);
+        return 0;
+    }
+    if (!strcmp(k, "pause_idle")) {
+        if (!cJSON_IsBool(e)) return fx_fail(err, "bad_request", k, "pause_idle: expected true or false");
+        cfg->pause_idle = cJSON_IsTrue(e);
+        return 0;
+    }
+    if (!strcmp(k, "port")) {
+        if (!cJSON_IsNumber(e) || e->valuedouble != (int)e->valuedouble || e->valuedouble < 0 || e->valuedouble > 65535)
+            return fx_fail(err, "bad_request", k, "port: expected an integer in [0, 65535]");
+        cfg->port = (int)e->valuedouble;
+        return 0;
+    }
+    if (!cJSON_IsString(e)) return fx_fail(err, "bad_request", k, "%s: expected a string (or unknown key)", k);
+    const char *v = e->valuestring;
+    if (!strcmp(k, "listen")) return config_str(cfg->listen, sizeof cfg->listen, v, k, err);
+    if (!strcmp(k, "state_dir")) return config_str(cfg->state_dir, sizeof cfg->state_dir, v, k, err);
+    if (!strcmp(k, "web_root")) return config_str(cfg->web_root, sizeof cfg->web_root, v, k, err);
+    if (!strcmp(k, "device")) return config_device(v, cfg->device, sizeof cfg->device, err);
+    if (!strcmp(k, "log_level")) {
+        int lv = log_parse_level(v);
+        if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
+        cfg->log_level = lv;
+        return 0;
+    }
+    return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
+}
+
+static int config_load_file(struct config *cfg, const char *path, struct fx_err *err)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return fx_fail(err, "bad_request", "config", "cannot open config file %s", path);
+    char *text = NULL;
+    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    if (size >= 0 && size < (16 << 20) && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1)))
+        text[fread(text, 1, (size_t)size, f)] = 0;
+    fclose(f);
+    cJSON *doc = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    int rc = 0;
+    if (!cJSON_IsObject(doc))
+        rc = fx_fail(err, "bad_json", "config", "%s: not a JSON object", path);
+    for (const cJSON *e = doc ? doc->child : NULL; e && !rc; e = e->next) rc = config_file_key(cfg, e, err);
+    cJSON_Delete(doc);
+    return rc;
+}
+
+/* ---- flags ---- */
+
+enum { OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP };
+
+static const struct option config_options[] = {
+    {"port", required_argument, NULL, OPT_PORT},       {"listen", required_argument, NULL, OPT_LISTEN},
+    {"config", required_argument, NULL, OPT_CONFIG},   {"state-dir", required_argument, NULL, OPT_STATE},
+    {"device", required_argument, NULL, OPT_DEVICE},   {"web-root", required_argument, NULL, OPT_WEB},
+    {"log-level", required_argument, NULL, OPT_LOG},   {"help", no_argument, NULL, OPT_HELP},
+    {NULL, 0, NULL, 0},
+};
+
+static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_err *err)
+{
+    switch (opt) {
+    case OPT_PORT:
+        if (config_int(arg, 0, 65535, &cfg->port))
+            return fx_fail(err, "bad_request", "port", "--port: expected 0-65535, got \"%s\"", arg);
+        return 0;
+    case OPT_LISTEN: return config_str(cfg->listen, sizeof cfg->listen, arg, "--listen", err);
+    case OPT_STATE: return config_str(cfg->state_dir, sizeof cfg->state_dir, arg, "--state-dir", err);
+    case OPT_DEVICE: return config_device(arg, cfg->device, sizeof cfg->device, err);
+    case OPT_WEB: return config_str(cfg->web_root, sizeof cfg->web_root, arg, "--web-root", err);
+    case OPT_LOG:
+        if ((cfg->log_level = log_parse_level(arg)) < 0)
+            return fx_fail(err, "bad_request", "log-level", "--log-level: expected error, warn, info or debug");
+        return 0;
+    default: return 0;
+    }
+}
+
+enum config_result config_parse(int argc, char **argv, struct config *cfg, struct fx_err *err)
+{
+    config_defaults(cfg);
+    const char *config_file = NULL;
+    int opt;
+    opterr = 0;
+    optind = 1;
+    /* First pass: --help, --config and unknown flags; the file is loaded before flags apply. */
+    while ((opt = getopt_long(argc, argv, ":", config_options, NULL)) != -1) {
+        if (opt == OPT_HELP) return CONFIG_HELP;
+        if (opt == OPT_CONFIG) config_file = optarg;
+        if (opt == '?') {
+            fx_fail(err, "bad_request", NULL, "unknown option \"%s\" (see --help)", argv[optind - 1]);
+            return CONFIG_ERROR;
+        }
+        if (opt == ':') {
+            fx_fail(err, "bad_request", NULL, "option \"%s\" needs a value", argv[optind - 1]);
+            return CONFIG_ERROR;
+        }
+    }
+    if (optind < argc) {
+        fx_fail(err, "bad_request", NULL, "unexpected argument \"%s\" (see --help)", argv[optind]);
+        return CONFIG_ERROR;
+    }
+    if (config_file && config_load_file(cfg, config_file, err)) return CONFIG_ERROR;
+    optind = 1;
+    while ((opt = getopt_long(argc, argv, ":", config_options, NULL)) != -1)
+        if (config_flag(cfg, opt, optarg, err)) return CONFIG_ERROR;
+    struct stat st;
+    if (cfg->web_root[0] && (stat(cfg->web_root, &st) || !S_ISDIR(st.st_mode))) {
+        fx_fail(err, "bad_request", "web-root", "web root %s is not a directory", cfg->web_root);
+        return CONFIG_ERROR;
+    }
+    return CONFIG_OK;
+}
+
+void config_free(struct config *cfg)
+{
+    cJSON_Delete(cfg->streams);
+    cfg->streams = NULL;
+}

@@ -1,0 +1,247 @@
+/* engine.c — see engine.h. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "engine.h"
+#include "log.h"
+
+struct engine_slot {
+    struct stream *s;
+    void *fx;            /* effect state, NULL until created (or after a failure) */
+    cJSON *params;       /* the document fx was created/updated with */
+    uint32_t rev;        /* its revision */
+    uint32_t failed_rev; /* creation failed at this revision: wait for a change */
+    uint64_t reset_gen;
+    uint64_t seq[FXS_KIND_MAX + 1];
+    bool running;
+    double next_due, last_wall, sim_time;
+};
+
+static double engine_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static uint64_t engine_realtime_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
+}
+
+static void engine_drop_fx(struct engine_slot *sl)
+{
+    if (sl->fx) sl->s->effect->destroy(sl->fx);
+    sl->fx = NULL;
+    cJSON_Delete(sl->params);
+    sl->params = NULL;
+}
+
+/* Reports a stream-level failure to its subscribers and the log. */
+static void engine_fail(struct engine *eng, struct engine_slot *sl, const struct fx_err *err)
+{
+    log_error("stream %s: %s", sl->s->name, err->message);
+    hub_stream_error(eng->hub, sl->s, err->message);
+}
+
+/* Brings the effect up to the hub's parameter revision. Returns 0 when fx is usable. */
+static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
+{
+    struct stream *s = sl->s;
+    uint32_t rev;
+    pthread_mutex_lock(&eng->hub->mu);
+    rev = s->rev;
+    pthread_mutex_unlock(&eng->hub->mu);
+    if (sl->fx && rev == sl->rev) return 0;
+    if (!sl->fx && rev == sl->failed_rev) return -1;
+
+    cJSON *doc = hub_get_params(eng->hub, s, &rev);
+    struct fx_err err = {0};
+    bool restart = !sl->fx || params_restart_changed(s->effect->params, sl->params, doc);
+    if (!restart && s->effect->apply(sl->fx, doc, &err) == 0) {
+        cJSON_Delete(sl->params);
+    } else {
+        if (!restart) engine_fail(eng, sl, &err);
+        engine_drop_fx(sl);
+        memset(&err, 0, sizeof err);
+        sl->fx = s->effect->create(eng->ocl, doc, &err);
+        sl->sim_time = 0;
+        if (!sl->fx) {
+            engine_fail(eng, sl, &err);
+            cJSON_Delete(doc);
+            sl->failed_rev = rev;
+            return -1;
+        }
+    }
+    sl->params = doc;
+    sl->rev = rev;
+    return 0;
+}
+
+struct engine_emit_ctx {
+    struct engine *eng;
+    struct engine_slot *sl;
+    double encode_ms;
+};
+
+static int engine_emit(void *ctx, const struct effect_frame *ef)
+{
+    struct engine_emit_ctx *c = ctx;
+    if (ef->kind < 1 || ef->kind > FXS_KIND_MAX) return -1;
+    struct fxs_header h = {
+        .kind = ef->kind,
+        .channel = c->sl->s->channel,
+        .param_rev = c->sl->rev,
+        .seq = ++c->sl->seq[ef->kind],
+        .sim_time = c->sl->sim_time,
+        .server_time_us = engine_realtime_us(),
+        .codec = ef->codec,
+        .count_or_width = ef->count_or_width,
+        .height = ef->height,
+        .flags = ef->flags,
+    };
+    struct frame *f = frame_new(&h, ef->payload, ef->payload_bytes);
+    if (!f) return -1;
+    c->encode_ms += ef->encode_ms;
+    hub_publish(c->eng->hub, c->sl->s, f);
+    return 0;
+}
+
+static void engine_step(struct engine *eng, struct engine_slot *sl, double now)
+{
+    struct stream *s = sl->s;
+    struct fx_err err = {0};
+    if (engine_sync_params(eng, sl)) return;
+
+    pthread_mutex_lock(&eng->hub->mu);
+    uint64_t reset_gen = s->reset_gen;
+    pthread_mutex_unlock(&eng->hub->mu);
+    if (reset_gen != sl->reset_gen) {
+        sl->reset_gen = reset_gen;
+        sl->sim_time = 0;
+        if (s->effect->reset(sl->fx, &err)) engine_fail(eng, sl, &err);
+    }
+
+    double dt = fmin(fmax(now - sl->last_wall, 0.0), 0.25); /* a long stall does not jump time */
+    sl->last_wall = now;
+    sl->sim_time += dt;
+    struct engine_emit_ctx ctx = {eng, sl, 0};
+    double t0 = engine_now();
+    if (s->effect->step(sl->fx, sl->sim_time, dt, engine_emit, &ctx, &err)) {
+        engine_fail(eng, sl, &err);
+        /* A blown-up state (NaN, runaway) starts over rather than failing forever. */
+        if (s->effect->reset(sl->fx, &err)) engine_drop_fx(sl);
+        sl->sim_time = 0;
+    }
+    double ms = (engine_now() - t0) * 1e3;
+    atomic_fetch_add(&s->steps, 1);
+    atomic_fetch_add(&s->step_us, (uint64_t)(ms * 1e3));
+    atomic_fetch_add(&s->encode_us, (uint64_t)(ctx.encode_ms * 1e3));
+}
+
+/* Matches slots to the hub's live streams: drops destroyed ones, adds new ones. */
+static void engine_sync_slots(struct engine *eng)
+{
+    int n;
+    struct stream **live = hub_snapshot(eng->hub, &n);
+    for (int i = 0; i < eng->nslots;) {
+        bool found = false;
+        for (int j = 0; j < n && !found; j++) found = live[j] == eng->slots[i].s;
+        if (found) {
+            i++;
+            continue;
+        }
+        engine_drop_fx(&eng->slots[i]);
+        stream_unref(eng->slots[i].s);
+        eng->slots[i] = eng->slots[--eng->nslots];
+    }
+    for (int j = 0; j < n; j++) {
+        bool found = false;
+        for (int i = 0; i < eng->nslots && !found; i++) found = eng->slots[i].s == live[j];
+        if (found) continue;
+        struct engine_slot *p = realloc(eng->slots, (size_t)(eng->nslots + 1) * sizeof *p);
+        if (!p) break;
+        eng->slots = p;
+        memset(&p[eng->nslots], 0, sizeof *p);
+        stream_ref(live[j]);
+        p[eng->nslots++].s = live[j];
+    }
+    hub_release_all(live, n);
+}
+
+/* Steps what is due; returns the time of the next deadline. */
+static double engine_run_due(struct engine *eng)
+{
+    double now = engine_now(), next = now + 1.0;
+    for (int i = 0; i < eng->nslots; i++) {
+        struct engine_slot *sl = &eng->slots[i];
+        pthread_mutex_lock(&eng->hub->mu);
+        int subs = sl->s->subscribers;
+        double fps = params_num(sl->s->params, "fps");
+        pthread_mutex_unlock(&eng->hub->mu);
+        if (eng->pause_idle && subs == 0) {
+            sl->running = false;
+            continue;
+        }
+        if (!sl->running) {
+            sl->running = true;
+            sl->next_due = sl->last_wall = now;
+        }
+        if (now >= sl->next_due) {
+            engine_step(eng, sl, now);
+            double period = 1.0 / (fps > 0 ? fps : 1.0);
+            sl->next_due += period;
+            now = engine_now();
+            if (sl->next_due < now) sl->next_due = now; /* overrun: no catch-up burst */
+        }
+        if (sl->next_due < next) next = sl->next_due;
+    }
+    return next;
+}
+
+static void *engine_main(void *arg)
+{
+    struct engine *eng = arg;
+    for (;;) {
+        pthread_mutex_lock(&eng->hub->mu);
+        uint64_t gen = eng->hub->gen;
+        bool stopping = eng->hub->stopping;
+        pthread_mutex_unlock(&eng->hub->mu);
+        if (stopping) break;
+        engine_sync_slots(eng);
+        double next = engine_run_due(eng);
+        hub_wait(eng->hub, gen, next);
+    }
+    return NULL;
+}
+
+int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool pause_idle, struct fx_err *err)
+{
+    memset(eng, 0, sizeof *eng);
+    eng->hub = hub;
+    eng->ocl = ocl;
+    eng->pause_idle = pause_idle;
+    if (pthread_create(&eng->thread, NULL, engine_main, eng))
+        return fx_fail(err, "internal", NULL, "cannot start the engine thread");
+    eng->started = true;
+    return 0;
+}
+
+void engine_stop(struct engine *eng)
+{
+    if (!eng->started) return;
+    hub_stop(eng->hub);
+    pthread_join(eng->thread, NULL);
+    for (int i = 0; i < eng->nslots; i++) {
+        engine_drop_fx(&eng->slots[i]);
+        stream_unref(eng->slots[i].s);
+    }
+    free(eng->slots);
+    eng->slots = NULL;
+    eng->nslots = 0;
+    eng->started = false;
+}

@@ -1,0 +1,36 @@
+/* engine.h — the worker thread that steps every stream at its `fps`.
+ *
+ * The engine owns effect state and the OpenCL device. Between two steps of a stream it
+ * applies the newest parameter document from the hub (all-or-nothing: a document is
+ * complete and validated before it reaches the hub), re-creates the effect when a
+ * restart-only parameter changed, and honours `reset`. Each step's outputs are encoded
+ * once into frames and published to the hub. One thread is enough on purpose: PoCL
+ * already spreads every kernel over all cores, and a second stepping thread would only
+ * contend for them; streams are scheduled earliest-deadline-first. A stream with no
+ * subscribers pauses (its simulated time stops) unless pause_idle is off. */
+#ifndef FX_ENGINE_H
+#define FX_ENGINE_H
+
+#include <pthread.h>
+#include <stdbool.h>
+
+#include "hub.h"
+
+struct ocl;
+struct engine_slot;
+
+struct engine {
+    struct hub *hub;
+    struct ocl *ocl;
+    bool pause_idle;
+    pthread_t thread;
+    bool started;
+    struct engine_slot *slots; /* engine thread only */
+    int nslots;
+};
+
+int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool pause_idle, struct fx_err *err);
+/* Stops the thread (after its current step) and frees every effect. */
+void engine_stop(struct engine *eng);
+
+#endif

@@ -1,0 +1,232 @@
+/* hub.c — see hub.h. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "hub.h"
+
+int hub_init(struct hub *hub, int max_streams)
+{
+    memset(hub, 0, sizeof *hub);
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    pthread_mutex_init(&hub->mu, NULL);
+    pthread_cond_init(&hub->cv, &ca);
+    pthread_condattr_destroy(&ca);
+    hub->max_streams = max_streams;
+    hub->next_channel = 1;
+    return 0;
+}
+
+void hub_free(struct hub *hub)
+{
+    hub_release_all(hub->streams, hub->n);
+    pthread_mutex_destroy(&hub->mu);
+    pthread_cond_destroy(&hub->cv);
+}
+
+/* Caller holds mu. */
+static void hub_changed(struct hub *hub)
+{
+    hub->gen++;
+    pthread_cond_broadcast(&hub->cv);
+}
+
+static bool hub_valid_name(const char *name)
+{
+    size_t n = strlen(name);
+    if (n == 0 || n >= STREAM_NAME_MAX) return false;
+    for (size_t i = 0; i < n; i++) {
+        char c = name[i];
+        if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+              c == '-' || c == '.'))
+            return false;
+    }
+    return true;
+}
+
+static int hub_index(const struct hub *hub, const char *name)
+{
+    for (int i = 0; i < hub->n; i++)
+        if (strcmp(hub->streams[i]->name, name) == 0) return i;
+    return -1;
+}
+
+int hub_create(struct hub *hub, const struct effect_ops *effect, const char *name, cJSON *params,
+               uint32_t rev, struct fx_err *err)
+{
+    if (!hub_valid_name(name))
+        return fx_fail(err, "bad_request", "stream",
+                       "stream name must be 1-%d characters of A-Z a-z 0-9 _ . -", STREAM_NAME_MAX - 1);
+    pthread_mutex_lock(&hub->mu);
+    int rc = 0;
+    if (hub_index(hub, name) >= 0)
+        rc = fx_fail(err, "exists", "stream", "a stream named \"%s\" already exists", name);
+    else if (hub->n >= hub->max_streams)
+        rc = fx_fail(err, "limit", "stream", "stream limit reached (%d)", hub->max_streams);
+    else if (hub->n == hub->cap) {
+        int cap = hub->cap ? 2 * hub->cap : 8;
+        struct stream **p = realloc(hub->streams, (size_t)cap * sizeof *p);
+        if (!p) rc = fx_fail(err, "internal", NULL, "out of memory");
+        else {
+            hub->streams = p;
+            hub->cap = cap;
+        }
+    }
+    struct stream *s = rc ? NULL : calloc(1, sizeof *s);
+    if (!rc && !s) rc = fx_fail(err, "internal", NULL, "out of memory");
+    if (!rc) {
+        atomic_init(&s->refs, 1);
+        snprintf(s->name, sizeof s->name, "%s", name);
+        s->effect = effect;
+        s->channel = hub->next_channel++;
+        s->params = params;
+        s->rev = rev;
+        hub->streams[hub->n++] = s;
+        hub_changed(hub);
+    }
+    pthread_mutex_unlock(&hub->mu);
+    return rc;
+}
+
+struct stream *hub_destroy(struct hub *hub, const char *name, struct fx_err *err)
+{
+    pthread_mutex_lock(&hub->mu);
+    int i = hub_index(hub, name);
+    struct stream *s = NULL;
+    if (i < 0) {
+        fx_fail(err, "unknown_stream", "stream", "no stream named \"%s\"", name);
+    } else {
+        s = hub->streams[i]; /* the table's reference passes to the caller */
+        memmove(hub->streams + i, hub->streams + i + 1, (size_t)(hub->n - i - 1) * sizeof *hub->streams);
+        hub->n--;
+        s->destroyed = true;
+        hub_changed(hub);
+    }
+    pthread_mutex_unlock(&hub->mu);
+    return s;
+}
+
+struct stream *hub_find(struct hub *hub, const char *name)
+{
+    pthread_mutex_lock(&hub->mu);
+    int i = hub_index(hub, name);
+    struct stream *s = i >= 0 ? hub->streams[i] : NULL;
+    if (s) stream_ref(s);
+    pthread_mutex_unlock(&hub->mu);
+    return s;
+}
+
+struct stream **hub_snapshot(struct hub *hub, int *n)
+{
+    pthread_mutex_lock(&hub->mu);
+    struct stream **out = malloc((size_t)(hub->n ? hub->n : 1) * sizeof *out);
+    *n = out ? hub->n : 0;
+    for (int i = 0; i < *n; i++) {
+        out[i] = hub->streams[i];
+        stream_ref(out[i]);
+    }
+    pthread_mutex_unlock(&hub->mu);
+    return out;
+}
+
+void hub_release_all(struct stream **streams, int n)
+{
+    for (int i = 0; i < n; i++) stream_unref(streams[i]);
+    free(streams);
+}
+
+void stream_ref(struct stream *s) { atomic_fetch_add(&s->refs, 1); }
+
+void stream_unref(struct stream *s)
+{
+    if (!s || atomic_fetch_sub(&s->refs, 1) != 1) return;
+    for (int k = 0; k <= FXS_KIND_MAX; k++) frame_unref(s->latest[k]);
+    cJSON_Delete(s->params);
+    free(s);
+}
+
+uint32_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc)
+{
+    pthread_mutex_lock(&hub->mu);
+    cJSON_Delete(s->params);
+    s->params = doc;
+    uint32_t rev = ++s->rev;
+    hub_changed(hub);
+    pthread_mutex_unlock(&hub->mu);
+    return rev;
+}
+
+cJSON *hub_get_params(struct hub *hub, struct stream *s, uint32_t *rev)
+{
+    pthread_mutex_lock(&hub->mu);
+    cJSON *doc = cJSON_Duplicate(s->params, 1);
+    *rev = s->rev;
+    pthread_mutex_unlock(&hub->mu);
+    return doc;
+}
+
+void hub_request_reset(struct hub *hub, struct stream *s)
+{
+    pthread_mutex_lock(&hub->mu);
+    s->reset_gen++;
+    hub_changed(hub);
+    pthread_mutex_unlock(&hub->mu);
+}
+
+void hub_add_subscriber(struct hub *hub, struct stream *s, int delta)
+{
+    pthread_mutex_lock(&hub->mu);
+    s->subscribers += delta;
+    hub_changed(hub);
+    pthread_mutex_unlock(&hub->mu);
+}
+
+void hub_publish(struct hub *hub, struct stream *s, struct frame *f)
+{
+    pthread_mutex_lock(&hub->mu);
+    struct frame *old = s->latest[f->hdr.kind];
+    s->latest[f->hdr.kind] = f;
+    pthread_mutex_unlock(&hub->mu);
+    frame_unref(old);
+    atomic_fetch_add(&s->frames_produced, 1);
+    if (hub->notify) hub->notify(hub->notify_ctx);
+}
+
+void hub_stream_error(struct hub *hub, struct stream *s, const char *message)
+{
+    pthread_mutex_lock(&hub->mu);
+    snprintf(s->error, sizeof s->error, "%s", message);
+    s->error_gen++;
+    pthread_mutex_unlock(&hub->mu);
+    if (hub->notify) hub->notify(hub->notify_ctx);
+}
+
+struct frame *hub_latest(struct hub *hub, struct stream *s, int kind)
+{
+    pthread_mutex_lock(&hub->mu);
+    struct frame *f = s->latest[kind] ? frame_ref(s->latest[kind]) : NULL;
+    pthread_mutex_unlock(&hub->mu);
+    return f;
+}
+
+void hub_wait(struct hub *hub, uint64_t seen_gen, double deadline)
+{
+    struct timespec ts;
+    ts.tv_sec = (time_t)floor(deadline);
+    ts.tv_nsec = (long)((deadline - floor(deadline)) * 1e9);
+    pthread_mutex_lock(&hub->mu);
+    while (hub->gen == seen_gen && !hub->stopping)
+        if (pthread_cond_timedwait(&hub->cv, &hub->mu, &ts)) break;
+    pthread_mutex_unlock(&hub->mu);
+}
+
+void hub_stop(struct hub *hub)
+{
+    pthread_mutex_lock(&hub->mu);
+    hub->stopping = true;
+    hub_changed(hub);
+    pthread_mutex_unlock(&hub->mu);
+}

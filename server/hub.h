@@ -1,0 +1,94 @@
+/* hub.h — streams by name, and where the engine and the network meet.
+ *
+ * A stream is the unit of compute: one effect instance stepped by the engine. The hub
+ * holds each stream's parameter document and revision (written by the network thread
+ * on `set`, read by the engine between steps), the latest encoded frame per kind
+ * (written by the engine, read by the network thread: latest frame wins), and its
+ * counters. Everything mutable is guarded by one mutex held only for pointer swaps
+ * and copies, never during a step or a send. The engine sleeps on the hub's condition
+ * variable; the network thread is woken through a callback (lws_cancel_service). */
+#ifndef FX_HUB_H
+#define FX_HUB_H
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <cjson/cJSON.h>
+
+#include "effect.h"
+#include "err.h"
+#include "frame.h"
+
+#define STREAM_NAME_MAX 64
+
+struct stream {
+    atomic_int refs;
+    char name[STREAM_NAME_MAX];
+    const struct effect_ops *effect;
+    uint32_t channel; /* unique for the daemon's lifetime; the `subscribed` reply's channel */
+
+    /* Guarded by hub.mu. */
+    cJSON *params;    /* complete, validated */
+    uint32_t rev;     /* +1 per accepted change, starts at 1 */
+    uint64_t reset_gen;
+    bool destroyed;
+    int subscribers;
+    struct frame *latest[FXS_KIND_MAX + 1];
+    char error[320];  /* last stream-level error, for subscribers and /healthz */
+    uint64_t error_gen;
+
+    /* Counters for /metrics. */
+    atomic_uint_fast64_t steps, frames_produced, frames_sent, frames_skipped, bytes_sent;
+    atomic_uint_fast64_t step_us, encode_us;
+};
+
+struct hub {
+    pthread_mutex_t mu;
+    pthread_cond_t cv;  /* engine wakes on any change */
+    uint64_t gen;       /* bumped on every change the engine must see */
+    bool stopping;
+    struct stream **streams;
+    int n, cap, max_streams;
+    uint32_t next_channel;
+    void (*notify)(void *ctx); /* frames or errors published: wake the network thread */
+    void *notify_ctx;
+};
+
+int hub_init(struct hub *hub, int max_streams);
+void hub_free(struct hub *hub);
+
+/* Adds a stream at revision rev (1 for a new one; stored streams keep theirs). Takes
+ * ownership of params on success. Errors: exists, limit, bad_request
+ * (invalid name: 1-63 characters of [A-Za-z0-9_.-]). */
+int hub_create(struct hub *hub, const struct effect_ops *effect, const char *name, cJSON *params,
+               uint32_t rev, struct fx_err *err);
+/* Removes a stream by name; returns it with a reference so the caller can tell its
+ * subscribers (unknown_stream when absent). */
+struct stream *hub_destroy(struct hub *hub, const char *name, struct fx_err *err);
+/* A reference to the named stream, or NULL. */
+struct stream *hub_find(struct hub *hub, const char *name);
+/* References to every live stream in creation order; free with hub_release_all. */
+struct stream **hub_snapshot(struct hub *hub, int *n);
+void hub_release_all(struct stream **streams, int n);
+void stream_ref(struct stream *s);
+void stream_unref(struct stream *s);
+
+/* Replaces the parameters (takes ownership of doc); returns the new revision. */
+uint32_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc);
+/* A copy of the parameters and their revision. */
+cJSON *hub_get_params(struct hub *hub, struct stream *s, uint32_t *rev);
+void hub_request_reset(struct hub *hub, struct stream *s);
+void hub_add_subscriber(struct hub *hub, struct stream *s, int delta);
+
+/* Engine side: publish a frame (takes the reference), report a stream error. */
+void hub_publish(struct hub *hub, struct stream *s, struct frame *f);
+void hub_stream_error(struct hub *hub, struct stream *s, const char *message);
+/* Network side: a reference to the newest frame of a kind (NULL if none). */
+struct frame *hub_latest(struct hub *hub, struct stream *s, int kind);
+
+/* Engine: waits until the hub changes or the absolute CLOCK_MONOTONIC deadline (seconds). */
+void hub_wait(struct hub *hub, uint64_t seen_gen, double deadline);
+void hub_stop(struct hub *hub);
+
+#endif

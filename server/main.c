@@ -1,0 +1,138 @@
+/* main.c — fxstreamd: wires configuration, OpenCL, hub, engine and network together,
+ * creates the start-up streams, serves until SIGINT/SIGTERM, then shuts down in order
+ * (close WebSockets with 1001, stop the engine, free everything) and exits 0. */
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "config.h"
+#include "effect.h"
+#include "log.h"
+#include "net.h"
+#include "ocl.h"
+#include "store.h"
+
+/* The embedded default: one stream per implemented effect, so `make run` shows something. */
+static const char *const main_default_streams =
+    "[{\"stream\":\"energy\",\"effect\":\"energy_wave\",\"params\":{}}]";
+
+static struct net *main_net;
+
+static void main_on_signal(int sig)
+{
+    (void)sig;
+    if (main_net) net_request_stop(main_net);
+}
+
+/* Creates one stream from {stream, effect, params, rev?}; params are re-validated. */
+static int main_create_stream(struct server *srv, const cJSON *def, struct fx_err *err)
+{
+    const cJSON *name = cJSON_GetObjectItemCaseSensitive(def, "stream");
+    const cJSON *effect = cJSON_GetObjectItemCaseSensitive(def, "effect");
+    const cJSON *params = cJSON_GetObjectItemCaseSensitive(def, "params");
+    const cJSON *rev = cJSON_GetObjectItemCaseSensitive(def, "rev");
+    if (!cJSON_IsString(name) || !cJSON_IsString(effect))
+        return fx_fail(err, "bad_request", NULL, "each stream needs string fields \"stream\" and \"effect\"");
+    const struct effect_ops *fx = effect_find(effect->valuestring);
+    if (!fx) return fx_fail(err, "unknown_effect", "effect", "stream %s: no effect named \"%s\"", name->valuestring,
+                            effect->valuestring);
+    cJSON *defaults = params_defaults(fx->params), *empty = cJSON_CreateObject(), *doc = NULL;
+    int rc = params_merge(fx->params, defaults, params ? params : empty, &doc, err);
+    if (!rc && fx->check) rc = fx->check(doc, err);
+    uint32_t r = cJSON_IsNumber(rev) && rev->valuedouble >= 1 ? (uint32_t)rev->valuedouble : 1;
+    if (!rc) rc = hub_create(&srv->hub, fx, name->valuestring, doc, r, err);
+    if (rc) cJSON_Delete(doc);
+    cJSON_Delete(defaults);
+    cJSON_Delete(empty);
+    return rc;
+}
+
+static int main_create_streams(struct server *srv, struct fx_err *err)
+{
+    cJSON *stored = NULL, *builtin = NULL;
+    if (store_load(srv, &stored, err)) return -1;
+    const cJSON *list = stored ? stored : srv->cfg.streams;
+    if (!list) list = builtin = cJSON_Parse(main_default_streams);
+    int rc = 0;
+    for (const cJSON *e = list->child; e && !rc; e = e->next) {
+        rc = main_create_stream(srv, e, err);
+        if (rc && stored) { /* a stored stream that no longer validates is skipped, not fatal */
+            log_warn("stored stream skipped: %s", err->message);
+            rc = 0;
+        }
+    }
+    cJSON_Delete(stored);
+    cJSON_Delete(builtin);
+    return rc;
+}
+
+static int main_prepare_state_dir(const char *dir, struct fx_err *err)
+{
+    if (!dir[0]) return 0;
+    if (mkdir(dir, 0755) && errno != EEXIST)
+        return fx_fail(err, "internal", NULL, "cannot create state directory %s: %s", dir, strerror(errno));
+    if (access(dir, W_OK))
+        return fx_fail(err, "internal", NULL, "state directory %s is not writable: %s", dir, strerror(errno));
+    return 0;
+}
+
+static void main_signals(void)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = main_on_signal;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+}
+
+static int main_serve(struct server *srv, struct fx_err *err)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    srv->start_time = (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+    if (main_prepare_state_dir(srv->cfg.state_dir, err)) return -1;
+    if (ocl_open(&srv->ocl, srv->cfg.device, err)) return -1;
+    log_info("OpenCL device: %s (%s)", ocl_device_name(srv->ocl), ocl_platform_name(srv->ocl));
+    hub_init(&srv->hub, srv->cfg.limits.max_streams);
+    int rc = main_create_streams(srv, err);
+    if (!rc) rc = net_open(&main_net, srv, err);
+    if (!rc) rc = engine_start(&srv->engine, &srv->hub, srv->ocl, srv->cfg.pause_idle, err);
+    if (!rc) {
+        int port = net_port(main_net);
+        printf("fxstreamd: listening on http://%s:%d/ (WebSocket ws://%s:%d/v1/ws)\n", srv->cfg.listen, port,
+               srv->cfg.listen, port);
+        fflush(stdout);
+        if (!srv->cfg.web_root[0]) log_warn("no web root: / serves nothing (use --web-root)");
+        main_signals();
+        net_run(main_net);
+        log_info("stopped serving");
+    }
+    engine_stop(&srv->engine);
+    net_close(main_net);
+    main_net = NULL;
+    hub_free(&srv->hub);
+    ocl_close(srv->ocl);
+    return rc;
+}
+
+int main(int argc, char **argv)
+{
+    static struct server srv;
+    struct fx_err err = {0};
+    switch (config_parse(argc, argv, &srv.cfg, &err)) {
+    case CONFIG_HELP: config_usage(stdout); return 0;
+    case CONFIG_ERROR: fprintf(stderr, "fxstreamd: %s\n", err.message); return 2;
+    case CONFIG_OK: break;
+    }
+    log_set_level(srv.cfg.log_level);
+    int rc = main_serve(&srv, &err);
+    if (rc) fprintf(stderr, "fxstreamd: %s\n", err.message);
+    config_free(&srv.cfg);
+    return rc ? 1 : 0;
+}

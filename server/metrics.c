@@ -1,0 +1,142 @@
+/* metrics.c — see metrics.h. */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "metrics.h"
+#include "ocl.h"
+
+static double metrics_uptime(const struct server *srv)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9 - srv->start_time;
+}
+
+static void metrics_printf(struct fx_buf *out, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void metrics_printf(struct fx_buf *out, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(NULL, 0, fmt, ap);
+    va_end(ap);
+    if (n < 0 || fx_buf_reserve(out, (size_t)n + 1)) return;
+    va_start(ap, fmt);
+    vsnprintf((char *)out->data + out->len, (size_t)n + 1, fmt, ap);
+    va_end(ap);
+    out->len += (size_t)n;
+}
+
+static void metrics_head(struct fx_buf *out, const char *name, const char *type, const char *help)
+{
+    metrics_printf(out, "# HELP %s %s\n# TYPE %s %s\n", name, help, name, type);
+}
+
+/* One metric line per stream, value read by `get`. */
+static void metrics_per_stream(struct fx_buf *out, struct stream **all, int n, const char *name,
+                               const char *type, const char *help, double (*get)(struct stream *))
+{
+    metrics_head(out, name, type, help);
+    for (int i = 0; i < n; i++)
+        metrics_printf(out, "%s{stream=\"%s\",effect=\"%s\"} %.9g\n", name, all[i]->name, all[i]->effect->name,
+                       get(all[i]));
+}
+
+static double m_subs(struct stream *s) { return s->subscribers; }
+static double m_produced(struct stream *s) { return (double)atomic_load(&s->frames_produced); }
+static double m_sent(struct stream *s) { return (double)atomic_load(&s->frames_sent); }
+static double m_skipped(struct stream *s) { return (double)atomic_load(&s->frames_skipped); }
+static double m_bytes(struct stream *s) { return (double)atomic_load(&s->bytes_sent); }
+static double m_steps(struct stream *s) { return (double)atomic_load(&s->steps); }
+static double m_step_s(struct stream *s) { return atomic_load(&s->step_us) * 1e-6; }
+static double m_encode_s(struct stream *s) { return atomic_load(&s->encode_us) * 1e-6; }
+static double m_errors(struct stream *s) { return (double)s->error_gen; }
+static double m_rev(struct stream *s) { return s->rev; }
+
+static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
+{
+    const struct counters *c = &srv->counters;
+    metrics_head(out, "fxs_up", "gauge", "1 while the daemon serves.");
+    metrics_printf(out, "fxs_up 1\n");
+    metrics_head(out, "fxs_uptime_seconds", "gauge", "Seconds since start.");
+    metrics_printf(out, "fxs_uptime_seconds %.3f\n", metrics_uptime(srv));
+    metrics_head(out, "fxs_connections", "gauge", "Open WebSocket connections.");
+    metrics_printf(out, "fxs_connections %d\n", srv->nsessions);
+    metrics_head(out, "fxs_connections_total", "counter", "WebSocket connections accepted.");
+    metrics_printf(out, "fxs_connections_total %llu\n", (unsigned long long)atomic_load(&c->connections_total));
+    metrics_head(out, "fxs_messages_received_total", "counter", "Control messages received.");
+    metrics_printf(out, "fxs_messages_received_total %llu\n", (unsigned long long)atomic_load(&c->messages_in));
+    metrics_head(out, "fxs_errors_sent_total", "counter", "Error replies sent.");
+    metrics_printf(out, "fxs_errors_sent_total %llu\n", (unsigned long long)atomic_load(&c->errors_out));
+    metrics_head(out, "fxs_streams", "gauge", "Streams defined.");
+    metrics_printf(out, "fxs_streams %d\n", nstreams);
+}
+
+static void metrics_kernels(struct server *srv, struct fx_buf *out)
+{
+    struct ocl_kernel_stat st[64];
+    int n = srv->ocl ? ocl_stats(srv->ocl, st, 64) : 0;
+    metrics_head(out, "fxs_kernel_seconds_total", "counter", "OpenCL kernel execution time (profiling events).");
+    for (int i = 0; i < n; i++)
+        metrics_printf(out, "fxs_kernel_seconds_total{kernel=\"%s\"} %.9g\n", st[i].name, st[i].total_ms * 1e-3);
+    metrics_head(out, "fxs_kernel_runs_total", "counter", "OpenCL kernel launches.");
+    for (int i = 0; i < n; i++)
+        metrics_printf(out, "fxs_kernel_runs_total{kernel=\"%s\"} %llu\n", st[i].name, (unsigned long long)st[i].runs);
+}
+
+int metrics_render(struct server *srv, struct fx_buf *out)
+{
+    int n;
+    struct stream **all = hub_snapshot(&srv->hub, &n);
+    metrics_global(srv, out, n);
+    pthread_mutex_lock(&srv->hub.mu); /* subscribers, rev and error_gen are guarded */
+    metrics_per_stream(out, all, n, "fxs_stream_subscribers", "gauge", "Subscribers per stream.", m_subs);
+    metrics_per_stream(out, all, n, "fxs_stream_param_rev", "gauge", "Parameter revision.", m_rev);
+    metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream errors (kernel, NaN).", m_errors);
+    pthread_mutex_unlock(&srv->hub.mu);
+    metrics_per_stream(out, all, n, "fxs_stream_frames_produced_total", "counter", "Frames encoded.", m_produced);
+    metrics_per_stream(out, all, n, "fxs_stream_frames_sent_total", "counter", "Frames sent, all subscribers.", m_sent);
+    metrics_per_stream(out, all, n, "fxs_stream_frames_skipped_total", "counter",
+                       "Frames a subscriber skipped (latest frame wins).", m_skipped);
+    metrics_per_stream(out, all, n, "fxs_stream_bytes_sent_total", "counter", "Frame bytes sent.", m_bytes);
+    metrics_per_stream(out, all, n, "fxs_stream_step_seconds_count", "counter", "Steps run.", m_steps);
+    metrics_per_stream(out, all, n, "fxs_stream_step_seconds_sum", "counter", "Time in steps, encoding included.",
+                       m_step_s);
+    metrics_per_stream(out, all, n, "fxs_stream_encode_seconds_sum", "counter", "Time encoding frames.", m_encode_s);
+    hub_release_all(all, n);
+    metrics_kernels(srv, out);
+    return 0;
+}
+
+int metrics_health(struct server *srv, struct fx_buf *out)
+{
+    int n;
+    struct stream **all = hub_snapshot(&srv->hub, &n);
+    cJSON *h = cJSON_CreateObject();
+    cJSON_AddStringToObject(h, "status", "ok");
+    cJSON_AddStringToObject(h, "version", FX_VERSION);
+    cJSON_AddNumberToObject(h, "uptime_s", metrics_uptime(srv));
+    cJSON_AddStringToObject(h, "device", srv->ocl ? ocl_device_name(srv->ocl) : "none");
+    cJSON_AddStringToObject(h, "platform", srv->ocl ? ocl_platform_name(srv->ocl) : "none");
+    cJSON_AddNumberToObject(h, "connections", srv->nsessions);
+    cJSON *arr = cJSON_AddArrayToObject(h, "streams");
+    pthread_mutex_lock(&srv->hub.mu);
+    for (int i = 0; i < n; i++) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "stream", all[i]->name);
+        cJSON_AddStringToObject(o, "effect", all[i]->effect->name);
+        cJSON_AddNumberToObject(o, "subscribers", all[i]->subscribers);
+        cJSON_AddNumberToObject(o, "rev", all[i]->rev);
+        if (all[i]->error[0]) cJSON_AddStringToObject(o, "last_error", all[i]->error);
+        cJSON_AddItemToArray(arr, o);
+    }
+    pthread_mutex_unlock(&srv->hub.mu);
+    hub_release_all(all, n);
+    char *text = cJSON_PrintUnformatted(h);
+    cJSON_Delete(h);
+    int rc = text ? fx_buf_append(out, text, strlen(text)) : -1;
+    free(text);
+    return rc;
+}

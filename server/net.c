@@ -1,0 +1,372 @@
+/* net.c — see net.h.
+ *
+ * Sending: a session sends one message at a time. Queued text replies go first;
+ * otherwise the newest unsent frame of any subscription (round-robin, honouring each
+ * subscription's max_fps) is sent in chunks of NET_CHUNK bytes, one chunk per writable
+ * callback, as one fragmented WebSocket message. Frame bytes are shared by every
+ * subscriber and never copied: the WebSocket framing goes into the FRAME_HEADROOM
+ * bytes before the frame, and for later chunks into the bytes before the chunk, which
+ * are saved and restored around the write (all sends run on this one thread, and
+ * lws_write either sends or buffers before it returns). A subscriber that cannot keep
+ * up simply picks the newest frame when it is ready again: latest frame wins. */
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include <libwebsockets.h>
+
+#include "log.h"
+#include "metrics.h"
+#include "net.h"
+#include "session.h"
+
+#define NET_CHUNK (64 * 1024)
+#define NET_WS_PATH "/v1/ws"
+#define NET_SHUTDOWN_GRACE_S 2.0
+
+_Static_assert(LWS_PRE <= FRAME_HEADROOM, "frame headroom must hold the WebSocket framing");
+
+struct net {
+    struct server *srv;
+    struct lws_context *ctx;
+    struct lws_vhost *vh;
+    struct lws_protocols protocols[3];
+    struct lws_http_mount mounts[3];
+    volatile sig_atomic_t stop_requested;
+    bool stopping;
+};
+
+struct net_http {
+    struct fx_buf body; /* LWS_PRE bytes, then the response body */
+};
+
+static double net_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+/* ---- HTTP: /healthz and /metrics ---- */
+
+static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h, const char *path)
+{
+    uint8_t hdr[LWS_PRE + 1024], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
+    fx_buf_free(&h->body);
+    fx_buf_reserve(&h->body, LWS_PRE);
+    h->body.len = LWS_PRE;
+    const char *type = "application/json";
+    int status = HTTP_STATUS_OK;
+    if (!strcmp(path, "/healthz")) {
+        metrics_health(net->srv, &h->body);
+    } else if (!strcmp(path, "/metrics")) {
+        type = "text/plain; version=0.0.4";
+        metrics_render(net->srv, &h->body);
+    } else {
+        status = HTTP_STATUS_NOT_FOUND;
+        fx_buf_append(&h->body, "{\"error\":\"not found\"}", 21);
+    }
+    size_t n = h->body.len - LWS_PRE;
+    if (lws_add_http_common_headers(wsi, (unsigned)status, type, n, &p, end) ||
+        lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_CACHE_CONTROL, (const uint8_t *)"no-store", 8, &p, end) ||
+        lws_finalize_write_http_header(wsi, start, &p, end))
+        return 1;
+    lws_callback_on_writable(wsi);
+    return 0;
+}
+
+static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
+{
+    struct net *net = lws_context_user(lws_get_context(wsi));
+    struct net_http *h = user;
+    switch (reason) {
+    case LWS_CALLBACK_HTTP: {
+        char path[64];
+        if (lws_hdr_copy(wsi, path, sizeof path, WSI_TOKEN_GET_URI) <= 0) {
+            lws_return_http_status(wsi, HTTP_STATUS_METHOD_NOT_ALLOWED, "only GET is supported");
+            return -1;
+        }
+        return net_http_request(wsi, net, h, path);
+    }
+    case LWS_CALLBACK_HTTP_WRITEABLE: {
+        if (!h || h->body.len <= LWS_PRE) break;
+        size_t n = h->body.len - LWS_PRE;
+        int w = lws_write(wsi, h->body.data + LWS_PRE, n, LWS_WRITE_HTTP_FINAL);
+        fx_buf_free(&h->body);
+        if (w < (int)n) return -1;
+        return lws_http_transaction_completed(wsi) ? -1 : 0;
+    }
+    case LWS_CALLBACK_CLOSED_HTTP:
+        if (h) fx_buf_free(&h->body);
+        break;
+    default:
+        break;
+    }
+    return lws_callback_http_dummy(wsi, reason, user, in, len);
+}
+
+/* ---- WebSocket: sending ---- */
+
+static void net_wake(struct session *ss) { lws_callback_on_writable(ss->wsi); }
+
+/* Picks the next frame to send, or arms a timer when only max_fps holds one back. */
+static bool net_pick_frame(struct session *ss)
+{
+    double now = net_now(), wait = -1;
+    for (int n = 0; n < ss->nsubs; n++) {
+        int i = (ss->rr + n) % ss->nsubs;
+        struct sub *sub = &ss->subs[i];
+        for (int k = 1; k <= FXS_KIND_MAX; k++) {
+            struct frame *f = hub_latest(&ss->srv->hub, sub->s, k);
+            if (!f || f->hdr.seq <= sub->last_seq[k]) {
+                frame_unref(f);
+                continue;
+            }
+            double ready = sub->last_sent + sub->min_interval;
+            if (now < ready) {
+                frame_unref(f);
+                if (wait < 0 || ready - now < wait) wait = ready - now;
+                break;
+            }
+            if (sub->last_seq[k] && f->hdr.seq > sub->last_seq[k] + 1) {
+                uint64_t skipped = f->hdr.seq - sub->last_seq[k] - 1;
+                atomic_fetch_add(&sub->s->frames_skipped, skipped);
+                atomic_fetch_add(&ss->srv->counters.frames_skipped, skipped);
+            }
+            sub->last_seq[k] = f->hdr.seq;
+            sub->last_sent = now;
+            ss->rr = i + 1;
+            ss->cur = f;
+            ss->cur_off = 0;
+            atomic_fetch_add(&sub->s->frames_sent, 1);
+            atomic_fetch_add(&sub->s->bytes_sent, f->len);
+            return true;
+        }
+    }
+    if (wait >= 0) lws_set_timer_usecs(ss->wsi, (lws_usec_t)(wait * 1e6) + 1);
+    return false;
+}
+
+/* Sends the next chunk of the current frame as a fragment of one binary message. */
+static int net_send_chunk(struct session *ss)
+{
+    struct frame *f = ss->cur;
+    size_t left = f->len - ss->cur_off, n = left < NET_CHUNK ? left : NET_CHUNK;
+    bool start = ss->cur_off == 0, end = n == left;
+    uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE];
+    if (!start) memcpy(saved, p - LWS_PRE, LWS_PRE);
+    int w = lws_write(ss->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
+    if (!start) memcpy(p - LWS_PRE, saved, LWS_PRE);
+    if (w < (int)n) return -1;
+    ss->cur_off += n;
+    if (end) {
+        atomic_fetch_add(&ss->srv->counters.frames_sent, 1);
+        atomic_fetch_add(&ss->srv->counters.bytes_sent, f->len);
+        frame_unref(f);
+        ss->cur = NULL;
+    }
+    return 0;
+}
+
+static bool net_has_frame(struct session *ss)
+{
+    for (int i = 0; i < ss->nsubs; i++)
+        for (int k = 1; k <= FXS_KIND_MAX; k++) {
+            struct frame *f = hub_latest(&ss->srv->hub, ss->subs[i].s, k);
+            bool fresh = f && f->hdr.seq > ss->subs[i].last_seq[k];
+            frame_unref(f);
+            if (fresh) return true;
+        }
+    return false;
+}
+
+static int net_writable(struct net *net, struct session *ss)
+{
+    if (net->stopping) {
+        lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_GOINGAWAY, (uint8_t *)"server shutting down", 20);
+        return -1;
+    }
+    if (ss->kill) {
+        lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (uint8_t *)"replies not read", 16);
+        return -1;
+    }
+    struct outmsg *m;
+    if (ss->cur) {
+        if (net_send_chunk(ss)) return -1;
+    } else if ((m = session_pop(ss))) {
+        int w = lws_write(ss->wsi, m->data + FRAME_HEADROOM, m->len, LWS_WRITE_TEXT);
+        size_t len = m->len;
+        free(m);
+        if (w < (int)len) return -1;
+    } else if (net_pick_frame(ss)) {
+        if (net_send_chunk(ss)) return -1;
+    }
+    if (ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
+    return 0;
+}
+
+/* ---- WebSocket: connection life ---- */
+
+static bool net_accept(struct net *net, struct lws *wsi)
+{
+    char uri[64];
+    if (net->stopping) return false;
+    if (lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI) <= 0 || strcmp(uri, NET_WS_PATH) != 0) {
+        log_info("refused WebSocket on %s (the endpoint is %s)", uri, NET_WS_PATH);
+        return false;
+    }
+    return true;
+}
+
+/* The engine published frames or errors, or a stop was requested. */
+static void net_on_wake(struct net *net)
+{
+    if (net->stop_requested && !net->stopping) {
+        net->stopping = true;
+        log_info("shutting down: closing %d connections", net->srv->nsessions);
+    }
+    for (struct session *ss = net->srv->sessions; ss; ss = ss->next) {
+        session_poll_errors(ss);
+        if (net->stopping || ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
+    }
+}
+
+static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
+{
+    struct lws_context *ctx = lws_get_context(wsi);
+    struct net *net = ctx ? lws_context_user(ctx) : NULL;
+    struct session *ss = user;
+    switch (reason) {
+    case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
+        return net_accept(net, wsi) ? 0 : 1;
+    case LWS_CALLBACK_ESTABLISHED:
+        if (net->srv->nsessions >= net->srv->cfg.limits.max_connections) {
+            log_warn("connection refused: limit of %d connections", net->srv->cfg.limits.max_connections);
+            lws_close_reason(wsi, (enum lws_close_status)1013 /* try again later */, (uint8_t *)"connection limit reached", 24);
+            return -1;
+        }
+        session_open(ss, net->srv, wsi);
+        break;
+    case LWS_CALLBACK_RECEIVE:
+        session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
+        break;
+    case LWS_CALLBACK_SERVER_WRITEABLE:
+        return net_writable(net, ss);
+    case LWS_CALLBACK_TIMER:
+        lws_callback_on_writable(wsi);
+        break;
+    case LWS_CALLBACK_CLOSED:
+        if (ss && ss->srv) session_close(ss);
+        break;
+    case LWS_CALLBACK_EVENT_WAIT_CANCELLED:
+        if (net) net_on_wake(net);
+        break;
+    default:
+        break;
+    }
+    return 0;
+}
+
+/* ---- set-up and loop ---- */
+
+static void net_lws_log(int level, const char *line)
+{
+    size_t n = strlen(line);
+    while (n && (line[n - 1] == '\n' || line[n - 1] == '\r')) n--;
+    log_msg(level == LLL_ERR ? LOG_ERROR : LOG_WARN, "lws: %.*s", (int)n, line);
+}
+
+static void net_notify(void *ctx)
+{
+    struct net *net = ctx;
+    lws_cancel_service(net->ctx);
+}
+
+static void net_setup_mounts(struct net *net)
+{
+    static const char *const dyn[] = {"/healthz", "/metrics"};
+    for (int i = 0; i < 2; i++) {
+        struct lws_http_mount *m = &net->mounts[i];
+        m->mountpoint = dyn[i];
+        m->mountpoint_len = (unsigned char)strlen(dyn[i]);
+        m->origin = "http";
+        m->origin_protocol = LWSMPRO_CALLBACK;
+        m->mount_next = &net->mounts[i + 1];
+    }
+    struct lws_http_mount *root = &net->mounts[2];
+    root->mountpoint = "/";
+    root->mountpoint_len = 1;
+    root->origin = net->srv->cfg.web_root;
+    root->origin_protocol = LWSMPRO_FILE;
+    root->def = "index.html";
+}
+
+int net_open(struct net **out, struct server *srv, struct fx_err *err)
+{
+    struct net *net = calloc(1, sizeof *net);
+    if (!net) return fx_fail(err, "internal", NULL, "out of memory");
+    net->srv = srv;
+    net->protocols[0] = (struct lws_protocols){"http", net_http_cb, sizeof(struct net_http), 0, 0, NULL, 0};
+    net->protocols[1] = (struct lws_protocols){"fxstream.v1", net_ws_cb, sizeof(struct session),
+                                               (size_t)srv->cfg.limits.max_message_bytes + 1024, 0, NULL, 0};
+    net_setup_mounts(net);
+    lws_set_log_level(LLL_ERR | LLL_WARN, net_lws_log);
+
+    struct lws_context_creation_info info;
+    memset(&info, 0, sizeof info);
+    info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS | LWS_SERVER_OPTION_DISABLE_IPV6;
+    info.user = net;
+    info.fd_limit_per_thread = (unsigned)srv->cfg.limits.max_connections + 64;
+    net->ctx = lws_create_context(&info);
+    if (!net->ctx) {
+        free(net);
+        return fx_fail(err, "internal", NULL, "cannot create the libwebsockets context");
+    }
+    info.port = srv->cfg.port; /* 0: the kernel picks a free port */
+    info.iface = srv->cfg.listen;
+    info.protocols = net->protocols;
+    info.mounts = &net->mounts[0];
+    if (!srv->cfg.web_root[0]) net->mounts[1].mount_next = NULL; /* no static files */
+    info.vhost_name = "default";
+    net->vh = lws_create_vhost(net->ctx, &info);
+    if (!net->vh) {
+        lws_context_destroy(net->ctx);
+        free(net);
+        return fx_fail(err, "internal", NULL, "cannot listen on %s:%d (address in use or not local?)",
+                       srv->cfg.listen, srv->cfg.port);
+    }
+    srv->wake = net_wake;
+    srv->hub.notify = net_notify;
+    srv->hub.notify_ctx = net;
+    *out = net;
+    return 0;
+}
+
+int net_port(const struct net *net) { return lws_get_vhost_listen_port(net->vh); }
+
+void net_request_stop(struct net *net)
+{
+    net->stop_requested = 1;
+    lws_cancel_service(net->ctx);
+}
+
+void net_run(struct net *net)
+{
+    double deadline = 0;
+    for (;;) {
+        if (lws_service(net->ctx, 0) < 0) break;
+        if (!net->stopping) continue;
+        if (deadline == 0) deadline = net_now() + NET_SHUTDOWN_GRACE_S;
+        if (net->srv->nsessions == 0 || net_now() > deadline) break;
+    }
+}
+
+void net_close(struct net *net)
+{
+    if (!net) return;
+    net->srv->hub.notify = NULL;
+    lws_context_destroy(net->ctx);
+    net->srv->wake = NULL;
+    free(net);
+}

@@ -1,0 +1,61 @@
+/* server.h — the daemon's shared context: configuration, limits and the parts that
+ * every module reaches (hub, engine, sessions, counters). One instance, built by
+ * main.c; modules take a pointer to it instead of using globals. */
+#ifndef FX_SERVER_H
+#define FX_SERVER_H
+
+#include <limits.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "engine.h"
+#include "hub.h"
+
+#define FX_VERSION "0.1.0"
+
+struct limits {
+    int max_connections;
+    int max_streams;
+    int max_subscriptions;   /* per connection */
+    int max_message_bytes;   /* control message size */
+    int max_json_depth;
+    int max_control_per_sec; /* per connection, token bucket with a burst of this size */
+    int max_queued_messages; /* text replies/events queued per connection before it is closed */
+};
+
+struct config {
+    char listen[64];
+    int port;
+    char state_dir[PATH_MAX];
+    char device[64];
+    char web_root[PATH_MAX];
+    int log_level;
+    bool pause_idle;
+    struct limits limits;
+    struct cJSON *streams; /* streams to create at start ([{effect, stream, params}]), NULL = built-in */
+};
+
+struct counters {
+    atomic_uint_fast64_t connections_total, messages_in, errors_out, frames_sent, frames_skipped, bytes_sent;
+};
+
+struct session;
+struct ocl;
+
+struct server {
+    struct config cfg;
+    struct hub hub;
+    struct engine engine;
+    struct ocl *ocl;
+    struct counters counters;
+    struct session *sessions; /* network thread only */
+    int nsessions;
+    double start_time;        /* CLOCK_MONOTONIC seconds */
+    /* Called by the session layer when a session has output queued (net.c asks the
+     * socket for a writable callback). */
+    void (*wake)(struct session *s);
+};
+
+#endif

@@ -1,0 +1,532 @@
+/* session.c — see session.h. One function per op; each validates everything first,
+ * then changes state in one step, then replies. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "effect.h"
+#include "log.h"
+#include "ocl.h"
+#include "session.h"
+#include "store.h"
+
+static double session_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+void session_send(struct session *ss, cJSON *msg)
+{
+    char *text = cJSON_PrintUnformatted(msg);
+    cJSON_Delete(msg);
+    if (!text) return;
+    if (ss->q_count >= ss->srv->cfg.limits.max_queued_messages) {
+        /* The peer is not reading its replies: close rather than grow without bound. */
+        ss->kill = true;
+        free(text);
+        if (ss->srv->wake) ss->srv->wake(ss);
+        return;
+    }
+    size_t len = strlen(text);
+    struct outmsg *m = malloc(sizeof *m + FRAME_HEADROOM + len);
+    if (m) {
+        m->next = NULL;
+        m->len = len;
+        memcpy(m->data + FRAME_HEADROOM, text, len);
+        if (ss->q_tail) ss->q_tail->next = m;
+        else ss->q_head = m;
+        ss->q_tail = m;
+        ss->q_count++;
+    }
+    free(text);
+    if (ss->srv->wake) ss->srv->wake(ss);
+}
+
+struct outmsg *session_pop(struct session *ss)
+{
+    struct outmsg *m = ss->q_head;
+    if (!m) return NULL;
+    ss->q_head = m->next;
+    if (!ss->q_head) ss->q_tail = NULL;
+    ss->q_count--;
+    return m;
+}
+
+/* A reply object with the request's id echoed. */
+static cJSON *session_reply(const char *op, const cJSON *id)
+{
+    cJSON *r = cJSON_CreateObject();
+    cJSON_AddStringToObject(r, "op", op);
+    if (id) cJSON_AddItemToObject(r, "id", cJSON_Duplicate(id, 1));
+    return r;
+}
+
+static void session_error(struct session *ss, const cJSON *id, const struct fx_err *err)
+{
+    cJSON *r = session_reply("error", id);
+    cJSON_AddStringToObject(r, "code", err->code);
+    cJSON_AddStringToObject(r, "message", err->message);
+    if (err->param[0]) cJSON_AddStringToObject(r, "param", err->param);
+    atomic_fetch_add(&ss->srv->counters.errors_out, 1);
+    session_send(ss, r);
+}
+
+static cJSON *session_hello(struct server *srv)
+{
+    const struct limits *l = &srv->cfg.limits;
+    cJSON *h = session_reply("hello", NULL);
+    cJSON_AddStringToObject(h, "protocol", "fxstream.v1");
+    cJSON_AddStringToObject(h, "server", "fxstreamd/" FX_VERSION);
+    cJSON_AddStringToObject(h, "device", srv->ocl ? ocl_device_name(srv->ocl) : "none");
+    cJSON *fx = cJSON_AddArrayToObject(h, "effects");
+    for (const struct effect_ops *const *e = effect_all(); *e; e++)
+        cJSON_AddItemToArray(fx, cJSON_CreateString((*e)->name));
+    cJSON *lim = cJSON_AddObjectToObject(h, "limits");
+    cJSON_AddNumberToObject(lim, "max_message_bytes", l->max_message_bytes);
+    cJSON_AddNumberToObject(lim, "max_json_depth", l->max_json_depth);
+    cJSON_AddNumberToObject(lim, "max_streams", l->max_streams);
+    cJSON_AddNumberToObject(lim, "max_subscriptions", l->max_subscriptions);
+    cJSON_AddNumberToObject(lim, "max_control_per_sec", l->max_control_per_sec);
+    return h;
+}
+
+void session_open(struct session *ss, struct server *srv, void *wsi)
+{
+    memset(ss, 0, sizeof *ss);
+    ss->srv = srv;
+    ss->wsi = wsi;
+    ss->tokens = srv->cfg.limits.max_control_per_sec;
+    ss->last_refill = session_now();
+    ss->next = srv->sessions;
+    if (srv->sessions) srv->sessions->prev = ss;
+    srv->sessions = ss;
+    srv->nsessions++;
+    atomic_fetch_add(&srv->counters.connections_total, 1);
+    session_send(ss, session_hello(srv));
+}
+
+static void session_drop_sub(struct session *ss, int i)
+{
+    hub_add_subscriber(&ss->srv->hub, ss->subs[i].s, -1);
+    stream_unref(ss->subs[i].s);
+    ss->subs[i] = ss->subs[--ss->nsubs];
+}
+
+void session_close(struct session *ss)
+{
+    while (ss->nsubs) session_drop_sub(ss, ss->nsubs - 1);
+    free(ss->subs);
+    struct outmsg *m;
+    while ((m = session_pop(ss))) free(m);
+    frame_unref(ss->cur);
+    fx_buf_free(&ss->rx);
+    if (ss->prev) ss->prev->next = ss->next;
+    else ss->srv->sessions = ss->next;
+    if (ss->next) ss->next->prev = ss->prev;
+    ss->srv->nsessions--;
+}
+
+/* ---- request field access: every field is checked for presence and type ---- */
+
+/* Fails unless every member of req is one of the allowed names (besides op and id). */
+static int session_only(const cJSON *req, const char *op, const char *const *allowed, struct fx_err *err)
+{
+    for (const cJSON *e = req->child; e; e = e->next) {
+        if (!strcmp(e->string, "op") || !strcmp(e->string, "id")) continue;
+        bool ok = false;
+        for (const char *const *a = allowed; *a && !ok; a++) ok = !strcmp(*a, e->string);
+        if (!ok) return fx_fail(err, "bad_request", e->string, "unknown field \"%s\" for op \"%s\"", e->string, op);
+    }
+    return 0;
+}
+
+static const char *session_str(const cJSON *req, const char *name, struct fx_err *err)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(req, name);
+    if (!v) {
+        fx_fail(err, "bad_request", name, "missing field \"%s\"", name);
+        return NULL;
+    }
+    if (!cJSON_IsString(v)) {
+        fx_fail(err, "bad_request", name, "field \"%s\" must be a string", name);
+        return NULL;
+    }
+    return v->valuestring;
+}
+
+/* The stream named by req's "stream" field, referenced, or NULL with err. */
+static struct stream *session_stream(struct session *ss, const cJSON *req, struct fx_err *err)
+{
+    const char *name = session_str(req, "stream", err);
+    if (!name) return NULL;
+    struct stream *s = hub_find(&ss->srv->hub, name);
+    if (!s) fx_fail(err, "unknown_stream", "stream", "no stream named \"%s\"", name);
+    return s;
+}
+
+static int session_find_sub(const struct session *ss, const struct stream *s)
+{
+    for (int i = 0; i < ss->nsubs; i++)
+        if (ss->subs[i].s == s) return i;
+    return -1;
+}
+
+/* ---- ops ---- */
+
+static int session_op_list(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {NULL};
+    if (session_only(req, "list", allowed, err)) return -1;
+    cJSON *r = session_reply("list", id);
+    cJSON *arr = cJSON_AddArrayToObject(r, "streams");
+    int n;
+    struct stream **all = hub_snapshot(&ss->srv->hub, &n);
+    for (int i = 0; i < n; i++) {
+        cJSON *o = cJSON_CreateObject();
+        pthread_mutex_lock(&ss->srv->hub.mu);
+        cJSON_AddStringToObject(o, "stream", all[i]->name);
+        cJSON_AddStringToObject(o, "effect", all[i]->effect->name);
+        cJSON_AddNumberToObject(o, "subscribers", all[i]->subscribers);
+        cJSON_AddNumberToObject(o, "rev", all[i]->rev);
+        cJSON_AddNumberToObject(o, "fps", params_num(all[i]->params, "fps"));
+        pthread_mutex_unlock(&ss->srv->hub.mu);
+        cJSON_AddItemToArray(arr, o);
+    }
+    hub_release_all(all, n);
+    session_send(ss, r);
+    return 0;
+}
+
+static const struct effect_ops *session_effect(const cJSON *req, struct fx_err *err)
+{
+    const char *name = session_str(req, "effect", err);
+    if (!name) return NULL;
+    const struct effect_ops *fx = effect_find(name);
+    if (!fx) fx_fail(err, "unknown_effect", "effect", "no effect named \"%s\"", name);
+    return fx;
+}
+
+static int session_op_describe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"effect", NULL};
+    if (session_only(req, "describe", allowed, err)) return -1;
+    const struct effect_ops *fx = session_effect(req, err);
+    if (!fx) return -1;
+    cJSON *r = session_reply("describe", id);
+    cJSON_AddStringToObject(r, "effect", fx->name);
+    cJSON_AddStringToObject(r, "doc", fx->doc);
+    cJSON_AddItemToObject(r, "params", params_describe(fx->params));
+    cJSON_AddItemToObject(r, "outputs", cJSON_Parse(fx->outputs_json));
+    session_send(ss, r);
+    return 0;
+}
+
+/* Validates partial against base and the effect's cross-field rules. */
+static cJSON *session_merge(const struct effect_ops *fx, const cJSON *base, const cJSON *partial,
+                            struct fx_err *err)
+{
+    cJSON *doc;
+    if (params_merge(fx->params, base, partial, &doc, err)) return NULL;
+    if (fx->check && fx->check(doc, err)) {
+        cJSON_Delete(doc);
+        return NULL;
+    }
+    return doc;
+}
+
+static int session_op_create(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"effect", "stream", "params", NULL};
+    if (session_only(req, "create", allowed, err)) return -1;
+    const struct effect_ops *fx = session_effect(req, err);
+    const char *name = fx ? session_str(req, "stream", err) : NULL;
+    if (!name) return -1;
+    const cJSON *partial = cJSON_GetObjectItemCaseSensitive(req, "params");
+    cJSON *defaults = params_defaults(fx->params);
+    cJSON *empty = cJSON_CreateObject();
+    cJSON *doc = session_merge(fx, defaults, partial ? partial : empty, err);
+    cJSON_Delete(defaults);
+    cJSON_Delete(empty);
+    if (!doc) return -1;
+    if (hub_create(&ss->srv->hub, fx, name, doc, 1, err)) {
+        cJSON_Delete(doc);
+        return -1;
+    }
+    store_save(ss->srv);
+    log_info("stream %s created (effect %s)", name, fx->name);
+    cJSON *r = session_reply("created", id);
+    cJSON_AddStringToObject(r, "stream", name);
+    cJSON_AddStringToObject(r, "effect", fx->name);
+    cJSON_AddNumberToObject(r, "rev", 1);
+    session_send(ss, r);
+    return 0;
+}
+
+static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", NULL};
+    if (session_only(req, "destroy", allowed, err)) return -1;
+    const char *name = session_str(req, "stream", err);
+    if (!name) return -1;
+    struct stream *s = hub_destroy(&ss->srv->hub, name, err);
+    if (!s) return -1;
+    session_stream_gone(ss->srv, s);
+    stream_unref(s);
+    store_save(ss->srv);
+    log_info("stream %s destroyed", name);
+    cJSON *r = session_reply("destroyed", id);
+    cJSON_AddStringToObject(r, "stream", name);
+    session_send(ss, r);
+    return 0;
+}
+
+void session_stream_gone(struct server *srv, struct stream *s)
+{
+    for (struct session *o = srv->sessions; o; o = o->next) {
+        int i = session_find_sub(o, s);
+        if (i < 0) continue;
+        session_drop_sub(o, i);
+        cJSON *ev = session_reply("unsubscribed", NULL);
+        cJSON_AddStringToObject(ev, "stream", s->name);
+        cJSON_AddStringToObject(ev, "reason", "destroyed");
+        session_send(o, ev);
+    }
+}
+
+static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", "max_fps", NULL};
+    if (session_only(req, "subscribe", allowed, err)) return -1;
+    const cJSON *mf = cJSON_GetObjectItemCaseSensitive(req, "max_fps");
+    if (mf && !(cJSON_IsNumber(mf) && isfinite(mf->valuedouble) && mf->valuedouble > 0 && mf->valuedouble <= 1000))
+        return fx_fail(err, "bad_request", "max_fps", "max_fps must be a number in (0, 1000]");
+    struct stream *s = session_stream(ss, req, err);
+    if (!s) return -1;
+    int i = session_find_sub(ss, s);
+    if (i < 0 && ss->nsubs >= ss->srv->cfg.limits.max_subscriptions) {
+        stream_unref(s);
+        return fx_fail(err, "limit", "stream", "subscription limit reached (%d per connection)",
+                       ss->srv->cfg.limits.max_subscriptions);
+    }
+    if (i < 0) {
+        struct sub *p = realloc(ss->subs, (size_t)(ss->nsubs + 1) * sizeof *p);
+        if (!p) {
+            stream_unref(s);
+            return fx_fail(err, "internal", NULL, "out of memory");
+        }
+        ss->subs = p;
+        i = ss->nsubs++;
+        memset(&p[i], 0, sizeof p[i]);
+        p[i].s = s; /* the reference passes to the subscription */
+        pthread_mutex_lock(&ss->srv->hub.mu);
+        p[i].error_gen = s->error_gen;
+        pthread_mutex_unlock(&ss->srv->hub.mu);
+        hub_add_subscriber(&ss->srv->hub, s, +1);
+    } else {
+        stream_unref(s); /* already subscribed: only max_fps changes */
+    }
+    ss->subs[i].min_interval = mf ? 1.0 / mf->valuedouble : 0;
+    cJSON *r = session_reply("subscribed", id);
+    cJSON_AddStringToObject(r, "stream", ss->subs[i].s->name);
+    cJSON_AddNumberToObject(r, "channel", ss->subs[i].s->channel);
+    session_send(ss, r);
+    if (ss->srv->wake) ss->srv->wake(ss); /* the current frame goes out right away */
+    return 0;
+}
+
+static int session_op_unsubscribe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", NULL};
+    if (session_only(req, "unsubscribe", allowed, err)) return -1;
+    struct stream *s = session_stream(ss, req, err);
+    if (!s) return -1;
+    int i = session_find_sub(ss, s);
+    if (i < 0) fx_fail(err, "bad_request", "stream", "not subscribed to \"%s\"", s->name);
+    stream_unref(s);
+    if (i < 0) return -1;
+    cJSON *r = session_reply("unsubscribed", id);
+    cJSON_AddStringToObject(r, "stream", ss->subs[i].s->name);
+    session_drop_sub(ss, i);
+    session_send(ss, r);
+    return 0;
+}
+
+static cJSON *session_params_msg(struct stream *s, const cJSON *id, uint32_t rev, cJSON *doc)
+{
+    cJSON *r = session_reply("params", id);
+    cJSON_AddStringToObject(r, "stream", s->name);
+    cJSON_AddNumberToObject(r, "rev", rev);
+    cJSON_AddItemToObject(r, "params", doc);
+    return r;
+}
+
+static int session_op_get(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", NULL};
+    if (session_only(req, "get", allowed, err)) return -1;
+    struct stream *s = session_stream(ss, req, err);
+    if (!s) return -1;
+    uint32_t rev;
+    cJSON *doc = hub_get_params(&ss->srv->hub, s, &rev);
+    session_send(ss, session_params_msg(s, id, rev, doc));
+    stream_unref(s);
+    return 0;
+}
+
+static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", "params", NULL};
+    if (session_only(req, "set", allowed, err)) return -1;
+    const cJSON *partial = cJSON_GetObjectItemCaseSensitive(req, "params");
+    if (!partial) return fx_fail(err, "bad_request", "params", "missing field \"params\"");
+    struct stream *s = session_stream(ss, req, err);
+    if (!s) return -1;
+    uint32_t rev;
+    cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
+    cJSON *doc = session_merge(s->effect, cur, partial, err);
+    cJSON_Delete(cur);
+    if (!doc) {
+        stream_unref(s);
+        return -1;
+    }
+    rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
+    store_save(ss->srv);
+    for (struct session *o = ss->srv->sessions; o; o = o->next)
+        if (o != ss && session_find_sub(o, s) >= 0)
+            session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));
+    session_send(ss, session_params_msg(s, id, rev, doc));
+    stream_unref(s);
+    return 0;
+}
+
+static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", NULL};
+    if (session_only(req, "reset", allowed, err)) return -1;
+    struct stream *s = session_stream(ss, req, err);
+    if (!s) return -1;
+    hub_request_reset(&ss->srv->hub, s);
+    cJSON *r = session_reply("reset", id);
+    cJSON_AddStringToObject(r, "stream", s->name);
+    session_send(ss, r);
+    stream_unref(s);
+    return 0;
+}
+
+static const struct {
+    const char *op;
+    int (*fn)(struct session *, const cJSON *, const cJSON *, struct fx_err *);
+} session_ops[] = {
+    {"list", session_op_list},       {"describe", session_op_describe},
+    {"create", session_op_create},   {"destroy", session_op_destroy},
+    {"subscribe", session_op_subscribe}, {"unsubscribe", session_op_unsubscribe},
+    {"get", session_op_get},         {"set", session_op_set},
+    {"reset", session_op_reset},
+};
+
+/* Nesting depth of JSON text, counted outside strings, without parsing it. */
+static int session_json_depth(const char *t, size_t len)
+{
+    int depth = 0, max = 0;
+    bool in_str = false;
+    for (size_t i = 0; i < len; i++) {
+        char c = t[i];
+        if (in_str) {
+            if (c == '\\') i++;
+            else if (c == '"') in_str = false;
+        } else if (c == '"') {
+            in_str = true;
+        } else if (c == '{' || c == '[') {
+            if (++depth > max) max = depth;
+        } else if (c == '}' || c == ']') {
+            depth--;
+        }
+    }
+    return max;
+}
+
+/* Token bucket: max_control_per_sec per second with an equal burst. */
+static bool session_rate_ok(struct session *ss)
+{
+    double rate = ss->srv->cfg.limits.max_control_per_sec, now = session_now();
+    ss->tokens = fmin(rate, ss->tokens + (now - ss->last_refill) * rate);
+    ss->last_refill = now;
+    if (ss->tokens < 1) return false;
+    ss->tokens -= 1;
+    return true;
+}
+
+static int session_dispatch(struct session *ss, const cJSON *req, const cJSON **id, struct fx_err *err)
+{
+    if (!cJSON_IsObject(req)) return fx_fail(err, "bad_request", NULL, "a control message must be a JSON object");
+    const cJSON *idv = cJSON_GetObjectItemCaseSensitive(req, "id");
+    if (idv && !cJSON_IsNumber(idv) && !cJSON_IsString(idv))
+        return fx_fail(err, "bad_request", "id", "id must be a number or a string");
+    *id = idv;
+    const cJSON *op = cJSON_GetObjectItemCaseSensitive(req, "op");
+    if (!op) return fx_fail(err, "bad_request", "op", "missing field \"op\"");
+    if (!cJSON_IsString(op)) return fx_fail(err, "bad_request", "op", "field \"op\" must be a string");
+    for (size_t i = 0; i < sizeof session_ops / sizeof session_ops[0]; i++)
+        if (!strcmp(session_ops[i].op, op->valuestring)) return session_ops[i].fn(ss, req, idv, err);
+    return fx_fail(err, "unknown_op", "op", "unknown op \"%.64s\"", op->valuestring);
+}
+
+void session_handle(struct session *ss, const char *text, size_t len)
+{
+    const struct limits *l = &ss->srv->cfg.limits;
+    struct fx_err err = {0};
+    const cJSON *id = NULL;
+    cJSON *req = NULL;
+    atomic_fetch_add(&ss->srv->counters.messages_in, 1);
+    if (!session_rate_ok(ss))
+        fx_fail(&err, "limit", NULL, "more than %d control messages per second", l->max_control_per_sec);
+    else if (session_json_depth(text, len) > l->max_json_depth)
+        fx_fail(&err, "bad_json", NULL, "JSON nested deeper than %d levels", l->max_json_depth);
+    else if (!(req = cJSON_ParseWithLength(text, len)))
+        fx_fail(&err, "bad_json", NULL, "malformed JSON near byte %ld",
+                cJSON_GetErrorPtr() ? (long)(cJSON_GetErrorPtr() - text) : 0L);
+    else
+        session_dispatch(ss, req, &id, &err);
+    if (err.code[0]) session_error(ss, id, &err);
+    cJSON_Delete(req);
+}
+
+void session_receive(struct session *ss, const void *data, size_t len, bool final, bool binary)
+{
+    size_t max = (size_t)ss->srv->cfg.limits.max_message_bytes;
+    struct fx_err err = {0};
+    if (!ss->rx_overflow && ss->rx.len + len > max) ss->rx_overflow = true;
+    if (!ss->rx_overflow && fx_buf_append(&ss->rx, data, len)) ss->rx_overflow = true;
+    if (!final) return;
+    if (binary)
+        fx_fail(&err, "bad_request", NULL, "binary messages are not accepted; send JSON text");
+    else if (ss->rx_overflow)
+        fx_fail(&err, "limit", NULL, "message exceeds %zu bytes", max);
+    if (err.code[0]) session_error(ss, NULL, &err);
+    else session_handle(ss, (const char *)ss->rx.data, ss->rx.len);
+    ss->rx.len = 0; /* the next fragment starts a new message */
+    ss->rx_overflow = false;
+    if (ss->rx.cap > 2 * max) fx_buf_free(&ss->rx);
+}
+
+void session_poll_errors(struct session *ss)
+{
+    for (int i = 0; i < ss->nsubs; i++) {
+        struct sub *sub = &ss->subs[i];
+        char msg[sizeof sub->s->error];
+        pthread_mutex_lock(&ss->srv->hub.mu);
+        bool fresh = sub->s->error_gen != sub->error_gen;
+        sub->error_gen = sub->s->error_gen;
+        memcpy(msg, sub->s->error, sizeof msg);
+        pthread_mutex_unlock(&ss->srv->hub.mu);
+        if (!fresh) continue;
+        cJSON *ev = session_reply("error", NULL);
+        cJSON_AddStringToObject(ev, "code", "internal");
+        cJSON_AddStringToObject(ev, "stream", sub->s->name);
+        cJSON_AddStringToObject(ev, "message", msg);
+        session_send(ss, ev);
+    }
+}

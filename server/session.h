@@ -1,0 +1,67 @@
+/* session.h — one per WebSocket connection: the control protocol (fxstream.v1).
+ *
+ * Parses and validates each JSON control message, dispatches it against the hub, and
+ * queues replies and events. It never touches a socket: net.c feeds received bytes in
+ * and drains the outgoing queue and subscribed frames, so this layer is unit-testable
+ * with no network. Every bad request gets an `error` reply and changes nothing. */
+#ifndef FX_SESSION_H
+#define FX_SESSION_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <cjson/cJSON.h>
+
+#include "buf.h"
+#include "frame.h"
+#include "server.h"
+
+struct sub {
+    struct stream *s;
+    double min_interval;  /* 1 / max_fps, 0 = unlimited */
+    double last_sent;     /* CLOCK_MONOTONIC seconds of the last frame sent */
+    uint64_t last_seq[FXS_KIND_MAX + 1];
+    uint64_t error_gen;   /* stream errors already reported */
+};
+
+/* A queued text message, with FRAME_HEADROOM spare bytes in front for the framing. */
+struct outmsg {
+    struct outmsg *next;
+    size_t len;
+    uint8_t data[];       /* FRAME_HEADROOM + len bytes */
+};
+
+struct session {
+    struct session *next, *prev;
+    struct server *srv;
+    void *wsi;            /* the network layer's handle */
+    struct sub *subs;
+    int nsubs, rr;        /* rr: round-robin start for frame sends */
+    struct outmsg *q_head, *q_tail;
+    int q_count;
+    struct frame *cur;    /* frame being sent, and how far */
+    size_t cur_off;
+    struct fx_buf rx;     /* fragments of the message being received */
+    bool rx_overflow;
+    double tokens, last_refill;
+    bool kill;            /* too much queued: the network layer closes it */
+};
+
+/* Links the session into srv->sessions and queues `hello`. */
+void session_open(struct session *ss, struct server *srv, void *wsi);
+/* Unsubscribes everything, frees queued messages, unlinks. */
+void session_close(struct session *ss);
+/* One received piece of a WebSocket message; final marks its last piece. */
+void session_receive(struct session *ss, const void *data, size_t len, bool final, bool binary);
+/* Handles one complete text message (exposed for tests). */
+void session_handle(struct session *ss, const char *text, size_t len);
+/* Queues msg (takes ownership) and wakes the network layer. */
+void session_send(struct session *ss, cJSON *msg);
+/* Pops the next queued text message (caller frees), or NULL. */
+struct outmsg *session_pop(struct session *ss);
+/* Drops subscriptions to a destroyed stream in every session, telling each subscriber. */
+void session_stream_gone(struct server *srv, struct stream *s);
+/* Queues error events for stream errors published since the last call. */
+void session_poll_errors(struct session *ss);
+
+#endif

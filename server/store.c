@@ -1,0 +1,101 @@
+/* store.c — see store.h. */
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "log.h"
+#include "store.h"
+
+static cJSON *store_snapshot(struct server *srv)
+{
+    cJSON *arr = cJSON_CreateArray();
+    int n;
+    struct stream **all = hub_snapshot(&srv->hub, &n);
+    for (int i = 0; i < n; i++) {
+        uint32_t rev;
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddStringToObject(o, "stream", all[i]->name);
+        cJSON_AddStringToObject(o, "effect", all[i]->effect->name);
+        cJSON *params = hub_get_params(&srv->hub, all[i], &rev);
+        cJSON_AddNumberToObject(o, "rev", rev);
+        cJSON_AddItemToObject(o, "params", params);
+        cJSON_AddItemToArray(arr, o);
+    }
+    hub_release_all(all, n);
+    return arr;
+}
+
+static int store_write_all(int fd, const char *text, size_t len)
+{
+    while (len) {
+        ssize_t w = write(fd, text, len);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) return -1;
+        text += w;
+        len -= (size_t)w;
+    }
+    return 0;
+}
+
+static int store_write_file(const char *dir, const char *text)
+{
+    char tmp[PATH_MAX + 32], path[PATH_MAX + 32];
+    snprintf(tmp, sizeof tmp, "%s/streams.json.tmp", dir);
+    snprintf(path, sizeof path, "%s/streams.json", dir);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) return -1;
+    int rc = store_write_all(fd, text, strlen(text)) || fsync(fd);
+    rc |= close(fd);
+    if (rc || rename(tmp, path)) {
+        unlink(tmp);
+        return -1;
+    }
+    int dfd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dfd >= 0) {
+        fsync(dfd);
+        close(dfd);
+    }
+    return 0;
+}
+
+void store_save(struct server *srv)
+{
+    if (!srv->cfg.state_dir[0]) return;
+    cJSON *doc = store_snapshot(srv);
+    char *text = cJSON_Print(doc);
+    cJSON_Delete(doc);
+    if (!text || store_write_file(srv->cfg.state_dir, text))
+        log_error("cannot save state to %s/streams.json: %s", srv->cfg.state_dir, strerror(errno));
+    free(text);
+}
+
+int store_load(const struct server *srv, cJSON **streams, struct fx_err *err)
+{
+    *streams = NULL;
+    if (!srv->cfg.state_dir[0]) return 0;
+    char path[PATH_MAX + 32];
+    snprintf(path, sizeof path, "%s/streams.json", srv->cfg.state_dir);
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        if (errno == ENOENT) return 0;
+        return fx_fail(err, "internal", NULL, "cannot read %s: %s", path, strerror(errno));
+    }
+    char *text = NULL;
+    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    if (size >= 0 && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1))) {
+        size_t got = fread(text, 1, (size_t)size, f);
+        text[got] = 0;
+    }
+    fclose(f);
+    *streams = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    if (!cJSON_IsArray(*streams)) {
+        cJSON_Delete(*streams);
+        *streams = NULL;
+        return fx_fail(err, "internal", NULL, "%s is not a JSON array of streams", path);
+    }
+    return 0;
+}
