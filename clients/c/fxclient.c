@@ -1,0 +1,657 @@
+/* fxclient.c — libfxclient: one blocking fxstream.v1 connection over libwebsockets.
+ *
+ * Owns the client's lws context, its single wsi, the reassembly buffer for
+ * fragmented messages, the one outgoing message in flight, the pending request id
+ * and the bounded queue of events and frames (see fxclient.h for the contract).
+ *
+ * Shape: lws callbacks only record what happened into struct fxc_client; the
+ * public calls run fxc_pump(), which services lws in the caller's thread until a
+ * condition holds, the connection ends or a deadline passes. lws_service() ignores
+ * its timeout since v3.2, so a self-re-arming timer (sul) bounds every poll wait. */
+#include "fxclient.h"
+
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include <netdb.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <libwebsockets.h>
+
+#define FXC_CLOSE_WAIT_MS 500
+#define FXC_PROBE_WAIT_MS 1000
+#define FXC_TICK_US 100000 /* longest lws poll wait of one fxc_pump round */
+#define FXC_REARM_US 1000  /* poll wait after a tick fired before lws polled */
+
+enum fxc_state { FXC_CONNECTING, FXC_OPEN, FXC_CLOSED };
+
+struct fxc_node {
+    struct fxc_node *next;
+    struct fxc_msg msg;
+};
+
+struct fxc_client {
+    struct lws_context *ctx;
+    struct lws *wsi;
+    lws_sorted_usec_list_t tick;   /* wakes lws_service() at our deadlines */
+    enum fxc_state state;
+    int handshake_done;
+    int closing;                   /* fxc_close asked lws to close */
+    char err[256];                 /* why the connection failed or ended */
+    char host[256];
+    char path[512];
+    char host_header[300];
+    int port;
+
+    uint8_t *rx;                   /* message being reassembled */
+    size_t rx_len, rx_cap;
+    int rx_active, rx_binary;
+
+    unsigned char *tx;             /* LWS_PRE + text of the message to send */
+    size_t tx_len;
+
+    double next_id, want_id;
+    int want;                      /* a request is waiting for want_id */
+    cJSON *reply;
+    cJSON *hello;
+
+    struct fxc_node *head, *tail;
+    size_t n_events;
+    struct fxc_stats stats;
+};
+
+static void fxc_set_err(char *buf, size_t len, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void fxc_set_err(char *buf, size_t len, const char *fmt, ...)
+{
+    va_list ap;
+    if (!buf || !len) return;
+    va_start(ap, fmt);
+    vsnprintf(buf, len, fmt, ap);
+    va_end(ap);
+}
+
+static int64_t fxc_now_us(clockid_t clk)
+{
+    struct timespec ts;
+    clock_gettime(clk, &ts);
+    return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
+}
+
+static int64_t fxc_deadline(int timeout_ms)
+{
+    return timeout_ms < 0 ? INT64_MAX : fxc_now_us(CLOCK_MONOTONIC) + (int64_t)timeout_ms * 1000;
+}
+
+/* ---- URL ------------------------------------------------------------------ */
+
+static int fxc_url_port(struct fxc_client *c, const char *s, size_t n, char *eb, size_t el)
+{
+    char digits[8];
+    char *end;
+    long v;
+    if (n == 0 || n >= sizeof digits) {
+        fxc_set_err(eb, el, "bad URL: port must be a number from 1 to 65535");
+        return -1;
+    }
+    memcpy(digits, s, n);
+    digits[n] = 0;
+    v = strtol(digits, &end, 10);
+    if (*end || v < 1 || v > 65535 || digits[0] < '0' || digits[0] > '9') {
+        fxc_set_err(eb, el, "bad URL: port \"%s\" must be a number from 1 to 65535", digits);
+        return -1;
+    }
+    c->port = (int)v;
+    return 0;
+}
+
+/* Splits "host[:port]" (host may be "[v6]") of n bytes into c->host and c->port. */
+static int fxc_url_authority(struct fxc_client *c, const char *s, size_t n, char *eb, size_t el)
+{
+    const char *colon = NULL, *hs = s, *he;
+    if (n && s[0] == '[') {
+        he = memchr(s, ']', n);
+        if (!he) { fxc_set_err(eb, el, "bad URL: unterminated [IPv6] host"); return -1; }
+        hs = s + 1;
+        if (he + 1 < s + n) {
+            if (he[1] != ':') { fxc_set_err(eb, el, "bad URL: junk after ]"); return -1; }
+            colon = he + 1;
+        }
+    } else {
+        colon = memchr(s, ':', n);
+        he = colon ? colon : s + n;
+    }
+    if (he == hs || (size_t)(he - hs) >= sizeof c->host) {
+        fxc_set_err(eb, el, "bad URL: missing or too long host");
+        return -1;
+    }
+    memcpy(c->host, hs, (size_t)(he - hs));
+    c->host[he - hs] = 0;
+    c->port = FXC_DEFAULT_PORT;
+    if (colon && fxc_url_port(c, colon + 1, (size_t)(s + n - colon - 1), eb, el)) return -1;
+    snprintf(c->host_header, sizeof c->host_header, "%.*s", (int)n, s);
+    return 0;
+}
+
+static int fxc_url_parse(struct fxc_client *c, const char *url, char *eb, size_t el)
+{
+    const char *auth, *slash;
+    if (!url) { fxc_set_err(eb, el, "bad URL: none given"); return -1; }
+    if (strncmp(url, "wss://", 6) == 0) {
+        fxc_set_err(eb, el, "TLS not supported yet: use ws:// (%s)", url);
+        return -1;
+    }
+    if (strncmp(url, "ws://", 5) != 0) {
+        fxc_set_err(eb, el, "bad URL \"%s\": expected ws://host[:port][/path]", url);
+        return -1;
+    }
+    auth = url + 5;
+    slash = strchr(auth, '/');
+    if (!slash) slash = auth + strlen(auth);
+    if (fxc_url_authority(c, auth, (size_t)(slash - auth), eb, el)) return -1;
+    if (strlen(slash) >= sizeof c->path) { fxc_set_err(eb, el, "bad URL: path too long"); return -1; }
+    snprintf(c->path, sizeof c->path, "%s", *slash && strcmp(slash, "/") ? slash : FXC_DEFAULT_PATH);
+    return 0;
+}
+
+/* ---- name resolution and connect diagnosis ---------------------------------- */
+
+static struct addrinfo *fxc_resolve(const struct fxc_client *c, char *eb, size_t el)
+{
+    struct addrinfo hints, *ai = NULL;
+    char port[8];
+    int r;
+    memset(&hints, 0, sizeof hints);
+    hints.ai_family = AF_UNSPEC;
+    hints.ai_socktype = SOCK_STREAM;
+    snprintf(port, sizeof port, "%d", c->port);
+    if ((r = getaddrinfo(c->host, port, &hints, &ai))) {
+        fxc_set_err(eb, el, "cannot resolve host \"%s\": %s", c->host, gai_strerror(r));
+        return NULL;
+    }
+    return ai;
+}
+
+/* lws reports a failed TCP connect as "Unable to connect" without errno; a second,
+ * bounded connect attempt on the failure path recovers it (0 when it now works). */
+static int fxc_probe_errno(const struct fxc_client *c)
+{
+    struct addrinfo *ai = fxc_resolve(c, NULL, 0);
+    struct pollfd pfd = { .fd = -1, .events = POLLOUT };
+    int err = 0;
+    socklen_t len = sizeof err;
+    if (!ai) return EHOSTUNREACH;
+    pfd.fd = socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK, ai->ai_protocol);
+    if (pfd.fd < 0) err = errno;
+    else if (connect(pfd.fd, ai->ai_addr, ai->ai_addrlen) && errno != EINPROGRESS) err = errno;
+    else if (poll(&pfd, 1, FXC_PROBE_WAIT_MS) != 1) err = ETIMEDOUT;
+    else if (getsockopt(pfd.fd, SOL_SOCKET, SO_ERROR, &err, &len)) err = errno;
+    if (pfd.fd >= 0) close(pfd.fd);
+    freeaddrinfo(ai);
+    return err;
+}
+
+/* ---- queue ---------------------------------------------------------------- */
+
+void fxc_msg_free(struct fxc_msg *m)
+{
+    if (!m) return;
+    cJSON_Delete(m->event);
+    free(m->data);
+    memset(m, 0, sizeof *m);
+}
+
+static void fxc_queue_push(struct fxc_client *c, struct fxc_node *n)
+{
+    n->next = NULL;
+    if (c->tail) c->tail->next = n;
+    else c->head = n;
+    c->tail = n;
+    if (n->msg.type == FXC_MSG_EVENT) c->n_events++;
+}
+
+static struct fxc_node *fxc_queue_unlink(struct fxc_client *c, struct fxc_node *prev, struct fxc_node *n)
+{
+    if (prev) prev->next = n->next;
+    else c->head = n->next;
+    if (c->tail == n) c->tail = prev;
+    if (n->msg.type == FXC_MSG_EVENT) c->n_events--;
+    return n;
+}
+
+/* Drops the oldest queued message matching (type, channel) when `limit` or more are
+ * queued. Returns 1 when one was dropped. */
+static int fxc_queue_trim(struct fxc_client *c, enum fxc_msg_type type, uint32_t channel, size_t limit)
+{
+    struct fxc_node *n, *prev = NULL, *oldest = NULL, *oldest_prev = NULL;
+    size_t count = 0;
+    for (n = c->head; n; prev = n, n = n->next) {
+        if (n->msg.type != type || (type == FXC_MSG_FRAME && n->msg.header.channel != channel)) continue;
+        if (!oldest) { oldest = n; oldest_prev = prev; }
+        count++;
+    }
+    if (count < limit) return 0;
+    fxc_queue_unlink(c, oldest_prev, oldest);
+    fxc_msg_free(&oldest->msg);
+    free(oldest);
+    return 1;
+}
+
+static void fxc_queue_free(struct fxc_client *c)
+{
+    while (c->head) {
+        struct fxc_node *n = fxc_queue_unlink(c, NULL, c->head);
+        fxc_msg_free(&n->msg);
+        free(n);
+    }
+}
+
+/* ---- received messages ------------------------------------------------------ */
+
+static void fxc_on_frame(struct fxc_client *c, int64_t now)
+{
+    struct fxc_node *n;
+    struct fxs_header h;
+    uint8_t *fit;
+    if (fxs_header_unpack(c->rx, c->rx_len, &h) || !(n = calloc(1, sizeof *n))) {
+        c->stats.bad_messages++;
+        return;
+    }
+    if ((fit = realloc(c->rx, c->rx_len))) c->rx = fit; /* the frame keeps the buffer: trim it */
+    c->stats.frames_received++;
+    if (fxc_queue_trim(c, FXC_MSG_FRAME, h.channel, FXC_QUEUE_FRAMES_PER_CHANNEL)) c->stats.frames_dropped++;
+    n->msg.type = FXC_MSG_FRAME;
+    n->msg.header = h;
+    n->msg.data = c->rx;
+    n->msg.data_bytes = c->rx_len;
+    n->msg.payload = c->rx + h.header_bytes;
+    n->msg.recv_time_us = (uint64_t)now;
+    c->rx = NULL;
+    c->rx_cap = 0;
+    fxc_queue_push(c, n);
+}
+
+static void fxc_on_event(struct fxc_client *c, cJSON *j, int64_t now)
+{
+    struct fxc_node *n = calloc(1, sizeof *n);
+    if (!n) { cJSON_Delete(j); c->stats.bad_messages++; return; }
+    if (fxc_queue_trim(c, FXC_MSG_EVENT, 0, FXC_QUEUE_EVENTS)) c->stats.events_dropped++;
+    n->msg.type = FXC_MSG_EVENT;
+    n->msg.event = j;
+    n->msg.recv_time_us = (uint64_t)now;
+    fxc_queue_push(c, n);
+}
+
+/* Routes one complete text message: the hello, the awaited reply, a stray reply
+ * (dropped), or an event (queued). */
+static void fxc_on_text(struct fxc_client *c, int64_t now)
+{
+    cJSON *j = cJSON_ParseWithLength((const char *)c->rx, c->rx_len);
+    const cJSON *op = cJSON_GetObjectItemCaseSensitive(j, "op");
+    const cJSON *id = cJSON_GetObjectItemCaseSensitive(j, "id");
+    if (!cJSON_IsObject(j) || !cJSON_IsString(op)) {
+        c->stats.bad_messages++;
+        cJSON_Delete(j);
+    } else if (!c->hello && strcmp(op->valuestring, "hello") == 0) {
+        c->hello = j;
+    } else if (id && c->want && cJSON_IsNumber(id) && id->valuedouble == c->want_id) {
+        c->reply = j;
+        c->want = 0;
+    } else if (id) {
+        c->stats.bad_messages++;
+        cJSON_Delete(j);
+    } else {
+        fxc_on_event(c, j, now);
+    }
+}
+
+/* Appends one received chunk; returns -1 (and closes) when the message is too big. */
+static int fxc_on_receive(struct fxc_client *c, struct lws *wsi, const void *in, size_t len)
+{
+    if (!c->rx_active) {
+        c->rx_active = 1;
+        c->rx_binary = lws_frame_is_binary(wsi);
+        c->rx_len = 0;
+    }
+    if (c->rx_len + len > FXC_MAX_MESSAGE_BYTES) {
+        fxc_set_err(c->err, sizeof c->err, "message larger than %zu bytes from server", FXC_MAX_MESSAGE_BYTES);
+        lws_close_reason(wsi, LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE, NULL, 0);
+        return -1;
+    }
+    if (c->rx_len + len > c->rx_cap) {
+        size_t cap = c->rx_cap ? c->rx_cap : 65536;
+        uint8_t *p;
+        while (cap < c->rx_len + len) cap *= 2;
+        if (!(p = realloc(c->rx, cap))) {
+            fxc_set_err(c->err, sizeof c->err, "out of memory reassembling a %zu-byte message", c->rx_len + len);
+            return -1;
+        }
+        c->rx = p;
+        c->rx_cap = cap;
+    }
+    memcpy(c->rx + c->rx_len, in, len);
+    c->rx_len += len;
+    if (!lws_is_final_fragment(wsi) || lws_remaining_packet_payload(wsi)) return 0;
+    c->rx_active = 0;
+    if (c->rx_binary) fxc_on_frame(c, fxc_now_us(CLOCK_REALTIME));
+    else fxc_on_text(c, fxc_now_us(CLOCK_REALTIME));
+    return 0;
+}
+
+/* ---- lws callbacks ---------------------------------------------------------- */
+
+/* Turns lws's connection-error text into one of the documented messages. */
+static void fxc_on_connect_error(struct fxc_client *c, const char *why)
+{
+    const char *w = why ? why : "unknown error";
+    int e;
+    if (c->err[0]) return; /* our own filter already explained it */
+    if (!c->handshake_done && strstr(w, "Unable to connect") && (e = fxc_probe_errno(c)))
+        fxc_set_err(c->err, sizeof c->err, "%s %s:%d", e == ECONNREFUSED ? "connection refused by" : strerror(e),
+                    c->host, c->port);
+    else if (c->handshake_done || strstr(w, "HS:") || strstr(w, "upgrade") || strstr(w, "protocol"))
+        fxc_set_err(c->err, sizeof c->err, "WebSocket handshake failed with ws://%s%s (%s)",
+                    c->host_header, c->path, w);
+    else
+        fxc_set_err(c->err, sizeof c->err, "cannot connect to %s:%d (%s)", c->host, c->port, w);
+}
+
+/* Rejects a server that did not agree to our subprotocol. */
+static int fxc_check_subprotocol(struct fxc_client *c, struct lws *wsi)
+{
+    char proto[64] = "";
+    c->handshake_done = 1;
+    if (lws_hdr_copy(wsi, proto, sizeof proto, WSI_TOKEN_PROTOCOL) < 0) proto[0] = 0;
+    if (!strcmp(proto, FXC_SUBPROTOCOL)) return 0;
+    if (proto[0])
+        fxc_set_err(c->err, sizeof c->err,
+                    "WebSocket handshake failed with ws://%s%s: server chose subprotocol \"%s\", not \"%s\"",
+                    c->host_header, c->path, proto, FXC_SUBPROTOCOL);
+    else
+        fxc_set_err(c->err, sizeof c->err,
+                    "WebSocket handshake failed with ws://%s%s: server did not accept subprotocol \"%s\"",
+                    c->host_header, c->path, FXC_SUBPROTOCOL);
+    return 1;
+}
+
+static void fxc_on_peer_close(struct fxc_client *c, const uint8_t *in, size_t len)
+{
+    if (len >= 2)
+        fxc_set_err(c->err, sizeof c->err, "server closed the connection (code %d%s%.*s)",
+                    (in[0] << 8) | in[1], len > 2 ? ": " : "", (int)(len - 2), (const char *)in + 2);
+    else
+        fxc_set_err(c->err, sizeof c->err, "server closed the connection (no close code)");
+}
+
+static int fxc_on_writeable(struct fxc_client *c, struct lws *wsi)
+{
+    int n;
+    if (!c->tx_len) return 0;
+    n = lws_write(wsi, c->tx + LWS_PRE, c->tx_len, LWS_WRITE_TEXT);
+    c->tx_len = 0;
+    if (n < 0) {
+        fxc_set_err(c->err, sizeof c->err, "write to server failed");
+        return -1;
+    }
+    return 0;
+}
+
+static int fxc_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
+{
+    struct fxc_client *c = lws_context_user(lws_get_context(wsi));
+    (void)user;
+    switch (reason) {
+    case LWS_CALLBACK_CLIENT_CONNECTION_ERROR:
+        fxc_on_connect_error(c, in);
+        c->state = FXC_CLOSED;
+        c->wsi = NULL;
+        return 0;
+    case LWS_CALLBACK_CLIENT_FILTER_PRE_ESTABLISH:
+        return fxc_check_subprotocol(c, wsi);
+    case LWS_CALLBACK_CLIENT_ESTABLISHED:
+        c->state = FXC_OPEN;
+        return 0;
+    case LWS_CALLBACK_CLIENT_RECEIVE:
+        return fxc_on_receive(c, wsi, in, len);
+    case LWS_CALLBACK_CLIENT_WRITEABLE:
+        if (c->closing) return -1;
+        return fxc_on_writeable(c, wsi);
+    case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE:
+        fxc_on_peer_close(c, in, len);
+        return 0;
+    case LWS_CALLBACK_CLIENT_CLOSED:
+        if (!c->err[0]) fxc_set_err(c->err, sizeof c->err, "connection to %s:%d lost", c->host, c->port);
+        c->state = FXC_CLOSED;
+        c->wsi = NULL;
+        return 0;
+    default:
+        return 0;
+    }
+}
+
+static const struct lws_protocols fxc_protocols[] = {
+    { .name = FXC_SUBPROTOCOL, .callback = fxc_lws_cb, .rx_buffer_size = 65536 },
+    { .name = NULL },
+};
+
+/* ---- service loop ----------------------------------------------------------- */
+
+/* lws runs ripe timers before it computes its poll wait, so a tick that expired
+ * just then would leave the poll unbounded: the tick re-arms itself. */
+static void fxc_tick_cb(lws_sorted_usec_list_t *sul)
+{
+    struct fxc_client *c = lws_container_of(sul, struct fxc_client, tick);
+    lws_sul_schedule(c->ctx, 0, &c->tick, fxc_tick_cb, FXC_REARM_US);
+}
+
+typedef int (*fxc_cond)(const struct fxc_client *c);
+
+/* Services lws until cond(c) holds (1), the connection is closed (-1) or the
+ * deadline passes (0). cond is checked first, so queued results win over a close. */
+static int fxc_pump(struct fxc_client *c, int64_t deadline, fxc_cond cond)
+{
+    for (;;) {
+        int64_t now = fxc_now_us(CLOCK_MONOTONIC);
+        if (cond(c)) return 1;
+        if (c->state == FXC_CLOSED) return -1;
+        if (now >= deadline) return 0;
+        lws_sul_schedule(c->ctx, 0, &c->tick, fxc_tick_cb, deadline - now < FXC_TICK_US ? deadline - now : FXC_TICK_US);
+        if (lws_service(c->ctx, 0) < 0) {
+            fxc_set_err(c->err, sizeof c->err, "libwebsockets service failed");
+            c->state = FXC_CLOSED;
+        }
+    }
+}
+
+static int fxc_has_hello(const struct fxc_client *c) { return c->hello != NULL; }
+static int fxc_has_reply(const struct fxc_client *c) { return c->reply != NULL; }
+static int fxc_has_msg(const struct fxc_client *c) { return c->head != NULL; }
+
+/* ---- public API --------------------------------------------------------------- */
+
+static int fxc_start(struct fxc_client *c, char *eb, size_t el)
+{
+    struct lws_context_creation_info info;
+    struct lws_client_connect_info ci;
+    struct addrinfo *ai = fxc_resolve(c, eb, el);
+    if (!ai) return -1;
+    freeaddrinfo(ai);
+    memset(&info, 0, sizeof info);
+    info.port = CONTEXT_PORT_NO_LISTEN;
+    info.protocols = fxc_protocols;
+    info.gid = (gid_t)-1;
+    info.uid = (uid_t)-1;
+    info.fd_limit_per_thread = 16;
+    info.user = c;
+    if (!(c->ctx = lws_create_context(&info))) {
+        fxc_set_err(eb, el, "cannot create a libwebsockets context");
+        return -1;
+    }
+    memset(&ci, 0, sizeof ci);
+    ci.context = c->ctx;
+    ci.address = c->host;
+    ci.port = c->port;
+    ci.path = c->path;
+    ci.host = c->host_header;
+    ci.origin = c->host_header;
+    ci.protocol = FXC_SUBPROTOCOL;
+    ci.pwsi = &c->wsi;
+    if (!lws_client_connect_via_info(&ci)) {
+        if (!c->err[0]) fxc_on_connect_error(c, "connect failed");
+        fxc_set_err(eb, el, "%s", c->err);
+        return -1;
+    }
+    return 0;
+}
+
+static void fxc_free(struct fxc_client *c)
+{
+    if (c->ctx) {
+        lws_sul_cancel(&c->tick);
+        lws_context_destroy(c->ctx);
+    }
+    fxc_queue_free(c);
+    cJSON_Delete(c->hello);
+    cJSON_Delete(c->reply);
+    free(c->rx);
+    free(c->tx);
+    free(c);
+}
+
+int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *eb, size_t el)
+{
+    struct fxc_client *c = calloc(1, sizeof *c);
+    int r;
+    *out = NULL;
+    if (!c) { fxc_set_err(eb, el, "out of memory"); return -1; }
+    if (fxc_url_parse(c, url, eb, el)) {
+        fxc_free(c);
+        return -2;
+    }
+    if (fxc_start(c, eb, el)) {
+        fxc_free(c);
+        return -1;
+    }
+    r = fxc_pump(c, fxc_deadline(timeout_ms), fxc_has_hello);
+    if (r == 1) {
+        *out = c;
+        return 0;
+    }
+    if (r == 0)
+        fxc_set_err(eb, el, "timeout after %d ms %s ws://%s%s", timeout_ms,
+                    c->state == FXC_OPEN ? "waiting for the hello of" : "connecting to", c->host_header, c->path);
+    else
+        fxc_set_err(eb, el, "%s", c->err);
+    fxc_free(c);
+    return -1;
+}
+
+const cJSON *fxc_hello(const struct fxc_client *c) { return c->hello; }
+
+/* Serializes req plus "id": c->next_id into c->tx and asks lws for a write. */
+static int fxc_queue_request(struct fxc_client *c, const cJSON *req, char *eb, size_t el)
+{
+    cJSON *copy = cJSON_Duplicate(req, 1);
+    char *text;
+    size_t n;
+    if (!copy || !cJSON_IsObject(copy)) {
+        cJSON_Delete(copy);
+        fxc_set_err(eb, el, "request must be a JSON object");
+        return -1;
+    }
+    cJSON_DeleteItemFromObjectCaseSensitive(copy, "id");
+    cJSON_AddNumberToObject(copy, "id", ++c->next_id);
+    text = cJSON_PrintUnformatted(copy);
+    cJSON_Delete(copy);
+    n = text ? strlen(text) : 0;
+    free(c->tx);
+    if (!text || !(c->tx = malloc(LWS_PRE + n))) {
+        free(text);
+        c->tx = NULL;
+        fxc_set_err(eb, el, "out of memory");
+        return -1;
+    }
+    memcpy(c->tx + LWS_PRE, text, n);
+    free(text);
+    c->tx_len = n;
+    c->want_id = c->next_id;
+    c->want = 1;
+    lws_callback_on_writable(c->wsi);
+    return 0;
+}
+
+/* Fills errbuf from an error reply: "code: message (param p)". */
+static void fxc_reply_error(const cJSON *r, char *eb, size_t el)
+{
+    const cJSON *code = cJSON_GetObjectItemCaseSensitive(r, "code");
+    const cJSON *msg = cJSON_GetObjectItemCaseSensitive(r, "message");
+    const cJSON *param = cJSON_GetObjectItemCaseSensitive(r, "param");
+    fxc_set_err(eb, el, "%s: %s%s%s%s", cJSON_IsString(code) ? code->valuestring : "error",
+                cJSON_IsString(msg) ? msg->valuestring : "(no message)",
+                cJSON_IsString(param) ? " (param " : "", cJSON_IsString(param) ? param->valuestring : "",
+                cJSON_IsString(param) ? ")" : "");
+}
+
+int fxc_request(struct fxc_client *c, const cJSON *req, cJSON **reply, int timeout_ms, char *eb, size_t el)
+{
+    const cJSON *op;
+    int r;
+    *reply = NULL;
+    if (c->state != FXC_OPEN) { fxc_set_err(eb, el, "%s", c->err); return -1; }
+    if (fxc_queue_request(c, req, eb, el)) return -1;
+    r = fxc_pump(c, fxc_deadline(timeout_ms), fxc_has_reply);
+    if (r != 1) {
+        c->want = 0;
+        c->tx_len = 0;
+        op = cJSON_GetObjectItemCaseSensitive(req, "op");
+        if (r == 0)
+            fxc_set_err(eb, el, "timeout after %d ms waiting for the reply to \"%s\"", timeout_ms,
+                        cJSON_IsString(op) ? op->valuestring : "?");
+        else
+            fxc_set_err(eb, el, "%s", c->err);
+        return -1;
+    }
+    *reply = c->reply;
+    c->reply = NULL;
+    op = cJSON_GetObjectItemCaseSensitive(*reply, "op");
+    if (strcmp(op->valuestring, "error") != 0) return 0;
+    fxc_reply_error(*reply, eb, el);
+    return 1;
+}
+
+int fxc_next(struct fxc_client *c, struct fxc_msg *m, int timeout_ms, char *eb, size_t el)
+{
+    struct fxc_node *n;
+    int r = fxc_pump(c, fxc_deadline(timeout_ms), fxc_has_msg);
+    memset(m, 0, sizeof *m);
+    if (r != 1) {
+        if (r < 0) fxc_set_err(eb, el, "%s", c->err);
+        return r;
+    }
+    n = fxc_queue_unlink(c, NULL, c->head);
+    *m = n->msg;
+    free(n);
+    return 1;
+}
+
+void fxc_stats(const struct fxc_client *c, struct fxc_stats *out) { *out = c->stats; }
+
+static int fxc_is_closed(const struct fxc_client *c) { return c->state == FXC_CLOSED; }
+
+void fxc_close(struct fxc_client *c)
+{
+    if (!c) return;
+    if (c->state == FXC_OPEN && c->wsi) {
+        fxc_set_err(c->err, sizeof c->err, "closed by the client");
+        lws_close_reason(c->wsi, LWS_CLOSE_STATUS_NORMAL, NULL, 0);
+        c->closing = 1; /* the writeable callback returns -1: lws sends the close */
+        lws_callback_on_writable(c->wsi);
+        fxc_pump(c, fxc_deadline(FXC_CLOSE_WAIT_MS), fxc_is_closed);
+    }
+    fxc_free(c);
+}

@@ -1,0 +1,423 @@
+/* fxctl.c — the command-line client of fxstreamd, built on libfxclient.
+ *
+ * Owns argument parsing, turning one command into one fxstream.v1 request, and
+ * printing: every reply is one line of JSON on stdout (easy to pipe into jq or a
+ * script), every failure one line on stderr with exit status 1 (server or
+ * transport) or 2 (usage). `subscribe` also owns writing frames to disk. */
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include <libwebsockets.h>
+
+#include "fxclient.h"
+
+#define FXCTL_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
+#define FXCTL_DEFAULT_TIMEOUT_MS 10000
+
+enum { FXCTL_OK = 0, FXCTL_FAIL = 1, FXCTL_USAGE = 2 };
+
+struct fxctl_opts {
+    const char *url;
+    int timeout_ms;
+    long frames;       /* subscribe --frames, 0 when not given */
+    double max_fps;    /* subscribe --max-fps, < 0 when not given */
+    const char *out_dir;
+    const char *cmd;
+    char **args;       /* positional arguments after the command */
+    int nargs;
+};
+
+static const char fxctl_help[] =
+    "usage: fxctl [--url ws://HOST[:PORT][/PATH]] [--timeout MS] COMMAND [ARGS]\n"
+    "\n"
+    "Talks to fxstreamd over WebSocket (protocol fxstream.v1).\n"
+    "\n"
+    "commands:\n"
+    "  list                          streams: name, effect, subscribers, rev, fps\n"
+    "  describe EFFECT               an effect's parameter schema and outputs\n"
+    "  create EFFECT NAME [K=V ...]  new stream NAME running EFFECT, optional params\n"
+    "  destroy NAME                  remove stream NAME\n"
+    "  get NAME                      complete parameters of NAME with their rev\n"
+    "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
+    "  reset NAME                    restart NAME's simulation\n"
+    "  subscribe NAME --frames N [--max-fps F] [--out DIR]\n"
+    "                                receive N frames of NAME; prints one JSON line\n"
+    "                                per frame (stream, channel, kind, seq, param_rev,\n"
+    "                                sim_time, server_time_us, latency_ms, codec,\n"
+    "                                payload_bytes, width and height, or count, flags)\n"
+    "                                and any params event of NAME; with --out writes\n"
+    "                                DIR/NAME-SEQ.exr (texture, codec 1) or .bin with\n"
+    "                                the payload and DIR/NAME-SEQ.json with the line\n"
+    "\n"
+    "K=V: K is a top-level parameter name; V is JSON (wind=[1,0,0], n=3, on=true,\n"
+    "mode=\"simpson\"); a V that is not valid JSON is taken as a string (mode=simpson).\n"
+    "\n"
+    "options (also as --opt=VALUE):\n"
+    "  --url URL      server, default $FXCTL_URL or " FXCTL_DEFAULT_URL "\n"
+    "                 (port 7681 and path /v1/ws when omitted; wss:// is not supported)\n"
+    "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
+    "                 each frame (default 10000)\n"
+    "  --help         this text\n"
+    "\n"
+    "output: each reply is printed on stdout as one line of JSON (the server's reply\n"
+    "object without the request id). Errors go to stderr as\n"
+    "\"fxctl: CODE: MESSAGE\" for server errors or \"fxctl: WHAT\" for transport errors.\n"
+    "exit status: 0 success, 1 server or transport error, 2 usage error (bad URL too).\n"
+    "environment: FXCTL_URL default URL; FXCTL_LWS_LOG libwebsockets log level bits\n"
+    "(default 0, silent).\n";
+
+static int fxctl_usage(const char *why, const char *arg)
+{
+    fprintf(stderr, "fxctl: %s%s%s\nTry 'fxctl --help'.\n", why, arg ? ": " : "", arg ? arg : "");
+    return FXCTL_USAGE;
+}
+
+/* ---- arguments ------------------------------------------------------------------ */
+
+static int fxctl_parse_long(const char *s, long min, long *out)
+{
+    char *end;
+    long v;
+    errno = 0;
+    v = strtol(s, &end, 10);
+    if (errno || end == s || *end || v < min) return -1;
+    *out = v;
+    return 0;
+}
+
+/* Applies option `name` with value `val`. Returns 0, or FXCTL_USAGE. */
+static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val)
+{
+    long n;
+    char *end;
+    if (!val) return fxctl_usage("option needs a value", name);
+    if (!strcmp(name, "--url")) {
+        o->url = val;
+    } else if (!strcmp(name, "--timeout")) {
+        if (fxctl_parse_long(val, 1, &n) || n > 3600000) return fxctl_usage("--timeout needs milliseconds, 1..3600000", val);
+        o->timeout_ms = (int)n;
+    } else if (!strcmp(name, "--frames")) {
+        if (fxctl_parse_long(val, 1, &o->frames)) return fxctl_usage("--frames needs a positive integer", val);
+    } else if (!strcmp(name, "--max-fps")) {
+        o->max_fps = strtod(val, &end);
+        if (end == val || *end || !(o->max_fps > 0) || !isfinite(o->max_fps))
+            return fxctl_usage("--max-fps needs a positive number", val);
+    } else if (!strcmp(name, "--out")) {
+        o->out_dir = val;
+    } else {
+        return fxctl_usage("unknown option", name);
+    }
+    return 0;
+}
+
+/* Handles argv[*i], an option; may consume argv[*i + 1]. */
+static int fxctl_take_opt(struct fxctl_opts *o, int argc, char **argv, int *i)
+{
+    char name[32];
+    const char *eq = strchr(argv[*i], '=');
+    if (!eq) {
+        const char *opt = argv[*i];
+        return fxctl_set_opt(o, opt, *i + 1 < argc ? argv[++*i] : NULL);
+    }
+    if ((size_t)(eq - argv[*i]) >= sizeof name) return fxctl_usage("unknown option", argv[*i]);
+    snprintf(name, sizeof name, "%.*s", (int)(eq - argv[*i]), argv[*i]);
+    return fxctl_set_opt(o, name, eq + 1);
+}
+
+/* Fills o from argv. Returns 0, FXCTL_USAGE, or -1 after printing --help. */
+static int fxctl_parse_args(struct fxctl_opts *o, int argc, char **argv)
+{
+    int i, only_positional = 0, r;
+    for (i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (only_positional || strncmp(a, "--", 2) != 0 || a[2] == 0) {
+            if (!only_positional && !strcmp(a, "--")) { only_positional = 1; continue; }
+            if (!o->cmd) o->cmd = a;
+            else o->args[o->nargs++] = argv[i];
+        } else if (!strcmp(a, "--help")) {
+            fputs(fxctl_help, stdout);
+            return -1;
+        } else if ((r = fxctl_take_opt(o, argc, argv, &i))) {
+            return r;
+        }
+    }
+    if (!o->cmd) return fxctl_usage("no command given", NULL);
+    return 0;
+}
+
+/* Adds "K=V" to obj; V parsed as JSON, or taken as a string when it is not JSON. */
+static int fxctl_add_kv(cJSON *obj, const char *kv)
+{
+    const char *eq = strchr(kv, '=');
+    char *key;
+    cJSON *v;
+    if (!eq || eq == kv) return fxctl_usage("expected KEY=VALUE", kv);
+    v = cJSON_ParseWithOpts(eq + 1, NULL, 1);
+    if (!v) v = cJSON_CreateString(eq + 1);
+    key = strndup(kv, (size_t)(eq - kv));
+    if (!v || !key) {
+        free(key);
+        cJSON_Delete(v);
+        fprintf(stderr, "fxctl: out of memory\n");
+        return FXCTL_FAIL;
+    }
+    cJSON_DeleteItemFromObjectCaseSensitive(obj, key);
+    cJSON_AddItemToObject(obj, key, v);
+    free(key);
+    return 0;
+}
+
+/* ---- commands -> requests --------------------------------------------------------- */
+
+struct fxctl_cmd {
+    const char *name;
+    int min_args, max_args; /* max_args < 0: unlimited */
+    const char *first_field; /* "effect" or "stream": what args[0] is */
+    const char *synopsis;
+};
+
+static const struct fxctl_cmd fxctl_cmds[] = {
+    { "list", 0, 0, NULL, "list" },
+    { "describe", 1, 1, "effect", "describe EFFECT" },
+    { "create", 2, -1, "effect", "create EFFECT NAME [K=V ...]" },
+    { "destroy", 1, 1, "stream", "destroy NAME" },
+    { "get", 1, 1, "stream", "get NAME" },
+    { "set", 2, -1, "stream", "set NAME K=V [K=V ...]" },
+    { "reset", 1, 1, "stream", "reset NAME" },
+    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--out DIR]" },
+};
+
+static const struct fxctl_cmd *fxctl_find_cmd(const char *name)
+{
+    for (size_t i = 0; i < sizeof fxctl_cmds / sizeof fxctl_cmds[0]; i++)
+        if (!strcmp(fxctl_cmds[i].name, name)) return &fxctl_cmds[i];
+    return NULL;
+}
+
+/* Checks argument counts and command-specific options before any network I/O. */
+static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cmd)
+{
+    int sub = !strcmp(cmd->name, "subscribe");
+    if (o->nargs < cmd->min_args || (cmd->max_args >= 0 && o->nargs > cmd->max_args)) {
+        fprintf(stderr, "fxctl: wrong number of arguments; usage: fxctl %s\nTry 'fxctl --help'.\n", cmd->synopsis);
+        return FXCTL_USAGE;
+    }
+    if (!sub && (o->frames || o->max_fps >= 0 || o->out_dir))
+        return fxctl_usage("--frames, --max-fps and --out go with subscribe only", NULL);
+    if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
+    return 0;
+}
+
+/* Builds the request of a command. Returns 0, or an exit status. */
+static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, cJSON **out)
+{
+    cJSON *req = cJSON_CreateObject(), *params = NULL;
+    int i = 1, r = 0;
+    *out = req;
+    if (!req) return FXCTL_FAIL;
+    cJSON_AddStringToObject(req, "op", cmd->name);
+    if (cmd->first_field) cJSON_AddStringToObject(req, cmd->first_field, o->args[0]);
+    if (!strcmp(cmd->name, "create")) cJSON_AddStringToObject(req, "stream", o->args[i++]);
+    if (o->max_fps >= 0) cJSON_AddNumberToObject(req, "max_fps", o->max_fps);
+    if (i < o->nargs) params = cJSON_AddObjectToObject(req, "params");
+    for (; i < o->nargs && !r; i++) r = fxctl_add_kv(params, o->args[i]);
+    return r;
+}
+
+/* ---- output -------------------------------------------------------------------------- */
+
+static void fxctl_print_json(FILE *f, cJSON *j)
+{
+    char *s = cJSON_PrintUnformatted(j);
+    if (s) fprintf(f, "%s\n", s);
+    free(s);
+}
+
+/* Formats one frame's header as a JSON line (no newline) into buf. */
+static void fxctl_frame_line(char *buf, size_t len, const char *stream, const struct fxc_msg *m)
+{
+    const struct fxs_header *h = &m->header;
+    cJSON *name = cJSON_CreateString(stream);
+    char *qname = cJSON_PrintUnformatted(name);
+    char size[96];
+    if (h->kind == FXS_KIND_TEXTURE || h->kind == FXS_KIND_LUT)
+        snprintf(size, sizeof size, "\"width\":%" PRIu32 ",\"height\":%" PRIu32, h->count_or_width, h->height);
+    else
+        snprintf(size, sizeof size, "\"count\":%" PRIu32, h->count_or_width);
+    snprintf(buf, len,
+             "{\"stream\":%s,\"channel\":%" PRIu32 ",\"kind\":%u,\"seq\":%" PRIu64 ",\"param_rev\":%" PRIu32
+             ",\"sim_time\":%.17g,\"server_time_us\":%" PRIu64 ",\"latency_ms\":%.3f,\"codec\":%" PRIu32
+             ",\"payload_bytes\":%" PRIu32 ",%s,\"flags\":%" PRIu32 "}",
+             qname ? qname : "null", h->channel, (unsigned)h->kind, h->seq, h->param_rev,
+             isfinite(h->sim_time) ? h->sim_time : 0.0, h->server_time_us,
+             ((double)m->recv_time_us - (double)h->server_time_us) / 1000.0, h->codec, h->payload_bytes,
+             size, h->flags);
+    free(qname);
+    cJSON_Delete(name);
+}
+
+static int fxctl_write_file(const char *path, const void *data, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    int ok = f && fwrite(data, 1, len, f) == len;
+    if (f && fclose(f)) ok = 0;
+    if (!ok) fprintf(stderr, "fxctl: cannot write %s: %s\n", path, strerror(errno));
+    return ok ? 0 : -1;
+}
+
+/* Writes DIR/STREAM-SEQ.{exr|bin} and DIR/STREAM-SEQ.json. */
+static int fxctl_save_frame(const char *dir, const char *stream, const struct fxc_msg *m, const char *line)
+{
+    const struct fxs_header *h = &m->header;
+    int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
+    char path[4096], *safe = strdup(stream);
+    int r;
+    if (!safe) return -1;
+    for (char *p = safe; *p; p++)
+        if (*p == '/') *p = '_';
+    snprintf(path, sizeof path, "%s/%s-%" PRIu64 ".%s", dir, safe, h->seq, exr ? "exr" : "bin");
+    r = fxctl_write_file(path, m->payload, h->payload_bytes);
+    snprintf(path, sizeof path, "%s/%s-%" PRIu64 ".json", dir, safe, h->seq);
+    free(safe);
+    if (!r) {
+        char *text = malloc(strlen(line) + 2);
+        r = text ? 0 : -1;
+        if (text) {
+            sprintf(text, "%s\n", line);
+            r = fxctl_write_file(path, text, strlen(text));
+            free(text);
+        }
+    }
+    return r;
+}
+
+/* ---- subscribe --------------------------------------------------------------------------- */
+
+struct fxctl_sub {
+    const struct fxctl_opts *o;
+    const char *stream;
+    uint32_t channel;
+    long got;
+};
+
+static int fxctl_on_frame(struct fxctl_sub *s, const struct fxc_msg *m)
+{
+    char line[1024];
+    if (m->header.channel != s->channel) return 0;
+    fxctl_frame_line(line, sizeof line, s->stream, m);
+    printf("%s\n", line);
+    fflush(stdout);
+    s->got++;
+    if (s->o->out_dir && fxctl_save_frame(s->o->out_dir, s->stream, m, line)) return FXCTL_FAIL;
+    return 0;
+}
+
+/* Prints the stream's params events; fails when the stream goes away. */
+static int fxctl_on_event(struct fxctl_sub *s, cJSON *ev)
+{
+    const char *op = cJSON_GetObjectItemCaseSensitive(ev, "op")->valuestring;
+    const cJSON *st = cJSON_GetObjectItemCaseSensitive(ev, "stream");
+    const cJSON *why = cJSON_GetObjectItemCaseSensitive(ev, "reason");
+    int mine = cJSON_IsString(st) && !strcmp(st->valuestring, s->stream);
+    if (!mine) return 0;
+    if (!strcmp(op, "params")) {
+        fxctl_print_json(stdout, ev);
+        fflush(stdout);
+    } else if (!strcmp(op, "unsubscribed")) {
+        fprintf(stderr, "fxctl: unsubscribed from stream \"%s\" (%s) after %ld of %ld frames\n", s->stream,
+                cJSON_IsString(why) ? why->valuestring : "no reason given", s->got, s->o->frames);
+        return FXCTL_FAIL;
+    } else if (!strcmp(op, "error")) {
+        fprintf(stderr, "fxctl: stream \"%s\" reported: ", s->stream);
+        fxctl_print_json(stderr, ev);
+    }
+    return 0;
+}
+
+static int fxctl_make_dir(const char *dir)
+{
+    if (!mkdir(dir, 0777) || errno == EEXIST) return 0;
+    fprintf(stderr, "fxctl: cannot create %s: %s\n", dir, strerror(errno));
+    return FXCTL_FAIL;
+}
+
+static int fxctl_subscribe(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *reply)
+{
+    const cJSON *ch = cJSON_GetObjectItemCaseSensitive(reply, "channel");
+    struct fxctl_sub s = { o, o->args[0], 0, 0 };
+    char err[512];
+    int r = 0;
+    if (!cJSON_IsNumber(ch)) {
+        fprintf(stderr, "fxctl: subscribed reply without a channel\n");
+        return FXCTL_FAIL;
+    }
+    s.channel = (uint32_t)ch->valuedouble;
+    while (!r && s.got < o->frames) {
+        struct fxc_msg m;
+        int n = fxc_next(c, &m, o->timeout_ms, err, sizeof err);
+        if (n <= 0) {
+            if (n == 0)
+                fprintf(stderr, "fxctl: timeout after %d ms waiting for frame %ld of %ld of \"%s\"\n",
+                        o->timeout_ms, s.got + 1, o->frames, s.stream);
+            else
+                fprintf(stderr, "fxctl: %s\n", err);
+            return FXCTL_FAIL;
+        }
+        r = m.type == FXC_MSG_FRAME ? fxctl_on_frame(&s, &m) : fxctl_on_event(&s, m.event);
+        fxc_msg_free(&m);
+    }
+    return r;
+}
+
+/* ---- main ------------------------------------------------------------------------------------ */
+
+static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req)
+{
+    struct fxc_client *c;
+    cJSON *reply;
+    char err[512];
+    int r;
+    if (o->out_dir && fxctl_make_dir(o->out_dir)) return FXCTL_FAIL;
+    if ((r = fxc_connect(&c, o->url, o->timeout_ms, err, sizeof err))) {
+        fprintf(stderr, "fxctl: %s\n", err);
+        return r == -2 ? FXCTL_USAGE : FXCTL_FAIL;
+    }
+    r = fxc_request(c, req, &reply, o->timeout_ms, err, sizeof err);
+    if (r) {
+        fprintf(stderr, "fxctl: %s\n", err);
+        r = FXCTL_FAIL;
+    } else {
+        cJSON_DeleteItemFromObjectCaseSensitive(reply, "id");
+        fxctl_print_json(stdout, reply);
+        fflush(stdout);
+        if (!strcmp(cmd->name, "subscribe")) r = fxctl_subscribe(c, o, reply);
+    }
+    cJSON_Delete(reply);
+    fxc_close(c);
+    return r;
+}
+
+int main(int argc, char **argv)
+{
+    struct fxctl_opts o = { .timeout_ms = FXCTL_DEFAULT_TIMEOUT_MS, .max_fps = -1 };
+    const struct fxctl_cmd *cmd = NULL;
+    const char *log = getenv("FXCTL_LWS_LOG");
+    cJSON *req = NULL;
+    int r;
+    o.url = getenv("FXCTL_URL") && *getenv("FXCTL_URL") ? getenv("FXCTL_URL") : FXCTL_DEFAULT_URL;
+    lws_set_log_level(log ? atoi(log) : 0, NULL);
+    if (!(o.args = calloc((size_t)argc, sizeof *o.args))) return FXCTL_FAIL;
+    r = fxctl_parse_args(&o, argc, argv);
+    if (r == 0 && !(cmd = fxctl_find_cmd(o.cmd))) r = fxctl_usage("unknown command", o.cmd);
+    if (r == 0) r = fxctl_validate(&o, cmd);
+    if (r == 0) r = fxctl_build(&o, cmd, &req);
+    if (r == 0) r = fxctl_run(&o, cmd, req);
+    cJSON_Delete(req);
+    free(o.args);
+    return r < 0 ? FXCTL_OK : r;
+}
