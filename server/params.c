@@ -19,6 +19,17 @@ static const char *const params_type_names[] = {
     [PARAM_FLOAT_LIST] = "float_list", [PARAM_OBJECT_LIST] = "object_list",
 };
 
+#define PARAMS_PATH_MAX 96
+
+/* path.name, or path[index] when name is NULL; long paths are truncated, not overflowed. */
+static void params_subpath(char sub[PARAMS_PATH_MAX], const char *path, const char *name, int index)
+{
+    int n = name ? snprintf(sub, PARAMS_PATH_MAX, "%s.", path) : snprintf(sub, PARAMS_PATH_MAX, "%s[", path);
+    if (n < 0 || n >= PARAMS_PATH_MAX - 1) return;
+    if (name) snprintf(sub + n, (size_t)(PARAMS_PATH_MAX - n), "%s", name);
+    else snprintf(sub + n, (size_t)(PARAMS_PATH_MAX - n), "%d]", index);
+}
+
 static const struct param_def *params_find(const struct param_def *defs, const char *name)
 {
     for (; defs->name; defs++)
@@ -92,9 +103,9 @@ static cJSON *params_check_numbers(const struct param_def *d, const cJSON *v, co
     double norm2 = 0;
     int i = 0;
     for (const cJSON *e = v->child; e; e = e->next, i++) {
-        char sub[96];
+        char sub[PARAMS_PATH_MAX];
         double x;
-        snprintf(sub, sizeof sub, "%s[%d]", path, i);
+        params_subpath(sub, path, NULL, i);
         if (params_check_number(d, e, sub, &x, err)) {
             cJSON_Delete(out);
             return NULL;
@@ -118,17 +129,17 @@ static cJSON *params_check_item(const struct param_def *fields, const cJSON *v, 
         fx_fail(err, "bad_param", path, "%s: expected an object", path);
         return NULL;
     }
-    char sub[96];
+    char sub[PARAMS_PATH_MAX];
     for (const cJSON *e = v->child; e; e = e->next) {
         if (!params_find(fields, e->string)) {
-            snprintf(sub, sizeof sub, "%s.%s", path, e->string);
+            params_subpath(sub, path, e->string, 0);
             fx_fail(err, "bad_param", sub, "%s: unknown field", sub);
             return NULL;
         }
     }
     cJSON *out = cJSON_CreateObject();
     for (const struct param_def *f = fields; f->name; f++) {
-        snprintf(sub, sizeof sub, "%s.%s", path, f->name);
+        params_subpath(sub, path, f->name, 0);
         const cJSON *given = cJSON_GetObjectItemCaseSensitive(v, f->name);
         cJSON *parsed = given ? NULL : cJSON_Parse(f->def);
         cJSON *val = params_check_value(f, given ? given : parsed, sub, err);
@@ -157,8 +168,8 @@ static cJSON *params_check_objects(const struct param_def *d, const cJSON *v, co
     cJSON *out = cJSON_CreateArray();
     int i = 0;
     for (const cJSON *e = v->child; e; e = e->next, i++) {
-        char sub[96];
-        snprintf(sub, sizeof sub, "%s[%d]", path, i);
+        char sub[PARAMS_PATH_MAX];
+        params_subpath(sub, path, NULL, i);
         cJSON *item = params_check_item(d->fields, e, sub, err);
         if (!item) {
             cJSON_Delete(out);
