@@ -1,0 +1,280 @@
+/* test_session.c — the control protocol without sockets: every op, every error code,
+ * all-or-nothing `set`, broadcasts to other subscribers, message size / depth / rate
+ * limits. Sessions are driven through session_handle/session_receive and their queued
+ * replies read back with session_pop; no engine runs (frames are not needed here). */
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "log.h"
+#include "session.h"
+
+static struct server t_srv;
+
+static void t_server_init(void)
+{
+    memset(&t_srv, 0, sizeof t_srv);
+    t_srv.cfg.limits = (struct limits){.max_connections = 8, .max_streams = 4, .max_subscriptions = 2,
+                                       .max_message_bytes = 4096, .max_json_depth = 8,
+                                       .max_control_per_sec = 1000, .max_queued_messages = 64};
+    hub_init(&t_srv.hub, t_srv.cfg.limits.max_streams);
+}
+
+static void t_server_free(void)
+{
+    while (t_srv.sessions) {
+        struct session *s = t_srv.sessions;
+        session_close(s);
+        free(s);
+    }
+    hub_free(&t_srv.hub);
+}
+
+static struct session *t_open(void)
+{
+    struct session *s = malloc(sizeof *s);
+    session_open(s, &t_srv, NULL);
+    return s;
+}
+
+/* The next queued message, parsed (caller deletes), or NULL. */
+static cJSON *t_next(struct session *s)
+{
+    struct outmsg *m = session_pop(s);
+    if (!m) return NULL;
+    cJSON *j = cJSON_ParseWithLength((const char *)m->data + FRAME_HEADROOM, m->len);
+    free(m);
+    return j;
+}
+
+static void t_drain(struct session *s)
+{
+    cJSON *j;
+    while ((j = t_next(s))) cJSON_Delete(j);
+}
+
+/* Sends text and returns the single reply (caller deletes). */
+static cJSON *t_req(struct session *s, const char *text)
+{
+    session_handle(s, text, strlen(text));
+    return t_next(s);
+}
+
+static const char *t_op(const cJSON *j) { return j ? cJSON_GetObjectItem(j, "op")->valuestring : "(none)"; }
+static const char *t_code(const cJSON *j)
+{
+    const cJSON *c = j ? cJSON_GetObjectItem(j, "code") : NULL;
+    return c ? c->valuestring : "(none)";
+}
+
+/* Expects an error reply with code. */
+static void t_expect_error(struct session *s, const char *text, const char *code)
+{
+    cJSON *r = t_req(s, text);
+    CHECK(r && !strcmp(t_op(r), "error"), "%s -> op %s", text, t_op(r));
+    CHECK(!strcmp(t_code(r), code), "%s -> code %s, expected %s", text, t_code(r), code);
+    CHECK(r && cJSON_IsString(cJSON_GetObjectItem(r, "message")), "%s: no message", text);
+    cJSON_Delete(r);
+    CHECK(t_next(s) == NULL, "%s: extra messages", text);
+}
+
+static void test_hello(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    cJSON *h = t_next(s);
+    CHECK(!strcmp(t_op(h), "hello"), "first message %s", t_op(h));
+    CHECK(!strcmp(cJSON_GetObjectItem(h, "protocol")->valuestring, "fxstream.v1"), "protocol");
+    CHECK(cJSON_GetArraySize(cJSON_GetObjectItem(h, "effects")) >= 1, "effects");
+    CHECK(cJSON_GetObjectItem(cJSON_GetObjectItem(h, "limits"), "max_message_bytes")->valueint == 4096, "limits");
+    cJSON_Delete(h);
+    t_server_free();
+}
+
+static void test_lifecycle(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    cJSON *r = t_req(s, "{\"op\":\"create\",\"id\":7,\"effect\":\"energy_wave\",\"stream\":\"a\",\"params\":{\"fps\":10}}");
+    CHECK(!strcmp(t_op(r), "created") && cJSON_GetObjectItem(r, "id")->valueint == 7, "create -> %s", t_op(r));
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"list\",\"id\":\"x\"}");
+    CHECK(!strcmp(t_op(r), "list") && !strcmp(cJSON_GetObjectItem(r, "id")->valuestring, "x"), "list");
+    const cJSON *st = cJSON_GetArrayItem(cJSON_GetObjectItem(r, "streams"), 0);
+    CHECK(st && !strcmp(cJSON_GetObjectItem(st, "stream")->valuestring, "a"), "listed");
+    CHECK(st && cJSON_GetObjectItem(st, "fps")->valuedouble == 10, "fps from params");
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"get\",\"stream\":\"a\"}");
+    CHECK(!strcmp(t_op(r), "params") && cJSON_GetObjectItem(r, "rev")->valueint == 1, "get");
+    CHECK(cJSON_GetObjectItem(cJSON_GetObjectItem(r, "params"), "width") != NULL, "complete params");
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"set\",\"stream\":\"a\",\"params\":{\"fps\":20}}");
+    CHECK(!strcmp(t_op(r), "params") && cJSON_GetObjectItem(r, "rev")->valueint == 2, "set -> rev 2");
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"reset\",\"stream\":\"a\"}");
+    CHECK(!strcmp(t_op(r), "reset"), "reset");
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"describe\",\"effect\":\"energy_wave\"}");
+    CHECK(!strcmp(t_op(r), "describe") && cJSON_GetArraySize(cJSON_GetObjectItem(r, "params")) > 10, "describe");
+    CHECK(cJSON_IsArray(cJSON_GetObjectItem(r, "outputs")), "outputs");
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"destroy\",\"stream\":\"a\"}");
+    CHECK(!strcmp(t_op(r), "destroyed"), "destroy");
+    cJSON_Delete(r);
+    t_expect_error(s, "{\"op\":\"get\",\"stream\":\"a\"}", "unknown_stream");
+    t_server_free();
+}
+
+static void test_error_codes(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    t_expect_error(s, "{\"op\":", "bad_json");
+    t_expect_error(s, "", "bad_json");
+    t_expect_error(s, "[[[[[[[[[[1]]]]]]]]]]", "bad_json"); /* depth 10 > 8 */
+    t_expect_error(s, "[1]", "bad_request");
+    t_expect_error(s, "{\"id\":1}", "bad_request");
+    t_expect_error(s, "{\"op\":5}", "bad_request");
+    t_expect_error(s, "{\"op\":\"list\",\"id\":[1]}", "bad_request");
+    t_expect_error(s, "{\"op\":\"list\",\"extra\":1}", "bad_request");
+    t_expect_error(s, "{\"op\":\"fly\"}", "unknown_op");
+    t_expect_error(s, "{\"op\":\"describe\",\"effect\":\"smoke\"}", "unknown_effect");
+    t_expect_error(s, "{\"op\":\"create\",\"effect\":\"smoke\",\"stream\":\"b\"}", "unknown_effect");
+    t_expect_error(s, "{\"op\":\"subscribe\",\"stream\":\"nope\"}", "unknown_stream");
+    t_expect_error(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"bad name!\"}", "bad_request");
+    t_expect_error(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"b\",\"params\":{\"fps\":0}}",
+                   "bad_param");
+    cJSON_Delete(t_req(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"b\"}"));
+    t_expect_error(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"b\"}", "exists");
+    t_expect_error(s, "{\"op\":\"set\",\"stream\":\"b\",\"params\":{\"nosuch\":1}}", "bad_param");
+    t_expect_error(s, "{\"op\":\"set\",\"stream\":\"b\",\"params\":{\"fps\":1e999}}", "bad_param");
+    t_expect_error(s, "{\"op\":\"set\",\"stream\":\"b\"}", "bad_request");
+    t_expect_error(s, "{\"op\":\"subscribe\",\"stream\":\"b\",\"max_fps\":-1}", "bad_request");
+    t_expect_error(s, "{\"op\":\"unsubscribe\",\"stream\":\"b\"}", "bad_request");
+    for (int i = 0; i < 3; i++) {
+        char req[128];
+        snprintf(req, sizeof req, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"c%d\"}", i);
+        cJSON_Delete(t_req(s, req));
+    }
+    t_expect_error(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"c9\"}", "limit"); /* 4 streams */
+    cJSON_Delete(t_req(s, "{\"op\":\"subscribe\",\"stream\":\"c0\"}"));
+    cJSON_Delete(t_req(s, "{\"op\":\"subscribe\",\"stream\":\"c1\"}"));
+    t_expect_error(s, "{\"op\":\"subscribe\",\"stream\":\"c2\"}", "limit"); /* 2 per connection */
+    t_server_free();
+}
+
+static void test_error_echoes_id_and_param(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    cJSON_Delete(t_req(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"a\"}"));
+    cJSON *r = t_req(s, "{\"op\":\"set\",\"id\":42,\"stream\":\"a\",\"params\":{\"alpha\":\"x\"}}");
+    CHECK(cJSON_GetObjectItem(r, "id") && cJSON_GetObjectItem(r, "id")->valueint == 42, "id echoed");
+    CHECK(cJSON_GetObjectItem(r, "param") && !strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "alpha"),
+          "param named");
+    cJSON_Delete(r);
+    t_server_free();
+}
+
+static void test_set_all_or_nothing(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    cJSON_Delete(t_req(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"a\"}"));
+    cJSON *before = t_req(s, "{\"op\":\"get\",\"stream\":\"a\"}");
+    t_expect_error(s, "{\"op\":\"set\",\"stream\":\"a\",\"params\":{\"fps\":15,\"alpha\":-1}}", "bad_param");
+    cJSON *after = t_req(s, "{\"op\":\"get\",\"stream\":\"a\"}");
+    CHECK(cJSON_Compare(before, after, 1), "state changed by a rejected set");
+    cJSON_Delete(before);
+    cJSON_Delete(after);
+    t_server_free();
+}
+
+static void test_broadcast(void)
+{
+    t_server_init();
+    struct session *a = t_open(), *b = t_open(), *c = t_open();
+    t_drain(a), t_drain(b), t_drain(c);
+    cJSON_Delete(t_req(a, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"x\"}"));
+    cJSON *r = t_req(b, "{\"op\":\"subscribe\",\"stream\":\"x\",\"max_fps\":5}");
+    CHECK(!strcmp(t_op(r), "subscribed") && cJSON_GetObjectItem(r, "channel")->valueint > 0, "subscribed");
+    cJSON_Delete(r);
+    CHECK(t_srv.hub.streams[0]->subscribers == 1, "subscriber counted");
+    cJSON_Delete(t_req(a, "{\"op\":\"set\",\"stream\":\"x\",\"params\":{\"fps\":12}}"));
+    cJSON *ev = t_next(b);
+    CHECK(!strcmp(t_op(ev), "params") && cJSON_GetObjectItem(ev, "rev")->valueint == 2, "broadcast to subscriber");
+    CHECK(ev && !cJSON_GetObjectItem(ev, "id"), "broadcast has no id");
+    cJSON_Delete(ev);
+    CHECK(t_next(c) == NULL, "non-subscriber got the broadcast");
+    cJSON_Delete(t_req(a, "{\"op\":\"destroy\",\"stream\":\"x\"}"));
+    ev = t_next(b);
+    CHECK(!strcmp(t_op(ev), "unsubscribed") && !strcmp(cJSON_GetObjectItem(ev, "reason")->valuestring, "destroyed"),
+          "destroy tells subscribers");
+    cJSON_Delete(ev);
+    CHECK(b->nsubs == 0, "subscription dropped");
+    t_server_free();
+}
+
+static void test_receive_limits(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    /* A message in two fragments is reassembled. */
+    session_receive(s, "{\"op\":", 6, false, false);
+    session_receive(s, "\"list\"}", 7, true, false);
+    cJSON *r = t_next(s);
+    CHECK(!strcmp(t_op(r), "list"), "fragments -> %s", t_op(r));
+    cJSON_Delete(r);
+    /* Oversized: limit, and the next message works. */
+    char *big = malloc(5000);
+    memset(big, ' ', 5000);
+    session_receive(s, big, 3000, false, false);
+    session_receive(s, big, 2000, true, false);
+    free(big);
+    r = t_next(s);
+    CHECK(!strcmp(t_code(r), "limit"), "oversized -> %s", t_code(r));
+    cJSON_Delete(r);
+    session_receive(s, "{}", 2, true, true);
+    r = t_next(s);
+    CHECK(!strcmp(t_code(r), "bad_request"), "binary -> %s", t_code(r));
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"list\"}");
+    CHECK(!strcmp(t_op(r), "list"), "usable after errors");
+    cJSON_Delete(r);
+    t_server_free();
+}
+
+static void test_rate_limit(void)
+{
+    t_server_init();
+    t_srv.cfg.limits.max_control_per_sec = 5;
+    struct session *s = t_open();
+    t_drain(s);
+    int limited = 0;
+    for (int i = 0; i < 20; i++) {
+        cJSON *r = t_req(s, "{\"op\":\"list\"}");
+        limited += !strcmp(t_code(r), "limit");
+        cJSON_Delete(r);
+    }
+    CHECK(limited >= 10, "only %d of 20 rate-limited", limited);
+    t_server_free();
+}
+
+int main(void)
+{
+    log_set_level(LOG_WARN);
+    RUN(test_hello);
+    RUN(test_lifecycle);
+    RUN(test_error_codes);
+    RUN(test_error_echoes_id_and_param);
+    RUN(test_set_all_or_nothing);
+    RUN(test_broadcast);
+    RUN(test_receive_limits);
+    RUN(test_rate_limit);
+    return check_summary("test_session");
+}
