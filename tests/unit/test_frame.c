@@ -165,6 +165,12 @@ static void test_reject_header_bytes(void)
         fxs_put_u16(buf + 4, bad[i]);
         CHECK(test_unpack_copy(buf, len) == -1, "header_bytes %u accepted", bad[i]);
     }
+    for (uint16_t hb = 0; hb < 64; hb += 4) { /* payload_bytes consistent with the short header */
+        fxs_put_u16(buf + 4, hb);
+        fxs_put_u32(buf + 44, (uint32_t)(len - hb));
+        CHECK(test_unpack_copy(buf, len) == -1, "header_bytes %u with matching payload accepted", hb);
+    }
+    fxs_put_u32(buf + 44, 5);
     fxs_put_u16(buf + 4, 69); /* whole frame is header: payload_bytes 5 no longer fits */
     CHECK(test_unpack_copy(buf, len) == -1, "header_bytes 69 with payload 5 accepted");
     free(buf);
