@@ -1,0 +1,136 @@
+"""fxtest.py — shared helpers for the integration suites: start a real fxstreamd on a
+random loopback port, connect real WebSocket clients (Debian's python3-websockets),
+parse binary frame headers, and count named checks into the suite's summary line.
+Every wait is bounded, so a hung daemon fails a check instead of hanging the run."""
+import asyncio
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+import websockets
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
+DAEMON = os.path.join(ROOT, "build", "fxstreamd")
+HEADER = struct.Struct("<4sHHIIQdQIIIIII")  # the 64-byte v1 header, ARCHITECTURE.md
+
+
+def parse_frame(data):
+    """Returns the header fields as a dict plus 'payload'."""
+    (magic, hbytes, kind, channel, rev, seq, sim_time, t_us, codec, nbytes, w, h, flags,
+     _reserved) = HEADER.unpack_from(data)
+    return dict(magic=magic, header_bytes=hbytes, kind=kind, channel=channel, param_rev=rev,
+                seq=seq, sim_time=sim_time, server_time_us=t_us, codec=codec,
+                payload_bytes=nbytes, width=w, height=h, flags=flags,
+                payload=data[hbytes:])
+
+
+class Daemon:
+    """A fxstreamd on 127.0.0.1 with a kernel-chosen port."""
+
+    def __init__(self, *args, state_dir=None):
+        self.state_dir = state_dir or tempfile.mkdtemp(prefix="fxs-state-")
+        cmd = [DAEMON, "--port", "0", "--state-dir", self.state_dir, "--log-level", "warn", *args]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        line = self.proc.stdout.readline()  # bounded by the daemon's own start-up
+        if "listening on" not in line:
+            self.proc.kill()
+            raise RuntimeError("daemon did not start: %r %s" % (line, self.proc.stderr.read()))
+        self.port = int(line.split("127.0.0.1:")[1].split("/")[0])
+        self.url = "ws://127.0.0.1:%d/v1/ws" % self.port
+        self.http = "http://127.0.0.1:%d" % self.port
+
+    def stop(self, sig=signal.SIGTERM, timeout=10):
+        """Signals the daemon and returns its exit status."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            return None
+
+
+class Client:
+    """One WebSocket connection speaking fxstream.v1; keeps events and frames apart."""
+
+    def __init__(self, ws):
+        self.ws = ws
+        self.next_id = 1
+
+    @classmethod
+    async def connect(cls, daemon, path="/v1/ws"):
+        ws = await asyncio.wait_for(websockets.connect(
+            "ws://127.0.0.1:%d%s" % (daemon.port, path), subprotocols=["fxstream.v1"],
+            max_size=64 << 20), 10)
+        c = cls(ws)
+        c.hello = await c.text()
+        return c
+
+    async def recv(self, timeout=10):
+        return await asyncio.wait_for(self.ws.recv(), timeout)
+
+    async def text(self, timeout=10):
+        """The next text message, skipping binary frames."""
+        deadline = time.monotonic() + timeout
+        while True:
+            m = await self.recv(max(0.01, deadline - time.monotonic()))
+            if isinstance(m, str):
+                return json.loads(m)
+
+    async def frame(self, timeout=20):
+        """The next binary frame, skipping text messages."""
+        deadline = time.monotonic() + timeout
+        while True:
+            m = await self.recv(max(0.01, deadline - time.monotonic()))
+            if isinstance(m, bytes):
+                return parse_frame(m)
+
+    async def request(self, op, timeout=10, **fields):
+        """Sends op with a fresh id; returns the reply with that id."""
+        rid = self.next_id
+        self.next_id += 1
+        await self.ws.send(json.dumps(dict(op=op, id=rid, **fields)))
+        deadline = time.monotonic() + timeout
+        while True:
+            m = await self.text(max(0.01, deadline - time.monotonic()))
+            if m.get("id") == rid:
+                return m
+
+    async def raw(self, text, timeout=10):
+        """Sends text as is; returns the next text message."""
+        await self.ws.send(text)
+        return await self.text(timeout)
+
+    async def close(self):
+        await self.ws.close()
+
+
+class Suite:
+    """Runs async checks in order and prints '<name>: N passed, M failed'."""
+
+    def __init__(self, name):
+        self.name, self.passed, self.failed = name, 0, 0
+
+    def check(self, cond, what):
+        if cond:
+            self.passed += 1
+            print("ok   " + what)
+        else:
+            self.failed += 1
+            print("FAIL " + what)
+        sys.stdout.flush()
+        return cond
+
+    def run(self, tests, timeout=60):
+        for t in tests:
+            try:
+                asyncio.run(asyncio.wait_for(t(self), timeout))
+            except Exception as e:  # a crashed test is a failed check, and the suite goes on
+                self.check(False, "%s raised %s: %s" % (t.__name__, type(e).__name__, e))
+        print("%s: %d passed, %d failed" % (self.name, self.passed, self.failed))
+        sys.exit(1 if self.failed else 0)

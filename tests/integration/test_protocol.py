@@ -1,0 +1,209 @@
+"""test_protocol.py — fxstreamd end to end with an independent client (python3-websockets):
+HTTP endpoints, hello, frames and their headers, live parameter changes seen in frames,
+broadcasts, one check per error code, limits, persistence across restarts, shutdown."""
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import time
+import urllib.request
+
+import websockets
+
+from fxtest import DAEMON, Client, Daemon, Suite
+
+SMALL = {"width": 64, "height": 48, "fps": 30}  # cheap frames keep the suite fast
+D = None
+
+
+def http_get(path):
+    with urllib.request.urlopen(D.http + path, timeout=10) as r:
+        return r.status, r.headers.get("Content-Type"), r.read().decode()
+
+
+async def test_http(t):
+    status, ctype, body = http_get("/healthz")
+    h = json.loads(body)
+    t.check(status == 200 and ctype.startswith("application/json"), "healthz is JSON")
+    t.check(h["status"] == "ok" and h["version"] and h["device"] and "uptime_s" in h, "healthz fields")
+    t.check(any(s["stream"] == "energy" for s in h["streams"]), "healthz lists the default stream")
+    status, ctype, body = http_get("/metrics")
+    t.check(status == 200 and ctype.startswith("text/plain"), "metrics is text")
+    for name in ("fxs_connections", "fxs_stream_frames_produced_total", "fxs_stream_step_seconds_sum",
+                 "fxs_stream_bytes_sent_total", "fxs_stream_frames_skipped_total"):
+        t.check(name in body, "metrics has " + name)
+
+
+async def test_hello(t):
+    c = await Client.connect(D)
+    t.check(c.ws.subprotocol == "fxstream.v1", "subprotocol negotiated")
+    h = c.hello
+    t.check(h["op"] == "hello" and h["protocol"] == "fxstream.v1", "hello first")
+    t.check(h["server"].startswith("fxstreamd/") and "energy_wave" in h["effects"], "hello server, effects")
+    t.check(h["limits"]["max_message_bytes"] > 0, "hello limits")
+    await c.close()
+    try:
+        await Client.connect(D, path="/elsewhere")
+        t.check(False, "WebSocket on a wrong path refused")
+    except (websockets.exceptions.InvalidHandshake, websockets.exceptions.ConnectionClosed, OSError):
+        t.check(True, "WebSocket on a wrong path refused")
+
+
+async def test_frames(t):
+    c = await Client.connect(D)
+    r = await c.request("create", effect="energy_wave", stream="frames", params=SMALL)
+    t.check(r["op"] == "created" and r["rev"] == 1, "create small stream")
+    r = await c.request("subscribe", stream="frames")
+    t.check(r["op"] == "subscribed" and r["channel"] > 0, "subscribed with a channel")
+    frames = [await c.frame() for _ in range(3)]
+    f = frames[0]
+    t.check(f["magic"] == b"FXS1" and f["header_bytes"] == 64, "header magic and size")
+    t.check(f["kind"] == 2 and f["codec"] == 1, "texture frame, EXR codec")
+    t.check(f["channel"] == r["channel"], "channel matches subscribed")
+    t.check(f["width"] == 64 and f["height"] == 48, "texture size")
+    t.check(all(len(x["payload"]) == x["payload_bytes"] for x in frames), "payload_bytes matches")
+    t.check(all(x["payload"][:4] == b"\x76\x2f\x31\x01" for x in frames), "payload is an OpenEXR file")
+    t.check(frames[0]["seq"] < frames[1]["seq"] < frames[2]["seq"], "seq increases")
+    t.check(frames[0]["sim_time"] <= frames[2]["sim_time"], "sim_time advances")
+    lat = time.time() * 1e6 - frames[2]["server_time_us"]
+    t.check(-1e6 < lat < 5e6, "server_time_us is wall-clock microseconds")
+    await c.close()
+
+
+async def test_set_reaches_frames(t):
+    a, b = await Client.connect(D), await Client.connect(D)
+    await a.request("subscribe", stream="frames")
+    await b.request("subscribe", stream="frames")
+    before = (await a.request("get", stream="frames"))["rev"]
+    r = await a.request("set", stream="frames", params={"alpha": 2.0, "width": 32})
+    t.check(r["op"] == "params" and r["rev"] == before + 1, "set -> params with rev + 1")
+    t.check(r["params"]["alpha"] == 2.0 and r["params"]["width"] == 32, "set reply has the new values")
+    ev = await b.text()
+    t.check(ev["op"] == "params" and ev["rev"] == r["rev"] and "id" not in ev, "broadcast to other subscriber")
+    deadline, seen = time.monotonic() + 15, None
+    while time.monotonic() < deadline:
+        f = await a.frame()
+        if f["param_rev"] == r["rev"]:
+            seen = f
+            break
+    t.check(seen is not None, "frames carry the new rev")
+    t.check(seen is not None and seen["width"] == 32, "the change took effect in the frame")
+    await a.close()
+    await b.close()
+
+
+async def expect_error(t, c, text, code, what):
+    m = await c.raw(text)
+    t.check(m["op"] == "error" and m["code"] == code and m["message"], "%s -> %s (%s)" % (what, code, m.get("code")))
+    return m
+
+
+async def test_error_codes(t):
+    c = await Client.connect(D)
+    await expect_error(t, c, "{nope", "bad_json", "malformed JSON")
+    await expect_error(t, c, "[" * 100 + "]" * 100, "bad_json", "deep nesting")
+    await expect_error(t, c, '{"op":"list","stream":1}', "bad_request", "unknown field")
+    await expect_error(t, c, '{"op":"warp"}', "unknown_op", "unknown op")
+    await expect_error(t, c, '{"op":"describe","effect":"smoke"}', "unknown_effect", "unknown effect")
+    await expect_error(t, c, '{"op":"get","stream":"ghost"}', "unknown_stream", "unknown stream")
+    await expect_error(t, c, '{"op":"create","effect":"energy_wave","stream":"energy"}', "exists", "existing name")
+    m = await expect_error(t, c, '{"op":"set","id":9,"stream":"energy","params":{"divisions":7}}', "bad_param",
+                           "odd divisions")
+    t.check(m.get("id") == 9 and m.get("param") == "divisions", "error echoes id and names the param")
+    await expect_error(t, c, '{"op":"set","stream":"energy","params":{"eye":[0,0,"x"]}}', "bad_param", "wrong type")
+    await expect_error(t, c, '{"op":"set","stream":"energy","params":{"alpha":1e400}}', "bad_param", "infinity")
+    await expect_error(t, c, '{"op":"set","stream":"energy","params":{"fps":1000}}', "bad_param", "out of range")
+    await expect_error(t, c, '{"op":"set","stream":"energy","params":{"eye":[1,2]}}', "bad_param", "wrong length")
+    await expect_error(t, c, '{"op":"set","stream":"energy","params":{"colour":1}}', "bad_param", "unknown name")
+    big = json.dumps({"op": "list", "pad": "x" * (c.hello["limits"]["max_message_bytes"] + 10)})
+    await expect_error(t, c, big, "limit", "oversized message")
+    r = await c.request("list")
+    t.check(r["op"] == "list", "connection usable after every error")
+    await c.close()
+
+
+async def test_nothing_half_applied(t):
+    c = await Client.connect(D)
+    before = await c.request("get", stream="energy")
+    r = await c.request("set", stream="energy", params={"alpha": 3.0, "beta": -1})
+    t.check(r["op"] == "error", "partly bad set rejected")
+    after = await c.request("get", stream="energy")
+    t.check(before["params"] == after["params"] and before["rev"] == after["rev"], "nothing half-applied")
+    await c.close()
+
+
+async def test_destroy_and_max_fps(t):
+    c, sub = await Client.connect(D), await Client.connect(D)
+    await c.request("create", effect="energy_wave", stream="slow", params=SMALL)
+    r = await sub.request("subscribe", stream="slow", max_fps=2)
+    t.check(r["op"] == "subscribed", "subscribe with max_fps")
+    start, n = time.monotonic(), 0
+    while time.monotonic() - start < 2.0:
+        try:
+            await sub.frame(timeout=max(0.05, 2.0 - (time.monotonic() - start)))
+            n += 1
+        except asyncio.TimeoutError:
+            break
+    t.check(1 <= n <= 6, "max_fps=2 caps the rate (%d frames in 2 s)" % n)
+    r = await c.request("destroy", stream="slow")
+    t.check(r["op"] == "destroyed", "destroy")
+    ev = await sub.text()
+    t.check(ev["op"] == "unsubscribed" and ev.get("reason") == "destroyed", "subscriber told of destroy")
+    await c.close()
+    await sub.close()
+
+
+async def test_persistence(t):
+    global D
+    c = await Client.connect(D)
+    await c.request("create", effect="energy_wave", stream="kept", params={"width": 40})
+    r = await c.request("set", stream="kept", params={"alpha": 1.5})
+    await c.close()
+    status = D.stop()
+    t.check(status == 0, "SIGTERM exits 0 (got %s)" % status)
+    D = Daemon(state_dir=D.state_dir)
+    c = await Client.connect(D)
+    g = await c.request("get", stream="kept")
+    t.check(g["op"] == "params" and g["params"]["width"] == 40 and g["params"]["alpha"] == 1.5,
+            "streams and parameters survive a restart")
+    t.check(g.get("rev") == r["rev"], "revision survives a restart")
+    await c.close()
+
+
+async def test_shutdown_closes_1001(t):
+    c = await Client.connect(D)
+    D.proc.send_signal(signal.SIGINT)
+    try:
+        while True:
+            await c.recv(timeout=10)
+    except websockets.exceptions.ConnectionClosed as e:
+        t.check(e.code == 1001, "clients closed with 1001 on shutdown (got %s)" % e.code)
+    t.check(D.proc.wait(timeout=10) == 0, "SIGINT exits 0")
+
+
+async def test_flags(t):
+    def run(*args):
+        p = subprocess.run([DAEMON, *args], capture_output=True, text=True, timeout=10)
+        return p.returncode, p.stdout + p.stderr
+    code, out = run("--help")
+    t.check(code == 0 and "--state-dir" in out and "--device" in out, "--help documents the flags")
+    code, out = run("--bogus")
+    t.check(code == 2 and "bogus" in out, "unknown flag is an error")
+    code, out = run("--port", "99999")
+    t.check(code == 2 and "port" in out, "bad port is an error")
+    code, out = run("--device", "banana")
+    t.check(code == 2 and "device" in out, "bad device spec is an error")
+    code, out = run("--log-level", "loud")
+    t.check(code == 2, "bad log level is an error")
+
+
+if __name__ == "__main__":
+    D = Daemon()
+    s = Suite("test_protocol")
+    try:
+        s.run([test_http, test_hello, test_frames, test_set_reaches_frames, test_error_codes,
+               test_nothing_half_applied, test_destroy_and_max_fps, test_persistence,
+               test_shutdown_closes_1001, test_flags])
+    finally:
+        D.stop(signal.SIGKILL)
