@@ -238,23 +238,32 @@ static void fxctl_print_json(FILE *f, cJSON *j)
     free(s);
 }
 
+/* Shortest of %.15g / %.17g that reads back as v (cJSON's rule); non-finite as 0. */
+static void fxctl_fmt_double(char *buf, size_t len, double v)
+{
+    if (!isfinite(v)) v = 0;
+    snprintf(buf, len, "%.15g", v);
+    if (strtod(buf, NULL) != v) snprintf(buf, len, "%.17g", v);
+}
+
 /* Formats one frame's header as a JSON line (no newline) into buf. */
 static void fxctl_frame_line(char *buf, size_t len, const char *stream, const struct fxc_msg *m)
 {
     const struct fxs_header *h = &m->header;
     cJSON *name = cJSON_CreateString(stream);
     char *qname = cJSON_PrintUnformatted(name);
-    char size[96];
+    char size[96], sim[32];
     if (h->kind == FXS_KIND_TEXTURE || h->kind == FXS_KIND_LUT)
         snprintf(size, sizeof size, "\"width\":%" PRIu32 ",\"height\":%" PRIu32, h->count_or_width, h->height);
     else
         snprintf(size, sizeof size, "\"count\":%" PRIu32, h->count_or_width);
+    fxctl_fmt_double(sim, sizeof sim, h->sim_time);
     snprintf(buf, len,
              "{\"stream\":%s,\"channel\":%" PRIu32 ",\"kind\":%u,\"seq\":%" PRIu64 ",\"param_rev\":%" PRIu32
-             ",\"sim_time\":%.17g,\"server_time_us\":%" PRIu64 ",\"latency_ms\":%.3f,\"codec\":%" PRIu32
+             ",\"sim_time\":%s,\"server_time_us\":%" PRIu64 ",\"latency_ms\":%.3f,\"codec\":%" PRIu32
              ",\"payload_bytes\":%" PRIu32 ",%s,\"flags\":%" PRIu32 "}",
              qname ? qname : "null", h->channel, (unsigned)h->kind, h->seq, h->param_rev,
-             isfinite(h->sim_time) ? h->sim_time : 0.0, h->server_time_us,
+             sim, h->server_time_us,
              ((double)m->recv_time_us - (double)h->server_time_us) / 1000.0, h->codec, h->payload_bytes,
              size, h->flags);
     free(qname);

@@ -1,0 +1,165 @@
+#!/bin/sh
+# test_fxctl.sh — end-to-end checks of fxctl (and so libfxclient) against a real fxstreamd.
+#
+# Owns: starting build/fxstreamd --port 0 on a free port (bounded wait for its
+# "listening on" line), driving every fxctl command against it, and stopping it.
+# Each check counts one pass or fail; the last line is "test_fxctl: N passed, M failed".
+# Every fxctl call runs under `timeout` so the suite stays well under 60 s.
+set -u
+cd "$(dirname "$0")/../.."
+
+FXCTL=build/fxctl
+DAEMON=build/fxstreamd
+T=30 # seconds any one fxctl call may take
+passed=0
+failed=0
+tmp=$(mktemp -d)
+dpid=
+trap 'test -n "$dpid" && kill "$dpid" 2>/dev/null; rm -rf "$tmp"' EXIT INT TERM
+
+pass() { passed=$((passed + 1)); echo "ok   $1"; }
+fail() { failed=$((failed + 1)); echo "FAIL $1"; sed 's/^/     | /' "$tmp/out" "$tmp/err" 2>/dev/null | head -n 8; }
+
+# fx ARGS...: runs fxctl, stdout in $tmp/out, stderr in $tmp/err, exit status in $rc.
+fx() {
+    timeout "$T" "$FXCTL" --timeout 15000 "$@" >"$tmp/out" 2>"$tmp/err"
+    rc=$?
+}
+
+# check NAME WANT_RC [STDOUT_PATTERN [STDERR_PATTERN]]: judges the last fx call.
+check() {
+    name=$1 want=$2 outpat=${3:-} errpat=${4:-}
+    if [ "$rc" -ne "$want" ]; then fail "$name (exit $rc, want $want)"; return; fi
+    if [ -n "$outpat" ] && ! grep -q -- "$outpat" "$tmp/out"; then fail "$name (stdout lacks $outpat)"; return; fi
+    if [ -n "$errpat" ] && ! grep -q -- "$errpat" "$tmp/err"; then fail "$name (stderr lacks $errpat)"; return; fi
+    pass "$name"
+}
+
+rev_of() { grep -o '"rev":[0-9]*' "$tmp/out" | head -n 1 | cut -d: -f2; }
+
+# wait_for FILE PATTERN TENTHS: polls until FILE contains PATTERN; 0 when it does.
+wait_for() {
+    i=0
+    while [ "$i" -lt "$3" ]; do
+        grep -q -- "$2" "$1" 2>/dev/null && return 0
+        sleep 0.1
+        i=$((i + 1))
+    done
+    return 1
+}
+
+summary() {
+    echo "test_fxctl: $passed passed, $failed failed"
+    [ "$failed" -eq 0 ]
+    exit $?
+}
+
+start_daemon() {
+    if [ ! -x "$DAEMON" ] || [ ! -x "$FXCTL" ]; then
+        fail "build/fxstreamd and build/fxctl exist (run make)"
+        summary
+    fi
+    "$DAEMON" --port 0 >"$tmp/daemon.out" 2>"$tmp/daemon.err" &
+    dpid=$!
+    if ! wait_for "$tmp/daemon.out" "listening on http://" 150; then
+        fail "fxstreamd starts within 15 s"
+        sed 's/^/     | /' "$tmp/daemon.err" | tail -n 5
+        summary
+    fi
+    port=$(sed -n 's|.*listening on http://[^:]*:\([0-9][0-9]*\)/.*|\1|p' "$tmp/daemon.out" | head -n 1)
+    FXCTL_URL="ws://127.0.0.1:$port"
+    export FXCTL_URL
+    pass "fxstreamd listening on port $port"
+}
+
+check_usage() {
+    fx; check "no command: usage error" 2 "" "no command"
+    fx frobnicate; check "unknown command: usage error" 2 "" "unknown command"
+    fx set energy; check "set without K=V: usage error" 2 "" "usage: fxctl set"
+    fx subscribe energy; check "subscribe without --frames: usage error" 2 "" "frames"
+    fx list --frames 3; check "--frames outside subscribe: usage error" 2
+    fx --url http://127.0.0.1:1/ list; check "bad URL: usage error" 2 "" "bad URL"
+    fx --url wss://127.0.0.1/ list; check "wss:// refused" 2 "" "TLS not supported"
+    fx --help; check "--help documents subscribe" 0 "subscribe NAME --frames N"
+    fx --url ws://127.0.0.1:1 list; check "connection refused" 1 "" "connection refused"
+}
+
+check_params() {
+    fx list; check "list shows energy" 0 '"stream":"energy"'
+    fx describe energy_wave; check "describe energy_wave has params" 0 '"params":\[{"name"'
+    fx describe nope; check "describe unknown effect" 1 "" "unknown_effect"
+    fx get energy; check "get energy" 0 '"op":"params"'
+    rev0=$(rev_of)
+    fx set energy alpha=2 'mode="adaptive"'; check "set energy valid" 0 '"alpha":2'
+    rev1=$(rev_of)
+    if [ -n "$rev0" ] && [ "$rev1" = $((rev0 + 1)) ]; then pass "set bumps rev ($rev0 -> $rev1)"
+    else fail "set bumps rev ($rev0 -> $rev1)"; fi
+    fx set energy alpha=-999; check "set bad value fails with bad_param" 1 "" "bad_param"
+    fx get energy; check "get after bad set" 0 '"alpha":2'
+    if [ "$(rev_of)" = "$rev1" ]; then pass "bad set leaves rev at $rev1"; else fail "bad set leaves rev ($(rev_of))"; fi
+    fx set energy mode=adaptive; check "bare word value is a string" 0 '"mode":"adaptive"'
+    fx get nope; check "get unknown stream" 1 "" "unknown_stream"
+    fx set nope alpha=2; check "set unknown stream" 1 "" "unknown_stream"
+    fx reset energy; check "reset energy" 0 '"op":"reset"'
+}
+
+check_streams() {
+    fx create energy_wave fxctl_t1 width=32 height=32; check "create stream" 0 '"op":"created"'
+    fx create energy_wave fxctl_t1; check "create existing name: exists" 1 "" "exists"
+    fx list; check "list shows created stream" 0 '"stream":"fxctl_t1"'
+    fx destroy fxctl_t1; check "destroy stream" 0 '"op":"destroyed"'
+    fx destroy fxctl_t1; check "destroy again: unknown_stream" 1 "" "unknown_stream"
+}
+
+check_subscribe() {
+    out=$tmp/frames
+    fx subscribe energy --frames 3 --out "$out"; check "subscribe energy --frames 3" 0 '"seq":'
+    n=$(grep -c '"payload_bytes"' "$tmp/out")
+    if [ "$n" -eq 3 ]; then pass "3 frame lines printed"; else fail "3 frame lines printed ($n)"; fi
+    nexr=$(ls "$out"/energy-*.exr 2>/dev/null | wc -l)
+    njson=$(ls "$out"/energy-*.json 2>/dev/null | wc -l)
+    if [ "$nexr" -eq 3 ] && [ "$njson" -eq 3 ]; then pass "3 .exr + 3 .json written"
+    else fail "3 .exr + 3 .json written ($nexr, $njson)"; fi
+    first=$(ls "$out"/energy-*.exr 2>/dev/null | head -n 1)
+    if ! command -v exrheader >/dev/null 2>&1; then
+        echo "skip exrheader not installed"
+    elif [ -n "$first" ] && exrheader "$first" >"$tmp/out" 2>"$tmp/err" && grep -q dataWindow "$tmp/out"; then
+        pass "exrheader reads $(basename "$first")"
+    else
+        fail "exrheader reads the .exr"
+    fi
+}
+
+# A subscriber prints its stream's params broadcasts and fails clearly when the
+# stream is destroyed under it.
+check_destroyed() {
+    fx create energy_wave fxctl_t2 width=32 height=32; check "create stream to destroy" 0
+    timeout "$T" "$FXCTL" subscribe fxctl_t2 --frames 100000 >"$tmp/sub.out" 2>"$tmp/sub.err" &
+    spid=$!
+    wait_for "$tmp/sub.out" '"subscribed"' 100
+    fx set fxctl_t2 alpha=3; check "set while subscribed" 0
+    fx destroy fxctl_t2
+    wait "$spid"; rc=$?
+    cp "$tmp/sub.out" "$tmp/out"; cp "$tmp/sub.err" "$tmp/err"
+    check "subscriber of destroyed stream fails" 1 '"op":"params","stream":"fxctl_t2"' "destroyed"
+}
+
+# A subscriber must fail clearly when the server goes away.
+check_server_close() {
+    timeout "$T" "$FXCTL" subscribe energy --frames 100000 >"$tmp/close.out" 2>"$tmp/close.err" &
+    spid=$!
+    wait_for "$tmp/close.out" '"seq"' 100
+    kill "$dpid"; wait "$dpid" 2>/dev/null; dpid=
+    wait "$spid"; rc=$?
+    cp "$tmp/close.out" "$tmp/out"; cp "$tmp/close.err" "$tmp/err"
+    check "subscriber fails when the server stops" 1 "" "server closed\|connection .* lost"
+}
+
+start_daemon
+check_usage
+check_params
+check_streams
+check_subscribe
+check_destroyed
+check_server_close
+summary
