@@ -41,7 +41,7 @@ struct fxc_client {
     struct lws *wsi;
     lws_sorted_usec_list_t tick;   /* wakes lws_service() at our deadlines */
     enum fxc_state state;
-    int handshake_done;
+    int tcp_up;                    /* connected; the handshake request went out */
     int closing;                   /* fxc_close asked lws to close */
     char err[256];                 /* why the connection failed or ended */
     char host[256];
@@ -280,7 +280,8 @@ static void fxc_on_event(struct fxc_client *c, cJSON *j, int64_t now)
 {
     struct fxc_node *n = calloc(1, sizeof *n);
     if (!n) { cJSON_Delete(j); c->stats.bad_messages++; return; }
-    if (fxc_queue_trim(c, FXC_MSG_EVENT, 0, FXC_QUEUE_EVENTS)) c->stats.events_dropped++;
+    if (c->n_events >= FXC_QUEUE_EVENTS && fxc_queue_trim(c, FXC_MSG_EVENT, 0, FXC_QUEUE_EVENTS))
+        c->stats.events_dropped++;
     n->msg.type = FXC_MSG_EVENT;
     n->msg.event = j;
     n->msg.recv_time_us = (uint64_t)now;
@@ -351,12 +352,12 @@ static void fxc_on_connect_error(struct fxc_client *c, const char *why)
     const char *w = why ? why : "unknown error";
     int e;
     if (c->err[0]) return; /* our own filter already explained it */
-    if (!c->handshake_done && strstr(w, "Unable to connect") && (e = fxc_probe_errno(c)))
+    if (!c->tcp_up && strstr(w, "Unable to connect") && (e = fxc_probe_errno(c)))
         fxc_set_err(c->err, sizeof c->err, "%s %s:%d", e == ECONNREFUSED ? "connection refused by" : strerror(e),
                     c->host, c->port);
-    else if (c->handshake_done || strstr(w, "HS:") || strstr(w, "upgrade") || strstr(w, "protocol"))
-        fxc_set_err(c->err, sizeof c->err, "WebSocket handshake failed with ws://%s%s (%s)",
-                    c->host_header, c->path, w);
+    else if (c->tcp_up)
+        fxc_set_err(c->err, sizeof c->err, "WebSocket handshake failed with ws://%s%s (%s)%s", c->host_header,
+                    c->path, w, strstr(w, "HS:") ? "" : ": the server hung up; wrong path or subprotocol?");
     else
         fxc_set_err(c->err, sizeof c->err, "cannot connect to %s:%d (%s)", c->host, c->port, w);
 }
@@ -365,7 +366,6 @@ static void fxc_on_connect_error(struct fxc_client *c, const char *why)
 static int fxc_check_subprotocol(struct fxc_client *c, struct lws *wsi)
 {
     char proto[64] = "";
-    c->handshake_done = 1;
     if (lws_hdr_copy(wsi, proto, sizeof proto, WSI_TOKEN_PROTOCOL) < 0) proto[0] = 0;
     if (!strcmp(proto, FXC_SUBPROTOCOL)) return 0;
     if (proto[0])
@@ -410,6 +410,9 @@ static int fxc_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         fxc_on_connect_error(c, in);
         c->state = FXC_CLOSED;
         c->wsi = NULL;
+        return 0;
+    case LWS_CALLBACK_CLIENT_APPEND_HANDSHAKE_HEADER:
+        c->tcp_up = 1;
         return 0;
     case LWS_CALLBACK_CLIENT_FILTER_PRE_ESTABLISH:
         return fxc_check_subprotocol(c, wsi);

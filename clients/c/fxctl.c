@@ -46,13 +46,15 @@ static const char fxctl_help[] =
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
     "  subscribe NAME --frames N [--max-fps F] [--out DIR]\n"
-    "                                receive N frames of NAME; prints one JSON line\n"
-    "                                per frame (stream, channel, kind, seq, param_rev,\n"
-    "                                sim_time, server_time_us, latency_ms, codec,\n"
-    "                                payload_bytes, width and height, or count, flags)\n"
-    "                                and any params event of NAME; with --out writes\n"
-    "                                DIR/NAME-SEQ.exr (texture, codec 1) or .bin with\n"
-    "                                the payload and DIR/NAME-SEQ.json with the line\n"
+    "                                receive N frames of NAME; prints the subscribed\n"
+    "                                reply, then one JSON line per frame (stream,\n"
+    "                                channel, kind, seq, param_rev, sim_time,\n"
+    "                                server_time_us, latency_ms, codec, payload_bytes,\n"
+    "                                width and height, or count, flags) and any params\n"
+    "                                event of NAME; with --out writes the payload to\n"
+    "                                DIR/NAME-SEQ.exr (texture, codec 1) or .bin, and\n"
+    "                                the line to DIR/NAME-SEQ.json. Fails when the\n"
+    "                                stream is destroyed or the server goes away.\n"
     "\n"
     "K=V: K is a top-level parameter name; V is JSON (wind=[1,0,0], n=3, on=true,\n"
     "mode=\"simpson\"); a V that is not valid JSON is taken as a string (mode=simpson).\n"
@@ -62,7 +64,7 @@ static const char fxctl_help[] =
     "                 (port 7681 and path /v1/ws when omitted; wss:// is not supported)\n"
     "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
     "                 each frame (default 10000)\n"
-    "  --help         this text\n"
+    "  --help, -h     this text\n"
     "\n"
     "output: each reply is printed on stdout as one line of JSON (the server's reply\n"
     "object without the request id). Errors go to stderr as\n"
@@ -135,7 +137,10 @@ static int fxctl_parse_args(struct fxctl_opts *o, int argc, char **argv)
     int i, only_positional = 0, r;
     for (i = 1; i < argc; i++) {
         const char *a = argv[i];
-        if (only_positional || strncmp(a, "--", 2) != 0 || a[2] == 0) {
+        if (!only_positional && !strcmp(a, "-h")) {
+            fputs(fxctl_help, stdout);
+            return -1;
+        } else if (only_positional || strncmp(a, "--", 2) != 0 || a[2] == 0) {
             if (!only_positional && !strcmp(a, "--")) { only_positional = 1; continue; }
             if (!o->cmd) o->cmd = a;
             else o->args[o->nargs++] = argv[i];
