@@ -487,6 +487,26 @@ static void test_linearity(void)
     }
 }
 
+/* The ground truth itself: converged B agrees with a very fine Simpson sum (W == 1, so the
+ * integrand has kinks but no jumps and Simpson converges at least as O(h^2)). */
+static void test_converged_vs_fine_simpson(void)
+{
+    struct energy_ref_scene sc;
+    ter_mixed_scene(&sc);
+    for (int k = 0; k < 7; k++) sc.curves[0].w[k] = 1.0;
+    static const double rays[4][2][3] = {
+        {{-0.3, 0.4, -2}, {0.1, 0.2, 4}},
+        {{-1.5, 0.3, -1}, {1.4, -0.2, 2}},
+        {{0, 0.96, -1}, {0, 0.96, 2.2}},
+        {{-0.9, 0.2, -3}, {0.7, 0.9, 3.5}},
+    };
+    for (int k = 0; k < 4; k++) {
+        double c = energy_ref_ray_converged(&sc, rays[k][0], rays[k][1]);
+        double f = energy_ref_ray_simpson(&sc, rays[k][0], rays[k][1], 100000);
+        CHECK_REL(c, f, 1e-7);
+    }
+}
+
 /* ---------------------------------------------------------------- item 11 */
 
 static void test_epsilon_bound(void)
@@ -597,6 +617,7 @@ int main(void)
     RUN(test_anim_weights);
     RUN(test_simpson_order);
     RUN(test_linearity);
+    RUN(test_converged_vs_fine_simpson);
     RUN(test_epsilon_bound);
     RUN(test_camera_distance_scaling);
     RUN(test_camera_rays);
