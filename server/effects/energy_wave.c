@@ -1,0 +1,701 @@
+/* energy_wave.c — effect `energy_wave` (seed 000, Watanabe 2016; spec: digest 000).
+ *
+ * Owns the parameter table, the host side of kernels/energy_wave.cl (packing sources
+ * into fixed-size device buffers, the camera, the eq. (5.1) animation of the curve
+ * weights), the colour map and the EXR frame. Everything per frame is small uploads
+ * plus one kernel and one read-back; big buffers (device output, host image, RGBA,
+ * EXR bytes) are allocated once per texture size and reused. */
+#include "energy_wave.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <stdio.h>
+
+#include "../buf.h"
+#include "../codec/exr.h"
+#include "../ocl.h"
+#include "fxs_frame.h"
+
+/* Limits and buffer layouts; the strides must match kernels/energy_wave.cl. */
+#define EW_MAX_SRC 16
+#define EW_MAX_W 32
+#define EW_PT_STRIDE 4
+#define EW_LN_STRIDE 8
+#define EW_TO_STRIDE 16
+#define EW_CV_STRIDE 16
+#define EW_CAM_FLOATS 20
+#define EW_KERNEL_FILE "energy_wave.cl"
+#define EW_BUILD_OPTS (getenv("EW_OPTS") ? getenv("EW_OPTS") : "-cl-fast-relaxed-math -DEW_GL_N=8")
+
+enum ew_mode { EW_MODE_SIMPSON, EW_MODE_ADAPTIVE };
+static const char *const ew_mode_names[] = {"simpson", "adaptive", NULL};
+static const char *const ew_output_names[] = {"Y", "RGBA", NULL};
+
+/* ---- parameters -------------------------------------------------------------------- */
+
+#define EW_POS(nm, dflt, what) \
+    {.name = nm, .type = PARAM_VEC3, .def = dflt, .min = -1000, .max = 1000, .unit = "world units", .doc = what}
+#define EW_DIR(nm, dflt, what)                                                                              \
+    {.name = nm, .type = PARAM_VEC3, .def = dflt, .min = -1000, .max = 1000, .unit = "direction",          \
+     .doc = what " (normalised by the server)", .flags = PARAM_NONZERO}
+#define EW_COEF(dflt)                                                                                       \
+    {.name = "coef", .type = PARAM_FLOAT, .def = dflt, .min = -20, .max = 20, .unit = "",                  \
+     .doc = "energy coefficient (sign unrestricted, eq. 3.28)"}
+
+static const struct param_def ew_point_fields[] = {
+    EW_POS("pos", "[0,0,0]", "point source M (eq. 3.2)"),
+    EW_COEF("4.0"),
+    {0},
+};
+
+static const struct param_def ew_line_fields[] = {
+    EW_POS("pos", "[0,0,0]", "any point M on the infinite line (eq. 3.3)"),
+    EW_DIR("dir", "[0,0,1]", "line direction D"),
+    EW_COEF("4.0"),
+    {0},
+};
+
+static const struct param_def ew_torus_fields[] = {
+    EW_POS("center", "[0,0,0]", "centre of the torus"),
+    EW_DIR("axis", "[0,0,1]", "torus axis (local z)"),
+    {.name = "R", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "world units",
+     .doc = "radius of the centre circle (eq. 3.7)"},
+    EW_COEF("5.1"),
+    {0},
+};
+
+static const struct param_def ew_curve_fields[] = {
+    EW_POS("p0", "[-1,0,0]", "Bezier control point B0 (curve start)"),
+    EW_POS("p1", "[0,1,0]", "Bezier control point B1"),
+    EW_POS("p2", "[1,0,0]", "Bezier control point B2 (curve end)"),
+    EW_COEF("8.0"),
+    {.name = "W", .type = PARAM_FLOAT_LIST, .def = "[1,1,1,1,1,1,1]", .min = 0, .max = 1, .min_len = 3,
+     .max_len = EW_MAX_W, .unit = "", .doc = "strength sequence along the curve (quadratic B-spline, eq. 3.25)"},
+    {0},
+};
+
+/* Default scene: two C1-joined Bezier curves (as thesis Figs 5.3-5.6), W of Fig 5.6
+ * (right) and b = 8.0, with the eq. (5.1) pulse running along each. */
+static const char ew_default_curves[] =
+    "[{\"p0\":[-2.2,-0.7,0.3],\"p1\":[-1.1,1.5,-0.3],\"p2\":[0,0,0],\"coef\":8.0,"
+    "\"W\":[1.0,0.2,0.6,1.0,0.5,0.8,1.0]},"
+    "{\"p0\":[0,0,0],\"p1\":[1.1,-1.5,0.3],\"p2\":[2.2,0.7,-0.3],\"coef\":8.0,"
+    "\"W\":[1.0,0.8,0.5,1.0,0.6,0.2,1.0]}]";
+
+const struct param_def energy_wave_params[] = {
+    {.name = "points", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_point_fields,
+     .unit = "", .doc = "point sources 1/max(eps,|P-M|)"},
+    {.name = "lines", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_line_fields,
+     .unit = "", .doc = "infinite line sources"},
+    {.name = "tori", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_torus_fields,
+     .unit = "", .doc = "torus sources: 1/distance to the centre circle of radius R"},
+    {.name = "curves", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = EW_MAX_SRC,
+     .fields = ew_curve_fields, .unit = "", .doc = "quadratic Bezier sources with B-spline strength W"},
+    {.name = "epsilon", .type = PARAM_FLOAT, .def = "0.01", .min = 1e-5, .max = 0.5, .unit = "world units",
+     .doc = "distance floor of every kernel 1/max(eps, d)"},
+    {.name = "alpha", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "",
+     .doc = "attenuation gain: zeta(s) = alpha/(s+beta)^2 (eq. 3.31)"},
+    {.name = "beta", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 10, .unit = "",
+     .doc = "attenuation offset in ray parameter s (must stay > 0)"},
+    {.name = "divisions", .type = PARAM_INT, .def = "200", .min = 2, .max = 1024, .unit = "",
+     .doc = "Simpson divisions n (n+1 samples per ray), used by mode simpson", .flags = PARAM_EVEN},
+    {.name = "mode", .type = PARAM_ENUM, .def = "\"adaptive\"", .choices = ew_mode_names, .unit = "",
+     .doc = "simpson: thesis composite Simpson with `divisions`; adaptive: closed forms for points/lines, "
+            "and per torus/curve Gauss-Legendre on sinh-mapped sides of each closest approach (much faster, "
+            "no banding)"},
+    EW_POS("eye", "[0,0,8]", "camera position V"),
+    EW_POS("center", "[0,0,3]", "billboard centre C; rays start on the billboard and look away from eye"),
+    EW_DIR("up", "[0,1,0]", "camera up vector (must not be parallel to eye->center)"),
+    {.name = "size", .type = PARAM_FLOAT, .def = "3.4", .min = 0.01, .max = 1000, .unit = "world units",
+     .doc = "billboard width l (height l*height/width)"},
+    {.name = "width", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
+     .doc = "texture width"},
+    {.name = "height", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
+     .doc = "texture height"},
+    {.name = "nu", .type = PARAM_FLOAT, .def = "2.0", .min = 1.05, .max = 16, .unit = "",
+     .doc = "ray end E = V + nu(S - V) (eq. 4.3, translation-invariant form)"},
+    {.name = "fps", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 240, .unit = "1/s",
+     .doc = "frames per second of the stream"},
+    {.name = "compression", .type = PARAM_ENUM, .def = "\"zip\"", .choices = exr_codec_names, .unit = "",
+     .doc = "OpenEXR compression of the texture frames"},
+    {.name = "output", .type = PARAM_ENUM, .def = "\"RGBA\"", .choices = ew_output_names, .unit = "",
+     .doc = "Y: raw luminance B (HDR, half float); RGBA: colour map clamp((1-B)Cb + B Ce), A = clamp(B)"},
+    {.name = "color_energy", .type = PARAM_COLOR, .def = "[0.35,0.75,1.0]", .min = 0, .max = 1, .unit = "linear RGB",
+     .doc = "energy colour C_e of the RGBA colour map (eq. 4.8)"},
+    {.name = "color_background", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
+     .doc = "background colour C_b of the RGBA colour map (eq. 4.8)"},
+    {.name = "animate", .type = PARAM_BOOL, .def = "true", .unit = "",
+     .doc = "multiply each curve's W by the eq. (5.1) travelling pulse"},
+    {.name = "anim_rate", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
+     .doc = "eq. (5.1) animation frames per second of stream time (the sweep loops)"},
+    {0},
+};
+
+/* ---- state ------------------------------------------------------------------------- */
+
+struct ew_curve_src {
+    double b[3][3], coef;
+    int nw;
+    double w[EW_MAX_W];
+};
+
+struct energy_wave {
+    struct ocl *ocl;
+    cl_kernel k_simpson, k_adaptive;
+    cl_mem d_out, d_cam, d_pts, d_lns, d_tor, d_cur, d_wts;
+    size_t out_texels;
+    /* parameters, unpacked */
+    enum ew_mode mode;
+    int width, height, divisions, output, compression, animate;
+    double anim_rate, color_e[3], color_b[3];
+    int np, nl, nt, ncurves;
+    struct ew_curve_src curves[EW_MAX_SRC];
+    /* packed uploads */
+    float cam[EW_CAM_FLOATS];
+    float pts[EW_MAX_SRC * EW_PT_STRIDE], lns[EW_MAX_SRC * EW_LN_STRIDE], tor[EW_MAX_SRC * EW_TO_STRIDE];
+    float cur[EW_MAX_SRC * EW_CV_STRIDE], wts[EW_MAX_SRC * EW_MAX_W];
+    /* reused frame buffers */
+    float *img, *rgba;
+    struct fx_buf exr;
+};
+
+static double ew_dot(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+static void ew_cross(const double a[3], const double b[3], double out[3])
+{
+    double r[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+    memcpy(out, r, sizeof r);
+}
+
+static void ew_normalize(double v[3])
+{
+    double n = sqrt(ew_dot(v, v));
+    if (n > 0)
+        for (int k = 0; k < 3; k++) v[k] /= n;
+}
+
+static void ew_put3(float *dst, const double v[3])
+{
+    for (int k = 0; k < 3; k++) dst[k] = (float)v[k];
+}
+
+static int ew_enum_index(const char *const *names, const char *s)
+{
+    for (int i = 0; names[i]; i++)
+        if (strcmp(names[i], s) == 0) return i;
+    return 0;
+}
+
+/* Camera: f = normalize(C − V), r = normalize(f × up), u = r × f; the kernel builds
+ * S = C + x·l·r + y·l·(H/W)·u from the scaled r and u. */
+static void ew_pack_camera(struct energy_wave *ew, const cJSON *p)
+{
+    double V[3], C[3], up[3], f[3], r[3], u[3];
+    params_vec3(p, "eye", V);
+    params_vec3(p, "center", C);
+    params_vec3(p, "up", up);
+    for (int k = 0; k < 3; k++) f[k] = C[k] - V[k];
+    ew_normalize(f);
+    ew_cross(f, up, r);
+    ew_normalize(r);
+    ew_cross(r, f, u);
+    double l = params_num(p, "size"), lh = l * ew->height / ew->width;
+    memset(ew->cam, 0, sizeof ew->cam);
+    ew_put3(ew->cam, C);
+    for (int k = 0; k < 3; k++) {
+        ew->cam[4 + k] = (float)(l * r[k]);
+        ew->cam[8 + k] = (float)(lh * u[k]);
+    }
+    ew_put3(ew->cam + 12, V);
+    ew->cam[15] = (float)params_num(p, "nu");
+    ew->cam[16] = (float)params_num(p, "alpha");
+    ew->cam[17] = (float)params_num(p, "beta");
+    ew->cam[18] = (float)params_num(p, "epsilon");
+}
+
+static void ew_pack_points_lines(struct energy_wave *ew, const cJSON *p)
+{
+    const cJSON *it;
+    ew->np = ew->nl = 0;
+    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "points")) {
+        float *dst = ew->pts + EW_PT_STRIDE * ew->np++;
+        double pos[3];
+        params_vec3(it, "pos", pos);
+        ew_put3(dst, pos);
+        dst[3] = (float)params_num(it, "coef");
+    }
+    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "lines")) {
+        float *dst = ew->lns + EW_LN_STRIDE * ew->nl++;
+        double pos[3], dir[3];
+        params_vec3(it, "pos", pos);
+        params_vec3(it, "dir", dir);
+        ew_normalize(dir);
+        ew_put3(dst, pos);
+        dst[3] = (float)params_num(it, "coef");
+        ew_put3(dst + 4, dir);
+        dst[7] = 0.0f;
+    }
+}
+
+/* Torus frame: e3 = axis, e1 any unit normal to it, e2 = e3 × e1 (the kernel is
+ * symmetric about the axis, so the choice of e1 does not matter). */
+static void ew_pack_tori(struct energy_wave *ew, const cJSON *p)
+{
+    const cJSON *it;
+    ew->nt = 0;
+    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "tori")) {
+        float *dst = ew->tor + EW_TO_STRIDE * ew->nt++;
+        double c[3], e1[3], e2[3], e3[3];
+        params_vec3(it, "center", c);
+        params_vec3(it, "axis", e3);
+        ew_normalize(e3);
+        double helper[3] = {fabs(e3[0]) < 0.9 ? 1.0 : 0.0, fabs(e3[0]) < 0.9 ? 0.0 : 1.0, 0.0};
+        ew_cross(helper, e3, e1);
+        ew_normalize(e1);
+        ew_cross(e3, e1, e2);
+        memset(dst, 0, EW_TO_STRIDE * sizeof *dst);
+        ew_put3(dst, c);
+        dst[3] = (float)params_num(it, "R");
+        ew_put3(dst + 4, e1);
+        dst[7] = (float)params_num(it, "coef");
+        ew_put3(dst + 8, e2);
+        ew_put3(dst + 12, e3);
+    }
+}
+
+static void ew_read_curves(struct energy_wave *ew, const cJSON *p)
+{
+    const cJSON *it;
+    static const char *const names[3] = {"p0", "p1", "p2"};
+    ew->ncurves = 0;
+    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "curves")) {
+        struct ew_curve_src *c = &ew->curves[ew->ncurves++];
+        for (int k = 0; k < 3; k++) params_vec3(it, names[k], c->b[k]);
+        c->coef = params_num(it, "coef");
+        const cJSON *w, *W = cJSON_GetObjectItemCaseSensitive(it, "W");
+        c->nw = 0;
+        cJSON_ArrayForEach(w, W) if (c->nw < EW_MAX_W) c->w[c->nw++] = w->valuedouble;
+    }
+}
+
+/* One curve record: (3.10) C₂ = B₀ − 2B₁ + B₂, C₁ = 2(B₁ − B₀), C₀ = B₀, plus |C₂|²,
+ * C₁·C₂, |C₁|², the weight count and the lit range [t_lo, t_hi] (S > 0 only there). */
+static void ew_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi)
+{
+    double C0[3], C1[3], C2[3];
+    for (int k = 0; k < 3; k++) {
+        C0[k] = b[0][k];
+        C1[k] = 2.0 * (b[1][k] - b[0][k]);
+        C2[k] = b[0][k] - 2.0 * b[1][k] + b[2][k];
+    }
+    memset(dst, 0, EW_CV_STRIDE * sizeof *dst);
+    ew_put3(dst, C0);
+    dst[3] = (float)coef;
+    ew_put3(dst + 4, C1);
+    dst[7] = (float)ew_dot(C2, C2);
+    ew_put3(dst + 8, C2);
+    dst[11] = (float)ew_dot(C1, C2);
+    dst[12] = (float)ew_dot(C1, C1);
+    dst[13] = (float)nw;
+    dst[14] = (float)t_lo;
+    dst[15] = (float)t_hi;
+}
+
+void energy_wave_anim_weights(double frame, int n, double *w)
+{
+    for (int i = 0; i < n; i++) {
+        double th = (frame - 7.0 * i) * M_PI / 25.0;
+        if (th < 0.0 || th > 2.0 * M_PI) th = 0.0;
+        double v = (-cos(th) + 0.8) / 1.5;
+        w[i] = v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v);
+    }
+}
+
+/* Packs the curves with their (animated) weights; curves whose strength is zero
+ * everywhere are left out, so the pulse costs nothing where it is not. Returns count. */
+static int ew_pack_curves(struct energy_wave *ew, double sim_time)
+{
+    int nc = 0;
+    for (int i = 0; i < ew->ncurves; i++) {
+        const struct ew_curve_src *c = &ew->curves[i];
+        double anim[EW_MAX_W];
+        int first = -1, last = -1;
+        if (ew->animate) {
+            double sweep = 7.0 * (c->nw - 1) + 50.0; /* digest §4: the pulse ends at 7(n−1)+50 */
+            energy_wave_anim_weights(fmod(sim_time * ew->anim_rate, sweep), c->nw, anim);
+        }
+        float *w = ew->wts + nc * EW_MAX_W;
+        for (int k = 0; k < c->nw; k++) {
+            w[k] = (float)(c->w[k] * (ew->animate ? anim[k] : 1.0));
+            if (w[k] > 0.0f) {
+                if (first < 0) first = k;
+                last = k;
+            }
+        }
+        if (first < 0 || c->coef == 0.0) continue;
+        /* N_i² is supported on [u_i, u_{i+3}] with u_i = clamp((i−2)/(nw−2), 0, 1) */
+        double lo = (first - 2.0) / (c->nw - 2.0), hi = (last + 1.0) / (c->nw - 2.0);
+        ew_pack_curve(ew->cur + nc * EW_CV_STRIDE, c->b, c->coef, c->nw, lo < 0 ? 0 : lo, hi > 1 ? 1 : hi);
+        nc++;
+    }
+    return nc;
+}
+
+/* ---- OpenCL objects ------------------------------------------------------------------ */
+
+static cl_mem ew_buffer(struct energy_wave *ew, cl_mem_flags flags, size_t bytes, struct fx_err *err)
+{
+    cl_int rc;
+    cl_mem m = clCreateBuffer(ocl_context(ew->ocl), flags, bytes, NULL, &rc);
+    if (rc != CL_SUCCESS) fx_fail(err, "internal", "", "clCreateBuffer(%zu bytes): %s", bytes, ocl_errstr(rc));
+    return m;
+}
+
+static int ew_kernels_create(struct energy_wave *ew, struct fx_err *err)
+{
+    cl_int rc;
+    cl_program prog = ocl_program(ew->ocl, EW_KERNEL_FILE, EW_BUILD_OPTS, err);
+    if (!prog) return -1;
+    ew->k_simpson = clCreateKernel(prog, "ew_render_simpson", &rc);
+    if (rc == CL_SUCCESS) ew->k_adaptive = clCreateKernel(prog, "ew_render_adaptive", &rc);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
+    const size_t f = sizeof(float);
+    if (!(ew->d_cam = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cam, err))) return -1;
+    if (!(ew->d_pts = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->pts, err))) return -1;
+    if (!(ew->d_lns = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->lns, err))) return -1;
+    if (!(ew->d_tor = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->tor, err))) return -1;
+    if (!(ew->d_cur = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cur, err))) return -1;
+    if (!(ew->d_wts = ew_buffer(ew, CL_MEM_READ_ONLY, EW_MAX_SRC * EW_MAX_W * f, err))) return -1;
+    return 0;
+}
+
+/* (Re)allocates the per-texel buffers when the texture grows. */
+static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
+{
+    size_t texels = (size_t)ew->width * (size_t)ew->height;
+    if (texels <= ew->out_texels) return 0;
+    if (ew->d_out) clReleaseMemObject(ew->d_out);
+    free(ew->img);
+    free(ew->rgba);
+    ew->out_texels = 0;
+    ew->img = malloc(texels * sizeof(float));
+    ew->rgba = malloc(texels * 4 * sizeof(float));
+    if (!ew->img || !ew->rgba) return fx_fail(err, "internal", "", "out of memory for %zu texels", texels);
+    if (!(ew->d_out = ew_buffer(ew, CL_MEM_WRITE_ONLY, texels * sizeof(float), err))) return -1;
+    ew->out_texels = texels;
+    return 0;
+}
+
+/* ---- public API ---------------------------------------------------------------------- */
+
+int energy_wave_set(struct energy_wave *ew, const cJSON *params, struct fx_err *err)
+{
+    ew->mode = (enum ew_mode)ew_enum_index(ew_mode_names, params_str(params, "mode"));
+    ew->width = (int)params_num(params, "width");
+    ew->height = (int)params_num(params, "height");
+    ew->divisions = (int)params_num(params, "divisions");
+    ew->output = ew_enum_index(ew_output_names, params_str(params, "output"));
+    ew->compression = exr_codec_parse(params_str(params, "compression"));
+    if (ew->compression < 0) ew->compression = EXR_CODEC_ZIP;
+    ew->animate = params_bool(params, "animate");
+    ew->anim_rate = params_num(params, "anim_rate");
+    params_vec3(params, "color_energy", ew->color_e);
+    params_vec3(params, "color_background", ew->color_b);
+    ew_pack_camera(ew, params);
+    ew_pack_points_lines(ew, params);
+    ew_pack_tori(ew, params);
+    ew_read_curves(ew, params);
+    return ew_frame_buffers(ew, err);
+}
+
+struct energy_wave *energy_wave_new(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+{
+    struct energy_wave *ew = calloc(1, sizeof *ew);
+    if (!ew) {
+        fx_fail(err, "internal", "", "out of memory");
+        return NULL;
+    }
+    ew->ocl = ocl;
+    if (ew_kernels_create(ew, err) || energy_wave_set(ew, params, err)) {
+        energy_wave_free(ew);
+        return NULL;
+    }
+    return ew;
+}
+
+void energy_wave_free(struct energy_wave *ew)
+{
+    if (!ew) return;
+    cl_mem mems[] = {ew->d_out, ew->d_cam, ew->d_pts, ew->d_lns, ew->d_tor, ew->d_cur, ew->d_wts};
+    for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
+        if (mems[i]) clReleaseMemObject(mems[i]);
+    if (ew->k_simpson) clReleaseKernel(ew->k_simpson);
+    if (ew->k_adaptive) clReleaseKernel(ew->k_adaptive);
+    free(ew->img);
+    free(ew->rgba);
+    fx_buf_free(&ew->exr);
+    free(ew);
+}
+
+static int ew_upload(struct energy_wave *ew, int nc, struct fx_err *err)
+{
+    cl_command_queue q = ocl_queue(ew->ocl);
+    const size_t f = sizeof(float);
+    struct { cl_mem m; const void *src; size_t bytes; } up[] = {
+        {ew->d_cam, ew->cam, sizeof ew->cam},
+        {ew->d_pts, ew->pts, (size_t)ew->np * EW_PT_STRIDE * f},
+        {ew->d_lns, ew->lns, (size_t)ew->nl * EW_LN_STRIDE * f},
+        {ew->d_tor, ew->tor, (size_t)ew->nt * EW_TO_STRIDE * f},
+        {ew->d_cur, ew->cur, (size_t)nc * EW_CV_STRIDE * f},
+        {ew->d_wts, ew->wts, (size_t)nc * EW_MAX_W * f},
+    };
+    for (size_t i = 0; i < sizeof up / sizeof up[0]; i++) {
+        if (!up[i].bytes) continue;
+        cl_int rc = clEnqueueWriteBuffer(q, up[i].m, CL_FALSE, 0, up[i].bytes, up[i].src, 0, NULL, NULL);
+        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clEnqueueWriteBuffer: %s", ocl_errstr(rc));
+    }
+    return 0;
+}
+
+static cl_int ew_set_args(struct energy_wave *ew, cl_kernel k, int nc)
+{
+    cl_int rc = 0, idx = 0;
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_out);
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_cam);
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_pts);
+    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->np);
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_lns);
+    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->nl);
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_tor);
+    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->nt);
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_cur);
+    rc |= clSetKernelArg(k, idx++, sizeof(int), &nc);
+    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_wts);
+    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->width);
+    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->height);
+    if (k == ew->k_simpson) rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->divisions);
+    return rc;
+}
+
+int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err)
+{
+    int nc = ew_pack_curves(ew, sim_time);
+    if (ew_upload(ew, nc, err)) return -1;
+    cl_kernel k = ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
+    const char *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
+    cl_int rc = ew_set_args(ew, k, nc);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s) failed", name);
+    size_t global[2] = {(size_t)ew->width, (size_t)ew->height};
+    cl_event ev;
+    cl_command_queue q = ocl_queue(ew->ocl);
+    size_t local[2] = {0, 0};
+    const char *ls = getenv("EW_LOCAL");
+    if (ls) sscanf(ls, "%zux%zu", &local[0], &local[1]);
+    if (local[0]) { global[0] = (global[0] + local[0] - 1) / local[0] * local[0]; global[1] = (global[1] + local[1] - 1) / local[1] * local[1]; }
+    rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, local[0] ? local : NULL, 0, NULL, &ev);
+    global[0] = ew->width; global[1] = ew->height;
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
+    rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, 0, global[0] * global[1] * sizeof(float), out, 0, NULL, NULL);
+    if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);
+    clReleaseEvent(ev);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
+    return 0;
+}
+
+/* ---- effect_ops ---------------------------------------------------------------------- */
+
+static double ew_now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static float ew_clamp01(double v) { return (float)(v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v)); }
+
+/* digest §2.7 proposal: RGBA = clamp((1−B)C_b + B·C_e, 0, 1), A = clamp(B, 0, 1). */
+static void ew_colour_map(const struct energy_wave *ew, size_t texels)
+{
+    for (size_t i = 0; i < texels; i++) {
+        double B = ew->img[i];
+        float *px = ew->rgba + 4 * i;
+        for (int c = 0; c < 3; c++) px[c] = ew_clamp01((1.0 - B) * ew->color_b[c] + B * ew->color_e[c]);
+        px[3] = ew_clamp01(B);
+    }
+}
+
+static int ew_check_finite(const float *img, size_t texels, struct fx_err *err)
+{
+    for (size_t i = 0; i < texels; i++)
+        if (!isfinite(img[i]))
+            return fx_fail(err, "internal", "", "energy_wave rendered a non-finite value at texel %zu", i);
+    return 0;
+}
+
+static int ew_step(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err)
+{
+    struct energy_wave *ew = self;
+    size_t texels = (size_t)ew->width * (size_t)ew->height;
+    (void)dt;
+    if (energy_wave_render(ew, sim_time, ew->img, err) || ew_check_finite(ew->img, texels, err)) return -1;
+    double t0 = ew_now_ms();
+    struct exr_image im = {ew->width, ew->height, 1, ew->img, ew->compression};
+    if (ew->output == 1) {
+        ew_colour_map(ew, texels);
+        im.channels = 4;
+        im.pixels = ew->rgba;
+    }
+    ew->exr.len = 0;
+    if (exr_write_mem(&im, &ew->exr, err)) return -1;
+    struct effect_frame fr = {
+        .kind = FXS_KIND_TEXTURE,
+        .codec = FXS_CODEC_EXR,
+        .count_or_width = (uint32_t)ew->width,
+        .height = (uint32_t)ew->height,
+        .payload = ew->exr.data,
+        .payload_bytes = ew->exr.len,
+        .encode_ms = ew_now_ms() - t0,
+    };
+    return emit(ctx, &fr);
+}
+
+/* Cross-field rules: eye ≠ center, and up not parallel to eye→center. */
+static int ew_check(const cJSON *params, struct fx_err *err)
+{
+    double V[3], C[3], up[3], f[3], x[3];
+    params_vec3(params, "eye", V);
+    params_vec3(params, "center", C);
+    params_vec3(params, "up", up);
+    for (int k = 0; k < 3; k++) f[k] = C[k] - V[k];
+    double ff = ew_dot(f, f);
+    if (ff < 1e-12) return fx_fail(err, "bad_param", "center", "center must differ from eye");
+    ew_cross(f, up, x);
+    if (ew_dot(x, x) <= 1e-10 * ff * ew_dot(up, up))
+        return fx_fail(err, "bad_param", "up", "up must not be parallel to the eye->center direction");
+    return 0;
+}
+
+static void *ew_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+{
+    return energy_wave_new(ocl, params, err);
+}
+
+static int ew_apply(void *self, const cJSON *params, struct fx_err *err)
+{
+    return energy_wave_set(self, params, err);
+}
+
+/* The effect has no state beyond its parameters: time comes with every step. */
+static int ew_reset(void *self, struct fx_err *err)
+{
+    (void)self;
+    (void)err;
+    return 0;
+}
+
+static void ew_destroy(void *self) { energy_wave_free(self); }
+
+const struct effect_ops energy_wave_effect = {
+    .name = "energy_wave",
+    .doc = "Energy wave (Watanabe 2016): per-texel line integral of a 1/distance energy field made of point, "
+           "line, torus and quadratic Bezier sources (B-spline strength W, optional travelling pulse), seen "
+           "through a billboard camera; streamed as OpenEXR textures (raw luminance Y or colour-mapped RGBA).",
+    .params = energy_wave_params,
+    .outputs_json = "[{\"kind\":2,\"codec\":\"exr\",\"channels\":\"Y (raw B, half) or RGBA (colour map), "
+                    "per `output`\",\"size\":\"width x height\",\"rate\":\"fps\"}]",
+    .check = ew_check,
+    .create = ew_create,
+    .apply = ew_apply,
+    .step = ew_step,
+    .reset = ew_reset,
+    .destroy = ew_destroy,
+};
+
+/* ---- device helpers for the tests ------------------------------------------------------ */
+
+/* Runs kernel `name` over n items with the given buffers (in: host data copied in;
+ * out: read back into host pointers). Scalars are passed as (int) args at their index. */
+struct ew_arg {
+    const void *in;  /* host data to upload, or NULL */
+    void *out;       /* host destination to read back, or NULL */
+    size_t bytes;    /* buffer size; 0 for an int scalar */
+    int scalar;
+};
+
+static int ew_run_test_kernel(struct ocl *ocl, const char *name, int n, struct ew_arg *args, int nargs,
+                              struct fx_err *err)
+{
+    cl_int rc;
+    cl_mem mems[8] = {0};
+    int ret = -1;
+    cl_program prog = ocl_program(ocl, EW_KERNEL_FILE, EW_BUILD_OPTS, err);
+    if (!prog) return -1;
+    cl_kernel k = clCreateKernel(prog, name, &rc);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel(%s): %s", name, ocl_errstr(rc));
+    for (int i = 0; i < nargs; i++) {
+        if (!args[i].bytes) {
+            rc = clSetKernelArg(k, i, sizeof(int), &args[i].scalar);
+        } else {
+            cl_mem_flags fl = CL_MEM_READ_WRITE | (args[i].in ? CL_MEM_COPY_HOST_PTR : 0);
+            mems[i] = clCreateBuffer(ocl_context(ocl), fl, args[i].bytes, (void *)args[i].in, &rc);
+            if (rc == CL_SUCCESS) rc = clSetKernelArg(k, i, sizeof(cl_mem), &mems[i]);
+        }
+        if (rc != CL_SUCCESS) goto done;
+    }
+    size_t global = (size_t)n;
+    rc = clEnqueueNDRangeKernel(ocl_queue(ocl), k, 1, NULL, &global, NULL, 0, NULL, NULL);
+    for (int i = 0; i < nargs && rc == CL_SUCCESS; i++)
+        if (args[i].out)
+            rc = clEnqueueReadBuffer(ocl_queue(ocl), mems[i], CL_TRUE, 0, args[i].bytes, args[i].out, 0, NULL, NULL);
+    ret = rc == CL_SUCCESS ? 0 : -1;
+done:
+    if (rc != CL_SUCCESS) fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
+    for (int i = 0; i < nargs; i++)
+        if (mems[i]) clReleaseMemObject(mems[i]);
+    clReleaseKernel(k);
+    return ret;
+}
+
+int energy_wave_dev_cubic(struct ocl *ocl, int n, const float *abc, float *roots, int *nroots, struct fx_err *err)
+{
+    size_t f = sizeof(float);
+    struct ew_arg args[] = {
+        {abc, NULL, 3 * (size_t)n * f, 0},
+        {NULL, roots, 3 * (size_t)n * f, 0},
+        {NULL, nroots, (size_t)n * sizeof(int), 0},
+    };
+    return ew_run_test_kernel(ocl, "ew_test_cubic", n, args, 3, err);
+}
+
+int energy_wave_dev_bspline(struct ocl *ocl, int nw, const float *w, int n, const float *t, float *out,
+                            struct fx_err *err)
+{
+    size_t f = sizeof(float);
+    if (nw < 3 || nw > EW_MAX_W) return fx_fail(err, "bad_param", "W", "need 3..%d weights, got %d", EW_MAX_W, nw);
+    struct ew_arg args[] = {
+        {w, NULL, (size_t)nw * f, 0},
+        {NULL, NULL, 0, nw},
+        {t, NULL, (size_t)n * f, 0},
+        {NULL, out, (size_t)n * f, 0},
+    };
+    return ew_run_test_kernel(ocl, "ew_test_bspline", n, args, 4, err);
+}
+
+int energy_wave_dev_curve_nearest(struct ocl *ocl, const float b[9], int n, const float *p, float *dist,
+                                  float *tparam, struct fx_err *err)
+{
+    size_t f = sizeof(float);
+    double bd[3][3];
+    float rec[EW_CV_STRIDE];
+    for (int k = 0; k < 9; k++) bd[k / 3][k % 3] = b[k];
+    ew_pack_curve(rec, bd, 1.0, 3, 0.0, 1.0);
+    struct ew_arg args[] = {
+        {rec, NULL, sizeof rec, 0},
+        {p, NULL, 3 * (size_t)n * f, 0},
+        {NULL, dist, (size_t)n * f, 0},
+        {NULL, tparam, (size_t)n * f, 0},
+    };
+    return ew_run_test_kernel(ocl, "ew_test_curve_nearest", n, args, 4, err);
+}
