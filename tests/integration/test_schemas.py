@@ -45,6 +45,34 @@ def errors(name, msg):
     return [e.message for e in validator(name).iter_errors(msg)]
 
 
+def param_schema(d):
+    """A JSON Schema for one parameter value, built from its describe descriptor (PROTOCOL.md §9)."""
+    t = d["type"]
+    num = {"type": "integer" if t == "int" else "number"}
+    if "min" in d:
+        num.update(minimum=d["min"], maximum=d["max"])
+    if d.get("even"):
+        num["multipleOf"] = 2
+    if t in ("float", "int"):
+        return num
+    if t == "bool":
+        return {"type": "boolean"}
+    if t == "enum":
+        return {"enum": d["choices"]}
+    if t in ("vec3", "color"):
+        return {"type": "array", "items": num, "minItems": 3, "maxItems": 3}
+    if t == "float_list":
+        return {"type": "array", "items": num, "minItems": d["min_len"], "maxItems": d["max_len"]}
+    item = params_doc_schema(d["fields"])
+    return {"type": "array", "items": item, "minItems": d["min_len"], "maxItems": d["max_len"]}
+
+
+def params_doc_schema(descriptors):
+    """A complete parameter document: every described parameter, nothing else."""
+    return {"type": "object", "required": [d["name"] for d in descriptors],
+            "properties": {d["name"]: param_schema(d) for d in descriptors}, "additionalProperties": False}
+
+
 def server_schema(m):
     """The schema file for a message received from the server."""
     op = m.get("op")
@@ -144,6 +172,12 @@ async def test_session(t):
     names = [p["name"] for p in r["params"]]
     g = await a.req("get", stream="energy")
     t.check(g["op"] == "params" and sorted(g["params"]) == sorted(names), "get returns every described parameter")
+    doc_schema = params_doc_schema(r["params"])
+    e = list(jsonschema.Draft202012Validator(doc_schema).iter_errors(g["params"]))
+    t.check(not e, "the complete document matches its describe descriptors%s" % ("" if not e else ": " + e[0].message))
+    for d in r["params"]:
+        e = list(jsonschema.Draft202012Validator(param_schema(d)).iter_errors(d["default"]))
+        t.check(not e, "describe default of %s is valid per its own descriptor" % d["name"])
     r = await a.req("create", effect="energy_wave", stream="sch.a", params=SMALL)
     t.check(r["op"] == "created" and r["rev"] == 1, "create")
     r = await a.req("create", "create without params", effect="energy_wave", stream="sch-b")
