@@ -70,6 +70,12 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_printf(out, "fxs_messages_received_total %llu\n", (unsigned long long)atomic_load(&c->messages_in));
     metrics_head(out, "fxs_errors_sent_total", "counter", "Error replies sent.");
     metrics_printf(out, "fxs_errors_sent_total %llu\n", (unsigned long long)atomic_load(&c->errors_out));
+    metrics_head(out, "fxs_frames_sent_total", "counter", "Frames sent to subscribers, all streams.");
+    metrics_printf(out, "fxs_frames_sent_total %llu\n", (unsigned long long)atomic_load(&c->frames_sent));
+    metrics_head(out, "fxs_frames_skipped_total", "counter", "Frames subscribers skipped, all streams.");
+    metrics_printf(out, "fxs_frames_skipped_total %llu\n", (unsigned long long)atomic_load(&c->frames_skipped));
+    metrics_head(out, "fxs_bytes_sent_total", "counter", "Frame bytes sent, all streams.");
+    metrics_printf(out, "fxs_bytes_sent_total %llu\n", (unsigned long long)atomic_load(&c->bytes_sent));
     metrics_head(out, "fxs_streams", "gauge", "Streams defined.");
     metrics_printf(out, "fxs_streams %d\n", nstreams);
 }

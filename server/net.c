@@ -81,12 +81,17 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
     struct net *net = lws_context_user(lws_get_context(wsi));
     struct net_http *h = user;
     switch (reason) {
+    case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
+        /* A WebSocket upgrade without subprotocol fxstream.v1 lands here: refuse it. */
+        log_info("refused WebSocket without subprotocol fxstream.v1");
+        return 1;
     case LWS_CALLBACK_HTTP: {
-        char path[64];
-        if (lws_hdr_copy(wsi, path, sizeof path, WSI_TOKEN_GET_URI) <= 0) {
+        char path[256] = "";
+        if (lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) <= 0) {
             lws_return_http_status(wsi, HTTP_STATUS_METHOD_NOT_ALLOWED, "only GET is supported");
             return -1;
         }
+        lws_hdr_copy(wsi, path, sizeof path, WSI_TOKEN_GET_URI); /* too long: "" -> 404 */
         return net_http_request(wsi, net, h, path);
     }
     case LWS_CALLBACK_HTTP_WRITEABLE: {
@@ -139,8 +144,7 @@ static bool net_pick_frame(struct session *ss)
             ss->rr = i + 1;
             ss->cur = f;
             ss->cur_off = 0;
-            atomic_fetch_add(&sub->s->frames_sent, 1);
-            atomic_fetch_add(&sub->s->bytes_sent, f->len);
+            stream_ref(ss->cur_stream = sub->s);
             return true;
         }
     }
@@ -161,10 +165,14 @@ static int net_send_chunk(struct session *ss)
     if (w < (int)n) return -1;
     ss->cur_off += n;
     if (end) {
+        atomic_fetch_add(&ss->cur_stream->frames_sent, 1);
+        atomic_fetch_add(&ss->cur_stream->bytes_sent, f->len);
         atomic_fetch_add(&ss->srv->counters.frames_sent, 1);
         atomic_fetch_add(&ss->srv->counters.bytes_sent, f->len);
         frame_unref(f);
+        stream_unref(ss->cur_stream);
         ss->cur = NULL;
+        ss->cur_stream = NULL;
     }
     return 0;
 }
@@ -210,10 +218,10 @@ static int net_writable(struct net *net, struct session *ss)
 
 static bool net_accept(struct net *net, struct lws *wsi)
 {
-    char uri[64];
+    char uri[256] = "";
     if (net->stopping) return false;
     if (lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI) <= 0 || strcmp(uri, NET_WS_PATH) != 0) {
-        log_info("refused WebSocket on %s (the endpoint is %s)", uri, NET_WS_PATH);
+        log_info("refused WebSocket on \"%.64s\" (the endpoint is %s)", uri, NET_WS_PATH);
         return false;
     }
     return true;

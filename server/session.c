@@ -85,6 +85,8 @@ static cJSON *session_hello(struct server *srv)
     for (const struct effect_ops *const *e = effect_all(); *e; e++)
         cJSON_AddItemToArray(fx, cJSON_CreateString((*e)->name));
     cJSON *lim = cJSON_AddObjectToObject(h, "limits");
+    cJSON_AddNumberToObject(lim, "max_connections", l->max_connections);
+    cJSON_AddNumberToObject(lim, "max_queued_messages", l->max_queued_messages);
     cJSON_AddNumberToObject(lim, "max_message_bytes", l->max_message_bytes);
     cJSON_AddNumberToObject(lim, "max_json_depth", l->max_json_depth);
     cJSON_AddNumberToObject(lim, "max_streams", l->max_streams);
@@ -122,6 +124,7 @@ void session_close(struct session *ss)
     struct outmsg *m;
     while ((m = session_pop(ss))) free(m);
     frame_unref(ss->cur);
+    if (ss->cur_stream) stream_unref(ss->cur_stream);
     fx_buf_free(&ss->rx);
     if (ss->prev) ss->prev->next = ss->next;
     else ss->srv->sessions = ss->next;

@@ -39,8 +39,9 @@ struct session {
     int nsubs, rr;        /* rr: round-robin start for frame sends */
     struct outmsg *q_head, *q_tail;
     int q_count;
-    struct frame *cur;    /* frame being sent, and how far */
+    struct frame *cur;    /* frame being sent, how far, and its stream (referenced) */
     size_t cur_off;
+    struct stream *cur_stream;
     struct fx_buf rx;     /* fragments of the message being received */
     bool rx_overflow;
     double tokens, last_refill;

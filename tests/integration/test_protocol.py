@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import time
+import urllib.error
 import urllib.request
 
 import websockets
@@ -15,6 +16,13 @@ from fxtest import DAEMON, Client, Daemon, Suite
 
 SMALL = {"width": 64, "height": 48, "fps": 30}  # cheap frames keep the suite fast
 D = None
+
+
+def http_get_status(path):
+    try:
+        return http_get(path)
+    except urllib.error.HTTPError as e:
+        return e.code, None, None
 
 
 def http_get(path):
@@ -30,7 +38,7 @@ async def test_http(t):
     t.check(any(s["stream"] == "energy" for s in h["streams"]), "healthz lists the default stream")
     status, ctype, body = http_get("/metrics")
     t.check(status == 200 and ctype.startswith("text/plain"), "metrics is text")
-    for name in ("fxs_connections", "fxs_stream_frames_produced_total", "fxs_stream_step_seconds_sum",
+    for name in ("fxs_connections", "fxs_frames_sent_total", "fxs_stream_frames_produced_total", "fxs_stream_step_seconds_sum",
                  "fxs_stream_bytes_sent_total", "fxs_stream_frames_skipped_total"):
         t.check(name in body, "metrics has " + name)
 
@@ -48,6 +56,14 @@ async def test_hello(t):
         t.check(False, "WebSocket on a wrong path refused")
     except (websockets.exceptions.InvalidHandshake, websockets.exceptions.ConnectionClosed, OSError):
         t.check(True, "WebSocket on a wrong path refused")
+    try:
+        ws = await asyncio.wait_for(websockets.connect(D.url), 10)  # no subprotocol offered
+        await asyncio.wait_for(ws.recv(), 5)
+        t.check(False, "WebSocket without subprotocol fxstream.v1 refused")
+    except (websockets.exceptions.InvalidHandshake, websockets.exceptions.ConnectionClosed, OSError):
+        t.check(True, "WebSocket without subprotocol fxstream.v1 refused")
+    status, _, _ = http_get_status("/" + "x" * 300)
+    t.check(status == 404, "long unknown path is 404 (got %s)" % status)
 
 
 async def test_frames(t):
