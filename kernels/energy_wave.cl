@@ -1,47 +1,61 @@
 /* energy_wave.cl — OpenCL kernels of effect energy_wave (seed 000, Watanabe 2016).
  *
- * One work item per texel (2-D NDRange, column i, row j from the top). Each computes
- * B = ∫₀¹ ψ(L(s)) ζ(s) ds along the ray L(s) = S + s(E − S), ζ(s) = α/(s+β)², where ψ
- * is the sum of point / line / torus / Bézier-curve kernels (digest §2). Two renderers:
+ * Each work item renders EW_LANES = 8 adjacent texels of one row as float8 lanes: the
+ * code is written branch-free on vectors (select instead of if), so PoCL on a CPU
+ * emits AVX code for it, and GPUs run it just as well. Per texel (column i, row j from
+ * the top) it computes B = ∫₀¹ ψ(L(s)) ζ(s) ds along L(s) = S + s(E − S),
+ * ζ(s) = α/(s+β)², ψ = the sum of point / line / torus / Bézier kernels (digest §2).
  *   ew_render_simpson   the thesis's method: composite Simpson, n+1 samples, fused
  *                       into one kernel (no A array).
  *   ew_render_adaptive  ψ is a sum, so each primitive is integrated on its own:
- *                       closed forms for points and lines (digest §2.6), and for tori
- *                       and curves the ray's closest approach s* (at most two per
- *                       primitive) splits [0,1]; each side is integrated with
- *                       s = s* ± w·sinh(u) (w = peak width) and EW_GL_N-point
- *                       Gauss–Legendre, which turns the 1/distance peak smooth.
- * The ew_test_* kernels expose the solver pieces to the unit tests; they call the same
- * functions as the renderers. Buffer layouts below must match energy_wave.c. */
+ *                       closed forms for points and lines (digest §2.6); for tori and
+ *                       curves the ray's closest approaches s* (at most two) split
+ *                       [0,1], and each side is integrated with s = s* ± w·sinh(u)
+ *                       (w = peak half-width) and EW_GL_N-point Gauss–Legendre, which
+ *                       makes the 1/distance peak smooth in u.
+ * The ew_test_* kernels run the same device functions for the unit tests (lane 0).
+ * Buffer layouts below must match server/effects/energy_wave.c. */
 
 #define EW_PT_STRIDE 4  /* pos.xyz, coef */
 #define EW_LN_STRIDE 8  /* pos.xyz, coef, dir.xyz (unit), 0 */
 #define EW_TO_STRIDE 16 /* center.xyz, R, e1.xyz, coef, e2.xyz, 0, axis.xyz (unit), 0 */
 #define EW_CV_STRIDE 16 /* C0.xyz, coef, C1.xyz, |C2|², C2.xyz, C1·C2, |C1|², nw, t_lo, t_hi */
 #define EW_MAX_W 32     /* curve i's weights start at wts[i·EW_MAX_W] */
+#define EW_LANES 8
+#define EW_BIG 1e30f /* "none yet" (finite: the build may assume finite math) */
 /* Camera buffer: billboard centre (0..2), l·r (4..6), l·(H/W)·u (8..10), eye (12..14),
  * nu (15), alpha (16), beta (17), epsilon (18). */
 
 #ifndef EW_GL_N
-#define EW_GL_N 8
+#define EW_GL_N 12
 #endif
 
-#if EW_GL_N == 6
-__constant float ew_gl_x[6] = {0.033765243f, 0.169395307f, 0.380690407f, 0.619309593f, 0.830604693f, 0.966234757f};
-__constant float ew_gl_w[6] = {0.085662246f, 0.180380787f, 0.233956967f, 0.233956967f, 0.180380787f, 0.085662246f};
-#elif EW_GL_N == 8
-__constant float ew_gl_x[8] = {0.019855072f, 0.101666761f, 0.237233795f, 0.408282679f,
-                               0.591717321f, 0.762766205f, 0.898333239f, 0.980144928f};
-__constant float ew_gl_w[8] = {0.050614268f, 0.111190517f, 0.156853323f, 0.181341892f,
-                               0.181341892f, 0.156853323f, 0.111190517f, 0.050614268f};
+#if EW_GL_N == 10
+__constant float ew_gl_x[10] = {0.013046736f, 0.067468317f, 0.160295216f, 0.283302303f, 0.425562831f,
+                                0.574437169f, 0.716697697f, 0.839704784f, 0.932531683f, 0.986953264f};
+__constant float ew_gl_w[10] = {0.033335672f, 0.074725675f, 0.109543181f, 0.134633360f, 0.147762112f,
+                                0.147762112f, 0.134633360f, 0.109543181f, 0.074725675f, 0.033335672f};
 #elif EW_GL_N == 12
 __constant float ew_gl_x[12] = {0.009219683f, 0.047941372f, 0.115048663f, 0.206341023f, 0.316084251f, 0.437383296f,
                                 0.562616704f, 0.683915749f, 0.793658977f, 0.884951337f, 0.952058628f, 0.990780317f};
 __constant float ew_gl_w[12] = {0.023587668f, 0.053469663f, 0.080039164f, 0.101583713f, 0.116746268f, 0.124573523f,
                                 0.124573523f, 0.116746268f, 0.101583713f, 0.080039164f, 0.053469663f, 0.023587668f};
+#elif EW_GL_N == 16
+__constant float ew_gl_x[16] = {0.005299533f, 0.027712488f, 0.067184399f, 0.122297796f, 0.191061878f, 0.270991611f,
+                                0.359198225f, 0.452493745f, 0.547506255f, 0.640801775f, 0.729008389f, 0.808938122f,
+                                0.877702204f, 0.932815601f, 0.972287512f, 0.994700467f};
+__constant float ew_gl_w[16] = {0.013576230f, 0.031126762f, 0.047579256f, 0.062314486f, 0.074797994f, 0.084578260f,
+                                0.091301708f, 0.094725305f, 0.094725305f, 0.091301708f, 0.084578260f, 0.074797994f,
+                                0.062314486f, 0.047579256f, 0.031126762f, 0.013576230f};
 #else
-#error "EW_GL_N must be 6, 8 or 12"
+#error "EW_GL_N must be 10, 12 or 16"
 #endif
+
+typedef float8 fv;
+typedef int8 iv;
+typedef struct {
+    fv x, y, z;
+} v3;
 
 typedef struct {
     __global const float *pts, *lns, *tor, *cur, *wts;
@@ -49,74 +63,97 @@ typedef struct {
     float alpha, beta, eps;
 } ew_scene;
 
-typedef struct {
-    int n;
-    float s[2];  /* closest-approach ray parameters, ascending */
-    float w[2];  /* peak half-widths in s */
-    float split; /* a jump of the integrand (curve medial plane), or -1 */
-} ew_peaks;
+/* ---- 3-vectors of lanes ------------------------------------------------------------ */
 
-static float ew_zeta(const ew_scene *sc, float s)
+static v3 v3_make(fv x, fv y, fv z)
 {
-    float d = s + sc->beta;
+    v3 r = {x, y, z};
+    return r;
+}
+static v3 v3_bcast(float3 c) { return v3_make((fv)(c.x), (fv)(c.y), (fv)(c.z)); }
+static v3 v3_load(__global const float *p) { return v3_make((fv)(p[0]), (fv)(p[1]), (fv)(p[2])); }
+static v3 v3_add(v3 a, v3 b) { return v3_make(a.x + b.x, a.y + b.y, a.z + b.z); }
+static v3 v3_sub(v3 a, v3 b) { return v3_make(a.x - b.x, a.y - b.y, a.z - b.z); }
+static v3 v3_mul(v3 a, fv k) { return v3_make(a.x * k, a.y * k, a.z * k); }
+static fv v3_dot(v3 a, v3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static v3 v3_cross(v3 a, v3 b)
+{
+    return v3_make(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+/* a + k·b */
+static v3 v3_mad(v3 a, fv k, v3 b) { return v3_make(mad(k, b.x, a.x), mad(k, b.y, a.y), mad(k, b.z, a.z)); }
+/* The component of a normal to the unit vector n. */
+static v3 v3_perp(v3 a, v3 n) { return v3_mad(a, -v3_dot(a, n), n); }
+
+static fv ew_zeta(const ew_scene *sc, fv s)
+{
+    fv d = s + sc->beta;
     return sc->alpha / (d * d);
 }
 
 /* ---- cubic solver (digest §2.2 recommended solver) ------------------------------- */
 
-/* Real roots of x³ + a x² + b x + c = 0, ascending; returns how many (1 or 3).
+/* Real roots of x³ + a x² + b x + c = 0, ascending in r0 ≤ r1 ≤ r2; returns the lanes
+ * with three real roots (elsewhere r0 = r1 = r2 is the single real root).
  * digest 000 §8 #5/#6/#7: the thesis's Cardano uses θ = arctan(q/r), omits the −a/3
  * shift and picks roots by "imag == 0"; this is the trigonometric form instead, with the
  * −a/3 shift, the double root (r ≈ 0) in the trig branch and one Newton step per root. */
-static int ew_cubic(float a, float b, float c, float *r)
+static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
 {
-    float p = b / 3.0f - a * a / 9.0f;
-    float q = a * a * a / 27.0f - a * b / 6.0f + c / 2.0f;
-    float disc = p * p * p + q * q, shift = -a / 3.0f;
-    int n = 1;
-    if (p < 0.0f && disc <= 1e-5f * q * q) {
-        float m = 2.0f * sqrt(-p);
-        float phi = acos(clamp(-q / sqrt(-p * p * p), -1.0f, 1.0f));
-        for (int k = 0; k < 3; k++) r[k] = m * cos((phi + 2.0f * M_PI_F * (float)k) / 3.0f) + shift;
-        n = 3;
-    } else if (disc > 0.0f) {
-        float sq = sqrt(disc);
-        r[0] = cbrt(-q + sq) + cbrt(-q - sq) + shift;
-    } else {
-        r[0] = shift; /* p = q = 0: triple root */
+    fv p = b / 3.0f - a * a / 9.0f;
+    fv q = a * a * a / 27.0f - a * b / 6.0f + c / 2.0f;
+    fv disc = p * p * p + q * q, shift = -a / 3.0f;
+    iv three = (p < 0.0f) & (disc <= 1e-5f * q * q);
+    fv x[3];
+    x[0] = x[1] = x[2] = shift;
+    if (!all(three)) { /* one real root: u = ∛(−q ∓ √r) of the larger size, v = −p/u */
+        fv u = cbrt(-q - copysign(sqrt(fmax(disc, 0.0f)), q));
+        fv one = select(u - p / u, (fv)(0.0f), u == 0.0f) + shift;
+        x[0] = x[1] = x[2] = one;
     }
-    for (int k = 0; k < n; k++) {
-        float x = r[k], f = ((x + a) * x + b) * x + c, fp = (3.0f * x + 2.0f * a) * x + b;
-        if (fp != 0.0f) r[k] = x - f / fp;
+    if (any(three)) {
+        fv mp = fmax(-p, 0.0f), m = 2.0f * sqrt(mp), cphi;
+        fv phi = acos(clamp(-q / sqrt(fmax(mp * mp * mp, 1e-30f)), -1.0f, 1.0f));
+        fv sphi = sincos(phi / 3.0f, &cphi);
+        x[0] = select(x[0], m * (-0.5f * cphi - 0.866025404f * sphi) + shift, three);
+        x[1] = select(x[1], m * (-0.5f * cphi + 0.866025404f * sphi) + shift, three);
+        x[2] = select(x[2], m * cphi + shift, three);
     }
-    for (int i = 1; i < n; i++)
-        for (int k = i; k > 0 && r[k - 1] > r[k]; k--) {
-            float t = r[k];
-            r[k] = r[k - 1];
-            r[k - 1] = t;
-        }
-    return n;
+    for (int k = 0; k < 3; k++) {
+        fv f = ((x[k] + a) * x[k] + b) * x[k] + c, fp = (3.0f * x[k] + 2.0f * a) * x[k] + b;
+        x[k] = select(x[k] - f / fp, x[k], fp == 0.0f);
+    }
+    fv lo = fmin(x[0], x[1]), hi = fmax(x[0], x[1]);
+    *r0 = fmin(lo, x[2]);
+    *r2 = fmax(hi, x[2]);
+    *r1 = fmax(lo, fmin(hi, x[2]));
+    return three;
 }
 
 /* ---- B-spline strength S(t) (digest §2.3) ----------------------------------------- */
 
-/* Clamped uniform knot u_i of (3.26) for nw weights: [0,0,0, 1/(nw−2), …, 1,1,1]. */
-static float ew_knot(int i, int nw)
+static fv ew_gather(__global const float *base, iv idx)
 {
-    return clamp((float)(i - 2) / (float)(nw - 2), 0.0f, 1.0f);
+    return (fv)(base[idx.s0], base[idx.s1], base[idx.s2], base[idx.s3], base[idx.s4], base[idx.s5], base[idx.s6],
+                base[idx.s7]);
+}
+
+/* Clamped uniform knot u_i of (3.26) for nw weights: [0,0,0, 1/(nw−2), …, 1,1,1]. */
+static fv ew_knot(iv i, float inv_spans)
+{
+    return clamp(convert_float8(i - 2) * inv_spans, 0.0f, 1.0f);
 }
 
 /* S(t) = Σ w_i N_i²(t) by de Boor's algorithm on the span holding t. digest 000 §8 #10:
  * the last span is closed at t = 1 (half-open spans give S(1) = 0, a dark end cap). */
-static float ew_bspline(__global const float *w, int nw, float t)
+static fv ew_bspline(__global const float *w, int nw, fv t)
 {
     int spans = nw - 2;
-    int j = clamp((int)(t * (float)spans), 0, spans - 1);
-    int k = j + 2; /* u_k <= t < u_{k+1} */
-    float d0 = w[k - 2], d1 = w[k - 1], d2 = w[k];
-    float u_km1 = ew_knot(k - 1, nw), u_k = ew_knot(k, nw);
-    float u_kp1 = ew_knot(k + 1, nw), u_kp2 = ew_knot(k + 2, nw);
-    float a = (t - u_k) / (u_kp2 - u_k);
+    float inv = 1.0f / (float)spans;
+    iv k = clamp(convert_int8(t * (float)spans), 0, spans - 1) + 2; /* u_k <= t < u_{k+1} */
+    fv d0 = ew_gather(w, k - 2), d1 = ew_gather(w, k - 1), d2 = ew_gather(w, k);
+    fv u_km1 = ew_knot(k - 1, inv), u_k = ew_knot(k, inv), u_kp1 = ew_knot(k + 1, inv), u_kp2 = ew_knot(k + 2, inv);
+    fv a = (t - u_k) / (u_kp2 - u_k);
     d2 = (1.0f - a) * d1 + a * d2;
     a = (t - u_km1) / (u_kp1 - u_km1);
     d1 = (1.0f - a) * d0 + a * d1;
@@ -126,88 +163,94 @@ static float ew_bspline(__global const float *w, int nw, float t)
 
 /* ---- kernels of the primitives (digest §2.2) ------------------------------------- */
 
-static float3 ew_load3(__global const float *p) { return (float3)(p[0], p[1], p[2]); }
-
-static float ew_point_k(__global const float *pt, float3 P, float eps)
+static fv ew_point_k(__global const float *pt, v3 P, float eps)
 {
-    float3 v = P - ew_load3(pt);
-    return pt[3] / fmax(eps, sqrt(dot(v, v)));
+    v3 v = v3_sub(P, v3_load(pt));
+    return pt[3] / fmax(eps, sqrt(v3_dot(v, v)));
 }
 
-static float ew_line_k(__global const float *ln, float3 P, float eps)
+static fv ew_line_k(__global const float *ln, v3 P, float eps)
 {
-    float3 v = P - ew_load3(ln);
-    float along = dot(v, ew_load3(ln + 4));
-    return ln[3] / fmax(eps, sqrt(fmax(dot(v, v) - along * along, 0.0f)));
+    v3 v = v3_sub(P, v3_load(ln));
+    fv along = v3_dot(v, v3_load(ln + 4));
+    return ln[3] / fmax(eps, sqrt(fmax(v3_dot(v, v) - along * along, 0.0f)));
 }
 
 /* P in the torus frame: P_local = Rᵀ(P − centre), axis = local z.
  * digest 000 §8 #20: the thesis fixes the torus at the origin; this is the pose. */
-static float3 ew_torus_local(__global const float *to, float3 P)
+static v3 ew_torus_local(__global const float *to, v3 P)
 {
-    float3 v = P - ew_load3(to);
-    return (float3)(dot(v, ew_load3(to + 4)), dot(v, ew_load3(to + 8)), dot(v, ew_load3(to + 12)));
+    v3 v = v3_sub(P, v3_load(to));
+    return v3_make(v3_dot(v, v3_load(to + 4)), v3_dot(v, v3_load(to + 8)), v3_dot(v, v3_load(to + 12)));
 }
 
-/* (3.6): distance to the centre circle of radius R. */
-static float ew_torus_dist(float3 l, float R)
+/* (3.6)/(3.7): coef / max(ε, distance to the centre circle of radius R). */
+static fv ew_torus_k(__global const float *to, v3 P, float eps)
 {
-    float dr = sqrt(l.x * l.x + l.y * l.y) - R;
-    return sqrt(dr * dr + l.z * l.z);
+    v3 l = ew_torus_local(to, P);
+    fv dr = sqrt(l.x * l.x + l.y * l.y) - to[3];
+    return to[7] / fmax(eps, sqrt(dr * dr + l.z * l.z));
 }
 
-static float ew_torus_k(__global const float *to, float3 P, float eps)
+static v3 ew_curve_at(__global const float *cv, fv t)
 {
-    return to[7] / fmax(eps, ew_torus_dist(ew_torus_local(to, P), to[3]));
+    return v3_mad(v3_mad(v3_load(cv), t, v3_load(cv + 4)), t * t, v3_load(cv + 8));
 }
 
-static float3 ew_curve_at(__global const float *cv, float t)
-{
-    return (ew_load3(cv + 8) * t + ew_load3(cv + 4)) * t + ew_load3(cv);
-}
-
-/* Nearest point of C(t) = C₂t² + C₁t + C₀, t in [0,1], to P: (distance, t*).
+/* Nearest point of C(t) = C₂t² + C₁t + C₀, t in [0,1], to P: distance, and t* in *t.
  * digest 000 §8 #4: thesis eq. 3.12 lacks −2C₂·P in the t coefficient (and flips the
  * sign); the cubic is 2|C₂|²t³ + 3(C₁·C₂)t² + (2C₂·(C₀−P) + |C₁|²)t + C₁·(C₀−P) = 0,
  * normalised by 2|C₂|² (§8 #6), with the straight case C₂ ≈ 0 solved linearly. */
-static float2 ew_curve_nearest(__global const float *cv, float3 P)
+static fv ew_curve_nearest(__global const float *cv, v3 P, fv *t)
 {
-    float3 D = ew_load3(cv) - P, C1 = ew_load3(cv + 4), C2 = ew_load3(cv + 8);
+    v3 D = v3_sub(v3_load(cv), P), C1 = v3_load(cv + 4), C2 = v3_load(cv + 8);
     float c2sq = cv[7], c12 = cv[11], c1sq = cv[12];
-    float cand[5] = {0.0f, 1.0f, 0.0f, 0.0f, 0.0f};
-    int n = 2;
+    fv c1d = v3_dot(C1, D), r0, r1, r2;
+    iv three = 0;
     if (c2sq <= 1e-6f * c1sq) {
-        cand[n++] = c1sq > 0.0f ? clamp(-dot(C1, D) / c1sq, 0.0f, 1.0f) : 0.0f;
+        r0 = r1 = r2 = clamp(-c1d / fmax(c1sq, 1e-30f), 0.0f, 1.0f);
     } else {
-        float inv = 0.5f / c2sq, r[3];
-        int nr = ew_cubic(3.0f * c12 * inv, (2.0f * dot(C2, D) + c1sq) * inv, dot(C1, D) * inv, r);
-        for (int k = 0; k < nr; k++) cand[n++] = clamp(r[k], 0.0f, 1.0f);
+        float inv = 0.5f / c2sq;
+        three = ew_cubic((fv)(3.0f * c12 * inv), (2.0f * v3_dot(C2, D) + c1sq) * inv, c1d * inv, &r0, &r1, &r2);
     }
-    float3 v0 = ew_curve_at(cv, cand[0]) - P;
-    float best = dot(v0, v0), bt = cand[0];
-    for (int k = 1; k < n; k++) {
-        float3 v = ew_curve_at(cv, cand[k]) - P;
-        float d2 = dot(v, v);
-        if (d2 < best) {
-            best = d2;
-            bt = cand[k];
-        }
+    /* candidates: both ends and the roots clamped to [0,1] (r1, r2 repeat r0 unless three) */
+    fv cand[5] = {0.0f, 1.0f, clamp(r0, 0.0f, 1.0f), clamp(r1, 0.0f, 1.0f), clamp(r2, 0.0f, 1.0f)};
+    int ncand = any(three) ? 5 : 3;
+    v3 v = v3_sub(ew_curve_at(cv, cand[0]), P);
+    fv best = v3_dot(v, v), bt = cand[0];
+    for (int k = 1; k < ncand; k++) {
+        v = v3_sub(ew_curve_at(cv, cand[k]), P);
+        fv d2 = v3_dot(v, v);
+        iv better = d2 < best;
+        best = select(best, d2, better);
+        bt = select(bt, cand[k], better);
     }
-    return (float2)(sqrt(best), bt);
+    *t = bt;
+    return sqrt(best);
 }
 
-/* (3.27): coef · S(t*) / max(ε, L(P, curve)). */
-static float ew_curve_k(const ew_scene *sc, __global const float *cv, float3 P)
+static __global const float *ew_curve_weights(const ew_scene *sc, __global const float *cv)
 {
-    float2 dt = ew_curve_nearest(cv, P);
-    float s = ew_bspline(sc->wts + (cv - sc->cur) / EW_CV_STRIDE * EW_MAX_W, (int)cv[13], dt.y);
-    return cv[3] * s / fmax(sc->eps, dt.x);
+    return sc->wts + (cv - sc->cur) / EW_CV_STRIDE * EW_MAX_W;
+}
+
+/* (3.27): coef · S(t*) / max(ε, L(P, curve)), and t* in *t. */
+static fv ew_curve_kt(const ew_scene *sc, __global const float *cv, v3 P, fv *t)
+{
+    fv d = ew_curve_nearest(cv, P, t);
+    return cv[3] * ew_bspline(ew_curve_weights(sc, cv), (int)cv[13], *t) / fmax(sc->eps, d);
+}
+
+static fv ew_curve_k(const ew_scene *sc, __global const float *cv, v3 P)
+{
+    fv t;
+    return ew_curve_kt(sc, cv, P, &t);
 }
 
 /* (3.28): ψ(P), the sum over every source. */
-static float ew_psi(const ew_scene *sc, float3 P)
+static fv ew_psi(const ew_scene *sc, v3 P)
 {
-    float psi = 0.0f;
+    fv psi = 0.0f;
     for (int i = 0; i < sc->np; i++) psi += ew_point_k(sc->pts + i * EW_PT_STRIDE, P, sc->eps);
     for (int i = 0; i < sc->nl; i++) psi += ew_line_k(sc->lns + i * EW_LN_STRIDE, P, sc->eps);
     for (int i = 0; i < sc->nt; i++) psi += ew_torus_k(sc->tor + i * EW_TO_STRIDE, P, sc->eps);
@@ -215,7 +258,7 @@ static float ew_psi(const ew_scene *sc, float3 P)
     return psi;
 }
 
-/* ---- camera ----------------------------------------------------------------------- */
+/* ---- camera and output -------------------------------------------------------------- */
 
 static ew_scene ew_scene_make(__constant const float *cam, __global const float *pts, int np,
                               __global const float *lns, int nl, __global const float *tor, int nt,
@@ -225,15 +268,29 @@ static ew_scene ew_scene_make(__constant const float *cam, __global const float 
     return sc;
 }
 
-/* Texel (i, j) → ray start S and Q = E − S, with E = V + ν(S − V).
- * digest 000 §8 #14/#17: translation-invariant E and pixel-centre sampling. */
-static void ew_texel_ray(__constant const float *cam, int i, int j, int width, int height, float3 *S, float3 *Q)
+/* The work item's 8 texels (i0 … i0+7, j) → ray starts S and Q = E − S, with
+ * E = V + ν(S − V). digest 000 §8 #14/#17: translation-invariant E, pixel centres. */
+static void ew_texel_rays(__constant const float *cam, int i0, int j, int width, int height, v3 *S, v3 *Q)
 {
-    float x = ((float)i + 0.5f) / (float)width - 0.5f;
-    float y = 0.5f - ((float)j + 0.5f) / (float)height;
-    float3 V = (float3)(cam[12], cam[13], cam[14]);
-    *S = (float3)(cam[0], cam[1], cam[2]) + x * (float3)(cam[4], cam[5], cam[6]) + y * (float3)(cam[8], cam[9], cam[10]);
-    *Q = (cam[15] - 1.0f) * (*S - V);
+    fv i = convert_float8(min((int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7), width - 1));
+    fv x = (i + 0.5f) / (float)width - 0.5f;
+    fv y = (fv)(0.5f - ((float)j + 0.5f) / (float)height);
+    v3 V = v3_make((fv)(cam[12]), (fv)(cam[13]), (fv)(cam[14]));
+    *S = v3_mad(v3_mad(v3_make((fv)(cam[0]), (fv)(cam[1]), (fv)(cam[2])), x, v3_make((fv)(cam[4]), (fv)(cam[5]), (fv)(cam[6]))),
+                y, v3_make((fv)(cam[8]), (fv)(cam[9]), (fv)(cam[10])));
+    *Q = v3_mul(v3_sub(*S, V), (fv)(cam[15] - 1.0f));
+}
+
+static void ew_store(__global float *out, fv B, int i0, int j, int width)
+{
+    __global float *row = out + j * width;
+    if (i0 + EW_LANES <= width) {
+        vstore8(B, 0, row + i0);
+        return;
+    }
+    float b[EW_LANES];
+    vstore8(B, 0, b);
+    for (int k = 0; i0 + k < width; k++) row[i0 + k] = b[k];
 }
 
 /* ---- Simpson (thesis §3.5.3, §4) --------------------------------------------------- */
@@ -245,279 +302,299 @@ __kernel void ew_render_simpson(__global float *out, __constant const float *cam
                                 __global const float *cur, int nc, __global const float *wts, int width,
                                 int height, int divisions)
 {
-    int i = get_global_id(0), j = get_global_id(1);
-    if (i >= width || j >= height) return;
+    int i0 = get_global_id(0) * EW_LANES, j = get_global_id(1);
+    if (i0 >= width || j >= height) return;
     ew_scene sc = ew_scene_make(cam, pts, np, lns, nl, tor, nt, cur, nc, wts);
-    float3 S, Q;
-    ew_texel_ray(cam, i, j, width, height, &S, &Q);
-    float inv_n = 1.0f / (float)divisions, acc = 0.0f;
+    v3 S, Q;
+    ew_texel_rays(cam, i0, j, width, height, &S, &Q);
+    float inv_n = 1.0f / (float)divisions;
+    fv acc = 0.0f;
     for (int k = 0; k <= divisions; k++) {
         float s = (float)k * inv_n;
         float wk = (k == 0 || k == divisions) ? 1.0f : ((k & 1) ? 4.0f : 2.0f);
-        acc += wk * ew_psi(&sc, S + s * Q) * ew_zeta(&sc, s);
+        acc += wk * ew_psi(&sc, v3_mad(S, (fv)(s), Q)) * ew_zeta(&sc, (fv)(s));
     }
-    out[j * width + i] = acc * inv_n / 3.0f;
+    ew_store(out, acc * (inv_n / 3.0f), i0, j, width);
 }
 
 /* ---- closed forms for points and lines (digest §2.6) ------------------------------ */
 
-/* asinh(z1/k) − asinh(z0/k) for k = √k2; when z0, z1 share a sign it is a log ratio,
+/* asinh(z1/k) − asinh(z0/k) for k = √k2; where z0, z1 share a sign it is a log ratio,
  * exact even when k → 0 (a ray through the source). */
-static float ew_asinh_diff(float z0, float z1, float k2)
+static fv ew_asinh_diff(fv z0, fv z1, fv k2)
 {
-    if (z0 * z1 > 0.0f) {
-        float a0 = fabs(z0), a1 = fabs(z1);
-        float l = log((a1 + sqrt(a1 * a1 + k2)) / (a0 + sqrt(a0 * a0 + k2)));
-        return z1 > 0.0f ? l : -l;
-    }
-    float k = sqrt(fmax(k2, 1e-30f));
-    return asinh(z1 / k) - asinh(z0 / k);
+    fv a0 = fabs(z0), a1 = fabs(z1);
+    fv l = log((a1 + sqrt(a1 * a1 + k2)) / (a0 + sqrt(a0 * a0 + k2)));
+    fv k = sqrt(fmax(k2, 1e-30f));
+    return select(asinh(z1 / k) - asinh(z0 / k), select(-l, l, z1 > 0.0f), z0 * z1 > 0.0f);
 }
 
 /* ∫_{s0}^{s1} α ds / ((s+β)² √(As² + 2Bs + C)), k2 = AC − B² (computed as a cross
  * product by the caller). With y = 1/(s+β), a' = U(−β), b' = B − Aβ it is
  * α[G(y0) − G(y1)], G(y) = √(a'y²+2b'y+A)/a' − b'a'^{−3/2} asinh((a'y+b')/√k2).
  * digest 000 §8 #2: the thesis's (2.8) lacks the square root in the asinh argument. */
-static float ew_quad_piece(const ew_scene *sc, float A, float B, float C, float k2, float s0, float s1)
+static fv ew_quad_piece(const ew_scene *sc, fv A, fv B, fv C, fv k2, fv s0, fv s1)
 {
-    if (s1 <= s0) return 0.0f;
     float be = sc->beta;
-    float ap = (A * be - 2.0f * B) * be + C, bp = B - A * be;
-    float y0 = 1.0f / (s0 + be), y1 = 1.0f / (s1 + be);
-    float u0 = fmax((A * s0 + 2.0f * B) * s0 + C, 0.0f), u1 = fmax((A * s1 + 2.0f * B) * s1 + C, 0.0f);
-    float t1 = (y0 * sqrt(u0) - y1 * sqrt(u1)) / ap;
-    float t2 = bp / (ap * sqrt(ap)) * ew_asinh_diff(ap * y1 + bp, ap * y0 + bp, k2);
-    return sc->alpha * (t1 - t2);
+    fv ap = (A * be - 2.0f * B) * be + C, bp = B - A * be;
+    fv y0 = 1.0f / (s0 + be), y1 = 1.0f / (s1 + be);
+    fv u0 = fmax((A * s0 + 2.0f * B) * s0 + C, 0.0f), u1 = fmax((A * s1 + 2.0f * B) * s1 + C, 0.0f);
+    fv t1 = (y0 * sqrt(u0) - y1 * sqrt(u1)) / ap;
+    fv t2 = bp / (ap * sqrt(ap)) * ew_asinh_diff(ap * y1 + bp, ap * y0 + bp, k2);
+    return select((fv)(0.0f), sc->alpha * (t1 - t2), s1 > s0);
 }
 
-/* ∫₀¹ ζ(s) / max(ε, √(As² + 2Bs + C)) ds: inside the ε-ball the kernel is 1/ε. */
-static float ew_quad_int(const ew_scene *sc, float A, float B, float C, float k2)
+/* ∫₀¹ ζ(s) / max(ε, √(As² + 2Bs + C)) ds: inside the ε-ball (h² < ε²) the kernel is
+ * 1/ε; elsewhere the core [lo, hi] is empty and the two pieces meet at s*. */
+static fv ew_quad_int(const ew_scene *sc, fv A, fv B, fv C, fv k2)
 {
-    float e2 = sc->eps * sc->eps, h2 = k2 / A, sstar = -B / A;
-    if (h2 >= e2) return ew_quad_piece(sc, A, B, C, k2, 0.0f, 1.0f);
-    float delta = sqrt((e2 - h2) / A);
-    float lo = clamp(sstar - delta, 0.0f, 1.0f), hi = clamp(sstar + delta, 0.0f, 1.0f);
-    float core = sc->alpha / sc->eps * (1.0f / (lo + sc->beta) - 1.0f / (hi + sc->beta));
-    return ew_quad_piece(sc, A, B, C, k2, 0.0f, lo) + core + ew_quad_piece(sc, A, B, C, k2, hi, 1.0f);
+    float e2 = sc->eps * sc->eps;
+    fv sstar = -B / A, delta = sqrt(fmax((e2 - k2 / A) / A, 0.0f));
+    fv lo = clamp(sstar - delta, 0.0f, 1.0f), hi = clamp(sstar + delta, 0.0f, 1.0f);
+    fv core = sc->alpha / sc->eps * (1.0f / (lo + sc->beta) - 1.0f / (hi + sc->beta));
+    return ew_quad_piece(sc, A, B, C, k2, (fv)(0.0f), lo) + core + ew_quad_piece(sc, A, B, C, k2, hi, (fv)(1.0f));
 }
 
-static float ew_point_int(const ew_scene *sc, __global const float *pt, float3 S, float3 Q)
+static fv ew_point_int(const ew_scene *sc, __global const float *pt, v3 S, v3 Q)
 {
-    float3 v = S - ew_load3(pt), x = cross(Q, v);
-    return pt[3] * ew_quad_int(sc, dot(Q, Q), dot(Q, v), dot(v, v), dot(x, x));
+    v3 v = v3_sub(S, v3_load(pt)), x = v3_cross(Q, v);
+    return pt[3] * ew_quad_int(sc, v3_dot(Q, Q), v3_dot(Q, v), v3_dot(v, v), v3_dot(x, x));
 }
 
 /* The line kernel is the point kernel in the plane normal to the line (2.14)–(2.16). */
-static float ew_line_int(const ew_scene *sc, __global const float *ln, float3 S, float3 Q)
+static fv ew_line_int(const ew_scene *sc, __global const float *ln, v3 S, v3 Q)
 {
-    float3 D = ew_load3(ln + 4), v = S - ew_load3(ln);
-    float3 qp = Q - dot(Q, D) * D, vp = v - dot(v, D) * D, x = cross(qp, vp);
-    float A = dot(qp, qp), C = dot(vp, vp);
-    if (A <= 1e-10f * dot(Q, Q)) /* ray parallel to the line: constant distance */
-        return ln[3] * sc->alpha * (1.0f / sc->beta - 1.0f / (1.0f + sc->beta)) / fmax(sc->eps, sqrt(C));
-    return ln[3] * ew_quad_int(sc, A, dot(qp, vp), C, dot(x, x));
+    v3 D = v3_load(ln + 4);
+    v3 qp = v3_perp(Q, D), vp = v3_perp(v3_sub(S, v3_load(ln)), D), x = v3_cross(qp, vp);
+    fv A = v3_dot(qp, qp), C = v3_dot(vp, vp);
+    iv parallel = A <= 1e-10f * v3_dot(Q, Q); /* constant distance along the ray */
+    fv flat = sc->alpha * (1.0f / sc->beta - 1.0f / (1.0f + sc->beta)) / fmax(sc->eps, sqrt(C));
+    fv A1 = select(A, (fv)(1.0f), parallel);
+    return ln[3] * select(ew_quad_int(sc, A1, v3_dot(qp, vp), C, v3_dot(x, x)), flat, parallel);
 }
 
 /* ---- peak-adapted quadrature for tori and curves ---------------------------------- */
 
-/* kind 0: torus, 1: curve. */
-static float ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, float3 P)
+/* Up to two closest approaches per lane, s0 <= s1 (s1 = s0 where there is one). */
+typedef struct {
+    fv s0, w0, s1, w1;
+    iv two;
+} ew_peaks;
+
+/* kind 0: torus, 1: curve (t*: the nearest curve parameter; 0 for a torus). */
+static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3 P, fv *t)
 {
-    return kind == 0 ? ew_torus_k(prim, P, sc->eps) : ew_curve_k(sc, prim, P);
+    *t = 0.0f;
+    return kind == 0 ? ew_torus_k(prim, P, sc->eps) : ew_curve_kt(sc, prim, P, t);
 }
 
-/* ∫ between s0 (a peak of half-width w) and s1 of ψ_prim ζ ds, with s = s0 ± w·sinh(u). */
-static float ew_side(const ew_scene *sc, int kind, __global const float *prim, float3 S, float3 Q, float s0,
-                     float w, float s1)
+/* A jump of t* between two nodes bigger than this is taken as a crossing of the curve's
+ * medial set, where S(t*) may jump (digest §2.3 note); a false alarm only costs time. */
+#ifndef EW_JUMP_T
+#define EW_JUMP_T 0.25f
+#endif
+#define EW_JUMP_BISECT 8
+
+/* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
+ * [a, b]): in u the 1/distance peak is smooth, so one Gauss–Legendre rule covers it.
+ * Lanes where t* jumps between two nodes get the bracket [*ja, *jb] flagged in *jumped. */
+static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b,
+                        iv *jumped, fv *ja, fv *jb)
 {
-    float len = fabs(s1 - s0);
-    if (len < 1e-7f) return 0.0f;
-    float U = asinh(len / w), dir = s1 > s0 ? w : -w, acc = 0.0f;
+    fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f, t, tprev = 0.0f, sprev = a;
+    *jumped = 0;
     for (int k = 0; k < EW_GL_N; k++) {
-        float e = exp(U * ew_gl_x[k]), ie = 1.0f / e;
-        float s = s0 + dir * 0.5f * (e - ie);
-        acc += ew_gl_w[k] * (e + ie) * ew_prim_k(sc, kind, prim, S + s * Q) * ew_zeta(sc, s);
+        fv e = exp(mad(du, ew_gl_x[k], ua)), ie = 1.0f / e;
+        fv s = c + w * 0.5f * (e - ie);
+        acc += ew_gl_w[k] * (e + ie) * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t) * ew_zeta(sc, s);
+        iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~*jumped & (fabs(t - tprev) > EW_JUMP_T);
+        *ja = select(*ja, sprev, jump);
+        *jb = select(*jb, s, jump);
+        *jumped |= jump;
+        tprev = t;
+        sprev = s;
     }
-    return acc * 0.5f * U * w;
+    return acc * 0.5f * du * w;
 }
 
-/* Half-width to use when anchoring the sinh map at x: the nearest peak's, widened by
- * the distance to it (the ray is at distance ≈ k·√(w² + (x − s*)²) there). */
-static float ew_anchor_w(const ew_peaks *pk, float x)
+static fv ew_span_plain(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
-    float best = INFINITY;
-    for (int m = 0; m < pk->n; m++) {
-        float d = x - pk->s[m];
-        best = fmin(best, pk->w[m] * pk->w[m] + d * d);
-    }
-    return sqrt(best);
+    iv jumped;
+    fv ja, jb;
+    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, &jumped, &ja, &jb);
 }
 
-/* ∫ over [a, b] where a or b may be a peak (pa, pb: peak index or −1). */
-static float ew_piece(const ew_scene *sc, int kind, __global const float *prim, float3 S, float3 Q,
-                      const ew_peaks *pk, float a, int pa, float b, int pb)
+/* Bisects [a, b] for the jump of t*. */
+static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 Q, fv a, fv b)
 {
-    if (pa >= 0 && pb >= 0) {
-        float mid = 0.5f * (a + b);
-        return ew_side(sc, kind, prim, S, Q, a, pk->w[pa], mid) + ew_side(sc, kind, prim, S, Q, b, pk->w[pb], mid);
+    fv ta, tb;
+    ew_curve_kt(sc, cv, v3_mad(S, a, Q), &ta);
+    ew_curve_kt(sc, cv, v3_mad(S, b, Q), &tb);
+    for (int it = 0; it < EW_JUMP_BISECT; it++) {
+        fv m = 0.5f * (a + b), tm;
+        ew_curve_kt(sc, cv, v3_mad(S, m, Q), &tm);
+        iv left = fabs(tm - ta) < fabs(tm - tb);
+        a = select(a, m, left);
+        ta = select(ta, tm, left);
+        b = select(m, b, left);
+        tb = select(tm, tb, left);
     }
-    if (pa >= 0) return ew_side(sc, kind, prim, S, Q, a, pk->w[pa], b);
-    if (pb >= 0) return ew_side(sc, kind, prim, S, Q, b, pk->w[pb], a);
-    float wa = ew_anchor_w(pk, a), wb = ew_anchor_w(pk, b);
-    return wa <= wb ? ew_side(sc, kind, prim, S, Q, a, wa, b) : ew_side(sc, kind, prim, S, Q, b, wb, a);
+    return 0.5f * (a + b);
 }
 
-/* Splits [0,1] at the peaks and the jump and integrates every piece. */
-static float ew_peaks_int(const ew_scene *sc, int kind, __global const float *prim, float3 S, float3 Q,
-                          const ew_peaks *pk)
+/* One span; where t* jumps, it is split at the jump and redone in two pieces. */
+static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
-    float x[4];
-    int peak[4], n = 0;
-    for (int m = 0; m < pk->n; m++) {
-        x[n] = pk->s[m];
-        peak[n++] = m;
-    }
-    if (pk->split > 0.0f && pk->split < 1.0f) {
-        int k = n++;
-        for (; k > 0 && x[k - 1] > pk->split; k--) {
-            x[k] = x[k - 1];
-            peak[k] = peak[k - 1];
-        }
-        x[k] = pk->split;
-        peak[k] = -1;
-    }
-    float acc = 0.0f, a = 0.0f;
-    int pa = -1;
-    for (int k = 0; k < n; k++) {
-        acc += ew_piece(sc, kind, prim, S, Q, pk, a, pa, x[k], peak[k]);
-        a = x[k];
-        pa = peak[k];
-    }
-    return acc + ew_piece(sc, kind, prim, S, Q, pk, a, pa, 1.0f, -1);
+    iv jumped;
+    fv ja = 0.0f, jb = 0.0f;
+    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, &jumped, &ja, &jb);
+    if (!any(jumped)) return acc;
+    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb), jumped); /* other lanes: plain redo */
+    fv redo = ew_span_plain(sc, kind, prim, S, Q, c, w, a, sj) + ew_span_plain(sc, kind, prim, S, Q, c, w, sj, b);
+    return select(acc, redo, jumped);
 }
 
-/* Adds the approach to point X (tangent T, or T = 0 at a curve end) to pk. The peak
- * half-width is h / k with k the ray's speed across the primitive: |Q| past a point,
- * |Q × T̂| past a curve. */
-static void ew_peak_add(ew_peaks *pk, float eps, float3 S, float3 Q, float3 X, float3 T)
+/* [0,1] as one span per peak (split halfway between two peaks). */
+static fv ew_peaks_int(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, const ew_peaks *pk)
 {
-    float qq = dot(Q, Q), tt = dot(T, T);
-    float s = clamp(dot(X - S, Q) / qq, 0.0f, 1.0f);
-    float3 d = S + s * Q - X;
-    float along = tt > 0.0f ? dot(Q, T) * dot(Q, T) / tt : 0.0f;
-    float w = fmax(sqrt(dot(d, d)), eps) / sqrt(fmax(qq - along, 1e-4f * qq));
-    int n = pk->n++;
-    if (n == 1 && s < pk->s[0]) {
-        pk->s[1] = pk->s[0];
-        pk->w[1] = pk->w[0];
-        n = 0;
-    }
-    pk->s[n] = s;
-    pk->w[n] = w;
+    if (!any(pk->two)) return ew_span(sc, kind, prim, S, Q, pk->s0, pk->w0, (fv)(0.0f), (fv)(1.0f));
+    fv mid = select((fv)(1.0f), 0.5f * (pk->s0 + pk->s1), pk->two);
+    return ew_span(sc, kind, prim, S, Q, pk->s0, pk->w0, (fv)(0.0f), mid) +
+           ew_span(sc, kind, prim, S, Q, pk->s1, pk->w1, mid, (fv)(1.0f));
 }
 
-/* Squared distance from the ray line to the circle point at φ, in the expanded form
+/* The approach of ray (S, Q) to point X with tangent T (T = 0: a point-like end):
+ * its ray parameter s, and half-width w = h/k, with k the ray's speed across the
+ * primitive (|Q| past a point, |Q × T̂| past a curve). */
+static fv ew_approach(float eps, v3 S, v3 Q, v3 X, v3 T, fv *w)
+{
+    fv qq = v3_dot(Q, Q), tt = v3_dot(T, T), qt = v3_dot(Q, T);
+    fv s = clamp(v3_dot(v3_sub(X, S), Q) / qq, 0.0f, 1.0f);
+    v3 d = v3_sub(v3_mad(S, s, Q), X);
+    fv along = select((fv)(0.0f), qt * qt / tt, tt > 0.0f);
+    *w = fmax(sqrt(v3_dot(d, d)), eps) / sqrt(fmax(qq - along, 1e-4f * qq));
+    return s;
+}
+
+static void ew_peaks_make(ew_peaks *pk, fv sa, fv wa, fv sb, fv wb, iv two)
+{
+    /* peaks closer than the wider one's half-width: the narrower one's sinh map resolves both */
+    iv merge = fabs(sb - sa) < fmax(wa, wb);
+    iv b_first = merge & (wb < wa);
+    sa = select(sa, sb, b_first);
+    wa = select(wa, wb, b_first);
+    two &= ~merge;
+#ifdef EW_NOTWO
+    two = 0;
+#endif
+    sb = select(sa, sb, two);
+    wb = select(wa, wb, two);
+    iv swap = sb < sa;
+    pk->s0 = select(sa, sb, swap);
+    pk->w0 = select(wa, wb, swap);
+    pk->s1 = select(sb, sa, swap);
+    pk->w1 = select(wb, wa, swap);
+    pk->two = two;
+}
+
+/* Squared distance from the ray line to the circle point at φ, expanded as
  * f = aa c² + bb s² + 2ab cs − 2ac c − 2bc s + cc (c = cos φ, s = sin φ). */
-static float ew_circle_f(const float *K, float phi)
+typedef struct {
+    fv aa, bb, ab, ac, bc, cc;
+} ew_circle;
+
+static fv ew_circle_f(const ew_circle *K, float c, float s)
 {
-    float c = cos(phi), s = sin(phi);
-    return K[0] * c * c + K[1] * s * s + 2.0f * K[2] * c * s - 2.0f * K[3] * c - 2.0f * K[4] * s + K[5];
+    return K->aa * (c * c) + K->bb * (s * s) + 2.0f * K->ab * (c * s) - 2.0f * K->ac * c - 2.0f * K->bc * s + K->cc;
 }
 
-/* Newton on f'(φ) = 0 from a coarse minimum. */
-static float ew_circle_refine(const float *K, float phi)
+/* Newton on f'(φ) = 0 from a coarse minimum (steps limited to ±0.4 rad). */
+static fv ew_circle_refine(const ew_circle *K, fv phi)
 {
     for (int it = 0; it < 3; it++) {
-        float c = cos(phi), s = sin(phi);
-        float g = (K[1] - K[0]) * s * c + K[2] * (c * c - s * s) + K[3] * s - K[4] * c;
-        float h = (K[1] - K[0]) * (c * c - s * s) - 4.0f * K[2] * s * c + K[3] * c + K[4] * s;
-        if (h <= 0.0f) break;
-        phi -= clamp(g / h, -0.4f, 0.4f);
+        fv c, s = sincos(phi, &c);
+        fv g = (K->bb - K->aa) * s * c + K->ab * (c * c - s * s) + K->ac * s - K->bc * c;
+        fv h = (K->bb - K->aa) * (c * c - s * s) - 4.0f * K->ab * s * c + K->ac * c + K->bc * s;
+        phi = select(phi, phi - clamp(g / h, -0.4f, 0.4f), h > 0.0f);
     }
     return phi;
 }
 
-/* Closest approaches of the ray line to the torus centre circle (at most two local
- * minima of the distance): 16-point search around the circle, then Newton. */
-static void ew_torus_peaks(__global const float *to, float eps, float3 S, float3 Q, ew_peaks *pk)
+static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, fv phi, fv *w)
 {
-    float3 e1 = ew_load3(to + 4), e2 = ew_load3(to + 8), e3 = ew_load3(to + 12);
-    float3 Sl = ew_torus_local(to, S), Ql = (float3)(dot(Q, e1), dot(Q, e2), dot(Q, e3));
-    float R = to[3];
-    float3 qn = normalize(Ql);
-    float3 a = R * ((float3)(1.0f, 0.0f, 0.0f) - qn.x * qn), b = R * ((float3)(0.0f, 1.0f, 0.0f) - qn.y * qn);
-    float3 c = Sl - dot(Sl, qn) * qn;
-    float K[6] = {dot(a, a), dot(b, b), dot(a, b), dot(a, c), dot(b, c), dot(c, c)};
-    float f[16];
-    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(K, (float)k * (M_PI_F / 8.0f));
-    int best[2] = {-1, -1};
-    for (int k = 0; k < 16; k++) {
-        float fk = f[k];
-        if (!(fk <= f[(k + 15) & 15] && fk < f[(k + 1) & 15])) continue;
-        if (best[0] < 0 || fk < f[best[0]]) {
-            best[1] = best[0];
-            best[0] = k;
-        } else if (best[1] < 0 || fk < f[best[1]]) {
-            best[1] = k;
-        }
-    }
-    if (best[0] < 0) best[0] = 0; /* ray along the axis: every circle point is a minimum */
-    pk->n = 0;
-    pk->split = -1.0f;
-    for (int m = 0; m < 2 && best[m] >= 0; m++) {
-        float phi = ew_circle_refine(K, (float)best[m] * (M_PI_F / 8.0f));
-        float3 X = (float3)(R * cos(phi), R * sin(phi), 0.0f), T = (float3)(-sin(phi), cos(phi), 0.0f);
-        ew_peak_add(pk, eps, Sl, Ql, X, T);
-    }
+    fv c, s = sincos(phi, &c);
+    fv R = (fv)(to[3]);
+    return ew_approach(eps, Sl, Ql, v3_make(R * c, R * s, (fv)(0.0f)), v3_make(-s, c, (fv)(0.0f)), w);
 }
 
-/* Where the ray crosses the curve's medial plane: the nearest point jumps between the
- * two arms there, and so may S(t*). For a parabola it is the symmetry plane (through
- * the vertex C(t_v), normal to C'(t_v)) beyond the vertex's centre of curvature;
- * returns its ray parameter, or −1 when the ray does not cross it. */
-static float ew_curve_medial(__global const float *cv, float3 S, float3 Q)
+/* Closest approaches of the ray line to the torus centre circle (at most two local
+ * minima of the distance): 16-point search around the circle, then Newton. */
+static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_peaks *pk)
 {
-    float c2sq = cv[7], tv = -cv[11] / (2.0f * c2sq);
-    if (c2sq <= 1e-6f * cv[12] || tv <= 0.0f || tv >= 1.0f) return -1.0f;
-    float3 C2 = ew_load3(cv + 8), Tv = 2.0f * tv * C2 + ew_load3(cv + 4), Xv = ew_curve_at(cv, tv);
-    float den = dot(Q, Tv);
-    if (fabs(den) <= 1e-6f * sqrt(dot(Q, Q) * dot(Tv, Tv))) return -1.0f;
-    float sm = dot(Xv - S, Tv) / den;
-    return dot(S + sm * Q - Xv, C2) > 0.5f * dot(Tv, Tv) ? sm : -1.0f;
+    v3 Sl = ew_torus_local(to, S), Ql = ew_torus_local(to, v3_add(Q, v3_load(to)));
+    fv R = (fv)(to[3]), inv = rsqrt(v3_dot(Ql, Ql));
+    v3 qn = v3_mul(Ql, inv);
+    v3 a = v3_mul(v3_mad(v3_make((fv)(1.0f), (fv)(0.0f), (fv)(0.0f)), -qn.x, qn), R);
+    v3 b = v3_mul(v3_mad(v3_make((fv)(0.0f), (fv)(1.0f), (fv)(0.0f)), -qn.y, qn), R);
+    v3 c = v3_perp(Sl, qn);
+    ew_circle K = {v3_dot(a, a), v3_dot(b, b), v3_dot(a, b), v3_dot(a, c), v3_dot(b, c), v3_dot(c, c)};
+    fv f[16];
+    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, cospi(k / 8.0f), sinpi(k / 8.0f));
+    fv b0 = EW_BIG, b1 = EW_BIG, p0 = 0.0f, p1 = 0.0f;
+    for (int k = 0; k < 16; k++) {
+        iv is_min = (f[k] <= f[(k + 15) & 15]) & (f[k] < f[(k + 1) & 15]);
+        iv first = is_min & (f[k] < b0), second = is_min & ~first & (f[k] < b1);
+        b1 = select(select(b1, f[k], second), b0, first);
+        p1 = select(select(p1, (fv)(k), second), p0, first);
+        b0 = select(b0, f[k], first);
+        p0 = select(p0, (fv)(k), first);
+    }
+    /* lanes without a strict minimum (a ray along the axis) keep φ = 0 */
+    fv w0, w1;
+    fv s0 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, p0 * (M_PI_F / 8.0f)), &w0);
+    fv s1 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, p1 * (M_PI_F / 8.0f)), &w1);
+    ew_peaks_make(pk, s0, w0, s1, w1, b1 < EW_BIG);
 }
 
 /* Closest approaches of the ray line to the lit part [t_lo, t_hi] of a curve (where
- * S(t) > 0): the local minima over t of the squared distance f(t) = |p(t)|², p = the
- * curve projected on the plane normal to the ray (relative to S). f'/2 is the
- * nearest-point cubic of the projected curve, so the same solver finds them; the ends
- * of the range count when f rises away from them. At most two minima. */
-static void ew_curve_peaks(__global const float *cv, float eps, float3 S, float3 Q, ew_peaks *pk)
+ * S(t) > 0): local minima over t of f(t) = |p(t)|², p = the curve projected on the
+ * plane normal to the ray, relative to S. f'/2 is the nearest-point cubic of the
+ * projected curve, so the same solver finds them; the ends of the range count where f
+ * rises away from them. At most two; the two smallest are kept. */
+static void ew_curve_peaks(__global const float *cv, float eps, v3 S, v3 Q, ew_peaks *pk)
 {
-    float3 qn = normalize(Q);
-    float3 C1 = ew_load3(cv + 4), C2 = ew_load3(cv + 8), D = ew_load3(cv) - S;
-    float3 C1p = C1 - dot(C1, qn) * qn, C2p = C2 - dot(C2, qn) * qn, Dp = D - dot(D, qn) * qn;
-    float c2 = dot(C2p, C2p), c12 = dot(C1p, C2p), c1 = dot(C1p, C1p), c2d = dot(C2p, Dp), c1d = dot(C1p, Dp);
-    float lo = cv[14], hi = cv[15], cand[3], r[3];
-    int n = 0;
-    if (c2 <= 1e-6f * c1) {
-        cand[n++] = c1 > 0.0f ? clamp(-c1d / c1, lo, hi) : 0.5f * (lo + hi);
-    } else {
-        float inv = 0.5f / c2;
-        int nr = ew_cubic(3.0f * c12 * inv, (2.0f * c2d + c1) * inv, c1d * inv, r);
-        if (((2.0f * c2 * lo + 3.0f * c12) * lo + 2.0f * c2d + c1) * lo + c1d > 0.0f) cand[n++] = lo;
-        for (int k = 0; k < nr && n < 2; k++)
-            if (r[k] > lo && r[k] < hi && (6.0f * c2 * r[k] + 6.0f * c12) * r[k] + 2.0f * c2d + c1 > 0.0f)
-                cand[n++] = r[k];
-        if (n < 2 && ((2.0f * c2 * hi + 3.0f * c12) * hi + 2.0f * c2d + c1) * hi + c1d < 0.0f) cand[n++] = hi;
-        if (n == 0) cand[n++] = 0.5f * (lo + hi); /* rounding hid every minimum */
+    v3 qn = v3_mul(Q, rsqrt(v3_dot(Q, Q)));
+    v3 C1 = v3_load(cv + 4), C2 = v3_load(cv + 8);
+    v3 C1p = v3_perp(C1, qn), C2p = v3_perp(C2, qn), Dp = v3_perp(v3_sub(v3_load(cv), S), qn);
+    fv c2 = v3_dot(C2p, C2p), c12 = v3_dot(C1p, C2p), c1 = v3_dot(C1p, C1p);
+    fv c2d = v3_dot(C2p, Dp), c1d = v3_dot(C1p, Dp);
+    float lo = cv[14], hi = cv[15];
+    iv straight = c2 <= 1e-6f * c1;
+    fv inv = 0.5f / select(c2, (fv)(1.0f), straight), r[3];
+    ew_cubic(3.0f * c12 * inv, (2.0f * c2d + c1) * inv, c1d * inv, &r[0], &r[1], &r[2]);
+    fv lin = clamp(-c1d / fmax(c1, 1e-30f), lo, hi);
+    fv cand[5] = {(fv)(lo), r[0], r[1], r[2], (fv)(hi)};
+    iv ok[5];
+    ok[0] = ~straight & (((2.0f * c2 * lo + 3.0f * c12) * lo + 2.0f * c2d + c1) * lo + c1d > 0.0f);
+    for (int k = 0; k < 3; k++)
+        ok[k + 1] = ~straight & (r[k] > lo) & (r[k] < hi) & ((6.0f * c2 * r[k] + 6.0f * c12) * r[k] + 2.0f * c2d + c1 > 0.0f);
+    ok[4] = ~straight & (((2.0f * c2 * hi + 3.0f * c12) * hi + 2.0f * c2d + c1) * hi + c1d < 0.0f);
+    fv b0 = EW_BIG, b1 = EW_BIG, t0 = select((fv)(0.5f * (lo + hi)), lin, straight), t1 = t0;
+    for (int k = 0; k < 5; k++) {
+        v3 p = v3_mad(v3_mad(Dp, cand[k], C1p), cand[k] * cand[k], C2p);
+        fv f = v3_dot(p, p);
+        iv first = ok[k] & (f < b0), second = ok[k] & ~first & (f < b1);
+        b1 = select(select(b1, f, second), b0, first);
+        t1 = select(select(t1, cand[k], second), t0, first);
+        b0 = select(b0, f, first);
+        t0 = select(t0, cand[k], first);
     }
-    pk->n = 0;
-    pk->split = ew_curve_medial(cv, S, Q);
-    for (int k = 0; k < n; k++) {
-        float t = cand[k];
-        float3 T = (t > 0.0f && t < 1.0f) ? 2.0f * t * C2 + C1 : (float3)(0.0f);
-        ew_peak_add(pk, eps, S, Q, ew_curve_at(cv, t), T);
-    }
+    fv w0, w1;
+    v3 T0 = v3_mul(v3_mad(C1, 2.0f * t0, C2), select((fv)(1.0f), (fv)(0.0f), (t0 <= 0.0f) | (t0 >= 1.0f)));
+    v3 T1 = v3_mul(v3_mad(C1, 2.0f * t1, C2), select((fv)(1.0f), (fv)(0.0f), (t1 <= 0.0f) | (t1 >= 1.0f)));
+    fv s0 = ew_approach(eps, S, Q, ew_curve_at(cv, t0), T0, &w0);
+    fv s1 = ew_approach(eps, S, Q, ew_curve_at(cv, t1), T1, &w1);
+    ew_peaks_make(pk, s0, w0, s1, w1, b1 < EW_BIG);
 }
 
 __kernel void ew_render_adaptive(__global float *out, __constant const float *cam, __global const float *pts,
@@ -525,13 +602,13 @@ __kernel void ew_render_adaptive(__global float *out, __constant const float *ca
                                  __global const float *cur, int nc, __global const float *wts, int width,
                                  int height)
 {
-    int i = get_global_id(0), j = get_global_id(1);
-    if (i >= width || j >= height) return;
+    int i0 = get_global_id(0) * EW_LANES, j = get_global_id(1);
+    if (i0 >= width || j >= height) return;
     ew_scene sc = ew_scene_make(cam, pts, np, lns, nl, tor, nt, cur, nc, wts);
-    float3 S, Q;
-    ew_texel_ray(cam, i, j, width, height, &S, &Q);
+    v3 S, Q;
+    ew_texel_rays(cam, i0, j, width, height, &S, &Q);
     ew_peaks pk;
-    float acc = 0.0f;
+    fv acc = 0.0f;
     for (int k = 0; k < np; k++) acc += ew_point_int(&sc, pts + k * EW_PT_STRIDE, S, Q);
     for (int k = 0; k < nl; k++) acc += ew_line_int(&sc, lns + k * EW_LN_STRIDE, S, Q);
     for (int k = 0; k < nt; k++) {
@@ -542,30 +619,33 @@ __kernel void ew_render_adaptive(__global float *out, __constant const float *ca
         ew_curve_peaks(cur + k * EW_CV_STRIDE, sc.eps, S, Q, &pk);
         acc += ew_peaks_int(&sc, 1, cur + k * EW_CV_STRIDE, S, Q, &pk);
     }
-    out[j * width + i] = acc;
+    ew_store(out, acc, i0, j, width);
 }
 
-/* ---- test entry points (energy_wave_dev_*) ---------------------------------------- */
+/* ---- test entry points (energy_wave_dev_*), lane 0 of the same functions ----------- */
 
 __kernel void ew_test_cubic(__global const float *abc, __global float *roots, __global int *nroots)
 {
     int i = get_global_id(0);
-    float r[3] = {0.0f, 0.0f, 0.0f};
-    nroots[i] = ew_cubic(abc[3 * i], abc[3 * i + 1], abc[3 * i + 2], r);
-    for (int k = 0; k < 3; k++) roots[3 * i + k] = k < nroots[i] ? r[k] : 0.0f;
+    fv r0, r1, r2;
+    iv three = ew_cubic((fv)(abc[3 * i]), (fv)(abc[3 * i + 1]), (fv)(abc[3 * i + 2]), &r0, &r1, &r2);
+    nroots[i] = three.s0 ? 3 : 1;
+    roots[3 * i] = r0.s0;
+    roots[3 * i + 1] = three.s0 ? r1.s0 : 0.0f;
+    roots[3 * i + 2] = three.s0 ? r2.s0 : 0.0f;
 }
 
 __kernel void ew_test_bspline(__global const float *w, int nw, __global const float *t, __global float *out)
 {
     int i = get_global_id(0);
-    out[i] = ew_bspline(w, nw, t[i]);
+    out[i] = ew_bspline(w, nw, (fv)(t[i])).s0;
 }
 
 __kernel void ew_test_curve_nearest(__global const float *cv, __global const float *p, __global float *dist,
                                     __global float *tparam)
 {
     int i = get_global_id(0);
-    float2 dt = ew_curve_nearest(cv, (float3)(p[3 * i], p[3 * i + 1], p[3 * i + 2]));
-    dist[i] = dt.x;
-    tparam[i] = dt.y;
+    fv t, d = ew_curve_nearest(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
+    dist[i] = d.s0;
+    tparam[i] = t.s0;
 }

@@ -26,6 +26,7 @@
 #define EW_TO_STRIDE 16
 #define EW_CV_STRIDE 16
 #define EW_CAM_FLOATS 20
+#define EW_LANES 8 /* texels per work item (float8) */
 #define EW_KERNEL_FILE "energy_wave.cl"
 #define EW_BUILD_OPTS (getenv("EW_OPTS") ? getenv("EW_OPTS") : "-cl-fast-relaxed-math -DEW_GL_N=8")
 
@@ -487,7 +488,7 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
     const char *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
     cl_int rc = ew_set_args(ew, k, nc);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s) failed", name);
-    size_t global[2] = {(size_t)ew->width, (size_t)ew->height};
+    size_t global[2] = {(size_t)(ew->width + EW_LANES - 1) / EW_LANES, (size_t)ew->height};
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);
     size_t local[2] = {0, 0};
@@ -495,9 +496,8 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
     if (ls) sscanf(ls, "%zux%zu", &local[0], &local[1]);
     if (local[0]) { global[0] = (global[0] + local[0] - 1) / local[0] * local[0]; global[1] = (global[1] + local[1] - 1) / local[1] * local[1]; }
     rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, local[0] ? local : NULL, 0, NULL, &ev);
-    global[0] = ew->width; global[1] = ew->height;
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
-    rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, 0, global[0] * global[1] * sizeof(float), out, 0, NULL, NULL);
+    rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, 0, (size_t)ew->width * ew->height * sizeof(float), out, 0, NULL, NULL);
     if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);
     clReleaseEvent(ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
