@@ -26,30 +26,13 @@
 /* Camera buffer: billboard centre (0..2), l·r (4..6), l·(H/W)·u (8..10), eye (12..14),
  * nu (15), alpha (16), beta (17), epsilon (18). */
 
-#ifndef EW_GL_N
+/* 12-point Gauss–Legendre on [0,1]: nodes and weights. 12 nodes per span measured
+ * 0.15% RMS error on the default scene (10: 0.23%, 16: 0.05%; Simpson n=200: 0.5%). */
 #define EW_GL_N 12
-#endif
-
-#if EW_GL_N == 10
-__constant float ew_gl_x[10] = {0.013046736f, 0.067468317f, 0.160295216f, 0.283302303f, 0.425562831f,
-                                0.574437169f, 0.716697697f, 0.839704784f, 0.932531683f, 0.986953264f};
-__constant float ew_gl_w[10] = {0.033335672f, 0.074725675f, 0.109543181f, 0.134633360f, 0.147762112f,
-                                0.147762112f, 0.134633360f, 0.109543181f, 0.074725675f, 0.033335672f};
-#elif EW_GL_N == 12
 __constant float ew_gl_x[12] = {0.009219683f, 0.047941372f, 0.115048663f, 0.206341023f, 0.316084251f, 0.437383296f,
                                 0.562616704f, 0.683915749f, 0.793658977f, 0.884951337f, 0.952058628f, 0.990780317f};
 __constant float ew_gl_w[12] = {0.023587668f, 0.053469663f, 0.080039164f, 0.101583713f, 0.116746268f, 0.124573523f,
                                 0.124573523f, 0.116746268f, 0.101583713f, 0.080039164f, 0.053469663f, 0.023587668f};
-#elif EW_GL_N == 16
-__constant float ew_gl_x[16] = {0.005299533f, 0.027712488f, 0.067184399f, 0.122297796f, 0.191061878f, 0.270991611f,
-                                0.359198225f, 0.452493745f, 0.547506255f, 0.640801775f, 0.729008389f, 0.808938122f,
-                                0.877702204f, 0.932815601f, 0.972287512f, 0.994700467f};
-__constant float ew_gl_w[16] = {0.013576230f, 0.031126762f, 0.047579256f, 0.062314486f, 0.074797994f, 0.084578260f,
-                                0.091301708f, 0.094725305f, 0.094725305f, 0.091301708f, 0.084578260f, 0.074797994f,
-                                0.062314486f, 0.047579256f, 0.031126762f, 0.013576230f};
-#else
-#error "EW_GL_N must be 10, 12 or 16"
-#endif
 
 typedef float8 fv;
 typedef int8 iv;
@@ -341,7 +324,10 @@ static fv ew_quad_piece(const ew_scene *sc, fv A, fv B, fv C, fv k2, fv s0, fv s
     fv u0 = fmax((A * s0 + 2.0f * B) * s0 + C, 0.0f), u1 = fmax((A * s1 + 2.0f * B) * s1 + C, 0.0f);
     fv t1 = (y0 * sqrt(u0) - y1 * sqrt(u1)) / ap;
     fv t2 = bp / (ap * sqrt(ap)) * ew_asinh_diff(ap * y1 + bp, ap * y0 + bp, k2);
-    return select((fv)(0.0f), sc->alpha * (t1 - t2), s1 > s0);
+    /* a' → 0: the ray meets the source at s = −β (e.g. the eye on a line), U = A(s+β)² */
+    fv through = 0.5f * (y0 * y0 - y1 * y1) * rsqrt(A);
+    fv v = select(t1 - t2, through, ap <= 1e-6f * A * be * be);
+    return select((fv)(0.0f), sc->alpha * v, s1 > s0);
 }
 
 /* ∫₀¹ ζ(s) / max(ε, √(As² + 2Bs + C)) ds: inside the ε-ball (h² < ε²) the kernel is
@@ -390,9 +376,7 @@ static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3
 
 /* A jump of t* between two nodes bigger than this is taken as a crossing of the curve's
  * medial set, where S(t*) may jump (digest §2.3 note); a false alarm only costs time. */
-#ifndef EW_JUMP_T
-#define EW_JUMP_T 0.25f
-#endif
+#define EW_JUMP_T 0.15f
 #define EW_JUMP_BISECT 8
 
 /* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
@@ -484,9 +468,6 @@ static void ew_peaks_make(ew_peaks *pk, fv sa, fv wa, fv sb, fv wb, iv two)
     sa = select(sa, sb, b_first);
     wa = select(wa, wb, b_first);
     two &= ~merge;
-#ifdef EW_NOTWO
-    two = 0;
-#endif
     sb = select(sa, sb, two);
     wb = select(wa, wb, two);
     iv swap = sb < sa;

@@ -11,7 +11,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-#include <stdio.h>
 
 #include "../buf.h"
 #include "../codec/exr.h"
@@ -28,7 +27,7 @@
 #define EW_CAM_FLOATS 20
 #define EW_LANES 8 /* texels per work item (float8) */
 #define EW_KERNEL_FILE "energy_wave.cl"
-#define EW_BUILD_OPTS (getenv("EW_OPTS") ? getenv("EW_OPTS") : "-cl-fast-relaxed-math -DEW_GL_N=8")
+#define EW_BUILD_OPTS "-cl-fast-relaxed-math"
 
 enum ew_mode { EW_MODE_SIMPSON, EW_MODE_ADAPTIVE };
 static const char *const ew_mode_names[] = {"simpson", "adaptive", NULL};
@@ -80,9 +79,9 @@ static const struct param_def ew_curve_fields[] = {
 /* Default scene: two C1-joined Bezier curves (as thesis Figs 5.3-5.6), W of Fig 5.6
  * (right) and b = 8.0, with the eq. (5.1) pulse running along each. */
 static const char ew_default_curves[] =
-    "[{\"p0\":[-2.2,-0.7,0.3],\"p1\":[-1.1,1.5,-0.3],\"p2\":[0,0,0],\"coef\":8.0,"
+    "[{\"p0\":[-13.2,-4.2,1.8],\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":8.0,"
     "\"W\":[1.0,0.2,0.6,1.0,0.5,0.8,1.0]},"
-    "{\"p0\":[0,0,0],\"p1\":[1.1,-1.5,0.3],\"p2\":[2.2,0.7,-0.3],\"coef\":8.0,"
+    "{\"p0\":[0,0,0],\"p1\":[6.6,-9.0,1.8],\"p2\":[13.2,4.2,-1.8],\"coef\":8.0,"
     "\"W\":[1.0,0.8,0.5,1.0,0.6,0.2,1.0]}]";
 
 const struct param_def energy_wave_params[] = {
@@ -94,7 +93,7 @@ const struct param_def energy_wave_params[] = {
      .unit = "", .doc = "torus sources: 1/distance to the centre circle of radius R"},
     {.name = "curves", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = EW_MAX_SRC,
      .fields = ew_curve_fields, .unit = "", .doc = "quadratic Bezier sources with B-spline strength W"},
-    {.name = "epsilon", .type = PARAM_FLOAT, .def = "0.01", .min = 1e-5, .max = 0.5, .unit = "world units",
+    {.name = "epsilon", .type = PARAM_FLOAT, .def = "0.05", .min = 1e-5, .max = 0.5, .unit = "world units",
      .doc = "distance floor of every kernel 1/max(eps, d)"},
     {.name = "alpha", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "",
      .doc = "attenuation gain: zeta(s) = alpha/(s+beta)^2 (eq. 3.31)"},
@@ -106,10 +105,10 @@ const struct param_def energy_wave_params[] = {
      .doc = "simpson: thesis composite Simpson with `divisions`; adaptive: closed forms for points/lines, "
             "and per torus/curve Gauss-Legendre on sinh-mapped sides of each closest approach (much faster, "
             "no banding)"},
-    EW_POS("eye", "[0,0,8]", "camera position V"),
-    EW_POS("center", "[0,0,3]", "billboard centre C; rays start on the billboard and look away from eye"),
+    EW_POS("eye", "[0,0,48]", "camera position V"),
+    EW_POS("center", "[0,0,18]", "billboard centre C; rays start on the billboard and look away from eye"),
     EW_DIR("up", "[0,1,0]", "camera up vector (must not be parallel to eye->center)"),
-    {.name = "size", .type = PARAM_FLOAT, .def = "3.4", .min = 0.01, .max = 1000, .unit = "world units",
+    {.name = "size", .type = PARAM_FLOAT, .def = "20.4", .min = 0.01, .max = 1000, .unit = "world units",
      .doc = "billboard width l (height l*height/width)"},
     {.name = "width", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
      .doc = "texture width"},
@@ -491,11 +490,7 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
     size_t global[2] = {(size_t)(ew->width + EW_LANES - 1) / EW_LANES, (size_t)ew->height};
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);
-    size_t local[2] = {0, 0};
-    const char *ls = getenv("EW_LOCAL");
-    if (ls) sscanf(ls, "%zux%zu", &local[0], &local[1]);
-    if (local[0]) { global[0] = (global[0] + local[0] - 1) / local[0] * local[0]; global[1] = (global[1] + local[1] - 1) / local[1] * local[1]; }
-    rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, local[0] ? local : NULL, 0, NULL, &ev);
+    rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, NULL, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
     rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, 0, (size_t)ew->width * ew->height * sizeof(float), out, 0, NULL, NULL);
     if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);
