@@ -26,13 +26,19 @@
 /* Camera buffer: billboard centre (0..2), l·r (4..6), l·(H/W)·u (8..10), eye (12..14),
  * nu (15), alpha (16), beta (17), epsilon (18). */
 
-/* 12-point Gauss–Legendre on [0,1]: nodes and weights. 12 nodes per span measured
- * 0.15% RMS error on the default scene (10: 0.23%, 16: 0.05%; Simpson n=200: 0.5%). */
+/* Gauss–Legendre rules on [0,1]: 12 points per span (measured 0.15% RMS error on the
+ * default scene; 10 points: 0.23%, 16: 0.05%; Simpson n=200: 0.5%), 8 points for the two
+ * pieces of a span redone at a jump. */
 #define EW_GL_N 12
 __constant float ew_gl_x[12] = {0.009219683f, 0.047941372f, 0.115048663f, 0.206341023f, 0.316084251f, 0.437383296f,
                                 0.562616704f, 0.683915749f, 0.793658977f, 0.884951337f, 0.952058628f, 0.990780317f};
 __constant float ew_gl_w[12] = {0.023587668f, 0.053469663f, 0.080039164f, 0.101583713f, 0.116746268f, 0.124573523f,
                                 0.124573523f, 0.116746268f, 0.101583713f, 0.080039164f, 0.053469663f, 0.023587668f};
+#define EW_GL8_N 8
+__constant float ew_gl8_x[8] = {0.019855072f, 0.101666761f, 0.237233795f, 0.408282679f,
+                                0.591717321f, 0.762766205f, 0.898333239f, 0.980144928f};
+__constant float ew_gl8_w[8] = {0.050614268f, 0.111190517f, 0.156853323f, 0.181341892f,
+                                0.181341892f, 0.156853323f, 0.111190517f, 0.050614268f};
 
 typedef float8 fv;
 typedef int8 iv;
@@ -217,17 +223,18 @@ static __global const float *ew_curve_weights(const ew_scene *sc, __global const
     return sc->wts + (cv - sc->cur) / EW_CV_STRIDE * EW_MAX_W;
 }
 
-/* (3.27): coef · S(t*) / max(ε, L(P, curve)), and t* in *t. */
-static fv ew_curve_kt(const ew_scene *sc, __global const float *cv, v3 P, fv *t)
+/* (3.27): coef · S(t*) / max(ε, L(P, curve)), with t* in *t and S(t*) in *str. */
+static fv ew_curve_kt(const ew_scene *sc, __global const float *cv, v3 P, fv *t, fv *str)
 {
     fv d = ew_curve_nearest(cv, P, t);
-    return cv[3] * ew_bspline(ew_curve_weights(sc, cv), (int)cv[13], *t) / fmax(sc->eps, d);
+    *str = ew_bspline(ew_curve_weights(sc, cv), (int)cv[13], *t);
+    return cv[3] * *str / fmax(sc->eps, d);
 }
 
 static fv ew_curve_k(const ew_scene *sc, __global const float *cv, v3 P)
 {
-    fv t;
-    return ew_curve_kt(sc, cv, P, &t);
+    fv t, str;
+    return ew_curve_kt(sc, cv, P, &t, &str);
 }
 
 /* (3.28): ψ(P), the sum over every source. */
@@ -367,35 +374,40 @@ typedef struct {
     iv two;
 } ew_peaks;
 
-/* kind 0: torus, 1: curve (t*: the nearest curve parameter; 0 for a torus). */
-static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3 P, fv *t)
+/* kind 0: torus, 1: curve (t*: the nearest curve parameter, str: S(t*); 0 for a torus). */
+static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3 P, fv *t, fv *str)
 {
-    *t = 0.0f;
-    return kind == 0 ? ew_torus_k(prim, P, sc->eps) : ew_curve_kt(sc, prim, P, t);
+    *t = *str = 0.0f;
+    return kind == 0 ? ew_torus_k(prim, P, sc->eps) : ew_curve_kt(sc, prim, P, t, str);
 }
 
-/* A jump of t* between two nodes bigger than this is taken as a crossing of the curve's
- * medial set, where S(t*) may jump (digest §2.3 note); a false alarm only costs time. */
+/* Between two nodes, t* moving by more than EW_JUMP_T while S(t*) changes by more than
+ * EW_JUMP_S is taken as a crossing of the curve's medial set, where S(t*) jumps
+ * (digest §2.3 note); a false alarm only costs time. */
 #define EW_JUMP_T 0.15f
-#define EW_JUMP_BISECT 8
+#define EW_JUMP_S 0.02f
+#define EW_JUMP_BISECT 6
 
 /* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
  * [a, b]): in u the 1/distance peak is smooth, so one Gauss–Legendre rule covers it.
- * Lanes where t* jumps between two nodes get the bracket [*ja, *jb] flagged in *jumped. */
+ * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] flagged in *jumped. */
 static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b,
-                        iv *jumped, fv *ja, fv *jb)
+                        int n, __constant const float *gx, __constant const float *gw, iv *jumped, fv *ja, fv *jb)
 {
-    fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f, t, tprev = 0.0f, sprev = a;
+    fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
+    fv t, str, tprev = 0.0f, strprev = 0.0f, sprev = a;
     *jumped = 0;
-    for (int k = 0; k < EW_GL_N; k++) {
-        fv e = exp(mad(du, ew_gl_x[k], ua)), ie = 1.0f / e;
+    for (int k = 0; k < n; k++) {
+        fv e = exp(mad(du, gx[k], ua)), ie = 1.0f / e;
         fv s = c + w * 0.5f * (e - ie);
-        acc += ew_gl_w[k] * (e + ie) * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t) * ew_zeta(sc, s);
-        iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~*jumped & (fabs(t - tprev) > EW_JUMP_T);
+        acc += gw[k] * (e + ie) * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t, &str) * ew_zeta(sc, s);
+        iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~*jumped & (fabs(t - tprev) > EW_JUMP_T) &
+                  (fabs(str - strprev) > EW_JUMP_S);
         *ja = select(*ja, sprev, jump);
         *jb = select(*jb, s, jump);
         *jumped |= jump;
         tprev = t;
+        strprev = str;
         sprev = s;
     }
     return acc * 0.5f * du * w;
@@ -405,18 +417,18 @@ static fv ew_span_plain(const ew_scene *sc, int kind, __global const float *prim
 {
     iv jumped;
     fv ja, jb;
-    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, &jumped, &ja, &jb);
+    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &jumped, &ja, &jb);
 }
 
 /* Bisects [a, b] for the jump of t*. */
 static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 Q, fv a, fv b)
 {
-    fv ta, tb;
-    ew_curve_kt(sc, cv, v3_mad(S, a, Q), &ta);
-    ew_curve_kt(sc, cv, v3_mad(S, b, Q), &tb);
+    fv ta, tb, str;
+    ew_curve_kt(sc, cv, v3_mad(S, a, Q), &ta, &str);
+    ew_curve_kt(sc, cv, v3_mad(S, b, Q), &tb, &str);
     for (int it = 0; it < EW_JUMP_BISECT; it++) {
         fv m = 0.5f * (a + b), tm;
-        ew_curve_kt(sc, cv, v3_mad(S, m, Q), &tm);
+        ew_curve_kt(sc, cv, v3_mad(S, m, Q), &tm, &str);
         iv left = fabs(tm - ta) < fabs(tm - tb);
         a = select(a, m, left);
         ta = select(ta, tm, left);
@@ -426,12 +438,12 @@ static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 
     return 0.5f * (a + b);
 }
 
-/* One span; where t* jumps, it is split at the jump and redone in two pieces. */
+/* One span; where S(t*) jumps, it is split at the jump and redone as two 8-point pieces. */
 static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
     iv jumped;
     fv ja = 0.0f, jb = 0.0f;
-    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, &jumped, &ja, &jb);
+    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL_N, ew_gl_x, ew_gl_w, &jumped, &ja, &jb);
     if (!any(jumped)) return acc;
     fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb), jumped); /* other lanes: plain redo */
     fv redo = ew_span_plain(sc, kind, prim, S, Q, c, w, a, sj) + ew_span_plain(sc, kind, prim, S, Q, c, w, sj, b);
