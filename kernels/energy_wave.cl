@@ -205,10 +205,11 @@ static fv ew_curve_nearest(__global const float *cv, v3 P, fv *t)
     /* candidates: both ends and the roots clamped to [0,1] (r1, r2 repeat r0 unless three) */
     fv cand[5] = {0.0f, 1.0f, clamp(r0, 0.0f, 1.0f), clamp(r1, 0.0f, 1.0f), clamp(r2, 0.0f, 1.0f)};
     int ncand = any(three) ? 5 : 3;
-    v3 v = v3_sub(ew_curve_at(cv, cand[0]), P);
+    /* C(t) − P = (C₀ − P) + t(C₁ + tC₂): relative to P, so no cancellation far from 0 */
+    v3 v = v3_mad(D, cand[0], v3_mad(C1, cand[0], C2));
     fv best = v3_dot(v, v), bt = cand[0];
     for (int k = 1; k < ncand; k++) {
-        v = v3_sub(ew_curve_at(cv, cand[k]), P);
+        v = v3_mad(D, cand[k], v3_mad(C1, cand[k], C2));
         fv d2 = v3_dot(v, v);
         iv better = d2 < best;
         best = select(best, d2, better);
@@ -331,27 +332,42 @@ static fv ew_quad_piece(const ew_scene *sc, fv A, fv B, fv C, fv k2, fv s0, fv s
     fv u0 = fmax((A * s0 + 2.0f * B) * s0 + C, 0.0f), u1 = fmax((A * s1 + 2.0f * B) * s1 + C, 0.0f);
     fv t1 = (y0 * sqrt(u0) - y1 * sqrt(u1)) / ap;
     fv t2 = bp / (ap * sqrt(ap)) * ew_asinh_diff(ap * y1 + bp, ap * y0 + bp, k2);
-    /* a' → 0: the ray meets the source at s = −β (e.g. the eye on a line), U = A(s+β)² */
-    fv through = 0.5f * (y0 * y0 - y1 * y1) * rsqrt(A);
-    fv v = select(t1 - t2, through, ap <= 1e-6f * A * be * be);
-    return select((fv)(0.0f), sc->alpha * v, s1 > s0);
+    return select((fv)(0.0f), sc->alpha * (t1 - t2), s1 > s0);
 }
 
 /* ∫₀¹ ζ(s) / max(ε, √(As² + 2Bs + C)) ds: inside the ε-ball (h² < ε²) the kernel is
- * 1/ε; elsewhere the core [lo, hi] is empty and the two pieces meet at s*. */
-static fv ew_quad_int(const ew_scene *sc, fv A, fv B, fv C, fv k2)
+ * 1/ε; elsewhere the core [lo, hi] is empty and the two pieces meet at s*. Lanes where
+ * a' = U(−β) is small (the ray passes the source just behind the texel, e.g. a source
+ * at the eye) lose the closed form to cancellation: they are flagged in *unstable. */
+static fv ew_quad_int(const ew_scene *sc, fv A, fv B, fv C, fv k2, iv *unstable)
 {
-    float e2 = sc->eps * sc->eps;
+    float e2 = sc->eps * sc->eps, be = sc->beta;
+    *unstable = (A * be - 2.0f * B) * be + C <= 1e-2f * A * be * be;
     fv sstar = -B / A, delta = sqrt(fmax((e2 - k2 / A) / A, 0.0f));
     fv lo = clamp(sstar - delta, 0.0f, 1.0f), hi = clamp(sstar + delta, 0.0f, 1.0f);
     fv core = sc->alpha / sc->eps * (1.0f / (lo + sc->beta) - 1.0f / (hi + sc->beta));
     return ew_quad_piece(sc, A, B, C, k2, (fv)(0.0f), lo) + core + ew_quad_piece(sc, A, B, C, k2, hi, (fv)(1.0f));
 }
 
+/* The peak of a point or line source along the ray: s* and half-width h/√A. */
+static fv ew_quad_peak(const ew_scene *sc, fv A, fv B, fv C, fv *w)
+{
+    fv s = clamp(-B / A, 0.0f, 1.0f);
+    *w = fmax(sqrt(fmax((A * s + 2.0f * B) * s + C, 0.0f)), sc->eps) * rsqrt(A);
+    return s;
+}
+
+static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b);
+
 static fv ew_point_int(const ew_scene *sc, __global const float *pt, v3 S, v3 Q)
 {
     v3 v = v3_sub(S, v3_load(pt)), x = v3_cross(Q, v);
-    return pt[3] * ew_quad_int(sc, v3_dot(Q, Q), v3_dot(Q, v), v3_dot(v, v), v3_dot(x, x));
+    fv A = v3_dot(Q, Q), B = v3_dot(Q, v), C = v3_dot(v, v), w;
+    iv unstable;
+    fv closed = pt[3] * ew_quad_int(sc, A, B, C, v3_dot(x, x), &unstable);
+    if (!any(unstable)) return closed;
+    fv s = ew_quad_peak(sc, A, B, C, &w);
+    return select(closed, ew_span(sc, 2, pt, S, Q, s, w, (fv)(0.0f), (fv)(1.0f)), unstable);
 }
 
 /* The line kernel is the point kernel in the plane normal to the line (2.14)–(2.16). */
@@ -359,11 +375,15 @@ static fv ew_line_int(const ew_scene *sc, __global const float *ln, v3 S, v3 Q)
 {
     v3 D = v3_load(ln + 4);
     v3 qp = v3_perp(Q, D), vp = v3_perp(v3_sub(S, v3_load(ln)), D), x = v3_cross(qp, vp);
-    fv A = v3_dot(qp, qp), C = v3_dot(vp, vp);
-    iv parallel = A <= 1e-10f * v3_dot(Q, Q); /* constant distance along the ray */
+    fv A = v3_dot(qp, qp), B = v3_dot(qp, vp), C = v3_dot(vp, vp), w;
+    iv parallel = A <= 1e-10f * v3_dot(Q, Q), unstable; /* parallel: constant distance */
     fv flat = sc->alpha * (1.0f / sc->beta - 1.0f / (1.0f + sc->beta)) / fmax(sc->eps, sqrt(C));
     fv A1 = select(A, (fv)(1.0f), parallel);
-    return ln[3] * select(ew_quad_int(sc, A1, v3_dot(qp, vp), C, v3_dot(x, x)), flat, parallel);
+    fv closed = ln[3] * select(ew_quad_int(sc, A1, B, C, v3_dot(x, x), &unstable), flat, parallel);
+    unstable &= ~parallel;
+    if (!any(unstable)) return closed;
+    fv s = ew_quad_peak(sc, A1, B, C, &w);
+    return select(closed, ew_span(sc, 3, ln, S, Q, s, w, (fv)(0.0f), (fv)(1.0f)), unstable);
 }
 
 /* ---- peak-adapted quadrature for tori and curves ---------------------------------- */
@@ -374,11 +394,17 @@ typedef struct {
     iv two;
 } ew_peaks;
 
-/* kind 0: torus, 1: curve (t*: the nearest curve parameter, str: S(t*); 0 for a torus). */
+/* kind 0: torus, 1: curve, 2: point, 3: line (t*: the nearest curve parameter, str:
+ * S(t*); both 0 for the others). */
 static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3 P, fv *t, fv *str)
 {
     *t = *str = 0.0f;
-    return kind == 0 ? ew_torus_k(prim, P, sc->eps) : ew_curve_kt(sc, prim, P, t, str);
+    switch (kind) {
+    case 0: return ew_torus_k(prim, P, sc->eps);
+    case 1: return ew_curve_kt(sc, prim, P, t, str);
+    case 2: return ew_point_k(prim, P, sc->eps);
+    default: return ew_line_k(prim, P, sc->eps);
+    }
 }
 
 /* Between two nodes, t* moving by more than EW_JUMP_T while S(t*) changes by more than
