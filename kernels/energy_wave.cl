@@ -9,10 +9,13 @@
  *                       into one kernel (no A array).
  *   ew_render_adaptive  ψ is a sum, so each primitive is integrated on its own:
  *                       closed forms for points and lines (digest §2.6); for tori and
- *                       curves the ray's closest approaches s* (at most two) split
- *                       [0,1], and each side is integrated with s = s* ± w·sinh(u)
- *                       (w = peak half-width) and EW_GL_N-point Gauss–Legendre, which
- *                       makes the 1/distance peak smooth in u.
+ *                       curves the ray's closest approach s* (two for a split ray) is
+ *                       found directly (circle search + Newton, or the nearest-point
+ *                       cubic of the curve projected along the ray), and [0,1] is
+ *                       integrated with s = s* + w·sinh(u) (w = peak half-width) and
+ *                       12-point Gauss–Legendre in u, where the 1/distance peak is
+ *                       smooth. Where S(t*) jumps (the curve's medial set) the span is
+ *                       split at the jump, found by bisection.
  * The ew_test_* kernels run the same device functions for the unit tests (lane 0).
  * Buffer layouts below must match server/effects/energy_wave.c. */
 
@@ -59,7 +62,6 @@ static v3 v3_make(fv x, fv y, fv z)
     v3 r = {x, y, z};
     return r;
 }
-static v3 v3_bcast(float3 c) { return v3_make((fv)(c.x), (fv)(c.y), (fv)(c.z)); }
 static v3 v3_load(__global const float *p) { return v3_make((fv)(p[0]), (fv)(p[1]), (fv)(p[2])); }
 static v3 v3_add(v3 a, v3 b) { return v3_make(a.x + b.x, a.y + b.y, a.z + b.z); }
 static v3 v3_sub(v3 a, v3 b) { return v3_make(a.x - b.x, a.y - b.y, a.z - b.z); }

@@ -102,9 +102,10 @@ const struct param_def energy_wave_params[] = {
     {.name = "divisions", .type = PARAM_INT, .def = "200", .min = 2, .max = 1024, .unit = "",
      .doc = "Simpson divisions n (n+1 samples per ray), used by mode simpson", .flags = PARAM_EVEN},
     {.name = "mode", .type = PARAM_ENUM, .def = "\"adaptive\"", .choices = ew_mode_names, .unit = "",
-     .doc = "simpson: thesis composite Simpson with `divisions`; adaptive: closed forms for points/lines, "
-            "and per torus/curve Gauss-Legendre on sinh-mapped sides of each closest approach (much faster, "
-            "no banding)"},
+     .doc = "simpson: the thesis's composite Simpson with `divisions` (n+1 samples per ray); adaptive: "
+            "closed forms for points/lines, and per torus/curve a 12-point Gauss-Legendre rule in u where "
+            "s = s* + w sinh(u) around the ray's closest approach (about 9x faster than simpson n=200 and "
+            "more accurate, no banding; ignores `divisions`)"},
     EW_POS("eye", "[0,0,48]", "camera position V"),
     EW_POS("center", "[0,0,18]", "billboard centre C; rays start on the billboard and look away from eye"),
     EW_DIR("up", "[0,1,0]", "camera up vector (must not be parallel to eye->center)"),
