@@ -1,6 +1,6 @@
 /* kernels.h — OpenCL C sources embedded at build time.
  *
- * tools/embed_kernels.sh turns every kernels/*.cl into a string in build/gen/kernels.c,
+ * tools/embed_kernels.sh turns every OpenCL file in kernels/ into a string in build/gen/kernels.c,
  * so the daemon never reads kernel files at run time. */
 #ifndef FX_KERNELS_H
 #define FX_KERNELS_H

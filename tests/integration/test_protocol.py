@@ -6,13 +6,14 @@ import json
 import os
 import signal
 import subprocess
+import sys
 import time
 import urllib.error
 import urllib.request
 
 import websockets
 
-from fxtest import DAEMON, Client, Daemon, Suite
+from fxtest import DAEMON, ROOT, Client, Daemon, Suite
 
 SMALL = {"width": 64, "height": 48, "fps": 30}  # cheap frames keep the suite fast
 D = None
@@ -64,6 +65,19 @@ async def test_hello(t):
         t.check(True, "WebSocket without subprotocol fxstream.v1 refused")
     status, _, _ = http_get_status("/" + "x" * 300)
     t.check(status == 404, "long unknown path is 404 (got %s)" % status)
+
+
+async def test_spec_current(t):
+    """PROTOCOL.md's parameter tables are generated from describe; they must match it."""
+    c = await Client.connect(D)
+    for effect in c.hello["effects"]:
+        desc = await c.request("describe", effect=effect)
+        p = subprocess.run([sys.executable, os.path.join(ROOT, "tools", "param_table.py"), effect, "--check",
+                            os.path.join(ROOT, "protocol", "PROTOCOL.md")],
+                           input=json.dumps(desc), capture_output=True, text=True, timeout=30)
+        t.check(p.returncode == 0, "PROTOCOL.md table of %s matches describe (tools/param_table.py --write)%s"
+                % (effect, "\n" + p.stdout + p.stderr if p.returncode else ""))
+    await c.close()
 
 
 async def test_frames(t):
@@ -218,7 +232,7 @@ if __name__ == "__main__":
     D = Daemon()
     s = Suite("test_protocol")
     try:
-        s.run([test_http, test_hello, test_frames, test_set_reaches_frames, test_error_codes,
+        s.run([test_http, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
                test_nothing_half_applied, test_destroy_and_max_fps, test_persistence,
                test_shutdown_closes_1001, test_flags])
     finally:
