@@ -21,6 +21,7 @@ BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/benc
 KERNELS     := $(wildcard kernels/*.cl)
 
 .PHONY: all deps run test bench clean unit
+.SECONDARY: # keep object files of tests and benches between runs
 all: $(BUILD)/fxstreamd $(BUILD)/fxctl
 
 deps:
