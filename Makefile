@@ -7,10 +7,14 @@ CC      ?= cc
 BUILD   := build
 PKGS    := libwebsockets libcjson OpenCL
 EXRLIB  := $(filter -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
+# CFLAGS/LDFLAGS are the user's (e.g. make CFLAGS="-O1 -g -fsanitize=address"); what the
+# build needs regardless lives in FX_CFLAGS/FX_LDLIBS so a command line cannot drop it.
 CFLAGS  ?= -O2 -g
-CFLAGS  += -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -pthread \
-           $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Iserver -Iclients/c
-LDLIBS  += $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXRLIB) -lm -lpthread
+FX_CFLAGS := -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -pthread \
+             $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Iserver -Iclients/c
+FX_LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXRLIB) -lm -lpthread
+CC_ALL  = $(CC) $(FX_CFLAGS) $(CFLAGS)
+LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
 
 SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c))
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
@@ -47,11 +51,11 @@ $(BUILD)/gen/kernels.c: $(KERNELS) tools/embed_kernels.sh
 
 $(BUILD)/obj/gen/%.o: $(BUILD)/gen/%.c
 	@mkdir -p $(@D)
-	$(CC) $(CFLAGS) -c $< -o $@
+	$(CC_ALL) -c $< -o $@
 
 $(BUILD)/obj/%.o: %.c
 	@mkdir -p $(@D)
-	$(CC) $(CFLAGS) -c $< -o $@
+	$(CC_ALL) -c $< -o $@
 
 $(BUILD)/libfxserver.a: $(SERVER_OBJ)
 	@rm -f $@
@@ -62,17 +66,17 @@ $(BUILD)/libfxclient.a: $(CLIENT_OBJ)
 	ar rcs $@ $^
 
 $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
-	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/fxctl: $(BUILD)/obj/clients/c/fxctl.o $(BUILD)/libfxclient.a
-	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
 	@mkdir -p $(@D)
-	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
 	@mkdir -p $(@D)
-	$(CC) $(CFLAGS) $^ -o $@ $(LDLIBS)
+	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
