@@ -219,6 +219,30 @@ static void test_broadcast(void)
     t_server_free();
 }
 
+static void test_stream_error_event(void)
+{
+    t_server_init();
+    struct session *a = t_open(), *b = t_open();
+    t_drain(a), t_drain(b);
+    cJSON_Delete(t_req(a, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"x\"}"));
+    cJSON_Delete(t_req(a, "{\"op\":\"subscribe\",\"stream\":\"x\"}"));
+    struct stream *s = hub_find(&t_srv.hub, "x");
+    hub_stream_error(&t_srv.hub, s, "kernel failed: CL_OUT_OF_RESOURCES");
+    session_poll_errors(a);
+    session_poll_errors(b);
+    cJSON *ev = t_next(a);
+    CHECK(!strcmp(t_op(ev), "error") && !strcmp(t_code(ev), "internal"), "subscriber gets internal (%s)", t_code(ev));
+    CHECK(ev && !strcmp(cJSON_GetObjectItem(ev, "stream")->valuestring, "x"), "event names the stream");
+    CHECK(ev && strstr(cJSON_GetObjectItem(ev, "message")->valuestring, "CL_OUT_OF_RESOURCES"), "message kept");
+    CHECK(ev && !cJSON_GetObjectItem(ev, "id"), "event has no id");
+    cJSON_Delete(ev);
+    CHECK(t_next(b) == NULL, "non-subscriber got the stream error");
+    session_poll_errors(a);
+    CHECK(t_next(a) == NULL, "the same error reported twice");
+    stream_unref(s);
+    t_server_free();
+}
+
 static void test_receive_limits(void)
 {
     t_server_init();
@@ -274,6 +298,7 @@ int main(void)
     RUN(test_error_echoes_id_and_param);
     RUN(test_set_all_or_nothing);
     RUN(test_broadcast);
+    RUN(test_stream_error_event);
     RUN(test_receive_limits);
     RUN(test_rate_limit);
     return check_summary("test_session");
