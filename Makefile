@@ -5,7 +5,7 @@
 
 CC      ?= cc
 BUILD   := build
-PKGS    := libwebsockets libcjson OpenCL
+PKGS    := libwebsockets libcjson OpenCL libzstd
 EXRLIB  := $(filter -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 # CFLAGS/LDFLAGS are the user's (e.g. make CFLAGS="-O1 -g -fsanitize=address"); what the
 # build needs regardless lives in FX_CFLAGS/FX_LDLIBS so a command line cannot drop it.
@@ -16,9 +16,13 @@ FX_LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXRLIB) -lm -lpthr
 CC_ALL  = $(CC) $(FX_CFLAGS) $(CFLAGS)
 LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
 
-SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c))
+# protocol/*.c (codecs shared by both sides) goes into the server and the client library.
+PROTO_SRC   := $(wildcard protocol/*.c)
+SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c)) $(PROTO_SRC)
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
-CLIENT_OBJ  := $(BUILD)/obj/clients/c/fxclient.o
+CLIENT_MAIN := clients/c/fxctl.c clients/c/fxload.c
+CLIENT_SRC  := $(filter-out $(CLIENT_MAIN),$(wildcard clients/c/*.c)) $(PROTO_SRC)
+CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o)
 REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
 UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
 BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))

@@ -6,7 +6,7 @@
 set -eu
 
 PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo
-libwebsockets-dev libopenexr-dev openexr libcjson-dev python3 python3-websockets python3-numpy python3-jsonschema"
+libwebsockets-dev libopenexr-dev openexr libcjson-dev libzstd-dev zstd draco nodejs python3 python3-websockets python3-numpy python3-jsonschema"
 
 missing=""
 for p in $PKGS; do

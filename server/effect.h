@@ -56,6 +56,11 @@ struct effect_ops {
     int (*reset)(void *self, struct fx_err *err);
 
     void (*destroy)(void *self);
+
+    /* Simulated seconds since create/reset, for effects whose own clock differs from the
+     * stream's (a fixed-step simulation); /metrics reports its rate against wall time as
+     * the real-time factor. May be NULL (the factor is then 1 by construction). */
+    double (*sim_seconds)(void *self);
 };
 
 /* The registry (effects/registry.c). */

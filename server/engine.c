@@ -17,6 +17,7 @@ struct engine_slot {
     uint64_t seq[FXS_KIND_MAX + 1];
     bool running;
     double next_due, last_wall, sim_time;
+    double rt_wall, rt_sim; /* start of the current real-time factor window */
 };
 
 static double engine_now(void)
@@ -111,6 +112,25 @@ static int engine_emit(void *ctx, const struct effect_frame *ef)
     return 0;
 }
 
+/* Updates the stream's real-time factor once a second: effect-simulated seconds per
+ * wall second (effects without their own clock follow the stream's, factor 1). */
+static void engine_realtime(struct engine *eng, struct engine_slot *sl, double now)
+{
+    const struct effect_ops *fx = sl->s->effect;
+    double sim = fx->sim_seconds && sl->fx ? fx->sim_seconds(sl->fx) : sl->sim_time;
+    if (sl->rt_wall == 0 || sim < sl->rt_sim) { /* first step, or a reset */
+        sl->rt_wall = now;
+        sl->rt_sim = sim;
+        return;
+    }
+    if (now - sl->rt_wall < 1.0) return;
+    pthread_mutex_lock(&eng->hub->mu);
+    sl->s->realtime = (sim - sl->rt_sim) / (now - sl->rt_wall);
+    pthread_mutex_unlock(&eng->hub->mu);
+    sl->rt_wall = now;
+    sl->rt_sim = sim;
+}
+
 static void engine_step(struct engine *eng, struct engine_slot *sl, double now)
 {
     struct stream *s = sl->s;
@@ -138,6 +158,7 @@ static void engine_step(struct engine *eng, struct engine_slot *sl, double now)
         sl->sim_time = 0;
     }
     double ms = (engine_now() - t0) * 1e3;
+    engine_realtime(eng, sl, now);
     atomic_fetch_add(&s->steps, 1);
     atomic_fetch_add(&s->step_us, (uint64_t)(ms * 1e3));
     atomic_fetch_add(&s->encode_us, (uint64_t)(ctx.encode_ms * 1e3));
@@ -185,6 +206,7 @@ static double engine_run_due(struct engine *eng)
         pthread_mutex_unlock(&eng->hub->mu);
         if (eng->pause_idle && subs == 0) {
             sl->running = false;
+            sl->rt_wall = 0; /* a pause is not slowness */
             continue;
         }
         if (!sl->running) {

@@ -37,6 +37,7 @@ struct stream {
     struct frame *latest[FXS_KIND_MAX + 1];
     char error[320];  /* last stream-level error, for subscribers and /healthz */
     uint64_t error_gen;
+    double realtime;  /* effect-simulated seconds per wall second, recent steps */
 
     /* Counters for /metrics. */
     atomic_uint_fast64_t steps, frames_produced, frames_sent, frames_skipped, bytes_sent;

@@ -54,6 +54,7 @@ static double m_step_s(struct stream *s) { return atomic_load(&s->step_us) * 1e-
 static double m_encode_s(struct stream *s) { return atomic_load(&s->encode_us) * 1e-6; }
 static double m_errors(struct stream *s) { return (double)s->error_gen; }
 static double m_rev(struct stream *s) { return s->rev; }
+static double m_realtime(struct stream *s) { return s->realtime; }
 
 static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
 {
@@ -101,6 +102,8 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     metrics_per_stream(out, all, n, "fxs_stream_subscribers", "gauge", "Subscribers per stream.", m_subs);
     metrics_per_stream(out, all, n, "fxs_stream_param_rev", "gauge", "Parameter revision.", m_rev);
     metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream errors (kernel, NaN).", m_errors);
+    metrics_per_stream(out, all, n, "fxs_stream_realtime_factor", "gauge",
+                       "Simulated seconds per wall second over the last second of stepping.", m_realtime);
     pthread_mutex_unlock(&srv->hub.mu);
     metrics_per_stream(out, all, n, "fxs_stream_frames_produced_total", "counter", "Frames encoded.", m_produced);
     metrics_per_stream(out, all, n, "fxs_stream_frames_sent_total", "counter", "Frames sent, all subscribers.", m_sent);

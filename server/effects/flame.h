@@ -1,0 +1,67 @@
+/* flame.h — effect `flame` (seed 002, Mabuchi 2012): the SPH flame, every step on the
+ * OpenCL device, streamed as kind 1 particle frames.
+ *
+ * Besides the effect_ops (flame_effect, registered in registry.c), the module exposes a
+ * direct API so tests and benches can load arbitrary particle sets (lattices, isolated
+ * particles), evaluate one SPH pass without integrating, run steps, and read the state
+ * back to compare with the double-precision C reference (tests/ref/flame_ref.c). */
+#ifndef FX_FLAME_H
+#define FX_FLAME_H
+
+#include <stdint.h>
+#include <cjson/cJSON.h>
+
+#include "../effect.h"
+
+struct ocl;
+struct flame;
+
+extern const struct effect_ops flame_effect;
+extern const struct param_def flame_params[]; /* {0}-terminated */
+
+/* Particle flags (bits of flame_particles.flags, and of the codec's flag byte). */
+enum flame_flag {
+    FLAME_GAS = 0u,        /* type in bits 0-1 */
+    FLAME_SOURCE = 1u,     /* burning solid: fixed, holds T_init/F_init (digest §2.13) */
+    FLAME_OBSTACLE = 2u,   /* non-burning solid moved kinematically (digest §9 #16) */
+    FLAME_TYPE_MASK = 3u,
+    FLAME_IS_FLAME = 1u << 2, /* T > T_ign and F > fuel_eps (digest §9 #12) */
+};
+
+/* Host copy of the particle state, structure of arrays, n particles. */
+struct flame_particles {
+    int n;
+    float *pos;        /* 4n: x, y, z, T */
+    float *vel;        /* 4n: vx, vy, vz, F */
+    uint32_t *flags;   /* n */
+    uint32_t *id;      /* n, stable across sorting; new particles get fresh ids */
+    /* Filled by flame_read after a step or flame_eval (ignored by flame_load): */
+    float *rho;        /* n */
+    float *pressure;   /* n */
+    float *force;      /* 4n: force density xyz, w unused */
+    float *dT, *dF;    /* n: total time derivatives (reaction + diffusion) */
+    uint16_t *nbr;     /* n: neighbours j != i within h */
+    uint16_t *flame_nbr; /* n: flame particles among them */
+};
+
+/* Allocates every array of p for n particles (zeroed). */
+int flame_particles_alloc(struct flame_particles *p, int n);
+void flame_particles_free(struct flame_particles *p);
+
+/* A simulation from a complete validated document; it starts with the scene's solids. */
+struct flame *flame_new(struct ocl *ocl, const cJSON *params, struct fx_err *err);
+int flame_set(struct flame *fl, const cJSON *params, struct fx_err *err); /* live parameters */
+/* Replaces the particles with p (pos, vel, flags, id), e.g. a test lattice. */
+int flame_load(struct flame *fl, const struct flame_particles *p, struct fx_err *err);
+/* Neighbour search, density, pressure, forces and derivatives for the current state,
+ * without integrating or resampling, so flame_read shows one SPH evaluation. */
+int flame_eval(struct flame *fl, struct fx_err *err);
+/* Advances `steps` time steps of dt (Algorithm 3.2 with resampling every interval). */
+int flame_run(struct flame *fl, int steps, struct fx_err *err);
+/* Reads the whole state back (allocates out; free with flame_particles_free). */
+int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err);
+int flame_count(const struct flame *fl);
+uint64_t flame_steps(const struct flame *fl); /* steps since creation or reset */
+void flame_free(struct flame *fl);
+
+#endif
