@@ -543,23 +543,33 @@ static fv ew_circle_f(const ew_circle *K, float c, float s)
     return K->aa * (c * c) + K->bb * (s * s) + 2.0f * K->ab * (c * s) - 2.0f * K->ac * c - 2.0f * K->bc * s + K->cc;
 }
 
-/* Newton on f'(φ) = 0 from a coarse minimum (steps limited to ±0.4 rad). */
-static fv ew_circle_refine(const ew_circle *K, fv phi)
+/* A point of the circle as the unit vector (c, s) = (cos φ, sin φ). */
+typedef struct {
+    fv c, s;
+} ew_angle;
+
+/* Newton on f'(φ) = 0 from a coarse minimum, steps limited to ±0.4 rad. The angle is
+ * carried as (c, s) and turned by each step with sin/cos series (error < 1e-4 rad at
+ * 0.4) and a renormalisation, so the search calls no trigonometric function. */
+static ew_angle ew_circle_refine(const ew_circle *K, ew_angle a)
 {
     for (int it = 0; it < 3; it++) {
-        fv c, s = sincos(phi, &c);
+        fv c = a.c, s = a.s;
         fv g = (K->bb - K->aa) * s * c + K->ab * (c * c - s * s) + K->ac * s - K->bc * c;
         fv h = (K->bb - K->aa) * (c * c - s * s) - 4.0f * K->ab * s * c + K->ac * c + K->bc * s;
-        phi = select(phi, phi - clamp(g / h, -0.4f, 0.4f), h > 0.0f);
+        fv d = select((fv)(0.0f), clamp(g / h, -0.4f, 0.4f), h > 0.0f), d2 = d * d;
+        fv sd = d * (1.0f - d2 / 6.0f), cd = 1.0f - d2 * (0.5f - d2 / 24.0f); /* φ ← φ − d */
+        fv nc = c * cd + s * sd, ns = s * cd - c * sd, inv = rsqrt(nc * nc + ns * ns);
+        a.c = nc * inv;
+        a.s = ns * inv;
     }
-    return phi;
+    return a;
 }
 
-static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, fv phi, fv *w)
+static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, ew_angle a, fv *w)
 {
-    fv c, s = sincos(phi, &c);
     fv R = (fv)(to[3]);
-    return ew_approach(eps, Sl, Ql, v3_make(R * c, R * s, (fv)(0.0f)), v3_make(-s, c, (fv)(0.0f)), w);
+    return ew_approach(eps, Sl, Ql, v3_make(R * a.c, R * a.s, (fv)(0.0f)), v3_make(-a.s, a.c, (fv)(0.0f)), w);
 }
 
 /* Closest approaches of the ray line to the torus centre circle (at most two local
@@ -575,19 +585,23 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_p
     ew_circle K = {v3_dot(a, a), v3_dot(b, b), v3_dot(a, b), v3_dot(a, c), v3_dot(b, c), v3_dot(c, c)};
     fv f[16];
     for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, cospi(k / 8.0f), sinpi(k / 8.0f));
-    fv b0 = EW_BIG, b1 = EW_BIG, p0 = 0.0f, p1 = 0.0f;
+    /* lanes without a strict minimum (a ray along the axis) keep φ = 0 */
+    fv b0 = EW_BIG, b1 = EW_BIG;
+    ew_angle a0 = {(fv)(1.0f), (fv)(0.0f)}, a1 = a0;
     for (int k = 0; k < 16; k++) {
         iv is_min = (f[k] <= f[(k + 15) & 15]) & (f[k] < f[(k + 1) & 15]);
         iv first = is_min & (f[k] < b0), second = is_min & ~first & (f[k] < b1);
+        fv ck = (fv)(cospi(k / 8.0f)), sk = (fv)(sinpi(k / 8.0f));
         b1 = select(select(b1, f[k], second), b0, first);
-        p1 = select(select(p1, (fv)(k), second), p0, first);
+        a1.c = select(select(a1.c, ck, second), a0.c, first);
+        a1.s = select(select(a1.s, sk, second), a0.s, first);
         b0 = select(b0, f[k], first);
-        p0 = select(p0, (fv)(k), first);
+        a0.c = select(a0.c, ck, first);
+        a0.s = select(a0.s, sk, first);
     }
-    /* lanes without a strict minimum (a ray along the axis) keep φ = 0 */
     fv w0, w1;
-    fv s0 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, p0 * (M_PI_F / 8.0f)), &w0);
-    fv s1 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, p1 * (M_PI_F / 8.0f)), &w1);
+    fv s0 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, a0), &w0);
+    fv s1 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, a1), &w1);
     ew_peaks_make(pk, s0, w0, s1, w1, b1 < EW_BIG);
 }
 
