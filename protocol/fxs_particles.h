@@ -23,7 +23,19 @@ struct fxs_particles {
 
 struct fxs_particles_opts {
     int pos_bits;    /* quantisation of each coordinate relative to the frame's bounds, 8..24 */
+    /* Added with codec 1 (0 = default): bits of temperature and fuel relative to the
+     * frame's [min, max] of each, 2..16. Defaults below. */
+    int temp_bits;
+    int fuel_bits;
 };
+
+#define FXS_PARTICLES_DEFAULT_POS_BITS 16
+#define FXS_PARTICLES_DEFAULT_TEMP_BITS 10
+#define FXS_PARTICLES_DEFAULT_FUEL_BITS 8
+/* Most particles one payload may declare; the decoder rejects more (decompression bombs). */
+#define FXS_PARTICLES_MAX_N (1u << 22)
+/* Bytes of the payload's own header (PROTOCOL.md §7.5). */
+#define FXS_PARTICLES_HEADER_BYTES 64u
 
 /* Encodes p into a newly allocated buffer (*out, *out_len; free()). Returns 0, or -1 with
  * a message in err (errlen bytes). */

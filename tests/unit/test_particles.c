@@ -1,0 +1,429 @@
+/* test_particles.c — the kind 1 particle codec (protocol/fxs_particles.c, PROTOCOL.md §7.5).
+ *
+ * Round trips of random and SPH-like sets (n = 0, 1, 2, 1e6, degenerate bounds, every
+ * pos_bits 8..24, several T/F widths) checked particle by particle against the order the
+ * spec prescribes, within the documented quantisation bounds; corrupt and truncated
+ * payloads are rejected without reading out of bounds (run it under valgrind too).
+ * Test vectors: tests/data/particles/NAME.bin with NAME.json (what decoding gives) are
+ * checked here and by the JavaScript decoder; `test_particles --write-vectors`
+ * regenerates them after a deliberate format change. FXS_TEST_QUICK=1 skips the 1e6 set. */
+#include <float.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "check.h"
+#include "fxs_particles.h"
+#include "particles_gen.h"
+
+#define VEC_DIR "tests/data/particles"
+
+static void free_set(struct fxs_particles *p) { fxs_particles_free(p); }
+
+/* ---- the order of the spec ------------------------------------------------------------ */
+
+struct ord {
+    uint64_t key;
+    uint32_t i;
+};
+static int ord_cmp(const void *a, const void *b)
+{
+    const struct ord *x = a, *y = b;
+    return x->key < y->key ? -1 : x->key > y->key ? 1 : (x->i > y->i) - (x->i < y->i);
+}
+
+static uint32_t quant(float v, float lo, float hi, int bits)
+{
+    uint32_t qmax = (1u << bits) - 1u;
+    double s = hi > lo ? (double)qmax / ((double)hi - (double)lo) : 0, q = ((double)v - lo) * s + 0.5;
+    uint32_t u = q <= 0 ? 0 : (uint32_t)q;
+    return u > qmax ? qmax : u;
+}
+
+static float getf(const uint8_t *b)
+{
+    float f;
+    uint32_t v = (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+    memcpy(&f, &v, 4);
+    return f;
+}
+
+/* Input index of each decoded particle: by (cell, x offset), ties in input order. */
+static uint32_t *spec_order(const struct fxs_particles *p, const uint8_t *enc)
+{
+    int b = enc[5], k = enc[8], m = b - k;
+    struct ord *o = malloc((p->n ? p->n : 1) * sizeof *o);
+    uint32_t *idx = malloc((p->n ? p->n : 1) * sizeof *idx);
+    for (uint32_t i = 0; i < p->n && o; i++) {
+        uint32_t q[3];
+        for (int a = 0; a < 3; a++) q[a] = quant(p->xyz[3 * i + a], getf(enc + 16 + 4 * a), getf(enc + 28 + 4 * a), b);
+        o[i].key = ((uint64_t)(q[2] >> m) << (2 * k) | (uint64_t)(q[1] >> m) << k | (q[0] >> m)) << m | (q[0] & ((1u << m) - 1));
+        o[i].i = i;
+    }
+    if (o) qsort(o, p->n, sizeof *o, ord_cmp);
+    for (uint32_t j = 0; j < p->n && o && idx; j++) idx[j] = o[j].i;
+    free(o);
+    return idx;
+}
+
+/* ---- round trips ------------------------------------------------------------------------ */
+
+static double tol(float lo, float hi, int bits)
+{
+    double step = ((double)hi - lo) / ((1u << bits) - 1u), mag = fmax(fabs(lo), fabs(hi));
+    return step / 2 * (1 + 1e-9) + mag * FLT_EPSILON;
+}
+
+/* Counts particles outside the bounds; prints the first few. */
+static int compare(const struct fxs_particles *in, const struct fxs_particles *out, const uint8_t *enc)
+{
+    uint32_t *idx = spec_order(in, enc);
+    int bad = 0, bits[5] = { enc[5], enc[5], enc[5], enc[6], enc[7] };
+    double t[5];
+    for (int c = 0; c < 5; c++) t[c] = tol(getf(enc + (c < 3 ? 16 + 4 * c : 40 + 8 * (c - 3))), getf(enc + (c < 3 ? 28 + 4 * c : 44 + 8 * (c - 3))), bits[c]);
+    for (uint32_t j = 0; j < in->n && idx; j++) {
+        uint32_t i = idx[j];
+        double e[5] = { in->xyz[3 * i] - out->xyz[3 * j], in->xyz[3 * i + 1] - out->xyz[3 * j + 1],
+                        in->xyz[3 * i + 2] - out->xyz[3 * j + 2], in->temp[i] - out->temp[j], in->fuel[i] - out->fuel[j] };
+        int ok = in->flags[i] == out->flags[j];
+        for (int c = 0; c < 5; c++) ok = ok && fabs(e[c]) <= t[c];
+        if (!ok && bad++ < 3)
+            fprintf(stderr, "  particle %u (input %u): errors %g %g %g T %g F %g flags %u/%u\n", j, i, e[0], e[1], e[2],
+                    e[3], e[4], in->flags[i], out->flags[j]);
+    }
+    free(idx);
+    return idx ? bad : -1;
+}
+
+/* Encodes, decodes and compares; returns the payload size or -1. */
+static long round_trip(const struct fxs_particles *in, int pos_bits, int temp_bits, int fuel_bits)
+{
+    struct fxs_particles_opts o = { pos_bits, temp_bits, fuel_bits };
+    struct fxs_particles out;
+    uint8_t *enc = NULL;
+    size_t len = 0;
+    char err[200] = "";
+    long r = -1;
+    int bad;
+    CHECK(fxs_particles_encode(in, &o, &enc, &len, err, sizeof err) == 0, "encode: %s", err);
+    if (!enc) return -1;
+    CHECK(fxs_particles_decode(enc, len, &out, err, sizeof err) == 0, "decode: %s", err);
+    CHECK(out.n == in->n, "n %u vs %u", out.n, in->n);
+    if (out.n == in->n) {
+        bad = compare(in, &out, enc);
+        CHECK(bad == 0, "%d of %u particles outside the bounds (pos_bits %d)", bad, in->n, pos_bits);
+        r = (long)len;
+    }
+    free(enc);
+    fxs_particles_free(&out);
+    return r;
+}
+
+static void test_empty_and_tiny(void)
+{
+    struct fxs_particles p = { 0 };
+    for (uint32_t n = 0; n <= 2; n++) {
+        pgen_random(&p, n, 1.0);
+        CHECK(round_trip(&p, 16, 0, 0) >= 64, "n=%u", n);
+        free_set(&p);
+    }
+}
+
+static void test_every_pos_bits(void)
+{
+    struct fxs_particles p = { 0 }, f = { 0 };
+    pgen_random(&p, 3000, 2.0);
+    pgen_flame(&f, 3000);
+    for (int b = 8; b <= 24; b++) {
+        CHECK(round_trip(&p, b, 0, 0) > 0, "random, pos_bits %d", b);
+        CHECK(round_trip(&f, b, 0, 0) > 0, "flame, pos_bits %d", b);
+    }
+    free_set(&p);
+    free_set(&f);
+}
+
+static void test_temp_fuel_bits(void)
+{
+    struct fxs_particles p = { 0 };
+    pgen_flame(&p, 5000);
+    for (int b = 2; b <= 16; b += 7) CHECK(round_trip(&p, 16, b, 18 - b) > 0, "temp_bits %d", b);
+    free_set(&p);
+}
+
+/* Synthetic flame: 5.4 B/particle at 16 bits, 3.9 at 12 (bench_particles); guards regressions. */
+static void test_flame_size(void)
+{
+    struct fxs_particles p = { 0 };
+    long len;
+    pgen_flame(&p, 50000);
+    len = round_trip(&p, 16, 0, 0);
+    CHECK(len > 0 && (double)len / p.n < 5.6, "%.2f bytes/particle", (double)len / p.n);
+    len = round_trip(&p, 12, 0, 0);
+    CHECK(len > 0 && (double)len / p.n < 4.1, "%.2f bytes/particle at 12 bits", (double)len / p.n);
+    free_set(&p);
+}
+
+static void test_degenerate(void)
+{
+    struct fxs_particles p = { 0 };
+    pgen_random(&p, 1000, 1.0);
+    for (uint32_t i = 0; i < p.n; i++) {
+        p.xyz[3 * i] = p.xyz[3 * i + 1] = p.xyz[3 * i + 2] = 0.25f;
+        p.temp[i] = 300;
+        p.fuel[i] = 0;
+        p.flags[i] = 4;
+    }
+    CHECK(round_trip(&p, 16, 0, 0) > 0, "one point");
+    for (uint32_t i = 0; i < p.n; i++) p.xyz[3 * i] = (float)i; /* one axis spread */
+    CHECK(round_trip(&p, 24, 0, 0) > 0, "a line");
+    for (uint32_t i = 0; i < p.n; i++) p.xyz[3 * i] = 1e6f + (float)(i % 7) * 0.0625f; /* far from 0 */
+    CHECK(round_trip(&p, 24, 16, 16) > 0, "far from the origin");
+    free_set(&p);
+}
+
+static void test_large(void)
+{
+    struct fxs_particles p = { 0 };
+    const char *quick = getenv("FXS_TEST_QUICK");
+    if (quick && *quick == '1') return;
+    pgen_random(&p, 1000000, 10.0);
+    CHECK(round_trip(&p, 16, 0, 0) > 0, "1e6 random");
+    free_set(&p);
+    pgen_flame(&p, 1000000);
+    CHECK(round_trip(&p, 20, 0, 0) > 0, "1e6-ish flame");
+    free_set(&p);
+}
+
+static void test_bad_input(void)
+{
+    struct fxs_particles p = { 0 };
+    struct fxs_particles_opts o = { 7, 0, 0 };
+    uint8_t *enc = NULL;
+    size_t len;
+    char err[200];
+    pgen_random(&p, 10, 1.0);
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "pos_bits 7");
+    o.pos_bits = 25;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "pos_bits 25");
+    o.pos_bits = 16;
+    o.temp_bits = 17;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "temp_bits 17");
+    o.temp_bits = 0;
+    p.temp[3] = NAN;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "NaN");
+    CHECK(strstr(err, "non-finite") != NULL, "message: %s", err);
+    p.temp[3] = 300;
+    p.xyz[4] = INFINITY;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "inf");
+    p.n = FXS_PARTICLES_MAX_N + 1;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "too many");
+    p.n = 10;
+    free_set(&p);
+}
+
+/* Encodes a small flame; the caller frees *enc. */
+static size_t small_payload(uint8_t **enc, uint32_t n)
+{
+    struct fxs_particles p = { 0 };
+    size_t len = 0;
+    char err[200];
+    pgen_flame(&p, 3000);
+    if (p.n > n) p.n = n;
+    if (fxs_particles_encode(&p, NULL, enc, &len, err, sizeof err)) *enc = NULL;
+    free_set(&p);
+    return len;
+}
+
+static int try_decode(const uint8_t *buf, size_t len)
+{
+    struct fxs_particles out;
+    char err[200];
+    uint8_t *copy = malloc(len ? len : 1); /* exact size, so valgrind sees overreads */
+    int r;
+    memcpy(copy, buf, len);
+    r = fxs_particles_decode(copy, len, &out, err, sizeof err);
+    if (!r) fxs_particles_free(&out);
+    else CHECK(strncmp(err, "particles: ", 11) == 0 && out.xyz == NULL, "error state: %s", err);
+    free(copy);
+    return r;
+}
+
+static void test_truncated(void)
+{
+    uint8_t *enc;
+    size_t len = small_payload(&enc, 200);
+    CHECK(enc && try_decode(enc, len) == 0, "intact payload decodes");
+    for (size_t l = 0; enc && l < len; l++) CHECK(try_decode(enc, l) == -1, "truncated to %zu of %zu decodes", l, len);
+    free(enc);
+}
+
+static void test_corrupt(void)
+{
+    uint8_t *enc, *bad;
+    size_t len = small_payload(&enc, 200);
+    int rejected = 0, trials = 3000;
+    if (!enc) {
+        CHECK(0, "encode");
+        return;
+    }
+    bad = malloc(len);
+    for (int t = 0; t < trials; t++) {
+        memcpy(bad, enc, len);
+        size_t at = (size_t)(pgen_rand() * len);
+        bad[at] ^= (uint8_t)(1 + pgen_rand() * 255);
+        if (pgen_rand() < 0.3) bad[(size_t)(pgen_rand() * len)] = (uint8_t)(pgen_rand() * 256);
+        rejected += try_decode(bad, len) == -1;
+    }
+    printf("  corrupt: %d of %d rejected, the rest decode to other valid particles\n", rejected, trials);
+    CHECK(rejected > trials / 2, "only %d rejected", rejected);
+    free(bad);
+    free(enc);
+}
+
+static void put32(uint8_t *p, uint32_t v)
+{
+    for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
+}
+
+static void test_header_limits(void)
+{
+    uint8_t *enc, *bad;
+    size_t len = small_payload(&enc, 50);
+    static const struct { int at; uint8_t v; } byte_cases[] = {
+        { 0, 'X' }, { 4, 2 }, { 5, 7 }, { 5, 25 }, { 6, 1 }, { 7, 17 }, { 8, 11 },
+    };
+    if (!enc) {
+        CHECK(0, "encode");
+        return;
+    }
+    bad = malloc(len);
+    for (size_t c = 0; c < sizeof byte_cases / sizeof byte_cases[0]; c++) {
+        memcpy(bad, enc, len);
+        bad[byte_cases[c].at] = byte_cases[c].v;
+        CHECK(try_decode(bad, len) == -1, "byte %d = %u accepted", byte_cases[c].at, byte_cases[c].v);
+    }
+    memcpy(bad, enc, len);
+    put32(bad + 12, FXS_PARTICLES_MAX_N + 1);
+    CHECK(try_decode(bad, len) == -1, "n over the limit");
+    memcpy(bad, enc, len);
+    put32(bad + 16, 0x7fc00000u); /* NaN bound */
+    CHECK(try_decode(bad, len) == -1, "NaN bound");
+    memcpy(bad, enc, len);
+    put32(bad + 56, 0xffffffffu);
+    CHECK(try_decode(bad, len) == -1, "huge rans_bytes");
+    free(bad);
+    free(enc);
+}
+
+/* ---- test vectors ------------------------------------------------------------------------ */
+
+static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts *o)
+{
+    pgen_rng = 12345 + (uint64_t)v;
+    *o = (struct fxs_particles_opts){ 16, 0, 0 };
+    if (v == 0) pgen_random(p, 0, 1.0);
+    if (v == 1) pgen_random(p, 1, 1.0);
+    if (v == 2) pgen_random(p, 7, 3.0), o->pos_bits = 8;
+    if (v == 3 || v == 4) {
+        pgen_flame(p, 3000);
+        p->n = 64;
+        if (v == 4) *o = (struct fxs_particles_opts){ 24, 16, 16 };
+    }
+    if (v == 5) {
+        pgen_random(p, 5, 1.0);
+        for (int i = 0; i < 5; i++) p->xyz[3 * i + 1] = 2.5f; /* flat in y */
+    }
+}
+
+static const char *const vec_names[] = { "empty", "one", "seven_8bit", "flame64", "flame64_24bit", "flat_y" };
+#define NVEC 6
+
+/* The JSON the decoder must produce: floats as %.9g (float32 round trips exactly). */
+static char *vec_json(const struct fxs_particles *d)
+{
+    size_t cap = 256 + (size_t)d->n * 100, o = 0;
+    char *s = malloc(cap);
+    const float *arr[3] = { d->xyz, d->temp, d->fuel };
+    const char *names[3] = { "xyz", "temp", "fuel" };
+    o += (size_t)snprintf(s + o, cap - o, "{\"n\":%u", d->n);
+    for (int a = 0; a < 3; a++) {
+        uint32_t cnt = a ? d->n : 3 * d->n;
+        o += (size_t)snprintf(s + o, cap - o, ",\n\"%s\":[", names[a]);
+        for (uint32_t i = 0; i < cnt; i++) o += (size_t)snprintf(s + o, cap - o, "%s%.9g", i ? "," : "", arr[a][i]);
+        o += (size_t)snprintf(s + o, cap - o, "]");
+    }
+    o += (size_t)snprintf(s + o, cap - o, ",\n\"flags\":[");
+    for (uint32_t i = 0; i < d->n; i++) o += (size_t)snprintf(s + o, cap - o, "%s%u", i ? "," : "", d->flags[i]);
+    snprintf(s + o, cap - o, "]}\n");
+    return s;
+}
+
+static char *read_file(const char *path, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    char *buf = NULL;
+    long n;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0 && (buf = malloc((size_t)n + 1))) {
+        *len = fread(buf, 1, (size_t)n, f);
+        buf[*len] = 0;
+    }
+    fclose(f);
+    return buf;
+}
+
+static int write_file(const char *path, const void *data, size_t len)
+{
+    FILE *f = fopen(path, "wb");
+    int ok = f && fwrite(data, 1, len, f) == len;
+    if (f && fclose(f)) ok = 0;
+    return ok ? 0 : -1;
+}
+
+/* Encodes vector v; writes it (write) or compares it with the committed files. */
+static void vec_one(int v, int write)
+{
+    struct fxs_particles p = { 0 }, d;
+    struct fxs_particles_opts o;
+    uint8_t *enc = NULL;
+    size_t len = 0, flen = 0, jlen = 0;
+    char err[200], path[256], *file, *json, *fjson;
+    vec_input(v, &p, &o);
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == 0, "%s", err);
+    CHECK(enc && fxs_particles_decode(enc, len, &d, err, sizeof err) == 0, "%s", err);
+    json = vec_json(&d);
+    snprintf(path, sizeof path, VEC_DIR "/%s.bin", vec_names[v]);
+    if (write) CHECK(write_file(path, enc, len) == 0, "write %s", path);
+    file = read_file(path, &flen);
+    CHECK(file && flen == len && !memcmp(file, enc, len), "%s differs from the encoder's output (format change? rerun with --write-vectors)", path);
+    snprintf(path, sizeof path, VEC_DIR "/%s.json", vec_names[v]);
+    if (write) CHECK(write_file(path, json, strlen(json)) == 0, "write %s", path);
+    fjson = read_file(path, &jlen);
+    CHECK(fjson && !strcmp(fjson, json), "%s differs from what the decoder gives", path);
+    free(file), free(fjson), free(json), free(enc);
+    fxs_particles_free(&d);
+    free_set(&p);
+}
+
+static int vec_write;
+static void test_vectors(void)
+{
+    for (int v = 0; v < NVEC; v++) vec_one(v, vec_write);
+}
+
+int main(int argc, char **argv)
+{
+    vec_write = argc > 1 && !strcmp(argv[1], "--write-vectors");
+    RUN(test_vectors);
+    RUN(test_empty_and_tiny);
+    RUN(test_every_pos_bits);
+    RUN(test_temp_fuel_bits);
+    RUN(test_flame_size);
+    RUN(test_degenerate);
+    RUN(test_large);
+    RUN(test_bad_input);
+    RUN(test_truncated);
+    RUN(test_corrupt);
+    RUN(test_header_limits);
+    return check_summary("test_particles");
+}
