@@ -274,8 +274,9 @@ static int fxs_pt_cell_bits(uint32_t n, int pos_bits)
 static int fxs_pt_radix(uint64_t *key, uint32_t *idx, uint64_t *key2, uint32_t *idx2, uint32_t n, int keybits)
 {
     static const int D = 11;
-    uint32_t *count = malloc(sizeof(uint32_t) << D);
-    if (!count) return -1;
+    uint32_t *count;
+    if (n < 2) return 0;
+    if (!(count = malloc(sizeof(uint32_t) << D))) return -1;
     for (int shift = 0; shift < keybits; shift += D) {
         uint32_t sum = 0, mask = (1u << D) - 1u;
         memset(count, 0, sizeof(uint32_t) << D);
@@ -298,6 +299,13 @@ static int fxs_pt_radix(uint64_t *key, uint32_t *idx, uint64_t *key2, uint32_t *
     return 0;
 }
 
+/* Division-free encoder symbol (ryg_rans): x / freq as a multiply and shift, bit-exact. */
+struct fxs_pt_esym {
+    uint32_t xmax, rcp, bias;
+    uint16_t cmpl;
+    uint16_t shift;
+};
+
 /* ---- encoder --------------------------------------------------------------------------------- */
 
 struct fxs_pt_enc {
@@ -307,6 +315,7 @@ struct fxs_pt_enc {
     uint8_t *tok;   /* 7 per particle */
     uint32_t count[FXS_PT_NSTREAMS][FXS_PT_NTOK];
     struct fxs_pt_table tab[FXS_PT_NSTREAMS];
+    struct fxs_pt_esym sym[FXS_PT_NSTREAMS][FXS_PT_NTOK];
     struct fxs_pt_bitw bits;
     uint8_t *rans;  /* written backwards from rans + rans_cap */
     size_t rans_cap, rans_len;
@@ -385,27 +394,48 @@ static void fxs_pt_tokens(const struct fxs_particles *p, struct fxs_pt_enc *e, c
     fxs_pt_bits_flush(&e->bits);
 }
 
-static inline void fxs_pt_rans_put(struct fxs_pt_enc *e, uint32_t *x, const struct fxs_pt_table *t, unsigned s)
+static void fxs_pt_esym_init(struct fxs_pt_esym *e, uint32_t start, uint32_t freq)
 {
-    uint32_t freq = t->freq[s], xmax = ((FXS_PT_RANS_L >> FXS_PT_PROB_BITS) << 8) * freq;
-    while (*x >= xmax) {
+    e->xmax = ((FXS_PT_RANS_L >> FXS_PT_PROB_BITS) << 8) * freq;
+    e->cmpl = (uint16_t)(FXS_PT_PROB_SCALE - freq);
+    if (freq < 2) {
+        e->rcp = ~0u;
+        e->shift = 0;
+        e->bias = start + FXS_PT_PROB_SCALE - 1u;
+    } else {
+        uint32_t shift = 0;
+        while (freq > (1u << shift)) shift++;
+        e->rcp = (uint32_t)(((1ull << (shift + 31)) + freq - 1) / freq);
+        e->shift = (uint16_t)(shift - 1);
+        e->bias = start;
+    }
+}
+
+static inline void fxs_pt_rans_put(struct fxs_pt_enc *e, uint32_t *x, const struct fxs_pt_esym *sym)
+{
+    uint32_t q;
+    while (*x >= sym->xmax) {
         e->rans[e->rans_cap - ++e->rans_len] = (uint8_t)*x;
         *x >>= 8;
     }
-    *x = ((*x / freq) << FXS_PT_PROB_BITS) + (*x % freq) + t->start[s];
+    q = (uint32_t)(((uint64_t)*x * sym->rcp) >> 32) >> sym->shift;
+    *x += sym->bias + q * sym->cmpl;
 }
 
 /* Backward rANS pass; the decoder reads the bytes forward. */
 static void fxs_pt_rans(struct fxs_pt_enc *e)
 {
     static const int slot_stream[FXS_PT_SLOTS] = { FXS_PT_CELL, -1, FXS_PT_Y, FXS_PT_Z, FXS_PT_T, FXS_PT_F, FXS_PT_FLAGS };
+    struct fxs_pt_esym (*sym)[FXS_PT_NTOK] = e->sym;
     uint32_t x = FXS_PT_RANS_L;
     if (!e->f.n) return;
+    for (int st = 0; st < FXS_PT_NSTREAMS; st++)
+        for (int t = 0; t < e->tab[st].nsym; t++) fxs_pt_esym_init(&sym[st][t], e->tab[st].start[t], e->tab[st].freq[t]);
     for (uint32_t j = e->f.n; j-- > 0;) {
         const uint8_t *s = e->tok + (size_t)FXS_PT_SLOTS * j;
         for (int k = FXS_PT_SLOTS - 1; k >= 0; k--) {
             int st = k == 1 ? (s[0] == 0 && j ? FXS_PT_XSAME : FXS_PT_XNEW) : slot_stream[k];
-            fxs_pt_rans_put(e, &x, &e->tab[st], s[k]);
+            fxs_pt_rans_put(e, &x, &sym[st][s[k]]);
         }
     }
     for (int i = 0; i < 4; i++) e->rans[e->rans_cap - ++e->rans_len] = (uint8_t)(x >> (8 * (3 - i)));

@@ -1,0 +1,344 @@
+/* bench_particles.c — the kind 1 particle codec against Draco and plain zstd.
+ *
+ * On the same frames, one line per figure: bytes per particle, encode and decode time
+ * per million particles of
+ *   (a) codec 1 (protocol/fxs_particles.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
+ *       16 bits with T and F at 8 bits (the quantisation given to Draco);
+ *   (b) Draco point cloud (draco_encoder/draco_decoder, -qp = pos bits, cl 7 and 10),
+ *       fed a PLY with x, y, z and T, F, flags as red, green, blue (uchar: T and F
+ *       quantised to 8 bits over their range, flags exact), because Draco's PLY reader
+ *       keeps no other attribute; its own "ms to encode/decode" figures (no file I/O);
+ *   (c) zstd level 1 and 3 of the raw arrays (xyz, T, F as float32, flags u8);
+ *   (d) the same quantised values as codec 1 (grid order, deltas) as LEB128 byte
+ *       streams + zstd -3: zstd instead of our rANS as the entropy stage.
+ * Frames: synthetic SPH-like flames (tests/unit/particles_gen.h: 10k, 50k, 200k),
+ * plus every DIR/<stream>-<seq>.ply that `fxctl subscribe flame --out DIR` wrote when
+ * FXS_BENCH_PLY_DIR=DIR is set (real flame frames). Each line says which. */
+#include <dirent.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <zstd.h>
+
+#include "fxs_particles.h"
+#include "../unit/particles_gen.h"
+
+static double bp_now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return t.tv_sec + t.tv_nsec * 1e-9;
+}
+
+static int bp_reps(uint32_t n) { return n < 20000 ? 30 : n < 100000 ? 10 : 4; }
+
+static void bp_line(const char *frame, uint32_t n, const char *what, double bytes, double enc_s, double dec_s)
+{
+    printf("%-22s n=%-7u %-34s %6.3f B/particle  encode %8.1f ms/M  decode %8.1f ms/M  (%.3f ms / %.3f ms per 10k)\n",
+           frame, n, what, bytes / n, enc_s * 1e9 / n, dec_s * 1e9 / n, enc_s * 1e7 / n, dec_s * 1e7 / n);
+}
+
+/* ---- (a) codec 1 ------------------------------------------------------------------------ */
+
+static void bp_ours(const char *frame, const struct fxs_particles *p, int pb, int tb, int fb)
+{
+    struct fxs_particles_opts o = { pb, tb, fb };
+    struct fxs_particles d;
+    uint8_t *enc = NULL;
+    size_t len = 0;
+    char err[200], what[64];
+    double te = 1e9, td = 1e9;
+    for (int r = 0; r < bp_reps(p->n); r++) {
+        double t0 = bp_now();
+        free(enc);
+        if (fxs_particles_encode(p, &o, &enc, &len, err, sizeof err)) {
+            printf("%s: encode failed: %s\n", frame, err);
+            return;
+        }
+        double t1 = bp_now();
+        if (fxs_particles_decode(enc, len, &d, err, sizeof err)) printf("%s: decode failed: %s\n", frame, err);
+        double t2 = bp_now();
+        fxs_particles_free(&d);
+        te = fmin(te, t1 - t0), td = fmin(td, t2 - t1);
+    }
+    snprintf(what, sizeof what, "fxs codec 1 pos %d T %d F %d", pb, tb ? tb : FXS_PARTICLES_DEFAULT_TEMP_BITS,
+             fb ? fb : FXS_PARTICLES_DEFAULT_FUEL_BITS);
+    bp_line(frame, p->n, what, (double)len, te, td);
+    free(enc);
+}
+
+/* ---- (b) Draco ---------------------------------------------------------------------------- */
+
+static uint8_t bp_q8(float v, float lo, float hi) { return hi > lo ? (uint8_t)((v - lo) / (hi - lo) * 255 + 0.5f) : 0; }
+
+static int bp_write_draco_ply(const char *path, const struct fxs_particles *p)
+{
+    FILE *f = fopen(path, "wb");
+    float lo[2] = { INFINITY, INFINITY }, hi[2] = { -INFINITY, -INFINITY };
+    if (!f) return -1;
+    for (uint32_t i = 0; i < p->n; i++) {
+        lo[0] = fminf(lo[0], p->temp[i]), hi[0] = fmaxf(hi[0], p->temp[i]);
+        lo[1] = fminf(lo[1], p->fuel[i]), hi[1] = fmaxf(hi[1], p->fuel[i]);
+    }
+    fprintf(f, "ply\nformat binary_little_endian 1.0\nelement vertex %u\nproperty float x\nproperty float y\n"
+               "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n", p->n);
+    for (uint32_t i = 0; i < p->n; i++) {
+        uint8_t c[3] = { bp_q8(p->temp[i], lo[0], hi[0]), bp_q8(p->fuel[i], lo[1], hi[1]), p->flags[i] };
+        fwrite(p->xyz + 3 * i, 4, 3, f);
+        fwrite(c, 1, 3, f);
+    }
+    return fclose(f);
+}
+
+/* Runs cmd and returns the "(N ms to ...)" figure it prints, or -1. */
+static double bp_run_ms(const char *cmd)
+{
+    FILE *f = popen(cmd, "r");
+    char line[512];
+    double ms = -1;
+    if (!f) return -1;
+    while (fgets(line, sizeof line, f)) {
+        const char *s = strstr(line, "ms to ");
+        if (s) {
+            while (s > line && s[-1] == ' ') s--;
+            while (s > line && (s[-1] == '.' || (s[-1] >= '0' && s[-1] <= '9'))) s--;
+            ms = atof(s);
+        }
+    }
+    return pclose(f) == 0 ? ms : -1;
+}
+
+static long bp_file_size(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    long n = -1;
+    if (f && fseek(f, 0, SEEK_END) == 0) n = ftell(f);
+    if (f) fclose(f);
+    return n;
+}
+
+static void bp_draco(const char *frame, const struct fxs_particles *p, int pb, int cl)
+{
+    char dir[] = "/tmp/bench_particles_XXXXXX", cmd[1024], what[64];
+    double te = 1e9, td = 1e9;
+    long size;
+    if (!mkdtemp(dir)) return;
+    snprintf(cmd, sizeof cmd, "%s/in.ply", dir);
+    if (bp_write_draco_ply(cmd, p)) return;
+    for (int r = 0; r < 3; r++) {
+        snprintf(cmd, sizeof cmd, "draco_encoder -point_cloud -i %s/in.ply -o %s/out.drc -qp %d -cl %d 2>&1", dir, dir, pb, cl);
+        te = fmin(te, bp_run_ms(cmd) * 1e-3);
+        snprintf(cmd, sizeof cmd, "draco_decoder -i %s/out.drc -o %s/out.ply 2>&1", dir, dir);
+        td = fmin(td, bp_run_ms(cmd) * 1e-3);
+    }
+    snprintf(cmd, sizeof cmd, "%s/out.drc", dir);
+    size = bp_file_size(cmd);
+    snprintf(what, sizeof what, "draco cl %d pos %d T 8 F 8", cl, pb);
+    if (size > 0 && te >= 0 && td >= 0) bp_line(frame, p->n, what, (double)size, te, td);
+    else printf("%-22s %s: draco_encoder/draco_decoder failed or missing\n", frame, what);
+    snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+    if (system(cmd)) return;
+}
+
+/* ---- (c) zstd of raw floats ------------------------------------------------------------------ */
+
+static void bp_zstd_buf(const char *frame, uint32_t n, const char *what, const uint8_t *raw, size_t len, int level)
+{
+    size_t cap = ZSTD_compressBound(len), clen = 0;
+    uint8_t *c = malloc(cap), *d = malloc(len);
+    double te = 1e9, td = 1e9;
+    for (int r = 0; r < bp_reps(n); r++) {
+        double t0 = bp_now();
+        clen = ZSTD_compress(c, cap, raw, len, level);
+        double t1 = bp_now();
+        size_t dl = ZSTD_decompress(d, len, c, clen);
+        double t2 = bp_now();
+        if (ZSTD_isError(clen) || dl != len) printf("%s: zstd failed\n", frame);
+        te = fmin(te, t1 - t0), td = fmin(td, t2 - t1);
+    }
+    bp_line(frame, n, what, (double)clen, te, td);
+    free(c);
+    free(d);
+}
+
+static void bp_zstd_raw(const char *frame, const struct fxs_particles *p, int level)
+{
+    size_t n = p->n, len = n * 21;
+    uint8_t *raw = malloc(len);
+    char what[64];
+    memcpy(raw, p->xyz, 12 * n);
+    memcpy(raw + 12 * n, p->temp, 4 * n);
+    memcpy(raw + 16 * n, p->fuel, 4 * n);
+    memcpy(raw + 20 * n, p->flags, n);
+    snprintf(what, sizeof what, "zstd -%d raw float32 arrays", level);
+    bp_zstd_buf(frame, p->n, what, raw, len, level);
+    free(raw);
+}
+
+/* ---- (d) codec 1's values, zstd as the entropy stage ---------------------------------------------- */
+
+struct bp_rec {
+    uint64_t key;
+    uint32_t i;
+};
+static int bp_rec_cmp(const void *a, const void *b)
+{
+    const struct bp_rec *x = a, *y = b;
+    return x->key < y->key ? -1 : x->key > y->key;
+}
+
+static uint32_t bp_q(float v, float lo, float hi, int bits)
+{
+    uint32_t m = (1u << bits) - 1;
+    return hi > lo ? (uint32_t)(((double)v - lo) / ((double)hi - lo) * m + 0.5) : 0;
+}
+
+static size_t bp_leb(uint8_t *o, uint32_t v)
+{
+    size_t k = 0;
+    for (; v >= 128; v >>= 7) o[k++] = (uint8_t)(v | 128);
+    o[k++] = (uint8_t)v;
+    return k;
+}
+
+/* Values of codec 1 in its order, one LEB128 stream per kind, streams concatenated. */
+static size_t bp_transform(const struct fxs_particles *p, int pb, uint8_t *out)
+{
+    float lo[5], hi[5];
+    int k = 0, m, bits[5] = { pb, pb, pb, 10, 8 };
+    struct bp_rec *r = malloc(p->n * sizeof *r);
+    uint8_t *st[7];
+    size_t len[7] = { 0 }, o = 0;
+    uint32_t prev[3] = { 0 };
+    uint64_t prev_cell = 0;
+    while (k < 10 && (1ull << (3 * (k + 1))) <= p->n) k++;
+    m = pb - k;
+    for (int c = 0; c < 5; c++) lo[c] = INFINITY, hi[c] = -INFINITY;
+    for (uint32_t i = 0; i < p->n; i++) {
+        float v[5] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], p->fuel[i] };
+        for (int c = 0; c < 5; c++) lo[c] = fminf(lo[c], v[c]), hi[c] = fmaxf(hi[c], v[c]);
+    }
+    for (uint32_t i = 0; i < p->n; i++) {
+        uint32_t q[3];
+        for (int a = 0; a < 3; a++) q[a] = bp_q(p->xyz[3 * i + a], lo[a], hi[a], pb);
+        r[i].key = ((uint64_t)(q[2] >> m) << (2 * k) | (uint64_t)(q[1] >> m) << k | (q[0] >> m)) << m | (q[0] & ((1u << m) - 1));
+        r[i].i = i;
+    }
+    qsort(r, p->n, sizeof *r, bp_rec_cmp);
+    for (int s = 0; s < 7; s++) st[s] = malloc(p->n * 5 + 8);
+    for (uint32_t j = 0; j < p->n; j++) {
+        uint32_t i = r[j].i, q[5];
+        uint64_t cell = r[j].key >> m;
+        for (int c = 0; c < 5; c++) q[c] = bp_q(c < 3 ? p->xyz[3 * i + c] : c == 3 ? p->temp[i] : p->fuel[i], lo[c], hi[c], bits[c]);
+        len[0] += bp_leb(st[0] + len[0], (uint32_t)(cell - prev_cell));
+        len[1] += bp_leb(st[1] + len[1], cell == prev_cell && j ? (q[0] & ((1u << m) - 1)) - prev[0] : q[0] & ((1u << m) - 1));
+        len[2] += bp_leb(st[2] + len[2], q[1] & ((1u << m) - 1));
+        len[3] += bp_leb(st[3] + len[3], q[2] & ((1u << m) - 1));
+        for (int c = 3; c < 5; c++) {
+            int32_t dlt = (int32_t)q[c] - (int32_t)prev[c - 2];
+            len[c + 1] += bp_leb(st[c + 1] + len[c + 1], ((uint32_t)dlt << 1) ^ (uint32_t)(dlt >> 31));
+            prev[c - 2] = q[c];
+        }
+        st[6][len[6]++] = p->flags[i];
+        prev_cell = cell, prev[0] = q[0] & ((1u << m) - 1);
+    }
+    for (int s = 0; s < 7; s++) memcpy(out + o, st[s], len[s]), o += len[s], free(st[s]);
+    free(r);
+    return o;
+}
+
+static void bp_zstd_transform(const char *frame, const struct fxs_particles *p, int pb)
+{
+    uint8_t *buf = malloc((size_t)p->n * 40 + 64);
+    double t0 = bp_now();
+    size_t len = bp_transform(p, pb, buf);
+    double tt = bp_now() - t0;
+    char what[64];
+    snprintf(what, sizeof what, "codec 1 values+LEB128+zstd-3 pos %d", pb);
+    printf("%-22s (transform alone, qsort: %.1f ms/M; zstd times below exclude it)\n", frame, tt * 1e9 / p->n);
+    bp_zstd_buf(frame, p->n, what, buf, len, 3);
+    free(buf);
+}
+
+/* ---- frames ---------------------------------------------------------------------------------- */
+
+static void bp_frame(const char *name, const struct fxs_particles *p)
+{
+    static const int bits[] = { 12, 16, 20 };
+    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 0, 0);
+    bp_ours(name, p, 16, 8, 8);
+    for (int b = 0; b < 3; b++) bp_draco(name, p, bits[b], 7);
+    bp_draco(name, p, 16, 10);
+    bp_zstd_raw(name, p, 1);
+    bp_zstd_raw(name, p, 3);
+    bp_zstd_transform(name, p, 16);
+    printf("\n");
+}
+
+/* Reads a PLY written by fxctl (x y z temperature fuel flags, binary little endian). */
+static int bp_read_ply(const char *path, struct fxs_particles *p)
+{
+    FILE *f = fopen(path, "rb");
+    char line[256];
+    unsigned n = 0;
+    int ok = 0;
+    if (!f) return -1;
+    while (fgets(line, sizeof line, f)) {
+        if (sscanf(line, "element vertex %u", &n) == 1) continue;
+        if (!strcmp(line, "end_header\n")) { ok = 1; break; }
+    }
+    if (ok && n && !pgen_alloc(p, n)) {
+        for (uint32_t i = 0; i < n && ok; i++) {
+            uint8_t rec[21];
+            ok = fread(rec, 1, 21, f) == 21;
+            memcpy(p->xyz + 3 * i, rec, 12), memcpy(p->temp + i, rec + 12, 4), memcpy(p->fuel + i, rec + 16, 4);
+            p->flags[i] = rec[20];
+        }
+    }
+    fclose(f);
+    return ok && n ? 0 : -1;
+}
+
+static void bp_real_frames(const char *dir)
+{
+    DIR *d = opendir(dir);
+    struct dirent *e;
+    int count = 0;
+    if (!d) {
+        printf("real frames: cannot open %s\n", dir);
+        return;
+    }
+    while ((e = readdir(d)) && count < 4) {
+        char path[4096], name[64];
+        struct fxs_particles p = { 0 };
+        size_t l = strlen(e->d_name);
+        if (l < 5 || strcmp(e->d_name + l - 4, ".ply")) continue;
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        if (bp_read_ply(path, &p)) continue;
+        snprintf(name, sizeof name, "real:%.17s", e->d_name);
+        bp_frame(name, &p);
+        fxs_particles_free(&p);
+        count++;
+    }
+    closedir(d);
+    if (!count) printf("real frames: no readable .ply in %s\n", dir);
+}
+
+int main(void)
+{
+    static const uint32_t sizes[] = { 10000, 50000, 200000 };
+    const char *dir = getenv("FXS_BENCH_PLY_DIR");
+    printf("bench_particles: frames are synthetic SPH-like flames (tests/unit/particles_gen.h, sorted by cell)%s\n",
+           dir ? " and real flame frames from FXS_BENCH_PLY_DIR" : "; set FXS_BENCH_PLY_DIR to add real flame frames");
+    for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++) {
+        struct fxs_particles p = { 0 };
+        char name[64];
+        if (pgen_flame(&p, sizes[s])) return 1;
+        snprintf(name, sizeof name, "synthetic-flame-%uk", sizes[s] / 1000);
+        bp_frame(name, &p);
+        fxs_particles_free(&p);
+    }
+    if (dir) bp_real_frames(dir);
+    return 0;
+}
