@@ -1,0 +1,104 @@
+// particles_js_check.mjs — decodes the C encoder's test vectors (tests/data/particles/*.bin)
+// with clients/web/fxs_particles.js and compares with what the C decoder gave (*.json):
+// every float bit for bit (both decoders compute float32(lo + q * step) in double), flags
+// exactly. Also: a frame header round trip, and truncated/corrupt payloads must throw a
+// "particles:" error, never return garbage silently or crash. Prints
+// "test_particles_js: N passed, M failed" last; exit status 1 on any failure.
+import { readFileSync, readdirSync } from 'node:fs';
+import { join, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { decode, decodeFrame, parseHeader } from '../../clients/web/fxs_particles.js';
+
+const root = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
+const dir = join(root, 'tests', 'data', 'particles');
+let passed = 0, failed = 0;
+
+function check(name, fn) {
+  try {
+    const why = fn();
+    if (why) throw new Error(why);
+    passed++;
+    console.log(`ok   ${name}`);
+  } catch (e) {
+    failed++;
+    console.log(`FAIL ${name}: ${e.message}`);
+  }
+}
+
+function compare(got, want) {
+  if (got.n !== want.n) return `n ${got.n} vs ${want.n}`;
+  for (const key of ['xyz', 'temp', 'fuel', 'flags']) {
+    if (got[key].length !== want[key].length) return `${key}: length ${got[key].length} vs ${want[key].length}`;
+    for (let i = 0; i < want[key].length; i++) {
+      const w = key === 'flags' ? want[key][i] : Math.fround(want[key][i]);
+      if (got[key][i] !== w) return `${key}[${i}] = ${got[key][i]}, C gave ${w}`;
+    }
+  }
+  return null;
+}
+
+function frameOf(payload, n) {
+  const msg = new Uint8Array(64 + payload.length);
+  const v = new DataView(msg.buffer);
+  msg.set([0x46, 0x58, 0x53, 0x31]);
+  v.setUint16(4, 64, true);
+  v.setUint16(6, 1, true);
+  v.setUint32(8, 7, true);
+  v.setBigUint64(16, 42n, true);
+  v.setFloat64(24, 1.5, true);
+  v.setUint32(40, 1, true);
+  v.setUint32(44, payload.length, true);
+  v.setUint32(48, n, true);
+  msg.set(payload, 64);
+  return msg;
+}
+
+const names = readdirSync(dir).filter((f) => f.endsWith('.bin')).map((f) => f.slice(0, -4)).sort();
+check('test vectors present', () => (names.length >= 4 ? null : `only ${names.length} in ${dir}`));
+for (const name of names) {
+  const bin = new Uint8Array(readFileSync(join(dir, `${name}.bin`)));
+  const want = JSON.parse(readFileSync(join(dir, `${name}.json`), 'utf8'));
+  check(`vector ${name} (n=${want.n})`, () => compare(decode(bin), want));
+  check(`vector ${name} as a frame`, () => {
+    const { header, particles } = decodeFrame(frameOf(bin, want.n).buffer);
+    if (header.seq !== 42n || header.channel !== 7 || header.simTime !== 1.5) return 'header fields';
+    return compare(particles, want);
+  });
+  check(`vector ${name} truncated`, () => {
+    for (let l = 0; l < bin.length; l++) {
+      try {
+        decode(bin.subarray(0, l));
+        return `decoded when cut to ${l} of ${bin.length} bytes`;
+      } catch (e) {
+        if (!e.message.startsWith('particles: ')) return `cut to ${l}: ${e.message}`;
+      }
+    }
+    return null;
+  });
+  check(`vector ${name} corrupt bytes`, () => {
+    let seed = 1;
+    for (let t = 0; t < 500; t++) {
+      const bad = bin.slice();
+      seed = (seed * 1103515245 + 12345) >>> 0;
+      bad[seed % bad.length] ^= 1 + (seed >>> 24) % 255;
+      try {
+        const p = decode(bad);
+        if (p.xyz.length !== 3 * p.n) return 'inconsistent output';
+      } catch (e) {
+        if (!e.message.startsWith('particles: ')) return `unexpected error ${e.message}`;
+      }
+    }
+    return null;
+  });
+}
+check('header: bad magic rejected', () => {
+  try {
+    parseHeader(new Uint8Array(64));
+    return 'accepted';
+  } catch (e) {
+    return null;
+  }
+});
+
+console.log(`test_particles_js: ${passed} passed, ${failed} failed`);
+process.exit(failed ? 1 : 0);
