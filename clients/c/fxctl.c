@@ -15,6 +15,7 @@
 #include <libwebsockets.h>
 
 #include "fxclient.h"
+#include "fxs_particles.h"
 
 #define FXCTL_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
 #define FXCTL_DEFAULT_TIMEOUT_MS 10000
@@ -52,9 +53,12 @@ static const char fxctl_help[] =
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
     "                                width and height, or count, flags) and any params\n"
     "                                event of NAME; with --out writes the payload to\n"
-    "                                DIR/NAME-SEQ.exr (texture, codec 1) or .bin, and\n"
-    "                                the line to DIR/NAME-SEQ.json. Fails when the\n"
-    "                                stream is destroyed or the server goes away.\n"
+    "                                DIR/NAME-SEQ.exr (texture, codec 1), the decoded\n"
+    "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 1:\n"
+    "                                binary PLY, x y z temperature fuel flags) or the\n"
+    "                                payload to .bin (others), and the line to\n"
+    "                                DIR/NAME-SEQ.json. Fails when the stream is\n"
+    "                                destroyed or the server goes away.\n"
     "\n"
     "K=V: K is a top-level parameter name; V is JSON (wind=[1,0,0], n=3, on=true,\n"
     "mode=\"simpson\"); a V that is not valid JSON is taken as a string (mode=simpson).\n"
@@ -284,20 +288,77 @@ static int fxctl_write_file(const char *path, const void *data, size_t len)
     return ok ? 0 : -1;
 }
 
-/* Writes DIR/STREAM-SEQ.{exr|bin} and DIR/STREAM-SEQ.json. */
-static int fxctl_save_frame(const char *dir, const char *stream, const struct fxc_msg *m, const char *line)
+/* Writes decoded particles as binary little-endian PLY: float x y z temperature fuel, uchar flags. */
+static int fxctl_write_ply(const char *path, const struct fxs_particles *p)
+{
+    FILE *f = fopen(path, "wb");
+    int ok = f != NULL;
+    if (ok)
+        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec 1\nelement vertex %" PRIu32
+                        "\nproperty float x\nproperty float y\nproperty float z\nproperty float temperature\n"
+                        "property float fuel\nproperty uchar flags\nend_header\n", p->n) > 0;
+    for (uint32_t i = 0; ok && i < p->n; i++) {
+        uint8_t rec[21];
+        float v[5] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], p->fuel[i] };
+        for (int c = 0; c < 5; c++) {
+            uint32_t u;
+            memcpy(&u, &v[c], 4);
+            fxs_put_u32(rec + 4 * c, u);
+        }
+        rec[20] = p->flags[i];
+        ok = fwrite(rec, 1, sizeof rec, f) == sizeof rec;
+    }
+    if (f && fclose(f)) ok = 0;
+    if (!ok) fprintf(stderr, "fxctl: cannot write %s: %s\n", path, strerror(errno));
+    return ok ? 0 : -1;
+}
+
+static int fxctl_is_particles(const struct fxs_header *h)
+{
+    return h->kind == FXS_KIND_PARTICLES && h->codec == FXS_CODEC_PARTICLES;
+}
+
+/* Decodes a particle frame; checks the count against the header. */
+static int fxctl_decode_particles(const struct fxc_msg *m, struct fxs_particles *p)
+{
+    char err[256];
+    if (fxs_particles_decode(m->payload, m->header.payload_bytes, p, err, sizeof err)) {
+        fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", m->header.seq, err);
+        return -1;
+    }
+    if (p->n != m->header.count_or_width) {
+        fprintf(stderr, "fxctl: frame %" PRIu64 ": header count %" PRIu32 " but %" PRIu32 " particles in the payload\n",
+                m->header.seq, m->header.count_or_width, p->n);
+        fxs_particles_free(p);
+        return -1;
+    }
+    return 0;
+}
+
+/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 1) or .bin. */
+static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const struct fxs_particles *p)
 {
     const struct fxs_header *h = &m->header;
     int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
+    char path[4200];
+    snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr ? "exr" : "bin");
+    return p ? fxctl_write_ply(path, p) : fxctl_write_file(path, m->payload, h->payload_bytes);
+}
+
+/* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json. */
+static int fxctl_save_frame(const char *dir, const char *stream, const struct fxc_msg *m, const char *line,
+                            const struct fxs_particles *p)
+{
+    const struct fxs_header *h = &m->header;
     char path[4096], *safe = strdup(stream);
     int r;
     if (!safe) return -1;
-    for (char *p = safe; *p; p++)
-        if (*p == '/') *p = '_';
-    snprintf(path, sizeof path, "%s/%s-%" PRIu64 ".%s", dir, safe, h->seq, exr ? "exr" : "bin");
-    r = fxctl_write_file(path, m->payload, h->payload_bytes);
-    snprintf(path, sizeof path, "%s/%s-%" PRIu64 ".json", dir, safe, h->seq);
+    for (char *c = safe; *c; c++)
+        if (*c == '/') *c = '_';
+    snprintf(path, sizeof path, "%s/%s-%" PRIu64, dir, safe, h->seq);
     free(safe);
+    r = fxctl_save_payload(path, m, p);
+    strncat(path, ".json", sizeof path - strlen(path) - 1);
     if (!r) {
         char *text = malloc(strlen(line) + 2);
         r = text ? 0 : -1;
@@ -322,13 +383,17 @@ struct fxctl_sub {
 static int fxctl_on_frame(struct fxctl_sub *s, const struct fxc_msg *m)
 {
     char line[1024];
+    struct fxs_particles p = { 0 };
+    int particles = s->o->out_dir && fxctl_is_particles(&m->header), r = 0;
     if (m->header.channel != s->channel) return 0;
+    if (particles && fxctl_decode_particles(m, &p)) return FXCTL_FAIL;
     fxctl_frame_line(line, sizeof line, s->stream, m);
     printf("%s\n", line);
     fflush(stdout);
     s->got++;
-    if (s->o->out_dir && fxctl_save_frame(s->o->out_dir, s->stream, m, line)) return FXCTL_FAIL;
-    return 0;
+    if (s->o->out_dir && fxctl_save_frame(s->o->out_dir, s->stream, m, line, particles ? &p : NULL)) r = FXCTL_FAIL;
+    fxs_particles_free(&p);
+    return r;
 }
 
 /* Prints the stream's params events; fails when the stream goes away. */
