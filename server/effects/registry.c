@@ -7,9 +7,11 @@
 #include "../effect.h"
 
 extern const struct effect_ops energy_wave_effect;
+extern const struct effect_ops flame_effect;
 
 static const struct effect_ops *const registry_effects[] = {
     &energy_wave_effect,
+    &flame_effect,
     NULL,
 };
 

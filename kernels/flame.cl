@@ -1,0 +1,425 @@
+/* flame.cl — the SPH flame (seed 002, Mabuchi 2012; spec: digest 002) on the device.
+ *
+ * One substep (digest §2.10, §5.3):
+ *   fl_hash           cell key per particle (cells of h/2, linear hash, power-of-two table)
+ *   fl_radix_hist/scan/scatter   stable LSD radix sort of (key, index), 8 bits a pass
+ *   fl_reorder        gathers the state into sorted order (double buffer)
+ *   fl_cell_start     cs[k] = number of particles with key < k (so a run of keys is one range)
+ *   fl_density        rho (poly6, eq 3.10), p (eq 3.11), neighbour and flame-neighbour counts
+ *   fl_forces         pressure (sign fixed, §2.5/§9 #1), viscosity (3.13), heat/fuel diffusion
+ *                     (3.20/3.21, stabilised §9 #4), chemistry (3.17-3.19), buoyancy (3.16),
+ *                     wind (§9 #15), symplectic Euler (3.14/3.15), solids (§2.13, §9 #16),
+ *                     resampling decisions (§2.12, §9 #9-11) and the runaway flag
+ *   fl_count/fl_scan_blocks/fl_compact   every resample_interval steps: survivors in order,
+ *                     then inserted particles appended in parent order with fresh ids
+ *
+ * Neighbour gather (§2.11): cells have edge c = h/2 and key(cx,cy,cz) = (cx + P1 cy + P2 cz)
+ * mod M, so the cells of one (cy,cz) row with consecutive cx have consecutive keys and, after
+ * the sort, consecutive particles: a particle visits at most 25 rows, each one contiguous
+ * range [cs[k0], cs[k0+len]), trimmed to the part of the row the sphere of radius h reaches.
+ * A candidate is accepted when r <= h and its own (cy,cz) is the row's, which filters hash
+ * collisions and makes overlapping rows (tiny tables) count each neighbour once.
+ * Parameters live in one __constant float array (indices FP_* shared with flame.c). */
+
+#define FP_H 0
+#define FP_H2 1
+#define FP_INV_CELL 2
+#define FP_MASS 3
+#define FP_POLY6 4      /* m * 315/(64 pi h^9) */
+#define FP_SPIKY 5      /* 45/(pi h^6): spiky gradient and viscosity Laplacian magnitude */
+#define FP_GPOLY6 6     /* m * 945/(32 pi h^9): colour-field normal */
+#define FP_KSTIFF 7
+#define FP_RHO0 8
+#define FP_KVISC 9
+#define FP_KBUO 10
+#define FP_UP 11        /* 11..13 */
+#define FP_WIND 14      /* 14..16 */
+#define FP_TAMB 17
+#define FP_TIGN 18
+#define FP_KRS 19
+#define FP_KCF 20
+#define FP_KPT 21
+#define FP_KH 22
+#define FP_KF 23
+#define FP_OMEGA 24
+#define FP_KCOOL 25
+#define FP_FEPS 26
+#define FP_DT 27
+#define FP_DIAM 28
+#define FP_VMAX 29
+#define FP_SYMMETRIC 30 /* 1: Mueller's symmetric pressure form (§9 #3) */
+#define FP_LITERAL 31   /* 1: diffusion as printed (§9 #4 literal mode) */
+#define FP_NBR_INS 32   /* insertion neighbour threshold (§9 #8) */
+#define FP_SEED 33
+#define FP_COUNT 34
+
+#define FL_GAS 0u
+#define FL_SOURCE 1u
+#define FL_OBSTACLE 2u
+#define FL_TYPE 3u
+#define FL_FLAME 4u
+
+#define FL_HP1 0x9E3779B1u
+#define FL_HP2 0x85EBCA77u
+
+#define FL_ERR_NAN 1
+#define FL_ERR_SPEED 2
+
+typedef __constant const float *prm_t;
+
+inline int3 fl_cell(float4 p, float ic) { return convert_int3_rtn(p.xyz * ic); }
+
+inline uint fl_row_base(int cy, int cz) { return (uint)cy * FL_HP1 + (uint)cz * FL_HP2; }
+
+inline uint fl_key(int3 c, uint mask) { return ((uint)c.x + fl_row_base(c.y, c.z)) & mask; }
+
+inline int fl_is_flame(float4 p, float4 v, prm_t P) { return p.w > P[FP_TIGN] && v.w > P[FP_FEPS]; }
+
+/* ---- sort -------------------------------------------------------------------------- */
+
+__kernel void fl_hash(__global const float4 *pos, __global uint *key, __global uint *val, int n, uint mask,
+                      prm_t P)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    key[i] = fl_key(fl_cell(pos[i], P[FP_INV_CELL]), mask);
+    val[i] = (uint)i;
+}
+
+inline void fl_block(int b, int nb, int n, int *lo, int *hi)
+{
+    int bs = (n + nb - 1) / nb;
+    *lo = min(n, b * bs);
+    *hi = min(n, *lo + bs);
+}
+
+/* Per block: counts of each 8-bit digit, stored digit-major (hist[d * nb + b]). */
+__kernel void fl_radix_hist(__global const uint *key, int n, int shift, __global uint *hist)
+{
+    int b = get_global_id(0), nb = get_global_size(0), lo, hi;
+    uint c[256];
+    for (int d = 0; d < 256; d++) c[d] = 0;
+    fl_block(b, nb, n, &lo, &hi);
+    for (int i = lo; i < hi; i++) c[(key[i] >> shift) & 255u]++;
+    for (int d = 0; d < 256; d++) hist[d * nb + b] = c[d];
+}
+
+/* Exclusive scan of `len` counts in place (one work item: len = 256 * blocks is small). */
+__kernel void fl_scan_serial(__global uint *a, int len)
+{
+    uint s = 0;
+    for (int i = 0; i < len; i++) {
+        uint v = a[i];
+        a[i] = s;
+        s += v;
+    }
+}
+
+/* Stable scatter of one block, in index order, to its digits' offsets. */
+__kernel void fl_radix_scatter(__global const uint *kin, __global const uint *vin, __global uint *kout,
+                               __global uint *vout, int n, int shift, __global const uint *hist)
+{
+    int b = get_global_id(0), nb = get_global_size(0), lo, hi;
+    uint off[256];
+    for (int d = 0; d < 256; d++) off[d] = hist[d * nb + b];
+    fl_block(b, nb, n, &lo, &hi);
+    for (int i = lo; i < hi; i++) {
+        uint k = kin[i], o = off[(k >> shift) & 255u]++;
+        kout[o] = k;
+        vout[o] = vin[i];
+    }
+}
+
+__kernel void fl_reorder(__global const uint *val, int n, __global const float4 *pos, __global const float4 *vel,
+                         __global const uint *flags, __global const uint *id, __global float4 *pos2,
+                         __global float4 *vel2, __global uint *flags2, __global uint *id2)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    uint s = val[i];
+    pos2[i] = pos[s];
+    vel2[i] = vel[s];
+    flags2[i] = flags[s];
+    id2[i] = id[s];
+}
+
+/* cs[q] = p for key[p-1] < q <= key[p]; work item n fills the tail up to cs[M] = n. */
+__kernel void fl_cell_start(__global const uint *key, int n, uint m, __global uint *cs)
+{
+    int p = get_global_id(0);
+    if (p > n) return;
+    uint from = p > 0 ? key[p - 1] + 1u : 0u, to = p < n ? key[p] : m;
+    for (uint q = from; q <= to; q++) cs[q] = (uint)p;
+}
+
+/* ---- neighbour gather ---------------------------------------------------------------- */
+
+/* Iterates the neighbours j (including i itself) of position `pi`; BODY sees j, dx = r_i - r_j,
+ * r2 = |dx|^2 and pj. Rows are trimmed to the sphere of radius h; collisions are filtered. */
+#define FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, BODY)                                                       \
+    {                                                                                                       \
+        const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_;                    \
+        const uint m_ = mask + 1u;                                                                          \
+        const int ylo_ = (int)floor((pi.y - h_) * ic_), yhi_ = (int)floor((pi.y + h_) * ic_);               \
+        const int zlo_ = (int)floor((pi.z - h_) * ic_), zhi_ = (int)floor((pi.z + h_) * ic_);               \
+        for (int cz_ = zlo_; cz_ <= zhi_; cz_++) {                                                          \
+            float ez_ = fmax(0.0f, fmax(cz_ * c_ - pi.z, pi.z - (cz_ + 1) * c_));                           \
+            for (int cy_ = ylo_; cy_ <= yhi_; cy_++) {                                                      \
+                float ey_ = fmax(0.0f, fmax(cy_ * c_ - pi.y, pi.y - (cy_ + 1) * c_));                       \
+                float rr_ = h_ * h_ - ey_ * ey_ - ez_ * ez_;                                                    \
+                if (rr_ < 0.0f) continue;                                                                   \
+                float rx_ = sqrt(rr_) * 1.0001f;                                                                      \
+                int xlo_ = (int)floor((pi.x - rx_) * ic_), xhi_ = (int)floor((pi.x + rx_) * ic_);           \
+                uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_)) & mask;                                     \
+                uint k1_ = k0_ + (uint)(xhi_ - xlo_ + 1);                                                   \
+                for (int part_ = 0; part_ < 2; part_++) {                                                   \
+                    uint a_, b_;                                                                            \
+                    if (part_ == 0) { a_ = cs[k0_]; b_ = cs[min(k1_, m_)]; }                                \
+                    else if (k1_ > m_) { a_ = cs[0]; b_ = cs[k1_ - m_]; }                                   \
+                    else break;                                                                             \
+                    for (uint j = a_; j < b_; j++) {                                                        \
+                        float4 pj = pos[j];                                                                 \
+                        float3 dx = pi.xyz - pj.xyz;                                                        \
+                        float r2 = dot(dx, dx);                                                             \
+                        if (r2 > h2_) continue;                                                             \
+                        if ((int)floor(pj.y * ic_) != cy_ || (int)floor(pj.z * ic_) != cz_) continue;       \
+                        BODY                                                                                \
+                    }                                                                                       \
+                }                                                                                           \
+            }                                                                                               \
+        }                                                                                                   \
+    }
+
+/* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11; clamped at 0 for the symmetric
+ * form, §9 #3), neighbour counts j != i (nbr | flame_nbr << 16, §2.12). */
+__kernel void fl_density(__global const float4 *pos, __global const float4 *vel, __global const uint *cs, uint mask,
+                         int n, prm_t P, __global float2 *rho_p, __global uint *counts)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float4 pi = pos[i];
+    float w = 0.0f;
+    uint nb = 0, fnb = 0;
+    const float tign = P[FP_TIGN], feps = P[FP_FEPS];
+    FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
+        float q = h2_ - r2;
+        w += q * q * q;
+        if (j != (uint)i) {
+            nb++;
+            fnb += (pj.w > tign && vel[j].w > feps) ? 1u : 0u;
+        }
+    })
+    float rho = w * P[FP_POLY6];
+    float p = P[FP_KSTIFF] * (rho - P[FP_RHO0]);
+    if (P[FP_SYMMETRIC] != 0.0f) p = fmax(p, 0.0f);
+    rho_p[i] = (float2)(rho, p);
+    counts[i] = min(nb, 65535u) | (min(fnb, 65535u) << 16);
+}
+
+/* Sums of one pass-2 gather. */
+struct fl_acc {
+    float3 f, visc, nrm;
+    float dT, wT, dF, wF, wV;
+};
+
+/* Pressure and viscosity force densities, diffusion sums and weights, colour normal. */
+inline void fl_pair(struct fl_acc *a, float4 pi, float4 vi, float2 rpi, float4 pj, float4 vj, float2 rpj,
+                    float3 dx, float r2, prm_t P)
+{
+    float r = sqrt(r2), h = P[FP_H], vol = P[FP_MASS] / rpj.x;
+    float hr = h - r, lap = P[FP_SPIKY] * hr;          /* eq 3.9 */
+    float grad = r > 0.0f ? P[FP_SPIKY] * hr * hr / r : 0.0f;
+    float pp = P[FP_SYMMETRIC] != 0.0f ? 0.5f * (rpi.y + rpj.y) : (rpj.y - rpi.y);
+    a->f += (vol * pp * grad) * dx;                     /* eq 3.12 pushed away from high p (§2.5) */
+    float wv = vol * lap;                               /* eq 3.13, weight per unit k_visc */
+    a->visc += wv * (vj.xyz - vi.xyz);
+    a->wV += wv;
+    a->dT += wv * (pj.w - pi.w);                        /* eq 3.20 per unit k_h */
+    a->wT += wv;
+    float wf = wv * 0.5f * (pi.w + pj.w);               /* eq 3.21 per unit k_f */
+    a->dF += wf * (vj.w - vi.w);
+    a->wF += wf;
+    float q = P[FP_H2] - r2;
+    a->nrm -= (vol * q * q) * dx;                       /* Mueller colour normal: points inward */
+}
+
+/* Stabilised explicit diffusion (§9 #4): the weights dt*k*w_ij of one particle sum to W; when
+ * W > omega_max all are scaled by omega_max/W, so the update is a convex combination. Returns
+ * the time derivative k*sum (scaled). */
+inline float fl_diffuse(float sum, float wsum, float k, prm_t P)
+{
+    float W = P[FP_DT] * k * wsum;
+    float s = (P[FP_LITERAL] == 0.0f && W > P[FP_OMEGA]) ? P[FP_OMEGA] / W : 1.0f;
+    return s * k * sum;
+}
+
+inline float3 fl_random_dir(uint id, prm_t P)
+{
+    uint s = id * 747796405u + (uint)P[FP_SEED] * 2891336453u + 1u;
+    float u[3];
+    for (int k = 0; k < 3; k++) {
+        s = s * 747796405u + 2891336453u;
+        uint x = ((s >> ((s >> 28u) + 4u)) ^ s) * 277803737u;
+        u[k] = (float)((x >> 22u) ^ x) * (1.0f / 4294967296.0f);
+    }
+    float z = 2.0f * u[0] - 1.0f, t = 6.2831853f * u[1], r = sqrt(fmax(0.0f, 1.0f - z * z));
+    return (float3)(r * cos(t), r * sin(t), z);
+}
+
+/* Chemistry (3.17-3.19), cooling (§9 #13), T/F update (3.22/3.23, F >= 0 §9 #12). */
+inline float2 fl_burn(float T, float F, float dTdiff, float dFdiff, int flame, prm_t P, float *dT, float *dF)
+{
+    float S = flame ? P[FP_KRS] * T * F : 0.0f;
+    float dt = P[FP_DT];
+    *dT = dTdiff + P[FP_KPT] * S;
+    *dF = dFdiff - P[FP_KCF] * S;
+    float Tn = T + dt * *dT;
+    Tn -= fmin(1.0f, dt * P[FP_KCOOL]) * (Tn - P[FP_TAMB]);
+    return (float2)(Tn, fmax(0.0f, F + dt * *dF));
+}
+
+/* Pass 2 + integration: reads the sorted state (pos, vel, flags, id), writes the next state
+ * in the same order (pos2..), the derivatives, and when `resample` is set the keep/insert
+ * decisions and the outward normal for fl_compact. */
+__kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, __global const uint *flags,
+                        __global const uint *id, __global const uint *cs, uint mask, int n, prm_t P,
+                        __global const float2 *rho_p, __global const uint *counts, __global float4 *pos2,
+                        __global float4 *vel2, __global uint *flags2, __global uint *id2, __global float4 *force,
+                        __global float2 *dTdF, int integrate, int resample, __global uint2 *keep_ins, __global float4 *nrm_out,
+                        __global int *errflag)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float4 pi = pos[i], vi = vel[i];
+    float2 rpi = rho_p[i];
+    uint fl = flags[i], type = fl & FL_TYPE;
+    struct fl_acc a = {(float3)(0.0f), (float3)(0.0f), (float3)(0.0f), 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+    FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
+        if (j != (uint)i) fl_pair(&a, pi, vi, rpi, pj, vel[j], rho_p[j], dx, r2, P);
+    })
+    float dt = P[FP_DT], rho = rpi.x;
+    float dTdiff = fl_diffuse(a.dT, a.wT, P[FP_KH], P);
+    float dFdiff = fl_diffuse(a.dF, a.wF, P[FP_KF], P);
+    float3 fvisc = P[FP_KVISC] * a.visc;
+    float wv = dt * P[FP_KVISC] * a.wV / rho; /* viscosity number: the same convex cap (§2.15) */
+    if (P[FP_LITERAL] == 0.0f && wv > P[FP_OMEGA]) fvisc *= P[FP_OMEGA] / wv;
+    float dT, dF;
+    float2 TF = fl_burn(pi.w, vi.w, dTdiff, dFdiff, fl_is_flame(pi, vi, P), P, &dT, &dF);
+    float3 up = (float3)(P[FP_UP], P[FP_UP + 1], P[FP_UP + 2]);
+    float3 f = a.f + fvisc + (P[FP_KBUO] * (TF.x - P[FP_TAMB])) * up; /* eq 3.16 with the new T */
+    float4 pn = pi, vn = vi;
+    if (!integrate) {
+        /* flame_eval: derivatives only, state unchanged */
+    } else if (type == FL_GAS) {
+        vn.xyz = vi.xyz + dt * (f / rho + (float3)(P[FP_WIND], P[FP_WIND + 1], P[FP_WIND + 2]));
+        pn.xyz = pi.xyz + dt * vn.xyz;
+        pn.w = TF.x;
+        vn.w = TF.y;
+        if (!(isfinite(pn.x) && isfinite(pn.y) && isfinite(pn.z) && isfinite(pn.w) && isfinite(vn.w)))
+            atomic_or(errflag, FL_ERR_NAN);
+        else if (dot(vn.xyz, vn.xyz) > P[FP_VMAX] * P[FP_VMAX])
+            atomic_or(errflag, FL_ERR_SPEED);
+    } else if (type == FL_OBSTACLE) {
+        pn.xyz = pi.xyz + dt * vi.xyz; /* prescribed motion (§9 #16) */
+    }
+    uint isf = integrate ? (fl_is_flame(pn, vn, P) ? FL_FLAME : 0u) : (fl & FL_FLAME);
+    pos2[i] = pn;
+    vel2[i] = vn;
+    flags2[i] = (fl & ~FL_FLAME) | isf;
+    id2[i] = id[i];
+    force[i] = (float4)(f, 0.0f);
+    dTdF[i] = (float2)(dT, dF);
+    if (!resample) return;
+    uint cnt = counts[i], nbr = cnt & 0xffffu, fnb = cnt >> 16;
+    uint keep = (type != FL_GAS || isf || fnb > 0u) ? 1u : 0u;  /* death rule (§2.12, §9 #11) */
+    uint ins = (isf && nbr < (uint)P[FP_NBR_INS]) ? 1u : 0u;    /* birth rule (§2.12, §9 #8) */
+    keep_ins[i] = (uint2)(keep, ins);
+    if (ins) {
+        float ln = length(a.nrm);
+        float tiny = 1e-4f * (P[FP_MASS] / rho) * P[FP_H2] * P[FP_H2] * P[FP_H];
+        float3 nh = ln > tiny ? a.nrm / ln : -fl_random_dir(id[i], P); /* §9 #9 */
+        nrm_out[i] = (float4)(nh, 0.0f);
+    }
+}
+
+/* ---- resampling compaction ----------------------------------------------------------- */
+
+/* Per block: number of survivors and of insertions. */
+__kernel void fl_count(__global const uint2 *keep_ins, int n, __global uint *bsum)
+{
+    int b = get_global_id(0), nb = get_global_size(0), lo, hi;
+    fl_block(b, nb, n, &lo, &hi);
+    uint k = 0, s = 0;
+    for (int i = lo; i < hi; i++) {
+        uint2 v = keep_ins[i];
+        k += v.x;
+        s += v.y;
+    }
+    bsum[b] = k;
+    bsum[nb + b] = s;
+}
+
+/* Exclusive scans of both rows; tot = (survivors, insertions, resulting n). */
+__kernel void fl_scan_blocks(__global uint *bsum, int nb, uint cap, __global uint *tot)
+{
+    uint s0 = 0, s1 = 0;
+    for (int b = 0; b < nb; b++) {
+        uint k = bsum[b], s = bsum[nb + b];
+        bsum[b] = s0;
+        bsum[nb + b] = s1;
+        s0 += k;
+        s1 += s;
+    }
+    tot[0] = s0;
+    tot[1] = s1;
+    tot[2] = min(cap, s0 + s1);
+}
+
+/* Survivors keep their order; inserted particles follow them in parent order (§2.12): at
+ * r_i - d n_i (§9 #9), T_amb, F = 0, v_i inherited (§9 #10), ids id_base + rank. Derived
+ * fields travel with the survivors and are zero for the inserted. */
+__kernel void fl_compact(__global const uint2 *keep_ins, int n, __global const uint *bsum,
+                         __global const uint *tot, uint id_base, prm_t P, __global const float4 *nrm,
+                         __global const float4 *pos, __global const float4 *vel, __global const uint *flags,
+                         __global const uint *id, __global const float2 *rho_p, __global const uint *counts,
+                         __global const float4 *force, __global const float2 *dTdF, __global float4 *opos,
+                         __global float4 *ovel, __global uint *oflags, __global uint *oid, __global float2 *orho_p,
+                         __global uint *ocounts, __global float4 *oforce, __global float2 *odTdF)
+{
+    int b = get_global_id(0), nb = get_global_size(0), lo, hi;
+    fl_block(b, nb, n, &lo, &hi);
+    uint ko = bsum[b], so = bsum[nb + b], nk = tot[0], nmax = tot[2];
+    for (int i = lo; i < hi; i++) {
+        uint2 v = keep_ins[i];
+        if (v.x) {
+            opos[ko] = pos[i];
+            ovel[ko] = vel[i];
+            oflags[ko] = flags[i];
+            oid[ko] = id[i];
+            orho_p[ko] = rho_p[i];
+            ocounts[ko] = counts[i];
+            oforce[ko] = force[i];
+            odTdF[ko] = dTdF[i];
+            ko++;
+        }
+        if (v.y) {
+            uint o = nk + so;
+            if (o < nmax) {
+                float4 p = pos[i];
+                p.xyz -= P[FP_DIAM] * nrm[i].xyz;
+                p.w = P[FP_TAMB];
+                float4 w = vel[i];
+                w.w = 0.0f;
+                opos[o] = p;
+                ovel[o] = w;
+                oflags[o] = FL_GAS;
+                oid[o] = id_base + so;
+                orho_p[o] = (float2)(0.0f);
+                ocounts[o] = 0u;
+                oforce[o] = (float4)(0.0f);
+                odTdF[o] = (float2)(0.0f);
+            }
+            so++;
+        }
+    }
+}

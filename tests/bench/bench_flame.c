@@ -1,0 +1,165 @@
+/* bench_flame.c — throughput of effect flame through PoCL (or any OpenCL device).
+ *
+ * 1. Particle-steps per second at about 10k, 50k and 200k particles. Scene: a cubic lattice
+ *    block of gas at spacing d = h/2 (the §8 A3 lattice, 32 neighbours inside) loaded with
+ *    flame_load, every particle a flame particle (T 1500 K, F 1) with k_rs = 0 and k_buo = 0,
+ *    so resampling keeps them and the block stays put; the full step runs (sort, density,
+ *    forces, integration, resampling every 5 steps), only N grows slightly at the faces.
+ *    Per-kernel split from the profiling events: ms per step and share.
+ * 2. The default scene (one source, defaults): N after warm-up and the achievable real-time
+ *    factor through effect_ops.step at 30 frames per second (substeps + read-back + encode).
+ * One line per figure; under two minutes on a 2-core PoCL. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "effects/flame.h"
+#include "ocl.h"
+#include "params.h"
+
+#define BENCH_MAX_STATS 32
+
+static double bench_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static void bench_die(const char *what, const struct fx_err *err)
+{
+    fprintf(stderr, "bench_flame: %s: %s\n", what, err->message);
+    exit(1);
+}
+
+static cJSON *bench_doc(const char *overrides)
+{
+    struct fx_err err;
+    cJSON *base = params_defaults(flame_params), *out = NULL, *o = cJSON_Parse(overrides);
+    if (!base || !o || params_merge(flame_params, base, o, &out, &err)) bench_die("bad document", &err);
+    cJSON_Delete(base);
+    cJSON_Delete(o);
+    return out;
+}
+
+/* A k^3 lattice at spacing d centred at the origin, all gas flame particles. */
+static void bench_lattice(struct flame_particles *p, int k, double d)
+{
+    if (flame_particles_alloc(p, k * k * k)) exit(1);
+    int n = 0;
+    for (int x = 0; x < k; x++)
+        for (int y = 0; y < k; y++)
+            for (int z = 0; z < k; z++, n++) {
+                float *r = p->pos + 4 * n;
+                r[0] = (float)(d * (x - k / 2));
+                r[1] = (float)(d * (y - k / 2));
+                r[2] = (float)(d * (z - k / 2));
+                r[3] = 1500.0f;
+                p->vel[4 * n + 3] = 1.0f;
+                p->flags[n] = FLAME_GAS | FLAME_IS_FLAME;
+                p->id[n] = (uint32_t)n;
+            }
+}
+
+static int bench_stats(struct ocl *ocl, struct ocl_kernel_stat *s)
+{
+    return ocl_stats(ocl, s, BENCH_MAX_STATS);
+}
+
+/* Per-kernel ms per step between two ocl_stats snapshots. */
+static void bench_split(const char *label, struct ocl_kernel_stat *a, int na, struct ocl_kernel_stat *b, int nb,
+                        int steps)
+{
+    double total = 0;
+    for (int i = 0; i < nb; i++) {
+        double prev = 0;
+        for (int j = 0; j < na; j++)
+            if (strcmp(a[j].name, b[i].name) == 0) prev = a[j].total_ms;
+        b[i].total_ms -= prev;
+        total += b[i].total_ms;
+    }
+    for (int i = 0; i < nb; i++)
+        if (b[i].total_ms > 0)
+            printf("flame %-6s kernel %-16s %8.3f ms/step  %5.1f%%\n", label, b[i].name, b[i].total_ms / steps,
+                   100.0 * b[i].total_ms / total);
+}
+
+static void bench_size(struct ocl *ocl, const char *label, int k, int steps)
+{
+    struct fx_err err;
+    cJSON *doc = bench_doc("{\"sources\":[],\"k_rs\":0,\"k_buo\":0,\"k_h\":0,\"k_f\":0,\"insert_nbr_threshold\":4}");
+    struct flame *fl = flame_new(ocl, doc, &err);
+    if (!fl) bench_die("flame_new", &err);
+    struct flame_particles p;
+    bench_lattice(&p, k, params_num(doc, "h") * params_num(doc, "particle_diameter"));
+    if (flame_load(fl, &p, &err) || flame_run(fl, 5, &err)) bench_die("warm-up", &err);
+    struct ocl_kernel_stat a[BENCH_MAX_STATS], b[BENCH_MAX_STATS];
+    int na = bench_stats(ocl, a);
+    double t0 = bench_now(), psteps = 0;
+    for (int s = 0; s < steps; s++) {
+        psteps += flame_count(fl);
+        if (flame_run(fl, 1, &err)) bench_die("run", &err);
+    }
+    double wall = bench_now() - t0;
+    int nb = bench_stats(ocl, b);
+    printf("flame %-6s N %7.0f  %7.2f ms/step  %6.2f M particle-steps/s\n", label, psteps / steps,
+           wall * 1e3 / steps, psteps / wall * 1e-6);
+    bench_split(label, a, na, b, nb, steps);
+    flame_particles_free(&p);
+    flame_free(fl);
+    cJSON_Delete(doc);
+}
+
+static int bench_emit(void *ctx, const struct effect_frame *f)
+{
+    *(size_t *)ctx += f->payload_bytes;
+    return 0;
+}
+
+/* Default scene: warm up `warm_s` simulated seconds, then frames at 30 fps of wall time
+ * as fast as they go: real-time factor = simulated seconds / wall seconds. */
+static void bench_default(struct ocl *ocl, double warm_s, int frames)
+{
+    struct fx_err err;
+    cJSON *doc = bench_doc("{}");
+    struct flame *fl = flame_effect.create(ocl, doc, &err);
+    if (!fl) bench_die("create", &err);
+    double dt = params_num(doc, "dt");
+    double t0 = bench_now();
+    if (flame_run(fl, (int)(warm_s / dt), &err)) bench_die("warm-up", &err);
+    double warm_wall = bench_now() - t0;
+    size_t bytes = 0;
+    double sim0 = flame_effect.sim_seconds(fl);
+    uint64_t st0 = flame_steps(fl);
+    t0 = bench_now();
+    double nsum = 0;
+    for (int f = 0; f < frames; f++) {
+        nsum += flame_count(fl);
+        if (flame_effect.step(fl, 0, 1.0 / 30, bench_emit, &bytes, &err)) bench_die("step", &err);
+    }
+    double wall = bench_now() - t0, sim = flame_effect.sim_seconds(fl) - sim0;
+    double ps = nsum / frames * (double)(flame_steps(fl) - st0) / wall;
+    printf("flame default warm-up %.1f s simulated (%llu steps) in %.1f s wall, N %d\n", warm_s,
+           (unsigned long long)st0, warm_wall, flame_count(fl));
+    printf("flame default N %.0f dt %.4f s: %.2f ms/frame of 1/30 s, real-time factor %.2f, %.2f M particle-steps/s, "
+           "%.0f kB/frame\n",
+           nsum / frames, dt, wall * 1e3 / frames, sim / wall, ps * 1e-6, bytes / 1024.0 / frames);
+    flame_effect.destroy(fl);
+    cJSON_Delete(doc);
+}
+
+int main(int argc, char **argv)
+{
+    struct fx_err err;
+    struct ocl *ocl;
+    if (ocl_open(&ocl, argc > 1 ? argv[1] : NULL, &err)) bench_die("ocl_open", &err);
+    printf("flame device: %s\n", ocl_device_name(ocl));
+    bench_size(ocl, "10k", 22, 60);
+    bench_size(ocl, "50k", 37, 20);
+    bench_size(ocl, "200k", 58, 8);
+    bench_default(ocl, 3.0, 60);
+    ocl_close(ocl);
+    return 0;
+}
