@@ -131,11 +131,23 @@ static int flame_ref_read_heat(const cJSON *doc, struct flame_ref_params *p)
     return n;
 }
 
+double flame_ref_lattice_mass(double h, double d, double rho_rest)
+{
+    int r = (int)(h / d) + 1;
+    double w = 0;
+    for (int i = -r; i <= r; i++)
+        for (int j = -r; j <= r; j++)
+            for (int k = -r; k <= r; k++) w += flame_ref_w_poly6(d * sqrt((double)(i * i + j * j + k * k)), h);
+    return rho_rest / w;
+}
+
 int flame_ref_params_from_json(const cJSON *doc, struct flame_ref_params *p)
 {
     const cJSON *sim = cJSON_GetObjectItemCaseSensitive(doc, "sim");
     if (cJSON_IsObject(sim)) doc = sim; /* nested form of digest §10 */
-    return flame_ref_read_sph(doc, p) + flame_ref_read_forces(doc, p) + flame_ref_read_heat(doc, p);
+    int n = flame_ref_read_sph(doc, p) + flame_ref_read_forces(doc, p) + flame_ref_read_heat(doc, p);
+    if (p->mass <= 0) p->mass = flame_ref_lattice_mass(p->h, p->d, p->rho_rest); /* §9 #6 */
+    return n;
 }
 
 /* ---------------------------------------------------------------- kernels */
@@ -263,12 +275,21 @@ static double flame_ref_diffuse(const struct flame_ref_params *p, const double *
     return s;
 }
 
+/* Optional viscosity cap (see cap_viscosity); wsum = Σ (m/ρ_j) ∇²W_visc. */
+static void flame_ref_cap_viscosity(const struct flame_ref_params *p, double rho_i, double wsum, double f[3])
+{
+    double w = p->dt * p->k_visc * wsum / rho_i;
+    if (!p->cap_viscosity || !p->stabilized || w <= p->omega_max) return;
+    for (int k = 0; k < 3; k++) f[k] *= p->omega_max / w;
+}
+
 static void flame_ref_eval_forces(const struct flame_ref_params *p, const struct flame_ref_particle *ps, int n,
                                   struct flame_ref_eval *ev, int i, double *buf)
 {
     struct flame_ref_eval *e = &ev[i];
     double *ch = buf, *dTv = buf + n, *cf = buf + 2 * n, *dFv = buf + 3 * n;
     int cnt = 0;
+    double wv = 0;
     for (int j = 0; j < n; j++) {
         double r = flame_ref_dist(ps[i].r, ps[j].r);
         if (j == i || r > p->h) continue;
@@ -278,6 +299,7 @@ static void flame_ref_eval_forces(const struct flame_ref_params *p, const struct
         for (int k = 0; k < 3; k++) x[k] = ps[i].r[k] - ps[j].r[k];
         flame_ref_grad_poly6(x, p->h, g);
         for (int k = 0; k < 3; k++) e->n[k] += vol * g[k];
+        wv += vol * lap;
         ch[cnt] = p->k_h * vol * lap;
         dTv[cnt] = ps[j].T - ps[i].T;
         cf[cnt] = p->k_f * 0.5 * (ps[i].T + ps[j].T) * vol * lap;
@@ -286,6 +308,7 @@ static void flame_ref_eval_forces(const struct flame_ref_params *p, const struct
         e->flame_nbr += flame_ref_is_flame(p, ps[j].T, ps[j].F);
         cnt++;
     }
+    flame_ref_cap_viscosity(p, ev[i].rho, wv, e->f_visc);
     e->dT_diff = flame_ref_diffuse(p, ch, dTv, cnt);
     e->dF_diff = flame_ref_diffuse(p, cf, dFv, cnt);
 }
@@ -313,7 +336,7 @@ void flame_ref_eval_all(const struct flame_ref_params *p, const struct flame_ref
         double S = flame_ref_reaction(p, ps[i].T, ps[i].F);
         e->dT_react = p->k_pt * S;
         e->dF_react = -p->k_cf * S;
-        e->dT = e->dT_react + e->dT_diff - p->k_cool * (ps[i].T - p->T_amb);
+        e->dT = e->dT_react + e->dT_diff;
         e->dF = e->dF_react + e->dF_diff;
     }
     free(rho);
@@ -330,7 +353,7 @@ void flame_ref_integrate(const struct flame_ref_params *p, const struct flame_re
         for (int k = 0; k < 3; k++) q->r[k] += p->dt * q->v[k];
         return;
     }
-    q->T += p->dt * e->dT;
+    q->T += p->dt * (e->dT - p->k_cool * (q->T - p->T_amb)); /* §9 #13, explicit */
     q->F += p->dt * e->dF;
     if (q->F < 0) q->F = 0;
     double f[3];

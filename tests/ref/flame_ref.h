@@ -27,6 +27,10 @@ struct flame_ref_params {
     int stabilized;                  /* 0: literal diffusion, 1: §9 #4 convex weights */
     double omega_max, k_cool, fuel_eps;
     int resample_interval, insert_nbr_threshold;
+    /* Not in the digest: also scale the viscous force when its explicit number
+     * dt k_visc Σ(m/ρ_j)∇²W / ρ_i exceeds omega_max (stabilised mode only). 0 by default;
+     * the device tests set it to mirror server/effects/flame.c's documented choice. */
+    int cap_viscosity;
 };
 
 struct flame_ref_particle {
@@ -40,7 +44,7 @@ struct flame_ref_eval {
     double f_press[3], f_visc[3]; /* force densities */
     double dT_diff, dF_diff;      /* diffusion parts of dT/dt, dF/dt */
     double dT_react, dF_react;    /* reaction parts (0 unless a flame particle) */
-    double dT, dF;                /* totals (incl. -k_cool (T - T_amb)) */
+    double dT, dF;                /* totals: reaction + diffusion (cooling is applied in integrate) */
     double n[3];                  /* Müller colour-field normal, Σ (m/ρ) ∇W_poly6(r_i - r_j) */
     int nbr, flame_nbr;           /* j != i with |r_ij| <= h, and flame ones among them */
     int is_flame;
@@ -49,8 +53,12 @@ struct flame_ref_eval {
 /* Table 3.1 values plus the digest's proposals (§3, §10). */
 void flame_ref_defaults(struct flame_ref_params *p);
 /* Reads a complete flame parameter document (names of flame_params); missing entries
- * keep their current value in p. Returns the number of parameters read. */
+ * keep their current value in p; mass <= 0 means derived (§9 #6). Returns the number of
+ * parameters read. */
 int flame_ref_params_from_json(const cJSON *doc, struct flame_ref_params *p);
+
+/* §9 #6: the mass giving rho_rest on a cubic lattice of spacing d (poly6, self included). */
+double flame_ref_lattice_mass(double h, double d, double rho_rest);
 
 /* Kernels (digest §2.3); all vanish for r >= h. x is the argument vector. */
 double flame_ref_w_poly6(double r, double h);

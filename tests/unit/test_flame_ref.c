@@ -136,6 +136,7 @@ static void test_lattice_density(void)
     CHECK_NEAR(ev[c].rho, 1.0, 5e-3);
     CHECK(ev[c].nbr == 32, "interior neighbours %d, want 32", ev[c].nbr);
     CHECK(flame_ref_neighbours(&p, ps, n, c, NULL, 0) == 32, "brute-force neighbour count");
+    CHECK_NEAR(flame_ref_lattice_mass(p.h, p.h / 2, 1.0), 1.7626e-7, 1e-11);
     CHECK(ev[0].nbr == 10 && ev[0].rho < 0.6, "corner: %d neighbours, rho %g", ev[0].nbr, ev[0].rho);
     free(ps);
     free(ev);
