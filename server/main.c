@@ -19,7 +19,8 @@
 
 /* The embedded default: one stream per implemented effect, so `make run` shows something. */
 static const char *const main_default_streams =
-    "[{\"stream\":\"energy\",\"effect\":\"energy_wave\",\"params\":{}}]";
+    "[{\"stream\":\"energy\",\"effect\":\"energy_wave\",\"params\":{}},"
+    " {\"stream\":\"flame\",\"effect\":\"flame\",\"params\":{}}]";
 
 static struct net *main_net;
 
