@@ -83,7 +83,8 @@ def main():
     path = sys.argv[3]
     text = open(path).read()
     begin = "<!-- generated: %s parameters -->" % effect
-    start, end = text.index(begin), text.index("<!-- end of generated table -->")
+    start = text.index(begin)
+    end = text.index("<!-- end of generated table -->", start)
     end += len("<!-- end of generated table -->\n")
     current = text[start:end]
     if mode == "--check":

@@ -327,7 +327,8 @@ async def test_limits(t):
     """A daemon with small limits: limit errors, the rate limit and the connection limit (1013)."""
     cfg = tempfile.NamedTemporaryFile("w", suffix=".json", delete=False)
     json.dump({"limits": {"max_connections": 3, "max_streams": 2, "max_subscriptions": 1,
-                          "max_control_per_sec": 10}}, cfg)
+                          "max_control_per_sec": 10},
+               "streams": [{"stream": "energy", "effect": "energy_wave", "params": SMALL}]}, cfg)
     cfg.close()
     d = Daemon("--config", cfg.name)
     try:
