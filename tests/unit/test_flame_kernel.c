@@ -295,6 +295,29 @@ static void test_eval_mixed(void) { tfk_eval_case("2000 mixed, 3 clusters", NULL
 
 static void test_eval_far_apart(void) { tfk_eval_case("1200 in 6 clusters ±1e3 h", NULL, 1200, 6, 1); }
 
+/* Forced hash collisions: no parameter sets the table size (flame.c uses 2^k >= 2n keys,
+ * k >= 10, so 8192 here). 4000 particles in 1000 groups of 4 spread over h³ each, scattered
+ * over a 120 h box, occupy ~1000 x 8-27 cells of h/2: more occupied cells than keys, so by
+ * pigeonhole many rows share keys and must be told apart by the cell test. */
+static void test_eval_hash_collisions(void)
+{
+    struct flame_ref_params rp;
+    struct flame *fl = tfk_new(NULL, &rp);
+    if (!fl) return;
+    const int n = 4000;
+    struct flame_ref_particle *ps = tfk_random_set(&rp, n, 1, 0);
+    for (int i = 0; i < n; i += 4) {
+        double c[3] = {tfk_rand(-60, 60) * rp.h, tfk_rand(-60, 60) * rp.h, tfk_rand(-60, 60) * rp.h};
+        for (int j = i; j < i + 4; j++) {
+            for (int k = 0; k < 3; k++) ps[j].r[k] = c[k] + tfk_rand(-0.5, 0.5) * rp.h;
+            tfk_round(&ps[j]);
+        }
+    }
+    tfk_eval_compare("4000 in 1000 scattered groups", fl, &rp, ps, n);
+    free(ps);
+    flame_free(fl);
+}
+
 static void test_eval_symmetric_literal(void)
 {
     tfk_eval_case("symmetric pressure", "{\"pressure_form\":\"symmetric\"}", 600, 1, 0);
@@ -812,6 +835,7 @@ int main(void)
     RUN(test_eval_small);
     RUN(test_eval_mixed);
     RUN(test_eval_far_apart);
+    RUN(test_eval_hash_collisions);
     RUN(test_eval_symmetric_literal);
     RUN(test_eval_other_params);
     RUN(test_eval_lattice);
