@@ -5,20 +5,26 @@
  *   fl_radix_hist/scan/scatter   stable LSD radix sort of (key, index), 8 bits a pass
  *   fl_reorder        gathers the state into sorted order (double buffer)
  *   fl_cell_start     cs[k] = number of particles with key < k (so a run of keys is one range)
- *   fl_density        rho (poly6, eq 3.10), p (eq 3.11), neighbour and flame-neighbour counts
- *   fl_forces         pressure (sign fixed, §2.5/§9 #1), viscosity (3.13), heat/fuel diffusion
+ *   fl_density        rho (poly6, eq 3.10), p (eq 3.11), neighbour and flame-neighbour counts,
+ *                     and the neighbour list (up to FL_NL - 1 indices per particle)
+ *   fl_forces         walks that list (or the grid again for a particle that overflowed it):
+ *                     pressure (sign fixed, §2.5/§9 #1), viscosity (3.13), heat/fuel diffusion
  *                     (3.20/3.21, stabilised §9 #4), chemistry (3.17-3.19), buoyancy (3.16),
  *                     wind (§9 #15), symplectic Euler (3.14/3.15), solids (§2.13, §9 #16),
  *                     resampling decisions (§2.12, §9 #9-11) and the runaway flag
  *   fl_count/fl_scan_blocks/fl_compact   every resample_interval steps: survivors in order,
  *                     then inserted particles appended in parent order with fresh ids
  *
- * Neighbour gather (§2.11): cells have edge c = h/2 and key(cx,cy,cz) = (cx + P1 cy + P2 cz)
- * mod M, so the cells of one (cy,cz) row with consecutive cx have consecutive keys and, after
- * the sort, consecutive particles: a particle visits at most 25 rows, each one contiguous
+ * Neighbour gather (§2.11): cells have edge c = h / FL_CELLS_PER_H (flame.c; h by default) and
+ * key(cx,cy,cz) = (cx + P1 cy + P2 cz) mod M, so the cells of one (cy,cz) row with consecutive cx
+ * have consecutive keys and, after the sort, consecutive particles: a particle visits at most 9
+ * rows (25 with cells of h/2), each one contiguous
  * range [cs[k0], cs[k0+len]), trimmed to the part of the row the sphere of radius h reaches.
  * A candidate is accepted when r <= h and its own (cy,cz) is the row's, which filters hash
- * collisions and makes overlapping rows (tiny tables) count each neighbour once.
+ * collisions and makes overlapping rows (tiny tables) count each neighbour once. The candidate
+ * loop (about 6 candidates per neighbour, an unpredictable accept branch) costs far more than the
+ * pair arithmetic, so it runs once a step: fl_density records the accepted j != i in gather
+ * order and fl_forces reads them back (bench_flame: the forces pass 3.5x faster).
  * Parameters live in one __constant float array (indices FP_* shared with flame.c). */
 
 #define FP_H 0
@@ -191,9 +197,13 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
     }
 
 /* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11; clamped at 0 for the symmetric
- * form, §9 #3), neighbour counts j != i (nbr | flame_nbr << 16, §2.12). */
+ * form, §9 #3), neighbour counts j != i (nbr | flame_nbr << 16, §2.12), and the neighbour
+ * list: nl[i * FL_NL + k] for the nbr neighbours j != i in gather order when nbr < FL_NL (slot
+ * FL_NL - 1 is the branch-free scratch slot). fl_forces walks the list instead of the grid;
+ * a particle with more neighbours keeps no list and fl_forces gathers it from the grid again,
+ * so no neighbour is ever dropped. The sums run in the same order as the grid gather. */
 __kernel void fl_density(__global const float4 *pos, __global const float4 *vel, __global const uint *cs, uint mask,
-                         int n, prm_t P, __global float2 *rho_p, __global uint *counts)
+                         int n, prm_t P, __global float2 *rho_p, __global uint *counts, __global uint *nl)
 {
     int i = get_global_id(0);
     if (i >= n) return;
@@ -201,10 +211,12 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     float w = 0.0f;
     uint nb = 0, fnb = 0;
     const float tign = P[FP_TIGN], feps = P[FP_FEPS];
+    __global uint *L = nl + (size_t)i * FL_NL;
     FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
         float q = h2_ - r2;
         w += q * q * q;
         if (j != (uint)i) {
+            if (nb < FL_NL) L[nb] = j;
             nb++;
             fnb += (pj.w > tign && vel[j].w > feps) ? 1u : 0u;
         }
@@ -283,7 +295,8 @@ inline float2 fl_burn(float T, float F, float dTdiff, float dFdiff, int flame, p
  * decisions and the outward normal for fl_compact. */
 __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, __global const uint *flags,
                         __global const uint *id, __global const uint *cs, uint mask, int n, prm_t P,
-                        __global const float2 *rho_p, __global const uint *counts, __global float4 *pos2,
+                        __global const float2 *rho_p, __global const uint *counts, __global const uint *nl,
+                        __global float4 *pos2,
                         __global float4 *vel2, __global uint *flags2, __global uint *id2, __global float4 *force,
                         __global float2 *dTdF, int integrate, int resample, __global uint2 *keep_ins, __global float4 *nrm_out,
                         __global int *errflag)
@@ -294,9 +307,20 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
     float2 rpi = rho_p[i];
     uint fl = flags[i], type = fl & FL_TYPE;
     struct fl_acc a = {(float3)(0.0f), (float3)(0.0f), (float3)(0.0f), 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
-    FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
-        if (j != (uint)i) fl_pair(&a, pi, vi, rpi, pj, vel[j], rho_p[j], dx, r2, P);
-    })
+    uint nbl = counts[i] & 0xffffu;
+    if (nbl < FL_NL) { /* the list of fl_density: the same neighbours in the same order */
+        __global const uint *L = nl + (size_t)i * FL_NL;
+        for (uint k = 0; k < nbl; k++) {
+            uint j = L[k];
+            float4 pj = pos[j];
+            float3 dx = pi.xyz - pj.xyz;
+            fl_pair(&a, pi, vi, rpi, pj, vel[j], rho_p[j], dx, dot(dx, dx), P);
+        }
+    } else {
+        FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
+            if (j != (uint)i) fl_pair(&a, pi, vi, rpi, pj, vel[j], rho_p[j], dx, r2, P);
+        })
+    }
     float dt = P[FP_DT], rho = rpi.x;
     float dTdiff = fl_diffuse(a.dT, a.wT, P[FP_KH], P);
     float dFdiff = fl_diffuse(a.dF, a.wF, P[FP_KF], P);

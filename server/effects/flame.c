@@ -26,7 +26,12 @@
 #include "fxs_particles.h"
 
 #define FL_KERNEL_FILE "flame.cl"
-#define FL_BUILD_OPTS "-cl-mad-enable"
+#ifndef FL_NL
+#define FL_NL 64 /* neighbour-list slots per particle (lists of up to FL_NL - 1 neighbours) */
+#endif
+#define FL_STR2(x) #x
+#define FL_STR(x) FL_STR2(x)
+#define FL_BUILD_OPTS "-cl-mad-enable -DFL_NL=" FL_STR(FL_NL)
 #ifndef FL_LOCAL
 #define FL_LOCAL 64 /* work-group size of the per-particle kernels */
 #endif
@@ -149,7 +154,7 @@ struct flame {
     struct ocl *ocl;
     cl_kernel k[K_N];
     struct fl_set st[2];
-    cl_mem key[2], val[2], hist, cs, keep_ins, nrm, bsum, tot, errflag, prm;
+    cl_mem key[2], val[2], hist, cs, keep_ins, nrm, nl, bsum, tot, errflag, prm;
     int cur, n, cap, cs_cap;
     uint32_t mask;
     int passes;
@@ -277,9 +282,9 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
         return fl_clfail(err, "allocating particle buffers", rc);
     }
     fl->cur = 0;
-    cl_mem *aux[] = {&fl->key[0], &fl->key[1], &fl->val[0], &fl->val[1], &fl->keep_ins, &fl->nrm};
-    size_t asz[] = {4, 4, 4, 4, 8, 16};
-    for (int i = 0; i < 6 && rc == CL_SUCCESS; i++) {
+    cl_mem *aux[] = {&fl->key[0], &fl->key[1], &fl->val[0], &fl->val[1], &fl->keep_ins, &fl->nrm, &fl->nl};
+    size_t asz[] = {4, 4, 4, 4, 8, 16, 4 * FL_NL};
+    for (int i = 0; i < 7 && rc == CL_SUCCESS; i++) {
         fl_release(aux[i]);
         *aux[i] = fl_buffer(fl, asz[i] * cap, &rc);
     }
@@ -543,14 +548,14 @@ static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_er
     cl_int n = fl->n;
     cl_uint mask = fl->mask;
     struct fl_arg da[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(fl->cs), FL_INT(mask), FL_INT(n), FL_MEM(fl->prm),
-                          FL_MEM(A->rho_p), FL_MEM(A->counts)};
+                          FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(fl->nl)};
     struct fl_arg fa[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->cs),
                           FL_INT(mask), FL_INT(n), FL_MEM(fl->prm), FL_MEM(A->rho_p), FL_MEM(A->counts),
-                          FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id), FL_MEM(A->force),
+                          FL_MEM(fl->nl), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id), FL_MEM(A->force),
                           FL_MEM(A->dTdF), FL_INT(integrate), FL_INT(resample), FL_MEM(fl->keep_ins),
                           FL_MEM(fl->nrm), FL_MEM(fl->errflag)};
-    if (fl_args(fl, K_DENSITY, da, 8, err) || fl_launch(fl, K_DENSITY, (size_t)n, 0, err) ||
-        fl_args(fl, K_FORCES, fa, 21, err) || fl_launch(fl, K_FORCES, (size_t)n, 0, err))
+    if (fl_args(fl, K_DENSITY, da, 9, err) || fl_launch(fl, K_DENSITY, (size_t)n, 0, err) ||
+        fl_args(fl, K_FORCES, fa, 22, err) || fl_launch(fl, K_FORCES, (size_t)n, 0, err))
         return -1;
     return 0;
 }
@@ -759,7 +764,7 @@ void flame_free(struct flame *fl)
     for (int s = 0; s < 2; s++)
         for (int i = 0; i < 8; i++) fl_release(fl_set_mem(&fl->st[s], i));
     cl_mem *m[] = {&fl->key[0], &fl->key[1], &fl->val[0], &fl->val[1], &fl->hist, &fl->cs, &fl->keep_ins,
-                   &fl->nrm, &fl->bsum, &fl->tot, &fl->errflag, &fl->prm};
+                   &fl->nrm, &fl->nl, &fl->bsum, &fl->tot, &fl->errflag, &fl->prm};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
     for (int k = 0; k < K_N; k++)
         if (fl->k[k]) clReleaseKernel(fl->k[k]);
