@@ -198,29 +198,84 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
 
 /* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11; clamped at 0 for the symmetric
  * form, §9 #3), neighbour counts j != i (nbr | flame_nbr << 16, §2.12), and the neighbour
- * list: nl[i * FL_NL + k] for the nbr neighbours j != i in gather order when nbr < FL_NL (slot
- * FL_NL - 1 is the branch-free scratch slot). fl_forces walks the list instead of the grid;
- * a particle with more neighbours keeps no list and fl_forces gathers it from the grid again,
- * so no neighbour is ever dropped. The sums run in the same order as the grid gather. */
+ * list: nl[i * FL_NL + k] for the nbr neighbours j != i in gather order when nbr < FL_NL - 1
+ * (slot FL_NL - 1 takes the overflow writes). fl_forces walks the list instead of the grid; a
+ * particle with more neighbours keeps no valid list and both passes gather it from the grid
+ * again, so no neighbour is ever dropped. The candidate scan runs 8 candidates at a time as
+ * float8 lanes (PoCL emits AVX for it), the row test as float compares (floor(y/c) == cy  <=>
+ * cy <= y/c < cy + 1; convert_int8_rtn is slow on PoCL), and the accepted lanes are appended
+ * one set bit at a time (bench_flame 50k: density 20.7 -> 14 ms). */
 __kernel void fl_density(__global const float4 *pos, __global const float4 *vel, __global const uint *cs, uint mask,
                          int n, prm_t P, __global float2 *rho_p, __global uint *counts, __global uint *nl)
 {
     int i = get_global_id(0);
     if (i >= n) return;
     float4 pi = pos[i];
-    float w = 0.0f;
+    float8 w8 = (float8)(0.0f);
     uint nb = 0, fnb = 0;
     const float tign = P[FP_TIGN], feps = P[FP_FEPS];
     __global uint *L = nl + (size_t)i * FL_NL;
-    FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
-        float q = h2_ - r2;
-        w += q * q * q;
-        if (j != (uint)i) {
-            if (nb < FL_NL) L[nb] = j;
-            nb++;
-            fnb += (pj.w > tign && vel[j].w > feps) ? 1u : 0u;
+    const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_;
+    const uint m_ = mask + 1u;
+    const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    const int ylo_ = (int)floor((pi.y - h_) * ic_), yhi_ = (int)floor((pi.y + h_) * ic_);
+    const int zlo_ = (int)floor((pi.z - h_) * ic_), zhi_ = (int)floor((pi.z + h_) * ic_);
+    for (int cz_ = zlo_; cz_ <= zhi_; cz_++) {
+        float ez_ = fmax(0.0f, fmax(cz_ * c_ - pi.z, pi.z - (cz_ + 1) * c_));
+        for (int cy_ = ylo_; cy_ <= yhi_; cy_++) {
+            float ey_ = fmax(0.0f, fmax(cy_ * c_ - pi.y, pi.y - (cy_ + 1) * c_));
+            float rr_ = h_ * h_ - ey_ * ey_ - ez_ * ez_;
+            if (rr_ < 0.0f) continue;
+            float rx_ = sqrt(rr_) * 1.0001f;
+            int xlo_ = (int)floor((pi.x - rx_) * ic_), xhi_ = (int)floor((pi.x + rx_) * ic_);
+            uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_)) & mask;
+            uint k1_ = k0_ + (uint)(xhi_ - xlo_ + 1);
+            const float fcy_ = (float)cy_, fcz_ = (float)cz_;
+            for (int part_ = 0; part_ < 2; part_++) {
+                uint a_, b_;
+                if (part_ == 0) { a_ = cs[k0_]; b_ = cs[min(k1_, m_)]; }
+                else if (k1_ > m_) { a_ = cs[0]; b_ = cs[k1_ - m_]; }
+                else break;
+                /* 8 candidates a step as float8 lanes (the buffers are padded by FL_PAD) */
+                for (uint j0 = a_; j0 < b_; j0 += 8u) {
+                    __global const float *pp = (__global const float *)(pos + j0);
+                    float16 A = vload16(0, pp), B = vload16(1, pp);
+                    float8 dX = pi.x - (float8)(A.s048c, B.s048c);
+                    float8 Y = (float8)(A.s159d, B.s159d), Z = (float8)(A.s26ae, B.s26ae);
+                    float8 dY = pi.y - Y, dZ = pi.z - Z;
+                    float8 r2 = dX * dX + dY * dY + dZ * dZ;
+                    float8 yc = Y * ic_, zc = Z * ic_; /* floor(yc) == cy  <=>  cy <= yc < cy + 1 */
+                    int8 ok = (r2 <= h2_) & (lane < (int)(b_ - j0)) & (yc >= fcy_) & (yc < fcy_ + 1.0f) &
+                              (zc >= fcz_) & (zc < fcz_ + 1.0f);
+                    float8 q = h2_ - r2;
+                    w8 += select((float8)(0.0f), q * q * q, ok);
+                    /* accepted lanes as bits (self excluded), then one iteration per neighbour */
+                    int8 bv = select((int8)(0), (int8)(1, 2, 4, 8, 16, 32, 64, 128), ok);
+                    int4 b4 = bv.lo | bv.hi;
+                    uint bits = (uint)(b4.x | b4.y | b4.z | b4.w);
+                    if ((uint)i - j0 < 8u) bits &= ~(1u << ((uint)i - j0));
+                    while (bits) {
+                        uint low = bits & (0u - bits);
+                        L[min(nb, (uint)(FL_NL - 1))] = j0 + (uint)(31 - clz(low));
+                        nb++;
+                        bits ^= low;
+                    }
+                }
+            }
         }
-    })
+    }
+    if (nb < FL_NL - 1) {
+        for (uint k = 0; k < nb; k++) {
+            uint j = L[k];
+            fnb += (pos[j].w > tign && vel[j].w > feps) ? 1u : 0u;
+        }
+    } else {
+        FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
+            if (j != (uint)i) fnb += (pj.w > tign && vel[j].w > feps) ? 1u : 0u;
+        })
+    }
+    float4 w4 = w8.lo + w8.hi;
+    float w = (w4.x + w4.y) + (w4.z + w4.w);
     float rho = w * P[FP_POLY6];
     float p = P[FP_KSTIFF] * (rho - P[FP_RHO0]);
     if (P[FP_SYMMETRIC] != 0.0f) p = fmax(p, 0.0f);
@@ -308,7 +363,7 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
     uint fl = flags[i], type = fl & FL_TYPE;
     struct fl_acc a = {(float3)(0.0f), (float3)(0.0f), (float3)(0.0f), 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
     uint nbl = counts[i] & 0xffffu;
-    if (nbl < FL_NL) { /* the list of fl_density: the same neighbours in the same order */
+    if (nbl < FL_NL - 1) { /* the list of fl_density: the same neighbours in the same order */
         __global const uint *L = nl + (size_t)i * FL_NL;
         for (uint k = 0; k < nbl; k++) {
             uint j = L[k];

@@ -38,6 +38,7 @@
 #ifndef FL_CELLS_PER_H
 #define FL_CELLS_PER_H 1.0 /* cells of edge h: 9 rows of 3 cells beat 25 rows of h/2 (bench_flame) */
 #endif
+#define FL_PAD 8           /* spare elements after every state buffer: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
 #define FL_VMAX 200.0      /* |v| beyond this (m/s) is a runaway */
@@ -266,7 +267,8 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
     cl_int rc = CL_SUCCESS;
     struct fl_set ns[2] = {{0}};
     for (int s = 0; s < 2 && rc == CL_SUCCESS; s++)
-        for (int i = 0; i < 8 && rc == CL_SUCCESS; i++) *fl_set_mem(&ns[s], i) = fl_buffer(fl, fl_sizes[i] * cap, &rc);
+        for (int i = 0; i < 8 && rc == CL_SUCCESS; i++)
+            *fl_set_mem(&ns[s], i) = fl_buffer(fl, fl_sizes[i] * ((size_t)cap + FL_PAD), &rc);
     for (int i = 0; i < 4 && rc == CL_SUCCESS && fl->n > 0; i++) /* the state of the current set */
         rc = clEnqueueCopyBuffer(ocl_queue(fl->ocl), *fl_set_mem(&fl->st[fl->cur], i), *fl_set_mem(&ns[0], i), 0, 0,
                                  fl_sizes[i] * fl->n, 0, NULL, NULL);
