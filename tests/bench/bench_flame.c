@@ -135,7 +135,8 @@ static int bench_emit(void *ctx, const struct effect_frame *f)
 static void bench_default(struct ocl *ocl, double warm_s, int frames)
 {
     struct fx_err err;
-    cJSON *doc = bench_doc("{}");
+    const char *ov = getenv("BENCH_FLAME_SCENE"); /* JSON overrides of the default scene, for experiments */
+    cJSON *doc = bench_doc(ov ? ov : "{}");
     struct flame *fl = flame_effect.create(ocl, doc, &err);
     if (!fl) bench_die("create", &err);
     double dt = params_num(doc, "dt");
@@ -153,8 +154,20 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     }
     double wall = bench_now() - t0, sim = flame_effect.sim_seconds(fl) - sim0;
     double ps = nsum / frames * (double)(flame_steps(fl) - st0) / wall;
-    printf("flame default warm-up %.1f s simulated (%llu steps) in %.1f s wall, N %d\n", warm_s,
-           (unsigned long long)st0, warm_wall, flame_count(fl));
+    struct flame_particles rb;
+    if (flame_read(fl, &rb, &err)) bench_die("read", &err);
+    int nflame = 0;
+    double zf = 0, zmax = 0;
+    for (int i = 0; i < rb.n; i++)
+        if ((rb.flags[i] & FLAME_TYPE_MASK) == FLAME_GAS && (rb.flags[i] & FLAME_IS_FLAME)) {
+            nflame++;
+            zf += rb.pos[4 * i + 2];
+            if (rb.pos[4 * i + 2] > zmax) zmax = rb.pos[4 * i + 2];
+        }
+    flame_particles_free(&rb);
+    printf("flame default warm-up %.1f s simulated (%llu steps) in %.1f s wall, N %d, gas flame particles %d "
+           "(mean z %.4f m, top %.4f m)\n", warm_s, (unsigned long long)st0, warm_wall, flame_count(fl), nflame,
+           nflame ? zf / nflame : 0.0, zmax);
     printf("flame default N %.0f dt %.4f s: %.2f ms/frame of 1/30 s, real-time factor %.2f, %.2f M particle-steps/s, "
            "%.0f kB/frame\n",
            nsum / frames, dt, wall * 1e3 / frames, sim / wall, ps * 1e-6, bytes / 1024.0 / frames);
