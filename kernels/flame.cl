@@ -265,12 +265,7 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
             }
         }
     }
-    if (nb < FL_NL - 1) {
-        for (uint k = 0; k < nb; k++) {
-            uint j = L[k];
-            fnb += (pos[j].w > tign && vel[j].w > feps) ? 1u : 0u;
-        }
-    } else {
+    if (nb >= FL_NL - 1) { /* no list: the flame neighbours from the grid (fl_forces counts them otherwise) */
         FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
             if (j != (uint)i) fnb += (pj.w > tign && vel[j].w > feps) ? 1u : 0u;
         })
@@ -281,7 +276,7 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     float p = P[FP_KSTIFF] * (rho - P[FP_RHO0]);
     if (P[FP_SYMMETRIC] != 0.0f) p = fmax(p, 0.0f);
     rho_p[i] = (float2)(rho, p);
-    counts[i] = min(nb, 65535u) | (min(fnb, 65535u) << 16);
+    counts[i] = min(nb, 65535u) | (min(fnb, 65535u) << 16); /* fnb completed by fl_forces for a list */
 }
 
 /* Sums of one pass-2 gather. */
@@ -351,7 +346,7 @@ inline float2 fl_burn(float T, float F, float dTdiff, float dFdiff, int flame, p
  * decisions and the outward normal for fl_compact. */
 __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, __global const uint *flags,
                         __global const uint *id, __global const uint *cs, uint mask, int n, prm_t P,
-                        __global const float2 *rho_p, __global const uint *counts, __global const uint *nl,
+                        __global const float2 *rho_p, __global uint *counts, __global const uint *nl,
                         __global float4 *pos2,
                         __global float4 *vel2, __global uint *flags2, __global uint *id2, __global float4 *force,
                         __global float2 *dTdF, int integrate, int resample, __global uint2 *keep_ins, __global float4 *nrm_out,
@@ -366,13 +361,15 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
     uint nbl = counts[i] & 0xffffu;
     if (nbl < FL_NL - 1) { /* the list of fl_density: the same neighbours in the same order */
         __global const uint *L = nl + (size_t)i * FL_NL;
-        uint k = 0;
+        const float tign = P[FP_TIGN], feps = P[FP_FEPS];
+        uint k = 0, fnb = 0;
         if (nbl >= 8u) {
             /* 8 neighbours a step as float8 lanes: fl_pair's sums, gathered then transposed */
             const float h = P[FP_H], h2 = P[FP_H2], spiky = P[FP_SPIKY], mass = P[FP_MASS];
             const float sym = P[FP_SYMMETRIC] != 0.0f ? 1.0f : 0.0f;
             float8 fx = 0.0f, fy = 0.0f, fz = 0.0f, ux = 0.0f, uy = 0.0f, uz = 0.0f, nx = 0.0f, ny = 0.0f,
                    nz = 0.0f, sT = 0.0f, sV = 0.0f, sF = 0.0f, sWF = 0.0f;
+            int8 nfl = 0;
             for (; k + 8u <= nbl; k += 8u) {
                 uint8 J = vload8(0, L + k);
                 float4 p0 = pos[J.s0], p1 = pos[J.s1], p2 = pos[J.s2], p3 = pos[J.s3], p4 = pos[J.s4],
@@ -389,6 +386,7 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
                 float8 VY = (float8)(v0.y, v1.y, v2.y, v3.y, v4.y, v5.y, v6.y, v7.y);
                 float8 VZ = (float8)(v0.z, v1.z, v2.z, v3.z, v4.z, v5.z, v6.z, v7.z);
                 float8 FJ = (float8)(v0.w, v1.w, v2.w, v3.w, v4.w, v5.w, v6.w, v7.w);
+                nfl -= (TJ > tign) & (FJ > feps); /* flame neighbours (true lanes are -1) */
                 float8 RJ = (float8)(q0.x, q1.x, q2.x, q3.x, q4.x, q5.x, q6.x, q7.x);
                 float8 PJ = (float8)(q0.y, q1.y, q2.y, q3.y, q4.y, q5.y, q6.y, q7.y);
                 float8 r2 = dX * dX + dY * dY + dZ * dZ, r = sqrt(r2), vol = mass / RJ;
@@ -422,13 +420,17 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
             a.dF = FL_HSUM8(sF);
             a.wF = FL_HSUM8(sWF);
 #undef FL_HSUM8
+            int4 n4 = nfl.lo + nfl.hi;
+            fnb = (uint)((n4.x + n4.y) + (n4.z + n4.w));
         }
         for (; k < nbl; k++) {
             uint j = L[k];
-            float4 pj = pos[j];
+            float4 pj = pos[j], vj = vel[j];
             float3 dx = pi.xyz - pj.xyz;
-            fl_pair(&a, pi, vi, rpi, pj, vel[j], rho_p[j], dx, dot(dx, dx), P);
+            fl_pair(&a, pi, vi, rpi, pj, vj, rho_p[j], dx, dot(dx, dx), P);
+            fnb += (pj.w > tign && vj.w > feps) ? 1u : 0u;
         }
+        counts[i] = nbl | (min(fnb, 65535u) << 16); /* the flame-neighbour count of fl_density's list */
     } else {
         FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
             if (j != (uint)i) fl_pair(&a, pi, vi, rpi, pj, vel[j], rho_p[j], dx, r2, P);
