@@ -38,6 +38,7 @@
 #ifndef FL_CELLS_PER_H
 #define FL_CELLS_PER_H 1.0 /* cells of edge h: 9 rows of 3 cells beat 25 rows of h/2 (bench_flame) */
 #endif
+#define FL_FRAME_BUDGET_MS 30.0 /* most wall time of the substeps of one frame (fl_step) */
 #define FL_PAD 8           /* spare elements after every state buffer: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
@@ -919,8 +920,20 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
     } else {
         fl->carry -= n * fl->dt;
     }
-    for (int s = 0; s < n; s++)
+    /* Wall-clock budget: when the next resample_interval steps would end past FL_FRAME_BUDGET_MS
+     * the frame goes out and the rest of the backlog is dropped (carry 0), so a slow scene
+     * streams at a steady frame rate and the real-time factor in /metrics reports the simulated
+     * rate. The host waits for the device at every resampling step, so the clock is read there. */
+    double t0 = fl_now_ms();
+    for (int s = 0; s < n; s++) {
+        int synced = fl->steps % (uint64_t)fl->interval == 0;
         if (fl_step_once(fl, err)) return -1;
+        double el = fl_now_ms() - t0;
+        if (synced && s + 1 < n && el + el / (s + 1) * fl->interval > FL_FRAME_BUDGET_MS) {
+            fl->carry = 0;
+            break;
+        }
+    }
     return fl_emit_frame(fl, emit, ctx, err);
 }
 
