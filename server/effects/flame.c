@@ -31,7 +31,9 @@
 #endif
 #define FL_STR2(x) #x
 #define FL_STR(x) FL_STR2(x)
-#define FL_BUILD_OPTS "-cl-mad-enable -DFL_NL=" FL_STR(FL_NL)
+/* -cl-unsafe-math-optimizations (reassociation, reciprocals; not finite-math, so the NaN/Inf
+ * runaway check still works): about 10% on bench_flame, device-vs-reference tests unchanged. */
+#define FL_BUILD_OPTS "-cl-mad-enable -cl-unsafe-math-optimizations -DFL_NL=" FL_STR(FL_NL)
 #ifndef FL_LOCAL
 #define FL_LOCAL 64 /* work-group size of the per-particle kernels */
 #endif
