@@ -139,12 +139,17 @@ __kernel void fl_radix_scatter(__global const uint *kin, __global const uint *vi
 
 __kernel void fl_reorder(__global const uint *val, int n, __global const float4 *pos, __global const float4 *vel,
                          __global const uint *flags, __global const uint *id, __global float4 *pos2,
-                         __global float4 *vel2, __global uint *flags2, __global uint *id2)
+                         __global float4 *vel2, __global uint *flags2, __global uint *id2, __global float *sxyz,
+                         int stride)
 {
     int i = get_global_id(0);
     if (i >= n) return;
     uint s = val[i];
-    pos2[i] = pos[s];
+    float4 p = pos[s];
+    pos2[i] = p;
+    sxyz[i] = p.x; /* x, y, z again as three arrays for the 8-wide loads of fl_density */
+    sxyz[stride + i] = p.y;
+    sxyz[2 * stride + i] = p.z;
     vel2[i] = vel[s];
     flags2[i] = flags[s];
     id2[i] = id[s];
@@ -205,9 +210,12 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
  * again, so no neighbour is ever dropped. The candidate scan runs 8 candidates at a time as
  * float8 lanes (PoCL emits AVX for it), the row test as float compares (floor(y/c) == cy  <=>
  * cy <= y/c < cy + 1; convert_int8_rtn is slow on PoCL), and the accepted lanes are appended
- * one set bit at a time (bench_flame 50k: density 20.7 -> 14 ms). */
+ * one set bit at a time (bench_flame 50k: density 20.7 -> 14 ms); x, y, z come from the
+ * sorted arrays of fl_reorder (sxyz: three plain vload8 instead of two vload16 and shuffles,
+ * another 10%). */
 __kernel void fl_density(__global const float4 *pos, __global const float4 *vel, __global const uint *cs, uint mask,
-                         int n, prm_t P, __global float2 *rho_p, __global uint *counts, __global uint *nl)
+                         int n, prm_t P, __global float2 *rho_p, __global uint *counts, __global uint *nl,
+                         __global const float *sxyz, int stride)
 {
     int i = get_global_id(0);
     if (i >= n) return;
@@ -237,12 +245,10 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
                 if (part_ == 0) { a_ = cs[k0_]; b_ = cs[min(k1_, m_)]; }
                 else if (k1_ > m_) { a_ = cs[0]; b_ = cs[k1_ - m_]; }
                 else break;
-                /* 8 candidates a step as float8 lanes (the buffers are padded by FL_PAD) */
+                /* 8 candidates a step as float8 lanes (sxyz arrays padded by FL_PAD) */
                 for (uint j0 = a_; j0 < b_; j0 += 8u) {
-                    __global const float *pp = (__global const float *)(pos + j0);
-                    float16 A = vload16(0, pp), B = vload16(1, pp);
-                    float8 dX = pi.x - (float8)(A.s048c, B.s048c);
-                    float8 Y = (float8)(A.s159d, B.s159d), Z = (float8)(A.s26ae, B.s26ae);
+                    float8 dX = pi.x - vload8(0, sxyz + j0);
+                    float8 Y = vload8(0, sxyz + stride + j0), Z = vload8(0, sxyz + 2 * stride + j0);
                     float8 dY = pi.y - Y, dZ = pi.z - Z;
                     float8 r2 = dX * dX + dY * dY + dZ * dZ;
                     float8 yc = Y * ic_, zc = Z * ic_; /* floor(yc) == cy  <=>  cy <= yc < cy + 1 */

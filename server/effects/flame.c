@@ -41,7 +41,7 @@
 #define FL_CELLS_PER_H 1.0 /* cells of edge h: 9 rows of 3 cells beat 25 rows of h/2 (bench_flame) */
 #endif
 #define FL_FRAME_BUDGET_MS 30.0 /* most wall time of the substeps of one frame (fl_step) */
-#define FL_PAD 8           /* spare elements after every state buffer: fl_density reads 8 at a time */
+#define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
 #define FL_VMAX 200.0      /* |v| beyond this (m/s) is a runaway */
@@ -159,6 +159,7 @@ struct flame {
     cl_kernel k[K_N];
     struct fl_set st[2];
     cl_mem key[2], val[2], hist, cs, keep_ins, nrm, nl, bsum, tot, errflag, prm;
+    cl_mem sxyz; /* sorted x, y, z as three arrays of stride cap + FL_PAD (fl_reorder -> fl_density) */
     int cur, n, cap, cs_cap;
     uint32_t mask;
     int passes;
@@ -270,8 +271,7 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
     cl_int rc = CL_SUCCESS;
     struct fl_set ns[2] = {{0}};
     for (int s = 0; s < 2 && rc == CL_SUCCESS; s++)
-        for (int i = 0; i < 8 && rc == CL_SUCCESS; i++)
-            *fl_set_mem(&ns[s], i) = fl_buffer(fl, fl_sizes[i] * ((size_t)cap + FL_PAD), &rc);
+        for (int i = 0; i < 8 && rc == CL_SUCCESS; i++) *fl_set_mem(&ns[s], i) = fl_buffer(fl, fl_sizes[i] * cap, &rc);
     for (int i = 0; i < 4 && rc == CL_SUCCESS && fl->n > 0; i++) /* the state of the current set */
         rc = clEnqueueCopyBuffer(ocl_queue(fl->ocl), *fl_set_mem(&fl->st[fl->cur], i), *fl_set_mem(&ns[0], i), 0, 0,
                                  fl_sizes[i] * fl->n, 0, NULL, NULL);
@@ -293,6 +293,8 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
         fl_release(aux[i]);
         *aux[i] = fl_buffer(fl, asz[i] * cap, &rc);
     }
+    fl_release(&fl->sxyz);
+    if (rc == CL_SUCCESS) fl->sxyz = fl_buffer(fl, 3 * sizeof(cl_float) * ((size_t)cap + FL_PAD), &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "allocating sort buffers", rc);
     fl->cap = cap;
     return 0;
@@ -536,10 +538,12 @@ static int fl_sort(struct flame *fl, struct fx_err *err)
             fl_args(fl, K_SCATTER, sa, 7, err) || fl_launch(fl, K_SCATTER, FL_BLOCKS, 1, err))
             return -1;
     }
+    cl_int stride = fl->cap + FL_PAD;
     struct fl_arg ra[] = {FL_MEM(fl->val[s]), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
-                          FL_MEM(A->id), FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id)};
+                          FL_MEM(A->id), FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id),
+                          FL_MEM(fl->sxyz), FL_INT(stride)};
     struct fl_arg ca[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(m), FL_MEM(fl->cs)};
-    if (fl_args(fl, K_REORDER, ra, 10, err) || fl_launch(fl, K_REORDER, (size_t)n, 0, err) ||
+    if (fl_args(fl, K_REORDER, ra, 12, err) || fl_launch(fl, K_REORDER, (size_t)n, 0, err) ||
         fl_args(fl, K_CSTART, ca, 4, err) || fl_launch(fl, K_CSTART, (size_t)n + 1, 0, err))
         return -1;
     return 0;
@@ -550,16 +554,16 @@ static int fl_sort(struct flame *fl, struct fx_err *err)
 static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_err *err)
 {
     struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
-    cl_int n = fl->n;
+    cl_int n = fl->n, stride = fl->cap + FL_PAD;
     cl_uint mask = fl->mask;
     struct fl_arg da[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(fl->cs), FL_INT(mask), FL_INT(n), FL_MEM(fl->prm),
-                          FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(fl->nl)};
+                          FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(fl->nl), FL_MEM(fl->sxyz), FL_INT(stride)};
     struct fl_arg fa[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->cs),
                           FL_INT(mask), FL_INT(n), FL_MEM(fl->prm), FL_MEM(A->rho_p), FL_MEM(A->counts),
                           FL_MEM(fl->nl), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id), FL_MEM(A->force),
                           FL_MEM(A->dTdF), FL_INT(integrate), FL_INT(resample), FL_MEM(fl->keep_ins),
                           FL_MEM(fl->nrm), FL_MEM(fl->errflag)};
-    if (fl_args(fl, K_DENSITY, da, 9, err) || fl_launch(fl, K_DENSITY, (size_t)n, 0, err) ||
+    if (fl_args(fl, K_DENSITY, da, 11, err) || fl_launch(fl, K_DENSITY, (size_t)n, 0, err) ||
         fl_args(fl, K_FORCES, fa, 22, err) || fl_launch(fl, K_FORCES, (size_t)n, 0, err))
         return -1;
     return 0;
@@ -769,7 +773,7 @@ void flame_free(struct flame *fl)
     for (int s = 0; s < 2; s++)
         for (int i = 0; i < 8; i++) fl_release(fl_set_mem(&fl->st[s], i));
     cl_mem *m[] = {&fl->key[0], &fl->key[1], &fl->val[0], &fl->val[1], &fl->hist, &fl->cs, &fl->keep_ins,
-                   &fl->nrm, &fl->nl, &fl->bsum, &fl->tot, &fl->errflag, &fl->prm};
+                   &fl->nrm, &fl->nl, &fl->sxyz, &fl->bsum, &fl->tot, &fl->errflag, &fl->prm};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
     for (int k = 0; k < K_N; k++)
         if (fl->k[k]) clReleaseKernel(fl->k[k]);
