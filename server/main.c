@@ -42,15 +42,14 @@ static int main_create_stream(struct server *srv, const cJSON *def, struct fx_er
     const struct effect_ops *fx = effect_find(effect->valuestring);
     if (!fx) return fx_fail(err, "unknown_effect", "effect", "stream %s: no effect named \"%s\"", name->valuestring,
                             effect->valuestring);
-    cJSON *defaults = params_defaults(fx->params), *empty = cJSON_CreateObject(), *doc = NULL;
-    int rc = params_merge(fx->params, defaults, params ? params : empty, &doc, err);
-    if (!rc && fx->check) rc = fx->check(doc, err);
+    cJSON *doc = effect_params(fx, NULL, params, err);
+    if (!doc) return -1;
     uint32_t r = cJSON_IsNumber(rev) && rev->valuedouble >= 1 ? (uint32_t)rev->valuedouble : 1;
-    if (!rc) rc = hub_create(&srv->hub, fx, name->valuestring, doc, r, err);
-    if (rc) cJSON_Delete(doc);
-    cJSON_Delete(defaults);
-    cJSON_Delete(empty);
-    return rc;
+    if (hub_create(&srv->hub, fx, name->valuestring, doc, r, err)) {
+        cJSON_Delete(doc);
+        return -1;
+    }
+    return 0;
 }
 
 static int main_create_streams(struct server *srv, struct fx_err *err)

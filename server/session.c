@@ -227,19 +227,6 @@ static int session_op_describe(struct session *ss, const cJSON *req, const cJSON
     return 0;
 }
 
-/* Validates partial against base and the effect's cross-field rules. */
-static cJSON *session_merge(const struct effect_ops *fx, const cJSON *base, const cJSON *partial,
-                            struct fx_err *err)
-{
-    cJSON *doc;
-    if (params_merge(fx->params, base, partial, &doc, err)) return NULL;
-    if (fx->check && fx->check(doc, err)) {
-        cJSON_Delete(doc);
-        return NULL;
-    }
-    return doc;
-}
-
 static int session_op_create(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
     static const char *const allowed[] = {"effect", "stream", "params", NULL};
@@ -247,12 +234,7 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
     const struct effect_ops *fx = session_effect(req, err);
     const char *name = fx ? session_str(req, "stream", err) : NULL;
     if (!name) return -1;
-    const cJSON *partial = cJSON_GetObjectItemCaseSensitive(req, "params");
-    cJSON *defaults = params_defaults(fx->params);
-    cJSON *empty = cJSON_CreateObject();
-    cJSON *doc = session_merge(fx, defaults, partial ? partial : empty, err);
-    cJSON_Delete(defaults);
-    cJSON_Delete(empty);
+    cJSON *doc = effect_params(fx, NULL, cJSON_GetObjectItemCaseSensitive(req, "params"), err);
     if (!doc) return -1;
     if (hub_create(&ss->srv->hub, fx, name, doc, 1, err)) {
         cJSON_Delete(doc);
@@ -389,7 +371,7 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     if (!s) return -1;
     uint32_t rev;
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
-    cJSON *doc = session_merge(s->effect, cur, partial, err);
+    cJSON *doc = effect_params(s->effect, cur, partial, err);
     cJSON_Delete(cur);
     if (!doc) {
         stream_unref(s);

@@ -6,6 +6,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "jsonfile.h"
 #include "log.h"
 #include "store.h"
 
@@ -72,26 +73,19 @@ void store_save(struct server *srv)
     free(text);
 }
 
+/* Far above any real state (max_streams documents), small enough to refuse a runaway file. */
+#define STORE_MAX_BYTES (256L << 20)
+
 int store_load(const struct server *srv, cJSON **streams, struct fx_err *err)
 {
     *streams = NULL;
     if (!srv->cfg.state_dir[0]) return 0;
     char path[PATH_MAX + 32];
     snprintf(path, sizeof path, "%s/streams.json", srv->cfg.state_dir);
-    FILE *f = fopen(path, "rb");
-    if (!f) {
+    if (jsonfile_read(path, STORE_MAX_BYTES, streams)) {
         if (errno == ENOENT) return 0;
         return fx_fail(err, "internal", NULL, "cannot read %s: %s", path, strerror(errno));
     }
-    char *text = NULL;
-    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
-    if (size >= 0 && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1))) {
-        size_t got = fread(text, 1, (size_t)size, f);
-        text[got] = 0;
-    }
-    fclose(f);
-    *streams = text ? cJSON_Parse(text) : NULL;
-    free(text);
     if (!cJSON_IsArray(*streams)) {
         cJSON_Delete(*streams);
         *streams = NULL;

@@ -1,4 +1,5 @@
-/* registry.c — the list of effects the daemon can run.
+/* registry.c — the list of effects the daemon can run, and the validation of their
+ * parameter documents that every entry point shares.
  *
  * Adding an effect is one line here plus its module; the protocol (`hello`,
  * `describe`, `create`) reads everything else from the effect's own table. */
@@ -22,4 +23,20 @@ const struct effect_ops *effect_find(const char *name)
     for (int i = 0; registry_effects[i]; i++)
         if (strcmp(registry_effects[i]->name, name) == 0) return registry_effects[i];
     return NULL;
+}
+
+cJSON *effect_params(const struct effect_ops *fx, const cJSON *base, const cJSON *partial, struct fx_err *err)
+{
+    cJSON *defaults = base ? NULL : params_defaults(fx->params);
+    cJSON *empty = partial ? NULL : cJSON_CreateObject();
+    cJSON *doc = NULL;
+    if (!base && !defaults) fx_fail(err, "internal", NULL, "effect %s: invalid default parameters", fx->name);
+    else if (!params_merge(fx->params, base ? base : defaults, partial ? partial : empty, &doc, err) && fx->check &&
+             fx->check(doc, err)) {
+        cJSON_Delete(doc);
+        doc = NULL;
+    }
+    cJSON_Delete(defaults);
+    cJSON_Delete(empty);
+    return doc;
 }
