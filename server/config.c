@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "config.h"
+#include "jsonfile.h"
 #include "log.h"
 
 void config_usage(FILE *out)
@@ -139,32 +140,29 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
         cfg->port = (int)e->valuedouble;
         return 0;
     }
-    if (!cJSON_IsString(e)) return fx_fail(err, "bad_request", k, "%s: expected a string (or unknown key)", k);
+    static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "log_level", NULL};
+    bool known = false;
+    for (const char *const *n = string_keys; *n && !known; n++) known = !strcmp(*n, k);
+    if (!known) return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
+    if (!cJSON_IsString(e)) return fx_fail(err, "bad_request", k, "%s: expected a string", k);
     const char *v = e->valuestring;
     if (!strcmp(k, "listen")) return config_str(cfg->listen, sizeof cfg->listen, v, k, err);
     if (!strcmp(k, "state_dir")) return config_str(cfg->state_dir, sizeof cfg->state_dir, v, k, err);
     if (!strcmp(k, "web_root")) return config_str(cfg->web_root, sizeof cfg->web_root, v, k, err);
     if (!strcmp(k, "device")) return config_device(v, cfg->device, sizeof cfg->device, err);
-    if (!strcmp(k, "log_level")) {
-        int lv = log_parse_level(v);
-        if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
-        cfg->log_level = lv;
-        return 0;
-    }
-    return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
+    int lv = log_parse_level(v); /* the last string key: log_level */
+    if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
+    cfg->log_level = lv;
+    return 0;
 }
+
+#define CONFIG_MAX_BYTES (16L << 20)
 
 static int config_load_file(struct config *cfg, const char *path, struct fx_err *err)
 {
-    FILE *f = fopen(path, "rb");
-    if (!f) return fx_fail(err, "bad_request", "config", "cannot open config file %s", path);
-    char *text = NULL;
-    long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
-    if (size >= 0 && size < (16 << 20) && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1)))
-        text[fread(text, 1, (size_t)size, f)] = 0;
-    fclose(f);
-    cJSON *doc = text ? cJSON_Parse(text) : NULL;
-    free(text);
+    cJSON *doc;
+    if (jsonfile_read(path, CONFIG_MAX_BYTES, &doc))
+        return fx_fail(err, "bad_request", "config", "cannot open config file %s", path);
     int rc = 0;
     if (!cJSON_IsObject(doc))
         rc = fx_fail(err, "bad_json", "config", "%s: not a JSON object", path);

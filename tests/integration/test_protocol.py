@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import urllib.error
 import urllib.request
@@ -226,6 +227,17 @@ async def test_flags(t):
     t.check(code == 2 and "device" in out, "bad device spec is an error")
     code, out = run("--log-level", "loud")
     t.check(code == 2, "bad log level is an error")
+    for text, word, what in (('{"port": 1,', "JSON", "malformed config file"),
+                             ('{"bogus": 1}', "bogus", "unknown config key (non-string value)"),
+                             ('{"listen": 5}', "listen", "config value of the wrong type"),
+                             ('{"limits": {"max_streams": 0}}', "max_streams", "config limit out of range")):
+        with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
+            f.write(text)
+        code, out = run("--config", f.name)
+        os.unlink(f.name)
+        t.check(code == 2 and word in out, "%s is an error naming it (%s)" % (what, out.strip()))
+    code, out = run("--config", "/nonexistent/fxs.json")
+    t.check(code == 2 and "cannot open" in out, "missing config file is an error")
 
 
 if __name__ == "__main__":
