@@ -98,29 +98,32 @@ class Reader {
   constructor(b, rp, rend, bend) {
     if (rend - rp < 5 || b[rp] !== 0) corrupt();
     this.b = b; this.rp = rp + 5; this.rend = rend; this.bp = rend; this.bend = bend;
-    this.range = 0xffffffff;
-    this.code = ((b[rp + 1] << 24) | (b[rp + 2] << 16) | (b[rp + 3] << 8) | b[rp + 4]) >>> 0;
-    if (this.code === 0xffffffff) corrupt();
+    this.range = -1; // 0xFFFFFFFF
+    this.code = (b[rp + 1] << 24) | (b[rp + 2] << 16) | (b[rp + 3] << 8) | b[rp + 4];
+    if (this.code === -1) corrupt();
     this.acc = 0; this.cnt = 0;
   }
+  // range and code are kept as int32 bit patterns (small integers for the engine), compared unsigned
   bit(p, i) { // p: Uint16Array of probabilities, i: index
-    const pr = p[i], bound = (this.range >>> PROB_BITS) * pr;
-    let bit;
-    if (this.code < bound) {
-      this.range = bound;
+    const pr = p[i], bound = Math.imul(this.range >>> PROB_BITS, pr); // < 2^32, exact
+    let bit, range, code = this.code;
+    if ((code >>> 0) < (bound >>> 0)) {
+      range = bound;
       p[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT);
       bit = 0;
     } else {
-      this.code -= bound;
-      this.range -= bound;
+      code = (code - bound) | 0;
+      range = (this.range - bound) | 0;
       p[i] = pr - (pr >> ADAPT);
       bit = 1;
     }
-    if (this.range < TOP) { // code < range < 2^24 here, so both stay below 2^32
-      this.range *= 256;
+    if ((range >>> 0) < TOP) { // code < range < 2^24 here
       if (this.rp >= this.rend) corrupt();
-      this.code = this.code * 256 + this.b[this.rp++];
+      range = range << 8;
+      code = (code << 8) | this.b[this.rp++];
     }
+    this.range = range;
+    this.code = code;
     return bit;
   }
   raw(n) { // n <= 16 per call keeps acc within 32 bits
