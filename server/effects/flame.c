@@ -40,6 +40,9 @@
 #ifndef FL_CELLS_PER_H
 #define FL_CELLS_PER_H 1.0 /* cells of edge h: 9 rows of 3 cells beat 25 rows of h/2 (bench_flame) */
 #endif
+#ifndef FL_XCELLS
+#define FL_XCELLS 4
+#endif
 #define FL_FRAME_BUDGET_MS 30.0 /* most wall time of the substeps of one frame (fl_step) */
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
@@ -50,7 +53,7 @@
 enum {
     FP_H, FP_H2, FP_INV_CELL, FP_MASS, FP_POLY6, FP_SPIKY, FP_GPOLY6, FP_KSTIFF, FP_RHO0, FP_KVISC, FP_KBUO,
     FP_UP, FP_WIND = FP_UP + 3, FP_TAMB = FP_WIND + 3, FP_TIGN, FP_KRS, FP_KCF, FP_KPT, FP_KH, FP_KF, FP_OMEGA,
-    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_COUNT
+    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_INV_CELLX, FP_COUNT
 };
 
 /* ---- parameters -------------------------------------------------------------------- */
@@ -86,10 +89,13 @@ static const struct param_def fl_obstacle_fields[] = {
     {0},
 };
 
-/* Default scene: one 6 cm disc at F_init 100, dt 1 ms (about 5.4k particles, 2.4k flame, after 0.5 s;
- * at dt 2 ms fresh gas is pushed off the source before it ignites and no flame forms). */
+/* Default scene: one 11 cm disc at F_init 100, dt 3 ms: about 10k particles (4k burning) that rise
+ * 6.4 cm on average, every group D behaviour (test_flame_behaviour). The thesis's dt of 1 ms would
+ * need 10 M particle-steps/s for 10k particles in real time; at 3 ms the stabilised diffusion mixes
+ * less per simulated second (its weights are capped per step, §9 #4), so a given source holds fewer
+ * particles (the 6 cm disc: 16k at 1 ms, 4.4k at 3 ms) and the default disc is larger instead. */
 const struct param_def flame_params[] = {
-    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.03}]", .max_len = 16,
+    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.055}]", .max_len = 16,
      .fields = fl_source_fields, .unit = "", .doc = "burning solids (§2.13)"},
     {.name = "obstacles", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = 16, .fields = fl_obstacle_fields,
      .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (§9 #16)"},
@@ -129,7 +135,7 @@ const struct param_def flame_params[] = {
     FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (§9 #7)", PARAM_RESTART),
     FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so a lattice at spacing d has rho_rest (§9 #6)",
          PARAM_RESTART),
-    FL_F("dt", "0.001", 0.0001, 0.004, "s", "time step of the simulation", 0),
+    FL_F("dt", "0.003", 0.0001, 0.004, "s", "time step of the simulation", 0),
     FL_I("max_substeps", "24", 1, 256, "steps", "most steps per frame; beyond it the stream runs slower than real "
                                                 "time (see the real-time factor in /metrics)", 0),
     FL_I("max_particles", "1000000", 1000, 4000000, "", "particle limit; reaching it is a runaway (reset)",
@@ -310,7 +316,7 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
 static int fl_table(struct flame *fl, struct fx_err *err)
 {
     int bits = 10;
-    while (bits < 22 && (1 << bits) < 2 * fl->n) bits++;
+    while (bits < 22 && (1 << bits) < 4 * fl->n) bits++;
     fl->mask = (1u << bits) - 1u;
     fl->passes = (bits + 7) / 8;
     int want = (1 << bits) + 1;
@@ -367,6 +373,7 @@ static void fl_pack(struct flame *fl, const cJSON *p)
     P[FP_H] = (float)h;
     P[FP_H2] = (float)(h * h);
     P[FP_INV_CELL] = (float)(FL_CELLS_PER_H / h);
+    P[FP_INV_CELLX] = (float)(FL_CELLS_PER_H * FL_XCELLS / h);
     P[FP_MASS] = (float)m;
     P[FP_POLY6] = (float)(m * 315.0 / (64.0 * M_PI * pow(h, 9)));
     P[FP_SPIKY] = (float)(45.0 / (M_PI * pow(h, 6)));
