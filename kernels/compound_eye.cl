@@ -73,6 +73,12 @@ inline float2 eye_nearest(int lattice, float2 q)
     return dot(da, da) <= dot(db, db) ? a : b;
 }
 
+/* Unit vectors to the Voronoi neighbours (all at distance 1 = one pitch). */
+__constant float2 eye_square_walls[4] = {(float2)(1.0f, 0.0f), (float2)(0.0f, 1.0f), (float2)(-1.0f, 0.0f),
+                                         (float2)(0.0f, -1.0f)};
+__constant float2 eye_hex_walls[6] = {(float2)(1.0f, 0.0f), (float2)(0.5f, 0.8660254f), (float2)(-0.5f, 0.8660254f),
+                                      (float2)(-1.0f, 0.0f), (float2)(-0.5f, -0.8660254f), (float2)(0.5f, -0.8660254f)};
+
 /* Ray o + t d (d unit) against the sphere (c, r): the two roots, or false. */
 inline bool eye_roots(float3 o, float3 d, float3 c, float r, float *t1, float *t2)
 {
@@ -104,8 +110,7 @@ static bool eye_enter_exact(const struct eye_optics *o, float2 p, float3 d, floa
         float t_exit = INFINITY;
         float2 step = (float2)(0.0f);
         for (int e = 0; e < nn; e++) { /* the cell's walls: bisectors to its Voronoi neighbours */
-            float ang = (o->lattice == EYE_HEX ? 1.0471976f : 1.5707964f) * (float)e;
-            float2 v = (float2)(cos(ang), sin(ang));
+            float2 v = o->lattice == EYE_HEX ? eye_hex_walls[e] : eye_square_walls[e];
             float den = dot(dh, v);
             if (den <= 1e-9f) continue;
             float t = (dot(c - p, v) + 0.5f) / den;
