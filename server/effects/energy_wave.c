@@ -16,6 +16,7 @@
 #include "../codec/exr.h"
 #include "../ocl.h"
 #include "fxs_frame.h"
+#include "light_rig.h"
 
 /* Limits and buffer layouts; the strides must match kernels/energy_wave.cl. */
 #define EW_MAX_SRC 16
@@ -76,6 +77,19 @@ static const struct param_def ew_curve_fields[] = {
     {0},
 };
 
+/* Light rig (digest 003): the toon ramp's bands, eq. 2.5 by default. */
+static const struct param_def ew_band_fields[] = {
+    {.name = "m_min", .type = PARAM_FLOAT, .def = "-1", .min = -1, .max = 1, .unit = "",
+     .doc = "lower end of the band in m = N.L (eq. 2.4); bands ascend, m below the first band takes its colour"},
+    {.name = "color", .type = PARAM_COLOR, .def = "[1,1,1]", .min = 0, .max = 1, .unit = "linear RGB",
+     .doc = "toon colour of the band (eq. 2.5)"},
+    {0},
+};
+
+static const char ew_default_ramp[] = "[{\"m_min\":-1,\"color\":[0.0,0.2,0.4]},"
+                                      "{\"m_min\":-0.3,\"color\":[0.5,0.7,0.9]},"
+                                      "{\"m_min\":0,\"color\":[0.9,0.9,1.0]}]";
+
 /* Default scene: two C1-joined Bezier curves (as thesis Figs 5.3-5.6), W of Fig 5.6
  * (right) and b = 8.0, with the eq. (5.1) pulse running along each. */
 static const char ew_default_curves[] =
@@ -133,6 +147,39 @@ const struct param_def energy_wave_params[] = {
      .doc = "multiply each curve's W by the eq. (5.1) travelling pulse"},
     {.name = "anim_rate", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
      .doc = "eq. (5.1) animation frames per second of stream time (the sweep loops)"},
+    /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7). Off by default until the
+     * suites that expect only textures from energy_wave streams know kind 3 (see README). */
+    {.name = "light_rig", .type = PARAM_BOOL, .def = "false", .unit = "",
+     .doc = "also send a light-rig frame (kind 3: centre-line segments, toon ramp, outline, shadow) with "
+            "every texture, for clients that light their own scene with the wave"},
+    {.name = "curve_segments", .type = PARAM_INT, .def = "8", .min = 1, .max = 32, .unit = "",
+     .doc = "light rig: chords per Bezier curve of the centre line (64 segments in all at most)"},
+    {.name = "torus_segments", .type = PARAM_INT, .def = "12", .min = 3, .max = 32, .unit = "",
+     .doc = "light rig: chords per torus centre circle"},
+    {.name = "light_strength", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
+     .doc = "light rig: mix of the toon colour over the client's own shading (1: full replacement, the thesis)"},
+    {.name = "ramp", .type = PARAM_OBJECT_LIST, .def = ew_default_ramp, .min_len = 1, .max_len = LIGHT_RIG_MAX_BANDS,
+     .fields = ew_band_fields, .unit = "",
+     .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5 by default)"},
+    {.name = "features", .type = PARAM_BOOL, .def = "true", .unit = "",
+     .doc = "light rig: multiply the feature texture onto the toon colour (eq. 2.6)"},
+    {.name = "outline", .type = PARAM_BOOL, .def = "true", .unit = "",
+     .doc = "light rig: draw back-face outlines (eq. 2.7)"},
+    {.name = "outline_width", .type = PARAM_FLOAT, .def = "0.005", .min = 0, .max = 0.05, .unit = "x depth",
+     .doc = "light rig: outline thickness d, R' = R + d|R_z|U in view space (eq. 2.7)"},
+    {.name = "outline_color", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
+     .doc = "light rig: outline colour"},
+    {.name = "shadow", .type = PARAM_BOOL, .def = "true", .unit = "",
+     .doc = "light rig: draw the clamped planar shadows (eqs. 2.8-2.32)"},
+    {.name = "shadow_theta", .type = PARAM_FLOAT, .def = "60", .min = 0, .max = 89, .unit = "degrees",
+     .doc = "light rig: largest angle theta of the shadow direction from the plane's downward normal; "
+            "a shadow is at most height x tan(theta) long (eq. 2.14)"},
+    {.name = "shadow_color", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
+     .doc = "light rig: shadow colour"},
+    {.name = "shadow_opacity", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
+     .doc = "light rig: shadow opacity where t >= 0 (eq. 2.32; 0 elsewhere)"},
+    EW_POS("shadow_plane_point", "[0,-9,0]", "light rig: a point I of the shadow-receiving plane"),
+    EW_DIR("shadow_plane_normal", "[0,1,0]", "light rig: up normal Y of the shadow-receiving plane"),
     {0},
 };
 
@@ -162,6 +209,11 @@ struct energy_wave {
     /* reused frame buffers */
     float *img, *rgba;
     struct fx_buf exr;
+    /* light rig: the current document (sources and rig constants) and the payload */
+    int light_rig;
+    cJSON *doc;
+    struct light_rig rig;
+    uint8_t rig_payload[LIGHT_RIG_MAX_PAYLOAD];
 };
 
 static double ew_dot(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -410,6 +462,11 @@ int energy_wave_set(struct energy_wave *ew, const cJSON *params, struct fx_err *
     ew_pack_points_lines(ew, params);
     ew_pack_tori(ew, params);
     ew_read_curves(ew, params);
+    ew->light_rig = params_bool(params, "light_rig");
+    cJSON *doc = cJSON_Duplicate(params, 1);
+    if (!doc) return fx_fail(err, "internal", "", "out of memory");
+    cJSON_Delete(ew->doc);
+    ew->doc = doc;
     return ew_frame_buffers(ew, err);
 }
 
@@ -439,6 +496,7 @@ void energy_wave_free(struct energy_wave *ew)
     free(ew->img);
     free(ew->rgba);
     fx_buf_free(&ew->exr);
+    cJSON_Delete(ew->doc);
     free(ew);
 }
 
@@ -556,7 +614,22 @@ static int ew_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         .payload_bytes = ew->exr.len,
         .encode_ms = ew_now_ms() - t0,
     };
-    return emit(ctx, &fr);
+    if (emit(ctx, &fr)) return -1;
+    if (!ew->light_rig) return 0;
+    /* The light rig at the same time as the texture. The constants (~150 bytes with 3 bands)
+     * go into every frame: the hub keeps only the newest frame per kind for late
+     * subscribers, and they cost far less than the texture (PROTOCOL.md §7.7). */
+    t0 = ew_now_ms();
+    light_rig_from_params(ew->doc, sim_time, &ew->rig);
+    struct effect_frame rf = {
+        .kind = FXS_KIND_LIGHT_RIG,
+        .codec = FXS_CODEC_LIGHT_RIG,
+        .count_or_width = (uint32_t)ew->rig.n_seg,
+        .payload = ew->rig_payload,
+        .payload_bytes = light_rig_encode(&ew->rig, 1, ew->rig_payload),
+    };
+    rf.encode_ms = ew_now_ms() - t0;
+    return emit(ctx, &rf);
 }
 
 /* Cross-field rules: eye ≠ center, and up not parallel to eye→center. */
@@ -572,6 +645,20 @@ static int ew_check(const cJSON *params, struct fx_err *err)
     ew_cross(f, up, x);
     if (ew_dot(x, x) <= 1e-10 * ff * ew_dot(up, up))
         return fx_fail(err, "bad_param", "up", "up must not be parallel to the eye->center direction");
+    /* light rig: the ramp's bands ascend strictly in m_min */
+    const cJSON *it;
+    int i = 0;
+    double prev = -INFINITY;
+    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(params, "ramp")) {
+        double m = params_num(it, "m_min");
+        if (m <= prev) {
+            char path[32];
+            snprintf(path, sizeof path, "ramp[%d].m_min", i);
+            return fx_fail(err, "bad_param", path, "ramp bands must ascend: m_min %g after %g", m, prev);
+        }
+        prev = m;
+        i++;
+    }
     return 0;
 }
 
@@ -602,7 +689,10 @@ const struct effect_ops energy_wave_effect = {
            "through a billboard camera; streamed as OpenEXR textures (raw luminance Y or colour-mapped RGBA).",
     .params = energy_wave_params,
     .outputs_json = "[{\"kind\":2,\"codec\":\"exr\",\"channels\":\"Y (raw B, half) or RGBA (colour map), "
-                    "per `output`\",\"size\":\"width x height\",\"rate\":\"fps\"}]",
+                    "per `output`\",\"size\":\"width x height\",\"rate\":\"fps\"},"
+                    "{\"kind\":3,\"codec\":\"rig1\",\"channels\":\"centre-line segments, toon ramp, outline "
+                    "and shadow constants (PROTOCOL.md 7.7)\",\"size\":\"segments\",\"rate\":\"fps, when "
+                    "light_rig is on\"}]",
     .check = ew_check,
     .create = ew_create,
     .apply = ew_apply,
