@@ -7,8 +7,11 @@
  * Shape: lws callbacks only record what happened into struct fxc_client; the
  * public calls run fxc_pump(), which services lws in the caller's thread until a
  * condition holds, the connection ends or a deadline passes. lws_service() ignores
- * its timeout since v3.2, so a self-re-arming timer (sul) bounds every poll wait. */
+ * its timeout since v3.2, so a self-re-arming timer (sul) bounds every poll wait.
+ * URL parsing, connect diagnosis, the handshake checks and fragment reassembly are
+ * shared with fxpool.c through fxws.c. */
 #include "fxclient.h"
+#include "fxws.h"
 
 #include <errno.h>
 #include <stdarg.h>
@@ -17,15 +20,9 @@
 #include <string.h>
 #include <time.h>
 
-#include <netdb.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
 #include <libwebsockets.h>
 
 #define FXC_CLOSE_WAIT_MS 500
-#define FXC_PROBE_WAIT_MS 1000
 #define FXC_TICK_US 100000 /* longest lws poll wait of one fxc_pump round */
 #define FXC_REARM_US 1000  /* poll wait after a tick fired before lws polled */
 
@@ -44,14 +41,9 @@ struct fxc_client {
     int tcp_up;                    /* connected; the handshake request went out */
     int closing;                   /* fxc_close asked lws to close */
     char err[256];                 /* why the connection failed or ended */
-    char host[256];
-    char path[512];
-    char host_header[300];
-    int port;
+    struct fxws_url url;           /* host, port, path, host_header */
 
-    uint8_t *rx;                   /* message being reassembled */
-    size_t rx_len, rx_cap;
-    int rx_active, rx_binary;
+    struct fxws_rx rx;             /* message being reassembled */
 
     unsigned char *tx;             /* LWS_PRE + text of the message to send */
     size_t tx_len;
@@ -76,124 +68,11 @@ static void fxc_set_err(char *buf, size_t len, const char *fmt, ...)
     va_end(ap);
 }
 
-static int64_t fxc_now_us(clockid_t clk)
-{
-    struct timespec ts;
-    clock_gettime(clk, &ts);
-    return (int64_t)ts.tv_sec * 1000000 + ts.tv_nsec / 1000;
-}
+static int64_t fxc_now_us(clockid_t clk) { return fxws_now_us(clk); }
 
 static int64_t fxc_deadline(int timeout_ms)
 {
     return timeout_ms < 0 ? INT64_MAX : fxc_now_us(CLOCK_MONOTONIC) + (int64_t)timeout_ms * 1000;
-}
-
-/* ---- URL ------------------------------------------------------------------ */
-
-static int fxc_url_port(struct fxc_client *c, const char *s, size_t n, char *eb, size_t el)
-{
-    char digits[8];
-    char *end;
-    long v;
-    if (n == 0 || n >= sizeof digits) {
-        fxc_set_err(eb, el, "bad URL: port must be a number from 1 to 65535");
-        return -1;
-    }
-    memcpy(digits, s, n);
-    digits[n] = 0;
-    v = strtol(digits, &end, 10);
-    if (*end || v < 1 || v > 65535 || digits[0] < '0' || digits[0] > '9') {
-        fxc_set_err(eb, el, "bad URL: port \"%s\" must be a number from 1 to 65535", digits);
-        return -1;
-    }
-    c->port = (int)v;
-    return 0;
-}
-
-/* Splits "host[:port]" (host may be "[v6]") of n bytes into c->host and c->port. */
-static int fxc_url_authority(struct fxc_client *c, const char *s, size_t n, char *eb, size_t el)
-{
-    const char *colon = NULL, *hs = s, *he;
-    if (n && s[0] == '[') {
-        he = memchr(s, ']', n);
-        if (!he) { fxc_set_err(eb, el, "bad URL: unterminated [IPv6] host"); return -1; }
-        hs = s + 1;
-        if (he + 1 < s + n) {
-            if (he[1] != ':') { fxc_set_err(eb, el, "bad URL: junk after ]"); return -1; }
-            colon = he + 1;
-        }
-    } else {
-        colon = memchr(s, ':', n);
-        he = colon ? colon : s + n;
-    }
-    if (he == hs || (size_t)(he - hs) >= sizeof c->host) {
-        fxc_set_err(eb, el, "bad URL: missing or too long host");
-        return -1;
-    }
-    memcpy(c->host, hs, (size_t)(he - hs));
-    c->host[he - hs] = 0;
-    c->port = FXC_DEFAULT_PORT;
-    if (colon && fxc_url_port(c, colon + 1, (size_t)(s + n - colon - 1), eb, el)) return -1;
-    snprintf(c->host_header, sizeof c->host_header, "%.*s", (int)n, s);
-    return 0;
-}
-
-static int fxc_url_parse(struct fxc_client *c, const char *url, char *eb, size_t el)
-{
-    const char *auth, *slash;
-    if (!url) { fxc_set_err(eb, el, "bad URL: none given"); return -1; }
-    if (strncmp(url, "wss://", 6) == 0) {
-        fxc_set_err(eb, el, "TLS not supported yet: use ws:// (%s)", url);
-        return -1;
-    }
-    if (strncmp(url, "ws://", 5) != 0) {
-        fxc_set_err(eb, el, "bad URL \"%s\": expected ws://host[:port][/path]", url);
-        return -1;
-    }
-    auth = url + 5;
-    slash = strchr(auth, '/');
-    if (!slash) slash = auth + strlen(auth);
-    if (fxc_url_authority(c, auth, (size_t)(slash - auth), eb, el)) return -1;
-    if (strlen(slash) >= sizeof c->path) { fxc_set_err(eb, el, "bad URL: path too long"); return -1; }
-    snprintf(c->path, sizeof c->path, "%s", *slash && strcmp(slash, "/") ? slash : FXC_DEFAULT_PATH);
-    return 0;
-}
-
-/* ---- name resolution and connect diagnosis ---------------------------------- */
-
-static struct addrinfo *fxc_resolve(const struct fxc_client *c, char *eb, size_t el)
-{
-    struct addrinfo hints, *ai = NULL;
-    char port[8];
-    int r;
-    memset(&hints, 0, sizeof hints);
-    hints.ai_family = AF_UNSPEC;
-    hints.ai_socktype = SOCK_STREAM;
-    snprintf(port, sizeof port, "%d", c->port);
-    if ((r = getaddrinfo(c->host, port, &hints, &ai))) {
-        fxc_set_err(eb, el, "cannot resolve host \"%s\": %s", c->host, gai_strerror(r));
-        return NULL;
-    }
-    return ai;
-}
-
-/* lws reports a failed TCP connect as "Unable to connect" without errno; a second,
- * bounded connect attempt on the failure path recovers it (0 when it now works). */
-static int fxc_probe_errno(const struct fxc_client *c)
-{
-    struct addrinfo *ai = fxc_resolve(c, NULL, 0);
-    struct pollfd pfd = { .fd = -1, .events = POLLOUT };
-    int err = 0;
-    socklen_t len = sizeof err;
-    if (!ai) return EHOSTUNREACH;
-    pfd.fd = socket(ai->ai_family, ai->ai_socktype | SOCK_NONBLOCK, ai->ai_protocol);
-    if (pfd.fd < 0) err = errno;
-    else if (connect(pfd.fd, ai->ai_addr, ai->ai_addrlen) && errno != EINPROGRESS) err = errno;
-    else if (poll(&pfd, 1, FXC_PROBE_WAIT_MS) != 1) err = ETIMEDOUT;
-    else if (getsockopt(pfd.fd, SOL_SOCKET, SO_ERROR, &err, &len)) err = errno;
-    if (pfd.fd >= 0) close(pfd.fd);
-    freeaddrinfo(ai);
-    return err;
 }
 
 /* ---- queue ---------------------------------------------------------------- */
@@ -258,21 +137,21 @@ static void fxc_on_frame(struct fxc_client *c, int64_t now)
     struct fxc_node *n;
     struct fxs_header h;
     uint8_t *fit;
-    if (fxs_header_unpack(c->rx, c->rx_len, &h) || !(n = calloc(1, sizeof *n))) {
+    if (fxs_header_unpack(c->rx.buf, c->rx.len, &h) || !(n = calloc(1, sizeof *n))) {
         c->stats.bad_messages++;
         return;
     }
-    if ((fit = realloc(c->rx, c->rx_len))) c->rx = fit; /* the frame keeps the buffer: trim it */
+    if ((fit = realloc(c->rx.buf, c->rx.len))) c->rx.buf = fit; /* the frame keeps the buffer: trim it */
     c->stats.frames_received++;
     if (fxc_queue_trim(c, FXC_MSG_FRAME, h.channel, FXC_QUEUE_FRAMES_PER_CHANNEL)) c->stats.frames_dropped++;
     n->msg.type = FXC_MSG_FRAME;
     n->msg.header = h;
-    n->msg.data = c->rx;
-    n->msg.data_bytes = c->rx_len;
-    n->msg.payload = c->rx + h.header_bytes;
+    n->msg.data = c->rx.buf;
+    n->msg.data_bytes = c->rx.len;
+    n->msg.payload = c->rx.buf + h.header_bytes;
     n->msg.recv_time_us = (uint64_t)now;
-    c->rx = NULL;
-    c->rx_cap = 0;
+    c->rx.buf = NULL;
+    c->rx.cap = 0;
     fxc_queue_push(c, n);
 }
 
@@ -292,7 +171,7 @@ static void fxc_on_event(struct fxc_client *c, cJSON *j, int64_t now)
  * (dropped), or an event (queued). */
 static void fxc_on_text(struct fxc_client *c, int64_t now)
 {
-    cJSON *j = cJSON_ParseWithLength((const char *)c->rx, c->rx_len);
+    cJSON *j = cJSON_ParseWithLength((const char *)c->rx.buf, c->rx.len);
     const cJSON *op = cJSON_GetObjectItemCaseSensitive(j, "op");
     const cJSON *id = cJSON_GetObjectItemCaseSensitive(j, "id");
     if (!cJSON_IsObject(j) || !cJSON_IsString(op)) {
@@ -314,32 +193,10 @@ static void fxc_on_text(struct fxc_client *c, int64_t now)
 /* Appends one received chunk; returns -1 (and closes) when the message is too big. */
 static int fxc_on_receive(struct fxc_client *c, struct lws *wsi, const void *in, size_t len)
 {
-    if (!c->rx_active) {
-        c->rx_active = 1;
-        c->rx_binary = lws_frame_is_binary(wsi);
-        c->rx_len = 0;
-    }
-    if (c->rx_len + len > FXC_MAX_MESSAGE_BYTES) {
-        fxc_set_err(c->err, sizeof c->err, "message larger than %zu bytes from server", FXC_MAX_MESSAGE_BYTES);
-        lws_close_reason(wsi, LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE, NULL, 0);
-        return -1;
-    }
-    if (c->rx_len + len > c->rx_cap) {
-        size_t cap = c->rx_cap ? c->rx_cap : 65536;
-        uint8_t *p;
-        while (cap < c->rx_len + len) cap *= 2;
-        if (!(p = realloc(c->rx, cap))) {
-            fxc_set_err(c->err, sizeof c->err, "out of memory reassembling a %zu-byte message", c->rx_len + len);
-            return -1;
-        }
-        c->rx = p;
-        c->rx_cap = cap;
-    }
-    memcpy(c->rx + c->rx_len, in, len);
-    c->rx_len += len;
-    if (!lws_is_final_fragment(wsi) || lws_remaining_packet_payload(wsi)) return 0;
-    c->rx_active = 0;
-    if (c->rx_binary) fxc_on_frame(c, fxc_now_us(CLOCK_REALTIME));
+    int r = fxws_rx_append(&c->rx, wsi, in, len, FXC_MAX_MESSAGE_BYTES, SIZE_MAX, c->err, sizeof c->err);
+    if (r == -1) lws_close_reason(wsi, LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE, NULL, 0);
+    if (r <= 0) return r < 0 ? -1 : 0;
+    if (c->rx.binary) fxc_on_frame(c, fxc_now_us(CLOCK_REALTIME));
     else fxc_on_text(c, fxc_now_us(CLOCK_REALTIME));
     return 0;
 }
@@ -350,42 +207,22 @@ static int fxc_on_receive(struct fxc_client *c, struct lws *wsi, const void *in,
 static void fxc_on_connect_error(struct fxc_client *c, const char *why)
 {
     const char *w = why ? why : "unknown error";
-    int e;
+    int e = 0;
     if (c->err[0]) return; /* our own filter already explained it */
-    if (!c->tcp_up && strstr(w, "Unable to connect") && (e = fxc_probe_errno(c)))
-        fxc_set_err(c->err, sizeof c->err, "%s %s:%d", e == ECONNREFUSED ? "connection refused by" : strerror(e),
-                    c->host, c->port);
-    else if (c->tcp_up)
-        fxc_set_err(c->err, sizeof c->err, "WebSocket handshake failed with ws://%s%s (%s)%s", c->host_header,
-                    c->path, w, strstr(w, "HS:") ? "" : ": the server hung up; wrong path or subprotocol?");
-    else
-        fxc_set_err(c->err, sizeof c->err, "cannot connect to %s:%d (%s)", c->host, c->port, w);
+    if (fxws_connect_needs_probe(c->tcp_up, w)) e = fxws_probe_errno(&c->url);
+    fxws_connect_error(&c->url, c->tcp_up, w, e, c->err, sizeof c->err);
 }
 
 /* Rejects a server that did not agree to our subprotocol. */
 static int fxc_check_subprotocol(struct fxc_client *c, struct lws *wsi)
 {
-    char proto[64] = "";
-    if (lws_hdr_copy(wsi, proto, sizeof proto, WSI_TOKEN_PROTOCOL) < 0) proto[0] = 0;
-    if (!strcmp(proto, FXC_SUBPROTOCOL)) return 0;
-    if (proto[0])
-        fxc_set_err(c->err, sizeof c->err,
-                    "WebSocket handshake failed with ws://%s%s: server chose subprotocol \"%s\", not \"%s\"",
-                    c->host_header, c->path, proto, FXC_SUBPROTOCOL);
-    else
-        fxc_set_err(c->err, sizeof c->err,
-                    "WebSocket handshake failed with ws://%s%s: server did not accept subprotocol \"%s\"",
-                    c->host_header, c->path, FXC_SUBPROTOCOL);
-    return 1;
+    return fxws_check_subprotocol(&c->url, wsi, c->err, sizeof c->err);
 }
 
 static void fxc_on_peer_close(struct fxc_client *c, const uint8_t *in, size_t len)
 {
-    if (len >= 2)
-        fxc_set_err(c->err, sizeof c->err, "server closed the connection (code %d%s%.*s)",
-                    (in[0] << 8) | in[1], len > 2 ? ": " : "", (int)(len - 2), (const char *)in + 2);
-    else
-        fxc_set_err(c->err, sizeof c->err, "server closed the connection (no close code)");
+    int code;
+    fxws_peer_close(in, len, &code, c->err, sizeof c->err, NULL, 0);
 }
 
 static int fxc_on_writeable(struct fxc_client *c, struct lws *wsi)
@@ -428,7 +265,7 @@ static int fxc_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         fxc_on_peer_close(c, in, len);
         return 0;
     case LWS_CALLBACK_CLIENT_CLOSED:
-        if (!c->err[0]) fxc_set_err(c->err, sizeof c->err, "connection to %s:%d lost", c->host, c->port);
+        if (!c->err[0]) fxc_set_err(c->err, sizeof c->err, "connection to %s:%d lost", c->url.host, c->url.port);
         c->state = FXC_CLOSED;
         c->wsi = NULL;
         return 0;
@@ -481,7 +318,7 @@ static int fxc_start(struct fxc_client *c, char *eb, size_t el)
 {
     struct lws_context_creation_info info;
     struct lws_client_connect_info ci;
-    struct addrinfo *ai = fxc_resolve(c, eb, el);
+    struct addrinfo *ai = fxws_resolve(&c->url, eb, el);
     if (!ai) return -1;
     freeaddrinfo(ai);
     memset(&info, 0, sizeof info);
@@ -497,11 +334,11 @@ static int fxc_start(struct fxc_client *c, char *eb, size_t el)
     }
     memset(&ci, 0, sizeof ci);
     ci.context = c->ctx;
-    ci.address = c->host;
-    ci.port = c->port;
-    ci.path = c->path;
-    ci.host = c->host_header;
-    ci.origin = c->host_header;
+    ci.address = c->url.host;
+    ci.port = c->url.port;
+    ci.path = c->url.path;
+    ci.host = c->url.host_header;
+    ci.origin = c->url.host_header;
     ci.protocol = FXC_SUBPROTOCOL;
     ci.pwsi = &c->wsi;
     if (!lws_client_connect_via_info(&ci)) {
@@ -521,7 +358,7 @@ static void fxc_free(struct fxc_client *c)
     fxc_queue_free(c);
     cJSON_Delete(c->hello);
     cJSON_Delete(c->reply);
-    free(c->rx);
+    fxws_rx_free(&c->rx);
     free(c->tx);
     free(c);
 }
@@ -532,7 +369,7 @@ int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *
     int r;
     *out = NULL;
     if (!c) { fxc_set_err(eb, el, "out of memory"); return -1; }
-    if (fxc_url_parse(c, url, eb, el)) {
+    if (fxws_url_parse(&c->url, url, eb, el)) {
         fxc_free(c);
         return -2;
     }
@@ -547,7 +384,7 @@ int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *
     }
     if (r == 0)
         fxc_set_err(eb, el, "timeout after %d ms %s ws://%s%s", timeout_ms,
-                    c->state == FXC_OPEN ? "waiting for the hello of" : "connecting to", c->host_header, c->path);
+                    c->state == FXC_OPEN ? "waiting for the hello of" : "connecting to", c->url.host_header, c->url.path);
     else
         fxc_set_err(eb, el, "%s", c->err);
     fxc_free(c);
