@@ -40,6 +40,9 @@
 #ifndef FL_CELLS_PER_H
 #define FL_CELLS_PER_H 1.0 /* cells of edge h: 9 rows of 3 cells beat 25 rows of h/2 (bench_flame) */
 #endif
+#ifndef FL_XCELLS
+#define FL_XCELLS 4
+#endif
 #define FL_FRAME_BUDGET_MS 30.0 /* most wall time of the substeps of one frame (fl_step) */
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
@@ -50,7 +53,7 @@
 enum {
     FP_H, FP_H2, FP_INV_CELL, FP_MASS, FP_POLY6, FP_SPIKY, FP_GPOLY6, FP_KSTIFF, FP_RHO0, FP_KVISC, FP_KBUO,
     FP_UP, FP_WIND = FP_UP + 3, FP_TAMB = FP_WIND + 3, FP_TIGN, FP_KRS, FP_KCF, FP_KPT, FP_KH, FP_KF, FP_OMEGA,
-    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_COUNT
+    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_INV_CELLX, FP_COUNT
 };
 
 /* ---- parameters -------------------------------------------------------------------- */
@@ -367,6 +370,7 @@ static void fl_pack(struct flame *fl, const cJSON *p)
     P[FP_H] = (float)h;
     P[FP_H2] = (float)(h * h);
     P[FP_INV_CELL] = (float)(FL_CELLS_PER_H / h);
+    P[FP_INV_CELLX] = (float)(FL_CELLS_PER_H * FL_XCELLS / h);
     P[FP_MASS] = (float)m;
     P[FP_POLY6] = (float)(m * 315.0 / (64.0 * M_PI * pow(h, 9)));
     P[FP_SPIKY] = (float)(45.0 / (M_PI * pow(h, 6)));

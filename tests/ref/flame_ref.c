@@ -334,6 +334,10 @@ void flame_ref_eval_all(const struct flame_ref_params *p, const struct flame_ref
         flame_ref_eval_forces(p, ps, n, out, i, buf);
         e->is_flame = flame_ref_is_flame(p, ps[i].T, ps[i].F);
         double S = flame_ref_reaction(p, ps[i].T, ps[i].F);
+        /* a step burns at most the fuel left after diffusion, so T + (k_pt/k_cf) F holds at any
+         * dt (kernels/flame.cl fl_burn) */
+        double Fd = fmax(0, ps[i].F + p->dt * e->dF_diff), burn = p->dt * p->k_cf * S;
+        if (burn > Fd) S *= Fd / burn;
         e->dT_react = p->k_pt * S;
         e->dF_react = -p->k_cf * S;
         e->dT = e->dT_react + e->dT_diff;

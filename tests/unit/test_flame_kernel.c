@@ -440,6 +440,35 @@ static void test_run_worked_step(void)
     flame_free(fl);
 }
 
+/* A step burns at most the fuel it has: at dt = 4 ms an Euler step at 8000 K would burn 160 of
+ * 100 units; the particle burns its 100 and gains exactly 100 k_pt/k_cf = 10000 K (the invariant
+ * T + 100F), while a slower case (1200 K, F 10: burns 2.4) is the plain Euler step. The two are
+ * h/2 apart without diffusion (k_h = k_f = 0), so the second, still burning, keeps the first
+ * (no fuel left, no flame) through the resampling of the step. */
+static void test_run_burn_limit(void)
+{
+    struct flame_ref_params rp;
+    struct flame *fl = tfk_new("{\"dt\":0.004,\"k_h\":0,\"k_f\":0}", &rp);
+    if (!fl) return;
+    const double tf[2][2] = {{8000, 100}, {1200, 10}};
+    struct flame_ref_particle *ps = tfk_isolated(&rp, tf, 2);
+    ps[1].r[0] = (float)(0.5 * rp.h);
+    struct flame_ref_particle ref[2] = {ps[0], ps[1]};
+    if (!tfk_isolated_step(fl, ps, 2)) {
+        flame_ref_step(&rp, ref, 2, NULL);
+        CHECK_NEAR(ps[0].F, 0, 1e-6);
+        CHECK_NEAR(ps[0].T, 18000, 18000 * 2e-7);
+        CHECK_NEAR(ps[1].T, 1440, 1440 * 2e-7);
+        CHECK_NEAR(ps[1].F, 7.6, 7.6 * 2e-7);
+        for (int i = 0; i < 2; i++) {
+            CHECK_NEAR(ref[i].T, ps[i].T, ps[i].T * 2e-7);
+            CHECK_NEAR(ref[i].F, ps[i].F, 1e-5);
+        }
+    }
+    free(ps);
+    flame_free(fl);
+}
+
 /* B1/B2 for one particle: E = T + 100F conserved to 1e-5 per step, T within 1e-4 of the
  * reference's Euler steps and on the logistic curve within tol until the fuel is spent (F < 0.01; below fuel_eps the lone particle is
  * no flame and the death rule removes it), for at most 300 steps. */
@@ -841,6 +870,7 @@ int main(void)
     RUN(test_eval_lattice);
     RUN(test_run_worked_step);
     RUN(test_run_invariant_logistic);
+    RUN(test_run_burn_limit);
     RUN(test_run_cooling);
     RUN(test_run_buoyancy);
     RUN(test_run_no_ignition);
