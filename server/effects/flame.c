@@ -313,7 +313,7 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
 static int fl_table(struct flame *fl, struct fx_err *err)
 {
     int bits = 10;
-    while (bits < 22 && (1 << bits) < 2 * fl->n) bits++;
+    while (bits < 22 && (1 << bits) < 4 * fl->n) bits++;
     fl->mask = (1u << bits) - 1u;
     fl->passes = (bits + 7) / 8;
     int want = (1 << bits) + 1;
