@@ -1,12 +1,13 @@
 /* test_flame_behaviour.c — digest 002 §8 group D: qualitative and statistical behaviour of
  * the flame effect (server/effects/flame.h) on whole scenes, on the OpenCL CPU device.
  *
- * D1-D4 run on the effect's untouched defaults (one 6 cm disc, ~5k particles, ~9 ms a step
- * on 2 cores): the digest's plateau window 2000-5000 is shortened to 1000-2500 because N
- * levels off within ~100 steps (measured: N(100) = 5150, then 5100-5400), which halves the
+ * D1-D4 run on the effect's untouched defaults (one 11 cm disc at dt 3 ms, ~10k particles, ~4 ms
+ * a step on 2 cores): the digest's plateau window 2000-5000 is shortened to 1000-2500 because N
+ * levels off within ~100 steps (measured: N(100-200) = 10.1k, plateau 9.8k), which halves the
  * cost. D5-D8 compare scenes and run on the digest's 3 cm disc (§9 #17, the size D8's
- * "3 cm discs 4-5 cm apart" needs; ~900 particles, ~1 ms a step) with the digest's step
- * counts. The binary takes ~1 minute of the 4 allowed. Quantities are time averages over
+ * "3 cm discs 4-5 cm apart" needs; ~1.7k particles, ~1 ms a step) with the digest's step
+ * counts (3 times the thesis's simulated time at the default dt). The binary takes ~30 s of the
+ * 4 minutes allowed. Quantities are time averages over
  * samples every 10 steps, because N and the flame centroid fluctuate from one resampling
  * to the next; comparisons use batch means over 500-step windows for their noise. Seeds are fixed (the effect is deterministic, test_flame_kernel C7); no timing is
  * asserted. "Flame particles" here are gas particles with the flame flag: the burning
