@@ -27,6 +27,11 @@ enum fxs_texture_codec {
     FXS_CODEC_EXR = 1, /* payload is a complete OpenEXR file */
 };
 
+/* Codecs of kind 4 (look-up table) payloads. */
+enum fxs_lut_codec {
+    FXS_CODEC_LUT_PACK = 1, /* "FXL1" container of named products (PROTOCOL.md §7.6) */
+};
+
 struct fxs_header {
     uint16_t header_bytes;
     uint16_t kind;

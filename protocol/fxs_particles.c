@@ -1,21 +1,22 @@
-/* fxs_particles.c — kind 1 particle payloads, codec 1 (PROTOCOL.md §7.5).
+/* fxs_particles.c — kind 1 particle payloads, codec 2 (PROTOCOL.md §7.5).
  *
  * Owns quantisation, ordering and entropy coding of particle frames, shared by the
  * daemon (encode) and libfxclient (decode). Shape, chosen by measurement
- * (tests/bench/bench_particles.c):
- *   - positions quantised to pos_bits per axis relative to the frame's bounds, T and F
- *     to temp_bits / fuel_bits relative to their [min, max];
- *   - particles re-ordered by a coarse grid of 2^k cells per axis (cell id linear,
- *     x fastest), inside a cell by x: the set costs little more than its entropy and
- *     neighbours follow each other (clients must not rely on particle order anyway);
- *   - per particle 7 values (cell gap, x offset or its delta in the cell, y and z
- *     offsets, zigzag deltas of T and F, flags) mapped to tokens (small values direct,
- *     large ones as bit length + next bit, with raw extra bits);
- *   - tokens coded with one static-table rANS (12-bit probabilities, byte-wise
- *     renormalisation, one table per value kind), extra bits packed LSB first.
+ * (tests/bench/bench_particles.c, table in §7.5.7):
+ *   - positions quantised with one step for all axes (largest extent / (2^B - 1), as
+ *     Draco's -qp), T and F to temp_bits / fuel_bits relative to their [min, max];
+ *   - positions as a kd-tree of point counts (split x, y, z alternately, top bit first):
+ *     each node with c >= 2 points sends how many lie in its lower half, a lone point
+ *     sends its remaining bits raw. The set is unordered, so this costs close to the
+ *     set's entropy, and the adaptive count models learn the particles' even spacing;
+ *   - particles are sent in the tree's depth-first order; each one's flags, T and F are
+ *     predicted from the nearest of the 8 particles before it and coded with contexts
+ *     (the neighbour's flags and fuel, the particle's own flags, the previous residual);
+ *   - one adaptive binary range coder (LZMA's, 12-bit probabilities) for every modelled
+ *     decision, and a raw LSB-first bit section for the incompressible bits.
  * Both sides are a few hundred lines of integer code, so the browser decoder
  * (clients/web/fxs_particles.js) needs no dependency. The decoder validates every
- * length, table and value and checks that rANS ends in its initial state. */
+ * length and value and checks that both sections are consumed exactly. */
 #include "fxs_particles.h"
 
 #include <math.h>
@@ -23,23 +24,42 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define FXS_PT_MAGIC "FXP1"
-#define FXS_PT_VERSION 1u
+#define FXS_PT_MAGIC "FXP2"
+#define FXS_PT_VERSION 2u
 #define FXS_PT_PROB_BITS 12
-#define FXS_PT_PROB_SCALE (1u << FXS_PT_PROB_BITS)
-#define FXS_PT_RANS_L (1u << 23)
-#define FXS_PT_NTOK 72
-#define FXS_PT_SLOTS 7
-#define FXS_PT_MAX_CELL_BITS 10
+#define FXS_PT_PROB_INIT (1u << (FXS_PT_PROB_BITS - 1))
+#define FXS_PT_ADAPT 5
+#define FXS_PT_TOP (1u << 24)
+#define FXS_PT_NEAR 8           /* neighbours searched for the attribute prediction */
+#define FXS_PT_MAXK 24          /* Exp-Golomb classes 0..23 */
+#define FXS_PT_MAXD 72          /* kd-tree depth: bits of x + y + z */
 
-/* Value kinds, each with its own frequency table, in table order. */
-enum fxs_pt_stream { FXS_PT_CELL, FXS_PT_XSAME, FXS_PT_XNEW, FXS_PT_Y, FXS_PT_Z, FXS_PT_T, FXS_PT_F, FXS_PT_FLAGS, FXS_PT_NSTREAMS };
+/* Integer models: U unary decisions, then the Exp-Golomb class in unary, then the top
+ * mantissa bit by class; the other mantissa bits go out raw. */
+#define FXS_PT_IPROBS(u) ((u) + 2 * FXS_PT_MAXK)
+#define FXS_PT_CNT_U 3
+#define FXS_PT_T_U 2
+#define FXS_PT_F_U 2
+#define FXS_PT_CNT_CTX (14 * 3)   /* count class x axis */
+#define FXS_PT_T_CTX (7 * 8 * 2)  /* previous residual class x own flags & 7 x neighbour F == 0 */
+#define FXS_PT_F_CTX (7 * 2 * 2)  /* previous residual class x neighbour F == 0 x own flame bit */
+#define FXS_PT_FL_CTX 16          /* neighbour flags & 7 x neighbour F == 0 */
 
-struct fxs_pt_table {
-    int nsym;                       /* tokens 0..nsym-1 may occur */
-    uint32_t freq[FXS_PT_NTOK];     /* sums to FXS_PT_PROB_SCALE (or all 0) */
-    uint32_t start[FXS_PT_NTOK];
+typedef uint16_t fxs_pt_prob;
+
+struct fxs_pt_models {
+    fxs_pt_prob cnt[FXS_PT_CNT_CTX][FXS_PT_IPROBS(FXS_PT_CNT_U)];
+    fxs_pt_prob t[FXS_PT_T_CTX][FXS_PT_IPROBS(FXS_PT_T_U)];
+    fxs_pt_prob f[FXS_PT_F_CTX][FXS_PT_IPROBS(FXS_PT_F_U)];
+    fxs_pt_prob same[FXS_PT_FL_CTX];
+    fxs_pt_prob tree[256];
 };
+
+static void fxs_pt_models_init(struct fxs_pt_models *m)
+{
+    fxs_pt_prob *p = (fxs_pt_prob *)m;
+    for (size_t i = 0; i < sizeof *m / sizeof *p; i++) p[i] = FXS_PT_PROB_INIT;
+}
 
 static int fxs_pt_fail(char *err, size_t errlen, const char *msg)
 {
@@ -71,60 +91,75 @@ static float fxs_pt_getf(const uint8_t *p)
     return f;
 }
 
-/* ---- tokens ------------------------------------------------------------------------------ */
-
-/* v < 16 is its own token; otherwise the token carries the bit length (5..32) and the
- * bit below the top one, and the len-2 lower bits go out raw. */
-static inline unsigned fxs_pt_token(uint32_t v, uint32_t *extra, int *nbits)
-{
-    int len;
-    if (v < 16) {
-        *nbits = 0;
-        *extra = 0;
-        return v;
-    }
-    len = 32 - __builtin_clz(v);
-    *nbits = len - 2;
-    *extra = v & ((1u << (len - 2)) - 1u);
-    return 16u + 2u * (unsigned)(len - 5) + ((v >> (len - 2)) & 1u);
-}
-
-static inline int fxs_pt_token_bits(unsigned tok) { return tok < 16 ? 0 : 5 + (int)(tok - 16) / 2 - 2; }
-
-static inline uint32_t fxs_pt_untoken(unsigned tok, uint32_t extra)
-{
-    int nb;
-    if (tok < 16) return tok;
-    nb = fxs_pt_token_bits(tok);
-    return ((2u | ((tok - 16) & 1u)) << nb) | extra;
-}
-
 static inline uint32_t fxs_pt_zigzag(int32_t d) { return ((uint32_t)d << 1) ^ (uint32_t)(d >> 31); }
 static inline int32_t fxs_pt_unzigzag(uint32_t z) { return (int32_t)(z >> 1) ^ -(int32_t)(z & 1); }
 
-/* ---- raw bits ------------------------------------------------------------------------------ */
+/* Class of a previous residual: 0, 1, 2-3, 4-7, 8-15, 16-31, 32+. */
+static inline int fxs_pt_rclass(uint32_t z) { return z < 2 ? (int)z : z >= 32 ? 6 : 32 - __builtin_clz(z); }
+
+/* Class of a node's count c >= 2: 2..8 alone, then 9-12, 13-16, 17-32, ... 257+. */
+static inline int fxs_pt_cclass(uint32_t c)
+{
+    if (c <= 8) return (int)c - 2;
+    if (c <= 12) return 7;
+    if (c <= 16) return 8;
+    if (c > 256) return 13;
+    return 9 + (int)(31 - __builtin_clz(c - 1)) - 4;
+}
+
+/* ---- growable byte buffer ---------------------------------------------------------- */
+
+struct fxs_pt_buf {
+    uint8_t *p;
+    size_t len, cap;
+    int oom;
+};
+
+static inline int fxs_pt_reserve(struct fxs_pt_buf *b, size_t more)
+{
+    if (b->len + more <= b->cap) return 0;
+    size_t cap = b->cap ? b->cap : 4096;
+    while (cap < b->len + more) cap *= 2;
+    uint8_t *p = realloc(b->p, cap);
+    if (!p) {
+        b->oom = 1;
+        return -1;
+    }
+    b->p = p;
+    b->cap = cap;
+    return 0;
+}
+
+/* ---- raw bits (LSB first) ------------------------------------------------------------ */
 
 struct fxs_pt_bitw {
-    uint8_t *buf;
-    size_t len;
+    struct fxs_pt_buf b;
     uint64_t acc;
     int cnt;
 };
 
 static inline void fxs_pt_bits_put(struct fxs_pt_bitw *w, uint32_t v, int nbits)
 {
-    w->acc |= (uint64_t)v << w->cnt;
+    if (!nbits) return;
+    w->acc |= (uint64_t)(v & (uint32_t)((1ull << nbits) - 1u)) << w->cnt;
     w->cnt += nbits;
-    while (w->cnt >= 8) {
-        w->buf[w->len++] = (uint8_t)w->acc;
-        w->acc >>= 8;
-        w->cnt -= 8;
+    if (w->cnt >= 32) {
+        if (fxs_pt_reserve(&w->b, 4)) return;
+        fxs_pt_put32(w->b.p + w->b.len, (uint32_t)w->acc);
+        w->b.len += 4;
+        w->acc >>= 32;
+        w->cnt -= 32;
     }
 }
 
 static void fxs_pt_bits_flush(struct fxs_pt_bitw *w)
 {
-    if (w->cnt > 0) w->buf[w->len++] = (uint8_t)w->acc;
+    while (w->cnt > 0) {
+        if (fxs_pt_reserve(&w->b, 1)) return;
+        w->b.p[w->b.len++] = (uint8_t)w->acc;
+        w->acc >>= 8;
+        w->cnt -= 8;
+    }
     w->acc = 0;
     w->cnt = 0;
 }
@@ -135,7 +170,7 @@ struct fxs_pt_bitr {
     int cnt;
 };
 
-/* Reads nbits (<= 30); returns -1 past the end. */
+/* Reads nbits (<= 32); returns -1 past the end. */
 static inline int fxs_pt_bits_get(struct fxs_pt_bitr *r, int nbits, uint32_t *v)
 {
     while (r->cnt < nbits) {
@@ -149,96 +184,200 @@ static inline int fxs_pt_bits_get(struct fxs_pt_bitr *r, int nbits, uint32_t *v)
     return 0;
 }
 
-/* ---- frequency tables ----------------------------------------------------------------------- */
+/* ---- adaptive binary range coder (LZMA's) ------------------------------------------ */
 
-/* Scales counts to freqs summing to the probability scale, every used token >= 1. */
-static void fxs_pt_normalize(const uint32_t *count, struct fxs_pt_table *t)
+struct fxs_pt_rcw {
+    struct fxs_pt_buf b;
+    uint64_t low;
+    uint32_t range;
+    uint8_t cache;
+    uint64_t cache_size;
+};
+
+static void fxs_pt_rc_init(struct fxs_pt_rcw *e)
 {
-    uint64_t total = 0;
-    uint32_t sum = 0;
-    int best = 0;
-    memset(t, 0, sizeof *t);
-    for (int s = 0; s < FXS_PT_NTOK; s++) total += count[s];
-    if (!total) return;
-    for (int s = 0; s < FXS_PT_NTOK; s++) {
-        if (!count[s]) continue;
-        t->freq[s] = (uint32_t)((uint64_t)count[s] * FXS_PT_PROB_SCALE / total);
-        if (!t->freq[s]) t->freq[s] = 1;
-        sum += t->freq[s];
-        if (count[s] > count[best]) best = s;
-        t->nsym = s + 1;
-    }
-    if (sum < FXS_PT_PROB_SCALE) t->freq[best] += FXS_PT_PROB_SCALE - sum;
-    while (sum > FXS_PT_PROB_SCALE) { /* take from the largest until it fits */
-        int big = 0;
-        for (int s = 1; s < t->nsym; s++)
-            if (t->freq[s] > t->freq[big]) big = s;
-        t->freq[big]--;
-        sum--;
-    }
-    for (int s = 1; s < FXS_PT_NTOK; s++) t->start[s] = t->start[s - 1] + t->freq[s - 1];
+    e->low = 0;
+    e->range = 0xFFFFFFFFu;
+    e->cache = 0;
+    e->cache_size = 1;
 }
 
-/* Table bytes: nsym, then nsym frequencies as LEB128 (1 or 2 bytes each). */
-static size_t fxs_pt_table_write(const struct fxs_pt_table *t, uint8_t *out)
+static inline void fxs_pt_rc_shift(struct fxs_pt_rcw *e)
 {
-    size_t o = 0;
-    out[o++] = (uint8_t)t->nsym;
-    for (int s = 0; s < t->nsym; s++) {
-        uint32_t f = t->freq[s];
-        if (f >= 128) {
-            out[o++] = (uint8_t)(0x80u | (f & 0x7fu));
-            out[o++] = (uint8_t)(f >> 7);
-        } else {
-            out[o++] = (uint8_t)f;
-        }
+    if ((uint32_t)e->low < 0xFF000000u || (e->low >> 32) != 0) {
+        uint8_t carry = (uint8_t)(e->low >> 32), out = e->cache;
+        do {
+            if (fxs_pt_reserve(&e->b, 1)) return;
+            e->b.p[e->b.len++] = (uint8_t)(out + carry);
+            out = 0xFF;
+        } while (--e->cache_size);
+        e->cache = (uint8_t)(e->low >> 24);
     }
-    return o;
+    e->cache_size++;
+    e->low = (e->low & 0x00FFFFFFu) << 8;
 }
 
-static int fxs_pt_table_read(const uint8_t *p, size_t len, size_t *pos, struct fxs_pt_table *t)
+static inline void fxs_pt_rc_bit(struct fxs_pt_rcw *e, fxs_pt_prob *p, int bit)
 {
-    uint32_t sum = 0;
-    memset(t, 0, sizeof *t);
-    if (*pos >= len) return -1;
-    t->nsym = p[(*pos)++];
-    if (t->nsym > FXS_PT_NTOK) return -1;
-    for (int s = 0; s < t->nsym; s++) {
-        uint32_t f;
-        if (*pos >= len) return -1;
-        f = p[(*pos)++];
-        if (f & 0x80u) {
-            if (*pos >= len || p[*pos] & 0x80u) return -1;
-            f = (f & 0x7fu) | (uint32_t)p[(*pos)++] << 7;
-        }
-        if (f > FXS_PT_PROB_SCALE) return -1;
-        t->freq[s] = f;
-        sum += f;
+    uint32_t bound = (e->range >> FXS_PT_PROB_BITS) * *p;
+    if (!bit) {
+        e->range = bound;
+        *p = (fxs_pt_prob)(*p + (((1u << FXS_PT_PROB_BITS) - *p) >> FXS_PT_ADAPT));
+    } else {
+        e->low += bound;
+        e->range -= bound;
+        *p = (fxs_pt_prob)(*p - (*p >> FXS_PT_ADAPT));
     }
-    if (sum != FXS_PT_PROB_SCALE && sum != 0) return -1;
-    for (int s = 1; s < FXS_PT_NTOK; s++) t->start[s] = t->start[s - 1] + t->freq[s - 1];
+    if (e->range < FXS_PT_TOP) {
+        e->range <<= 8;
+        fxs_pt_rc_shift(e);
+    }
+}
+
+static void fxs_pt_rc_flush(struct fxs_pt_rcw *e)
+{
+    for (int i = 0; i < 5; i++) fxs_pt_rc_shift(e);
+}
+
+struct fxs_pt_rcr {
+    const uint8_t *p, *end;
+    uint32_t range, code;
+    int bad;
+};
+
+static int fxs_pt_rcr_init(struct fxs_pt_rcr *d, const uint8_t *p, size_t len)
+{
+    if (len < 5 || p[0] != 0) return -1;
+    d->p = p + 5;
+    d->end = p + len;
+    d->range = 0xFFFFFFFFu;
+    d->code = (uint32_t)p[1] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 8 | p[4]; /* big endian */
+    d->bad = d->code == 0xFFFFFFFFu;
+    return d->bad ? -1 : 0;
+}
+
+static inline int fxs_pt_rc_get(struct fxs_pt_rcr *d, fxs_pt_prob *p)
+{
+    uint32_t bound = (d->range >> FXS_PT_PROB_BITS) * *p;
+    int bit;
+    if (d->code < bound) {
+        d->range = bound;
+        *p = (fxs_pt_prob)(*p + (((1u << FXS_PT_PROB_BITS) - *p) >> FXS_PT_ADAPT));
+        bit = 0;
+    } else {
+        d->code -= bound;
+        d->range -= bound;
+        *p = (fxs_pt_prob)(*p - (*p >> FXS_PT_ADAPT));
+        bit = 1;
+    }
+    if (d->range < FXS_PT_TOP) {
+        d->range <<= 8;
+        if (d->p < d->end) d->code = d->code << 8 | *d->p++;
+        else d->bad = 1, d->code <<= 8;
+    }
+    return bit;
+}
+
+/* ---- integers: unary prefix, Exp-Golomb class, top mantissa bit modelled ------------ */
+
+struct fxs_pt_enc_io {
+    struct fxs_pt_rcw rc;
+    struct fxs_pt_bitw bits;
+};
+
+static inline void fxs_pt_put_int(struct fxs_pt_enc_io *io, fxs_pt_prob *p, int u, uint32_t z)
+{
+    uint32_t e;
+    int k;
+    for (int i = 0; i < u; i++) {
+        fxs_pt_rc_bit(&io->rc, p + i, z > (uint32_t)i);
+        if (z == (uint32_t)i) return;
+    }
+    e = z - (uint32_t)u + 1u;
+    k = 31 - __builtin_clz(e);
+    for (int i = 0; i < k; i++) fxs_pt_rc_bit(&io->rc, p + u + i, 1);
+    fxs_pt_rc_bit(&io->rc, p + u + k, 0);
+    if (k) {
+        fxs_pt_rc_bit(&io->rc, p + u + FXS_PT_MAXK + k, (int)(e >> (k - 1)) & 1);
+        fxs_pt_bits_put(&io->bits, e, k - 1);
+    }
+}
+
+struct fxs_pt_dec_io {
+    struct fxs_pt_rcr rc;
+    struct fxs_pt_bitr bits;
+};
+
+/* Returns 0, or -1 for a class beyond the limit or raw bits past the end. */
+static inline int fxs_pt_get_int(struct fxs_pt_dec_io *io, fxs_pt_prob *p, int u, uint32_t *z)
+{
+    uint32_t e, m;
+    int k = 0;
+    for (int i = 0; i < u; i++)
+        if (!fxs_pt_rc_get(&io->rc, p + i)) {
+            *z = (uint32_t)i;
+            return 0;
+        }
+    while (fxs_pt_rc_get(&io->rc, p + u + k))
+        if (++k == FXS_PT_MAXK) return -1;
+    e = 1;
+    if (k) {
+        e = 2u | (uint32_t)fxs_pt_rc_get(&io->rc, p + u + FXS_PT_MAXK + k);
+        if (fxs_pt_bits_get(&io->bits, k - 1, &m)) return -1;
+        e = e << (k - 1) | m;
+    }
+    *z = e + (uint32_t)u - 1u;
     return 0;
 }
 
-/* ---- quantisation ---------------------------------------------------------------------------- */
+/* ---- frame description -------------------------------------------------------------- */
 
 struct fxs_pt_frame {
     uint32_t n;
-    int pos_bits, temp_bits, fuel_bits, cell_bits;
-    float lo[5], hi[5]; /* x, y, z, T, F */
+    int pos_bits, temp_bits, fuel_bits;
+    int abits[3];            /* bits of each axis' quantised coordinate */
+    float lo[5], hi[5];      /* x, y, z, T, F */
+    double step[5];
+    /* kd-tree schedule: axis split at depth d, and bits of each axis left below depth d */
+    int depth;
+    uint8_t axis[FXS_PT_MAXD];
+    uint8_t left[FXS_PT_MAXD + 1][3];
 };
+
+static void fxs_pt_steps(struct fxs_pt_frame *f)
+{
+    double r = 0;
+    for (int a = 0; a < 3; a++)
+        if ((double)f->hi[a] - (double)f->lo[a] > r) r = (double)f->hi[a] - (double)f->lo[a];
+    for (int a = 0; a < 3; a++) f->step[a] = r / (double)((1u << f->pos_bits) - 1u);
+    f->step[3] = ((double)f->hi[3] - (double)f->lo[3]) / (double)((1u << f->temp_bits) - 1u);
+    f->step[4] = ((double)f->hi[4] - (double)f->lo[4]) / (double)((1u << f->fuel_bits) - 1u);
+}
+
+/* Splits from the top bit down; at each bit x, then y, then z (axes that have it). */
+static void fxs_pt_schedule(struct fxs_pt_frame *f)
+{
+    int top = 0, d = 0, left[3];
+    for (int a = 0; a < 3; a++) {
+        left[a] = f->abits[a];
+        if (f->abits[a] > top) top = f->abits[a];
+    }
+    for (int b = top - 1; b >= 0; b--)
+        for (int a = 0; a < 3; a++)
+            if (b < f->abits[a]) {
+                for (int c = 0; c < 3; c++) f->left[d][c] = (uint8_t)left[c];
+                f->axis[d++] = (uint8_t)a;
+                left[a]--;
+            }
+    for (int c = 0; c < 3; c++) f->left[d][c] = 0;
+    f->depth = d;
+}
 
 static inline uint32_t fxs_pt_quant(float v, float lo, double scale, uint32_t qmax)
 {
     double q = ((double)v - (double)lo) * scale + 0.5;
     uint32_t u = q <= 0 ? 0u : (uint32_t)q;
     return u > qmax ? qmax : u;
-}
-
-/* Reconstruction shared with the JavaScript decoder: float32(lo + q * step) in double. */
-static inline double fxs_pt_step(float lo, float hi, int bits)
-{
-    return ((double)hi - (double)lo) / (double)((1u << bits) - 1u);
 }
 
 static int fxs_pt_bounds(const struct fxs_particles *p, struct fxs_pt_frame *f)
@@ -260,66 +399,240 @@ static int fxs_pt_bounds(const struct fxs_particles *p, struct fxs_pt_frame *f)
     return 0;
 }
 
-/* Cells per axis 2^k: about one cell per particle over the box. */
-static int fxs_pt_cell_bits(uint32_t n, int pos_bits)
+/* Index among the FXS_PT_NEAR particles before j of the one nearest to q (the latest
+ * on ties), or -1 for j = 0. */
+static inline int64_t fxs_pt_nearest(const uint32_t *q, uint32_t j)
 {
-    int k = 0;
-    while (k < FXS_PT_MAX_CELL_BITS && k < pos_bits && (1ull << (3 * (k + 1))) <= (uint64_t)n) k++;
-    return k;
-}
-
-/* ---- sorting --------------------------------------------------------------------------------- */
-
-/* LSD radix sort of idx by key (11-bit digits, constant digits skipped). */
-static int fxs_pt_radix(uint64_t *key, uint32_t *idx, uint64_t *key2, uint32_t *idx2, uint32_t n, int keybits)
-{
-    static const int D = 11;
-    uint32_t *count;
-    if (n < 2) return 0;
-    if (!(count = malloc(sizeof(uint32_t) << D))) return -1;
-    for (int shift = 0; shift < keybits; shift += D) {
-        uint32_t sum = 0, mask = (1u << D) - 1u;
-        memset(count, 0, sizeof(uint32_t) << D);
-        for (uint32_t i = 0; i < n; i++) count[(key[i] >> shift) & mask]++;
-        if (count[(key[0] >> shift) & mask] == n) continue;
-        for (uint32_t d = 0; d <= mask; d++) {
-            uint32_t c = count[d];
-            count[d] = sum;
-            sum += c;
+    int64_t best = -1;
+    uint64_t bd = UINT64_MAX;
+    const uint32_t *c = q + 3 * (size_t)j;
+    for (uint32_t k = 1; k <= FXS_PT_NEAR && k <= j; k++) {
+        const uint32_t *o = c - 3 * (size_t)k;
+        int64_t dx = (int64_t)c[0] - o[0], dy = (int64_t)c[1] - o[1], dz = (int64_t)c[2] - o[2];
+        uint64_t d = (uint64_t)(dx * dx) + (uint64_t)(dy * dy) + (uint64_t)(dz * dz);
+        if (d < bd) {
+            bd = d;
+            best = (int64_t)(j - k);
         }
-        for (uint32_t i = 0; i < n; i++) {
-            uint32_t d = (uint32_t)(key[i] >> shift) & mask, o = count[d]++;
-            key2[o] = key[i];
-            idx2[o] = idx[i];
-        }
-        memcpy(key, key2, n * sizeof *key);
-        memcpy(idx, idx2, n * sizeof *idx);
     }
-    free(count);
-    return 0;
+    return best;
 }
 
-/* Division-free encoder symbol (ryg_rans): x / freq as a multiply and shift, bit-exact. */
-struct fxs_pt_esym {
-    uint32_t xmax, rcp, bias;
-    uint16_t cmpl;
-    uint16_t shift;
-};
+/* ---- encoder --------------------------------------------------------------------------- */
 
-/* ---- encoder --------------------------------------------------------------------------------- */
+struct fxs_pt_pt {
+    uint32_t q[3];
+    uint32_t i;
+};
 
 struct fxs_pt_enc {
     struct fxs_pt_frame f;
-    uint64_t *key;
-    uint32_t *idx;
-    uint8_t *tok;   /* 7 per particle */
-    uint32_t count[FXS_PT_NSTREAMS][FXS_PT_NTOK];
-    struct fxs_pt_table tab[FXS_PT_NSTREAMS];
-    struct fxs_pt_esym sym[FXS_PT_NSTREAMS][FXS_PT_NTOK];
-    struct fxs_pt_bitw bits;
-    uint8_t *rans;  /* written backwards from rans + rans_cap */
-    size_t rans_cap, rans_len;
+    struct fxs_pt_pt *pts;
+    struct fxs_pt_enc_io io;
+    struct fxs_pt_models m;
 };
+
+/* Spreads the low 21 bits of v to every third bit. */
+static inline uint64_t fxs_pt_spread3(uint64_t v)
+{
+    v &= 0x1FFFFFu;
+    v = (v | v << 32) & 0x1F00000000FFFFull;
+    v = (v | v << 16) & 0x1F0000FF0000FFull;
+    v = (v | v << 8) & 0x100F00F00F00F00Full;
+    v = (v | v << 4) & 0x10C30C30C30C30C3ull;
+    v = (v | v << 2) & 0x1249249249249249ull;
+    return v;
+}
+
+/* The same tree over points sorted by Morton key (x above y above z at each bit): the
+ * lower half of a node is found by binary search. For frames whose axes have <= 21 bits. */
+static void fxs_pt_enc_sorted(struct fxs_pt_enc *e, const uint64_t *key, const struct fxs_pt_pt *p, uint32_t c, int d)
+{
+    const struct fxs_pt_frame *f = &e->f;
+    while (c >= 2 && d < f->depth) {
+        int a = f->axis[d], kb = 3 * (f->left[d][a] - 1) + 2 - a;
+        uint32_t lo = 0, hi = c;
+        while (lo < hi) { /* first key with bit kb set */
+            uint32_t mid = (lo + hi) >> 1;
+            if ((key[mid] >> kb) & 1u) hi = mid;
+            else lo = mid + 1;
+        }
+        fxs_pt_put_int(&e->io, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
+                       fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
+        d++;
+        if (lo && lo < c) {
+            fxs_pt_enc_sorted(e, key, p, lo, d);
+            p += lo;
+            key += lo;
+            c -= lo;
+        }
+    }
+    if (c == 1)
+        for (int a = 0; a < 3; a++) fxs_pt_bits_put(&e->io.bits, p->q[a], f->left[d][a]);
+}
+
+/* LSD radix sort by key (12-bit digits, constant digits skipped) of k[0]/ix[0] using
+ * k[1]/ix[1] as scratch; returns which of the two holds the result. */
+static int fxs_pt_radix(uint64_t *k[2], uint32_t *ix[2], uint32_t n, int keybits)
+{
+    enum { D = 12 };
+    uint32_t count[1u << D];
+    int cur = 0;
+    for (int shift = 0; n > 1 && shift < keybits; shift += D) {
+        const uint64_t *key = k[cur];
+        const uint32_t *idx = ix[cur];
+        uint64_t *key2 = k[!cur];
+        uint32_t *idx2 = ix[!cur];
+        uint32_t sum = 0, mask = (1u << D) - 1u;
+        memset(count, 0, sizeof count);
+        for (uint32_t i = 0; i < n; i++) count[(key[i] >> shift) & mask]++;
+        if (count[(key[0] >> shift) & mask] == n) continue;
+        for (uint32_t dg = 0; dg <= mask; dg++) {
+            uint32_t c = count[dg];
+            count[dg] = sum;
+            sum += c;
+        }
+        for (uint32_t i = 0; i < n; i++) {
+            uint32_t o = count[(key[i] >> shift) & mask]++;
+            key2[o] = key[i];
+            idx2[o] = idx[i];
+        }
+        cur = !cur;
+    }
+    return cur;
+}
+
+/* Sorts e->pts by Morton key and codes the tree; -1 when out of memory. */
+static int fxs_pt_enc_morton(struct fxs_pt_enc *e)
+{
+    uint32_t n = e->f.n;
+    uint64_t *kb = malloc(2 * (size_t)n * sizeof *kb);
+    uint32_t *ib = malloc(2 * (size_t)n * sizeof *ib);
+    struct fxs_pt_pt *sorted = malloc((size_t)n * sizeof *sorted);
+    int r = -1;
+    if (kb && ib && sorted) {
+        uint64_t *k[2] = { kb, kb + n };
+        uint32_t *ix[2] = { ib, ib + n };
+        int top = e->f.depth ? e->f.left[0][e->f.axis[0]] : 0, c;
+        for (uint32_t i = 0; i < n; i++) {
+            const uint32_t *q = e->pts[i].q;
+            kb[i] = fxs_pt_spread3(q[0]) << 2 | fxs_pt_spread3(q[1]) << 1 | fxs_pt_spread3(q[2]);
+            ib[i] = i;
+        }
+        c = fxs_pt_radix(k, ix, n, 3 * top);
+        for (uint32_t j = 0; j < n; j++) sorted[j] = e->pts[ix[c][j]];
+        free(e->pts);
+        e->pts = sorted;
+        sorted = NULL;
+        fxs_pt_enc_sorted(e, k[c], e->pts, n, 0);
+        r = 0;
+    }
+    free(kb);
+    free(ib);
+    free(sorted);
+    return r;
+}
+
+/* The tree by stable partitioning (through scratch), for frames with an axis of more
+ * than 21 bits: the same order as the Morton path, ties in input order. */
+static void fxs_pt_enc_node(struct fxs_pt_enc *e, struct fxs_pt_pt *p, struct fxs_pt_pt *tmp, uint32_t c, int d)
+{
+    const struct fxs_pt_frame *f = &e->f;
+    while (c >= 2 && d < f->depth) {
+        int a = f->axis[d], sh = f->left[d][a] - 1;
+        uint32_t lo = 0, hi = 0;
+        for (uint32_t i = 0; i < c; i++)
+            if (!((p[i].q[a] >> sh) & 1u)) p[lo++] = p[i];
+            else tmp[hi++] = p[i];
+        memcpy(p + lo, tmp, hi * sizeof *p);
+        fxs_pt_put_int(&e->io, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
+                       fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
+        d++;
+        if (lo && lo < c) {
+            fxs_pt_enc_node(e, p, tmp, lo, d);
+            p += lo;
+            c -= lo;
+        }
+    }
+    if (c == 1)
+        for (int a = 0; a < 3; a++) fxs_pt_bits_put(&e->io.bits, p->q[a], f->left[d][a]);
+}
+
+/* Flags, T and F of every particle in tree order. */
+static void fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p, uint32_t *q)
+{
+    const struct fxs_pt_frame *f = &e->f;
+    uint32_t n = f->n, tmax = (1u << f->temp_bits) - 1u, fmax = (1u << f->fuel_bits) - 1u;
+    double ts = f->hi[3] > f->lo[3] ? (double)tmax / ((double)f->hi[3] - (double)f->lo[3]) : 0;
+    double fs = f->hi[4] > f->lo[4] ? (double)fmax / ((double)f->hi[4] - (double)f->lo[4]) : 0;
+    uint32_t *qt = q + 3 * (size_t)n, *qf = qt + n, zt = 0, zf = 0;
+    uint8_t *fl = (uint8_t *)(qf + n);
+    for (uint32_t j = 0; j < n; j++) {
+        uint32_t i = e->pts[j].i;
+        memcpy(q + 3 * (size_t)j, e->pts[j].q, sizeof e->pts[j].q);
+        qt[j] = fxs_pt_quant(p->temp[i], f->lo[3], ts, tmax);
+        qf[j] = fxs_pt_quant(p->fuel[i], f->lo[4], fs, fmax);
+        fl[j] = p->flags[i];
+    }
+    for (uint32_t j = 0; j < n; j++) {
+        int64_t nb = fxs_pt_nearest(q, j);
+        uint32_t nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb];
+        unsigned nfl = nb < 0 ? 0 : fl[nb], v = fl[j];
+        int f0 = nf == 0;
+        fxs_pt_rc_bit(&e->io.rc, &e->m.same[(nfl & 7u) * 2 + (unsigned)f0], v != nfl);
+        if (v != nfl)
+            for (unsigned m = 1, b = 8; b-- > 0;) {
+                unsigned bit = v >> b & 1u;
+                fxs_pt_rc_bit(&e->io.rc, &e->m.tree[m], (int)bit);
+                m = 2 * m + bit;
+            }
+        fxs_pt_prob *pt = e->m.t[(fxs_pt_rclass(zt) * 8 + (int)(v & 7u)) * 2 + f0];
+        fxs_pt_prob *pf = e->m.f[(fxs_pt_rclass(zf) * 2 + f0) * 2 + (int)(v >> 2 & 1u)];
+        zt = fxs_pt_zigzag((int32_t)qt[j] - (int32_t)nt);
+        zf = fxs_pt_zigzag((int32_t)qf[j] - (int32_t)nf);
+        fxs_pt_put_int(&e->io, pt, FXS_PT_T_U, zt);
+        fxs_pt_put_int(&e->io, pf, FXS_PT_F_U, zf);
+    }
+}
+
+/* Quantises positions into e->pts and sets the axis bits. */
+static void fxs_pt_enc_quant(struct fxs_pt_enc *e, const struct fxs_particles *p)
+{
+    struct fxs_pt_frame *f = &e->f;
+    uint32_t qmax = (1u << f->pos_bits) - 1u, all[3] = { 0, 0, 0 };
+    double scale = f->step[0] > 0 ? 1.0 / f->step[0] : 0;
+    for (uint32_t i = 0; i < p->n; i++) {
+        for (int a = 0; a < 3; a++) {
+            uint32_t v = fxs_pt_quant(p->xyz[3 * i + a], f->lo[a], scale, qmax);
+            e->pts[i].q[a] = v;
+            all[a] |= v;
+        }
+        e->pts[i].i = i;
+    }
+    for (int a = 0; a < 3; a++) f->abits[a] = all[a] ? 32 - __builtin_clz(all[a]) : 0;
+}
+
+static void fxs_pt_header(const struct fxs_pt_frame *f, uint8_t *out, uint32_t rc_len, uint32_t bits_len)
+{
+    memset(out, 0, FXS_PARTICLES_HEADER_BYTES);
+    memcpy(out, FXS_PT_MAGIC, 4);
+    out[4] = FXS_PT_VERSION;
+    out[5] = (uint8_t)f->pos_bits;
+    out[6] = (uint8_t)f->temp_bits;
+    out[7] = (uint8_t)f->fuel_bits;
+    for (int a = 0; a < 3; a++) out[8 + a] = (uint8_t)f->abits[a];
+    fxs_pt_put32(out + 12, f->n);
+    for (int c = 0; c < 3; c++) {
+        fxs_pt_putf(out + 16 + 4 * c, f->lo[c]);
+        fxs_pt_putf(out + 28 + 4 * c, f->hi[c]);
+    }
+    fxs_pt_putf(out + 40, f->lo[3]);
+    fxs_pt_putf(out + 44, f->hi[3]);
+    fxs_pt_putf(out + 48, f->lo[4]);
+    fxs_pt_putf(out + 52, f->hi[4]);
+    fxs_pt_put32(out + 56, rc_len);
+    fxs_pt_put32(out + 60, bits_len);
+}
 
 static int fxs_pt_opts(const struct fxs_particles_opts *o, struct fxs_pt_frame *f)
 {
@@ -331,178 +644,6 @@ static int fxs_pt_opts(const struct fxs_particles_opts *o, struct fxs_pt_frame *
     return 0;
 }
 
-/* Sort keys: (cell id << m) | x offset, m = pos_bits - k. */
-static void fxs_pt_keys(const struct fxs_particles *p, struct fxs_pt_enc *e, uint32_t *q)
-{
-    const struct fxs_pt_frame *f = &e->f;
-    int m = f->pos_bits - f->cell_bits, k = f->cell_bits;
-    uint32_t qmax = (1u << f->pos_bits) - 1u;
-    double scale[3];
-    for (int c = 0; c < 3; c++) scale[c] = f->hi[c] > f->lo[c] ? (double)qmax / ((double)f->hi[c] - (double)f->lo[c]) : 0;
-    for (uint32_t i = 0; i < p->n; i++) {
-        uint32_t qx = fxs_pt_quant(p->xyz[3 * i], f->lo[0], scale[0], qmax);
-        uint32_t qy = fxs_pt_quant(p->xyz[3 * i + 1], f->lo[1], scale[1], qmax);
-        uint32_t qz = fxs_pt_quant(p->xyz[3 * i + 2], f->lo[2], scale[2], qmax);
-        uint64_t cell = (uint64_t)(qz >> m) << (2 * k) | (uint64_t)(qy >> m) << k | (qx >> m);
-        e->key[i] = cell << m | (qx & ((1u << m) - 1u));
-        e->idx[i] = i;
-        q[3 * i] = qx;
-        q[3 * i + 1] = qy;
-        q[3 * i + 2] = qz;
-    }
-}
-
-static inline void fxs_pt_emit(struct fxs_pt_enc *e, uint8_t *slot, int stream, uint32_t v)
-{
-    uint32_t extra;
-    int nb;
-    unsigned t = fxs_pt_token(v, &extra, &nb);
-    *slot = (uint8_t)t;
-    e->count[stream][t]++;
-    if (nb) fxs_pt_bits_put(&e->bits, extra, nb);
-}
-
-/* Forward pass in sorted order: tokens, counts and raw bits. */
-static void fxs_pt_tokens(const struct fxs_particles *p, struct fxs_pt_enc *e, const uint32_t *q)
-{
-    const struct fxs_pt_frame *f = &e->f;
-    int m = f->pos_bits - f->cell_bits;
-    uint32_t omask = (1u << m) - 1u, tmax = (1u << f->temp_bits) - 1u, fmax = (1u << f->fuel_bits) - 1u;
-    double ts = f->hi[3] > f->lo[3] ? (double)tmax / ((double)f->hi[3] - (double)f->lo[3]) : 0;
-    double fs = f->hi[4] > f->lo[4] ? (double)fmax / ((double)f->hi[4] - (double)f->lo[4]) : 0;
-    uint64_t prev_cell = 0;
-    uint32_t prev_x = 0, prev_t = 0, prev_f = 0;
-    for (uint32_t j = 0; j < p->n; j++) {
-        uint32_t i = e->idx[j];
-        uint8_t *s = e->tok + (size_t)FXS_PT_SLOTS * j;
-        uint64_t cell = e->key[j] >> m;
-        uint32_t ox = q[3 * i] & omask;
-        uint32_t qt = fxs_pt_quant(p->temp[i], f->lo[3], ts, tmax), qf = fxs_pt_quant(p->fuel[i], f->lo[4], fs, fmax);
-        fxs_pt_emit(e, s, FXS_PT_CELL, (uint32_t)(cell - prev_cell));
-        if (cell == prev_cell && j) fxs_pt_emit(e, s + 1, FXS_PT_XSAME, ox - prev_x);
-        else fxs_pt_emit(e, s + 1, FXS_PT_XNEW, ox);
-        fxs_pt_emit(e, s + 2, FXS_PT_Y, q[3 * i + 1] & omask);
-        fxs_pt_emit(e, s + 3, FXS_PT_Z, q[3 * i + 2] & omask);
-        fxs_pt_emit(e, s + 4, FXS_PT_T, fxs_pt_zigzag((int32_t)qt - (int32_t)prev_t));
-        fxs_pt_emit(e, s + 5, FXS_PT_F, fxs_pt_zigzag((int32_t)qf - (int32_t)prev_f));
-        fxs_pt_emit(e, s + 6, FXS_PT_FLAGS, p->flags[i]);
-        prev_cell = cell;
-        prev_x = ox;
-        prev_t = qt;
-        prev_f = qf;
-    }
-    fxs_pt_bits_flush(&e->bits);
-}
-
-static void fxs_pt_esym_init(struct fxs_pt_esym *e, uint32_t start, uint32_t freq)
-{
-    e->xmax = ((FXS_PT_RANS_L >> FXS_PT_PROB_BITS) << 8) * freq;
-    e->cmpl = (uint16_t)(FXS_PT_PROB_SCALE - freq);
-    if (freq < 2) {
-        e->rcp = ~0u;
-        e->shift = 0;
-        e->bias = start + FXS_PT_PROB_SCALE - 1u;
-    } else {
-        uint32_t shift = 0;
-        while (freq > (1u << shift)) shift++;
-        e->rcp = (uint32_t)(((1ull << (shift + 31)) + freq - 1) / freq);
-        e->shift = (uint16_t)(shift - 1);
-        e->bias = start;
-    }
-}
-
-static inline void fxs_pt_rans_put(struct fxs_pt_enc *e, uint32_t *x, const struct fxs_pt_esym *sym)
-{
-    uint32_t q;
-    while (*x >= sym->xmax) {
-        e->rans[e->rans_cap - ++e->rans_len] = (uint8_t)*x;
-        *x >>= 8;
-    }
-    q = (uint32_t)(((uint64_t)*x * sym->rcp) >> 32) >> sym->shift;
-    *x += sym->bias + q * sym->cmpl;
-}
-
-/* Backward rANS pass; the decoder reads the bytes forward. */
-static void fxs_pt_rans(struct fxs_pt_enc *e)
-{
-    static const int slot_stream[FXS_PT_SLOTS] = { FXS_PT_CELL, -1, FXS_PT_Y, FXS_PT_Z, FXS_PT_T, FXS_PT_F, FXS_PT_FLAGS };
-    struct fxs_pt_esym (*sym)[FXS_PT_NTOK] = e->sym;
-    uint32_t x = FXS_PT_RANS_L;
-    if (!e->f.n) return;
-    for (int st = 0; st < FXS_PT_NSTREAMS; st++)
-        for (int t = 0; t < e->tab[st].nsym; t++) fxs_pt_esym_init(&sym[st][t], e->tab[st].start[t], e->tab[st].freq[t]);
-    for (uint32_t j = e->f.n; j-- > 0;) {
-        const uint8_t *s = e->tok + (size_t)FXS_PT_SLOTS * j;
-        for (int k = FXS_PT_SLOTS - 1; k >= 0; k--) {
-            int st = k == 1 ? (s[0] == 0 && j ? FXS_PT_XSAME : FXS_PT_XNEW) : slot_stream[k];
-            fxs_pt_rans_put(e, &x, &sym[st][s[k]]);
-        }
-    }
-    for (int i = 0; i < 4; i++) e->rans[e->rans_cap - ++e->rans_len] = (uint8_t)(x >> (8 * (3 - i)));
-}
-
-static void fxs_pt_header(const struct fxs_pt_frame *f, uint8_t *out, uint32_t rans_len, uint32_t bits_len)
-{
-    memset(out, 0, FXS_PARTICLES_HEADER_BYTES);
-    memcpy(out, FXS_PT_MAGIC, 4);
-    out[4] = FXS_PT_VERSION;
-    out[5] = (uint8_t)f->pos_bits;
-    out[6] = (uint8_t)f->temp_bits;
-    out[7] = (uint8_t)f->fuel_bits;
-    out[8] = (uint8_t)f->cell_bits;
-    fxs_pt_put32(out + 12, f->n);
-    for (int c = 0; c < 3; c++) {
-        fxs_pt_putf(out + 16 + 4 * c, f->lo[c]);
-        fxs_pt_putf(out + 28 + 4 * c, f->hi[c]);
-    }
-    fxs_pt_putf(out + 40, f->lo[3]);
-    fxs_pt_putf(out + 44, f->hi[3]);
-    fxs_pt_putf(out + 48, f->lo[4]);
-    fxs_pt_putf(out + 52, f->hi[4]);
-    fxs_pt_put32(out + 56, rans_len);
-    fxs_pt_put32(out + 60, bits_len);
-}
-
-static int fxs_pt_assemble(struct fxs_pt_enc *e, uint8_t **out, size_t *out_len)
-{
-    uint8_t tables[FXS_PT_NSTREAMS * (1 + 2 * FXS_PT_NTOK)];
-    size_t tl = 0, total;
-    uint8_t *buf;
-    if (e->f.n)
-        for (int s = 0; s < FXS_PT_NSTREAMS; s++) tl += fxs_pt_table_write(&e->tab[s], tables + tl);
-    total = FXS_PARTICLES_HEADER_BYTES + tl + e->rans_len + e->bits.len;
-    if (!(buf = malloc(total ? total : 1))) return -1;
-    fxs_pt_header(&e->f, buf, (uint32_t)e->rans_len, (uint32_t)e->bits.len);
-    memcpy(buf + FXS_PARTICLES_HEADER_BYTES, tables, tl);
-    if (e->rans_len) memcpy(buf + FXS_PARTICLES_HEADER_BYTES + tl, e->rans + e->rans_cap - e->rans_len, e->rans_len);
-    if (e->bits.len) memcpy(buf + FXS_PARTICLES_HEADER_BYTES + tl + e->rans_len, e->bits.buf, e->bits.len);
-    *out = buf;
-    *out_len = total;
-    return 0;
-}
-
-static void fxs_pt_enc_free(struct fxs_pt_enc *e)
-{
-    free(e->key);
-    free(e->idx);
-    free(e->tok);
-    free(e->bits.buf);
-    free(e->rans);
-}
-
-/* Allocates the work arrays; the sort scratch (key2, idx2) reuses q's neighbours. */
-static int fxs_pt_enc_alloc(struct fxs_pt_enc *e, uint32_t n)
-{
-    size_t m = n ? n : 1;
-    e->key = malloc(2 * m * sizeof *e->key);
-    e->idx = malloc(2 * m * sizeof *e->idx);
-    e->tok = malloc(m * FXS_PT_SLOTS);
-    e->bits.buf = malloc(m * FXS_PT_SLOTS * 4 + 8);
-    e->rans_cap = m * FXS_PT_SLOTS * 2 + 16;
-    e->rans = malloc(e->rans_cap);
-    return e->key && e->idx && e->tok && e->bits.buf && e->rans ? 0 : -1;
-}
-
 static int fxs_pt_check_input(const struct fxs_particles *p, char *err, size_t errlen)
 {
     if (!p) return fxs_pt_fail(err, errlen, "no particles given");
@@ -512,12 +653,54 @@ static int fxs_pt_check_input(const struct fxs_particles *p, char *err, size_t e
     return 0;
 }
 
+/* Runs both passes and assembles header + range-coder bytes + raw bits. */
+static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, uint8_t **out, size_t *out_len)
+{
+    uint32_t n = p->n, *q = NULL;
+    uint8_t *buf;
+    size_t total;
+    int r = -1;
+    fxs_pt_steps(&e->f);
+    if (n) {
+        if (!(e->pts = malloc((size_t)n * sizeof *e->pts))) return -1;
+        /* q: 3n ordered coordinates, n qT, n qF, n flags */
+        if (!(q = malloc((size_t)n * (5 * sizeof *q + 1)))) return -1;
+        fxs_pt_enc_quant(e, p);
+        fxs_pt_schedule(&e->f);
+        fxs_pt_models_init(&e->m);
+        fxs_pt_rc_init(&e->io.rc);
+        if (e->f.abits[0] <= 21 && e->f.abits[1] <= 21 && e->f.abits[2] <= 21) {
+            if (fxs_pt_enc_morton(e)) goto done;
+        } else {
+            struct fxs_pt_pt *tmp = malloc((size_t)n * sizeof *tmp);
+            if (!tmp) goto done;
+            fxs_pt_enc_node(e, e->pts, tmp, n, 0);
+            free(tmp);
+        }
+        fxs_pt_enc_attrs(e, p, q);
+        fxs_pt_rc_flush(&e->io.rc);
+        fxs_pt_bits_flush(&e->io.bits);
+        if (e->io.rc.b.oom || e->io.bits.b.oom) goto done;
+        if (e->io.rc.b.len > UINT32_MAX || e->io.bits.b.len > UINT32_MAX) goto done;
+    }
+    total = FXS_PARTICLES_HEADER_BYTES + e->io.rc.b.len + e->io.bits.b.len;
+    if (!(buf = malloc(total))) goto done;
+    fxs_pt_header(&e->f, buf, (uint32_t)e->io.rc.b.len, (uint32_t)e->io.bits.b.len);
+    if (e->io.rc.b.len) memcpy(buf + FXS_PARTICLES_HEADER_BYTES, e->io.rc.b.p, e->io.rc.b.len);
+    if (e->io.bits.b.len) memcpy(buf + FXS_PARTICLES_HEADER_BYTES + e->io.rc.b.len, e->io.bits.b.p, e->io.bits.b.len);
+    *out = buf;
+    *out_len = total;
+    r = 0;
+done:
+    free(q);
+    return r;
+}
+
 int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particles_opts *opts, uint8_t **out,
                          size_t *out_len, char *err, size_t errlen)
 {
     struct fxs_pt_enc *e;
-    uint32_t *q;
-    int r = -1;
+    int r;
     if (fxs_pt_check_input(p, err, errlen)) return -1;
     if (!(e = calloc(1, sizeof *e))) return fxs_pt_fail(err, errlen, "out of memory");
     if (fxs_pt_opts(opts, &e->f)) {
@@ -525,58 +708,90 @@ int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particl
         return fxs_pt_fail(err, errlen, "pos_bits must be 8..24, temp_bits and fuel_bits 2..16");
     }
     e->f.n = p->n;
-    e->f.cell_bits = fxs_pt_cell_bits(p->n, e->f.pos_bits);
-    q = malloc(3 * (size_t)(p->n ? p->n : 1) * sizeof *q);
     if (fxs_pt_bounds(p, &e->f)) {
-        fxs_pt_fail(err, errlen, "non-finite position, temperature or fuel");
-    } else if (!q || fxs_pt_enc_alloc(e, p->n) || (fxs_pt_keys(p, e, q), 0) ||
-               fxs_pt_radix(e->key, e->idx, e->key + p->n, e->idx + p->n, p->n,
-                            2 * e->f.cell_bits + e->f.pos_bits)) {
-        fxs_pt_fail(err, errlen, "out of memory");
+        r = fxs_pt_fail(err, errlen, "non-finite position, temperature or fuel");
     } else {
-        fxs_pt_tokens(p, e, q);
-        for (int s = 0; s < FXS_PT_NSTREAMS; s++) fxs_pt_normalize(e->count[s], &e->tab[s]);
-        fxs_pt_rans(e);
-        r = fxs_pt_assemble(e, out, out_len);
+        r = fxs_pt_enc_run(e, p, out, out_len);
         if (r) fxs_pt_fail(err, errlen, "out of memory");
     }
-    free(q);
-    fxs_pt_enc_free(e);
+    free(e->pts);
+    free(e->io.rc.b.p);
+    free(e->io.bits.b.p);
     free(e);
     return r;
 }
 
-/* ---- decoder --------------------------------------------------------------------------------- */
+/* ---- decoder --------------------------------------------------------------------------- */
 
 struct fxs_pt_dec {
     struct fxs_pt_frame f;
-    struct fxs_pt_table tab[FXS_PT_NSTREAMS];
-    uint8_t lookup[FXS_PT_NSTREAMS][FXS_PT_PROB_SCALE];
-    const uint8_t *rp, *rend;
-    uint32_t x;
-    struct fxs_pt_bitr bits;
+    struct fxs_pt_dec_io io;
+    struct fxs_pt_models m;
+    uint32_t *q;      /* 3n coordinates in tree order */
+    uint32_t out;     /* particles placed so far */
 };
 
-static void fxs_pt_lookup(const struct fxs_pt_table *t, uint8_t *lookup)
+/* Decodes the subtree of c points at depth d whose coordinates start with base. */
+static int fxs_pt_dec_node(struct fxs_pt_dec *d, uint32_t c, int depth, uint32_t bx, uint32_t by, uint32_t bz)
 {
-    for (int s = 0; s < t->nsym; s++) memset(lookup + t->start[s], s, t->freq[s]);
+    const struct fxs_pt_frame *f = &d->f;
+    uint32_t base[3] = { bx, by, bz };
+    while (c >= 2 && depth < f->depth) {
+        int a = f->axis[depth], sh = f->left[depth][a] - 1;
+        uint32_t z;
+        int64_t lo;
+        if (fxs_pt_get_int(&d->io, d->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U, &z)) return -1;
+        lo = (int64_t)(c >> 1) + fxs_pt_unzigzag(z);
+        if (lo < 0 || lo > (int64_t)c || d->io.rc.bad) return -1;
+        depth++;
+        if (lo && lo < (int64_t)c) {
+            if (fxs_pt_dec_node(d, (uint32_t)lo, depth, base[0], base[1], base[2])) return -1;
+            c -= (uint32_t)lo;
+            base[a] |= 1u << sh;
+        } else if (!lo) {
+            base[a] |= 1u << sh;
+        }
+    }
+    if (c == 1)
+        for (int a = 0; a < 3; a++) {
+            uint32_t v;
+            if (fxs_pt_bits_get(&d->io.bits, f->left[depth][a], &v)) return -1;
+            base[a] |= v;
+        }
+    for (uint32_t k = 0; k < c; k++, d->out++) memcpy(d->q + 3 * (size_t)d->out, base, sizeof base);
+    return 0;
 }
 
-/* Decodes one value of a stream: token by rANS, then its raw bits. */
-static inline int fxs_pt_get(struct fxs_pt_dec *d, int stream, uint32_t *v)
+static int fxs_pt_dec_attrs(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
 {
-    const struct fxs_pt_table *t = &d->tab[stream];
-    uint32_t extra = 0, slot = d->x & (FXS_PT_PROB_SCALE - 1u);
-    unsigned s;
-    if (!t->nsym) return -1;
-    s = d->lookup[stream][slot];
-    d->x = t->freq[s] * (d->x >> FXS_PT_PROB_BITS) + slot - t->start[s];
-    while (d->x < FXS_PT_RANS_L) {
-        if (d->rp >= d->rend) return -1;
-        d->x = d->x << 8 | *d->rp++;
+    const struct fxs_pt_frame *f = &d->f;
+    const uint32_t *q = d->q;
+    uint32_t zt = 0, zf = 0;
+    for (uint32_t j = 0; j < f->n; j++) {
+        int64_t nb = fxs_pt_nearest(q, j);
+        uint32_t nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb];
+        unsigned nfl = nb < 0 ? 0 : p->flags[nb], v = nfl;
+        int f0 = nf == 0;
+        int64_t t, fu;
+        if (fxs_pt_rc_get(&d->io.rc, &d->m.same[(nfl & 7u) * 2 + (unsigned)f0])) {
+            unsigned m = 1;
+            while (m < 256) m = 2 * m + (unsigned)fxs_pt_rc_get(&d->io.rc, &d->m.tree[m]);
+            v = m - 256;
+            if (v == nfl) return -1;
+        }
+        fxs_pt_prob *pt = d->m.t[(fxs_pt_rclass(zt) * 8 + (int)(v & 7u)) * 2 + f0];
+        fxs_pt_prob *pf = d->m.f[(fxs_pt_rclass(zf) * 2 + f0) * 2 + (int)(v >> 2 & 1u)];
+        if (fxs_pt_get_int(&d->io, pt, FXS_PT_T_U, &zt) || fxs_pt_get_int(&d->io, pf, FXS_PT_F_U, &zf)) return -1;
+        t = (int64_t)nt + fxs_pt_unzigzag(zt);
+        fu = (int64_t)nf + fxs_pt_unzigzag(zf);
+        if (t < 0 || t >> f->temp_bits || fu < 0 || fu >> f->fuel_bits || d->io.rc.bad) return -1;
+        qt[j] = (uint32_t)t;
+        qf[j] = (uint32_t)fu;
+        p->flags[j] = (uint8_t)v;
+        for (int a = 0; a < 3; a++) p->xyz[3 * j + a] = (float)(f->lo[a] + q[3 * j + a] * f->step[a]);
+        p->temp[j] = (float)(f->lo[3] + qt[j] * f->step[3]);
+        p->fuel[j] = (float)(f->lo[4] + qf[j] * f->step[4]);
     }
-    if (s >= 16 && fxs_pt_bits_get(&d->bits, fxs_pt_token_bits(s), &extra)) return -1;
-    *v = fxs_pt_untoken(s, extra);
     return 0;
 }
 
@@ -587,7 +802,7 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     f->pos_bits = buf[5];
     f->temp_bits = buf[6];
     f->fuel_bits = buf[7];
-    f->cell_bits = buf[8];
+    for (int a = 0; a < 3; a++) f->abits[a] = buf[8 + a];
     f->n = fxs_pt_get32(buf + 12);
     for (int c = 0; c < 3; c++) {
         f->lo[c] = fxs_pt_getf(buf + 16 + 4 * c);
@@ -599,7 +814,7 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     f->hi[4] = fxs_pt_getf(buf + 52);
     *rl = fxs_pt_get32(buf + 56);
     *bl = fxs_pt_get32(buf + 60);
-    return 0;
+    return buf[11] ? -3 : 0;
 }
 
 static const char *fxs_pt_check_frame(const struct fxs_pt_frame *f)
@@ -607,60 +822,12 @@ static const char *fxs_pt_check_frame(const struct fxs_pt_frame *f)
     if (f->pos_bits < 8 || f->pos_bits > 24 || f->temp_bits < 2 || f->temp_bits > 16 || f->fuel_bits < 2 ||
         f->fuel_bits > 16)
         return "bad bit widths";
-    if (f->cell_bits > FXS_PT_MAX_CELL_BITS || f->cell_bits > f->pos_bits) return "bad cell_bits";
+    for (int a = 0; a < 3; a++)
+        if (f->abits[a] > f->pos_bits) return "bad axis bits";
     if (f->n > FXS_PARTICLES_MAX_N) return "particle count over the limit";
     for (int c = 0; c < 5; c++)
         if (!isfinite(f->lo[c]) || !isfinite(f->hi[c]) || f->lo[c] > f->hi[c]) return "bad bounds";
     return NULL;
-}
-
-struct fxs_pt_state {
-    uint64_t cell;
-    uint32_t x, t, f;
-};
-
-/* Decodes particle j into p. Returns 0 or -1 (corrupt). */
-static int fxs_pt_decode_one(struct fxs_pt_dec *d, struct fxs_pt_state *st, uint32_t j, struct fxs_particles *p,
-                             const double *step)
-{
-    const struct fxs_pt_frame *f = &d->f;
-    int m = f->pos_bits - f->cell_bits, k = f->cell_bits;
-    uint32_t v[FXS_PT_SLOTS], omask = (1u << m) - 1u;
-    if (fxs_pt_get(d, FXS_PT_CELL, &v[0])) return -1;
-    if (fxs_pt_get(d, v[0] == 0 && j ? FXS_PT_XSAME : FXS_PT_XNEW, &v[1]) || v[1] > omask) return -1;
-    for (int s = 2; s < FXS_PT_SLOTS; s++)
-        if (fxs_pt_get(d, FXS_PT_Y + s - 2, &v[s])) return -1;
-    st->cell += v[0];
-    st->x = v[0] == 0 && j ? st->x + v[1] : v[1];
-    st->t = (uint32_t)((int32_t)st->t + fxs_pt_unzigzag(v[4]));
-    st->f = (uint32_t)((int32_t)st->f + fxs_pt_unzigzag(v[5]));
-    if (st->cell >> (3 * k) || st->x > omask || v[2] > omask || v[3] > omask) return -1;
-    if (st->t >> f->temp_bits || st->f >> f->fuel_bits || v[6] > 255) return -1;
-    {
-        uint32_t cm = (1u << k) - 1u, c = (uint32_t)st->cell;
-        uint32_t q[3] = { (c & cm) << m | st->x, ((c >> k) & cm) << m | v[2], (c >> (2 * k)) << m | v[3] };
-        for (int a = 0; a < 3; a++) p->xyz[3 * j + a] = (float)(f->lo[a] + q[a] * step[a]);
-    }
-    p->temp[j] = (float)(f->lo[3] + st->t * step[3]);
-    p->fuel[j] = (float)(f->lo[4] + st->f * step[4]);
-    p->flags[j] = (uint8_t)v[6];
-    return 0;
-}
-
-static int fxs_pt_decode_all(struct fxs_pt_dec *d, struct fxs_particles *p)
-{
-    const struct fxs_pt_frame *f = &d->f;
-    struct fxs_pt_state st = { 0, 0, 0, 0 };
-    double step[5];
-    for (int c = 0; c < 5; c++) step[c] = fxs_pt_step(f->lo[c], f->hi[c], c < 3 ? f->pos_bits : c == 3 ? f->temp_bits : f->fuel_bits);
-    if (d->rend - d->rp < 4) return -1;
-    d->x = fxs_pt_get32(d->rp);
-    d->rp += 4;
-    for (uint32_t j = 0; j < f->n; j++)
-        if (fxs_pt_decode_one(d, &st, j, p, step)) return -1;
-    if (d->rp != d->rend || d->x != FXS_PT_RANS_L) return -1;
-    if (d->bits.p != d->bits.end || d->bits.acc) return -1;
-    return 0;
 }
 
 static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n)
@@ -676,21 +843,32 @@ static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n)
     return -1;
 }
 
-/* Reads the tables and sets up both streams; checks the sizes add up to len. */
-static const char *fxs_pt_setup(struct fxs_pt_dec *d, const uint8_t *buf, size_t len, uint32_t rl, uint32_t bl)
+/* Decodes both sections after the header; NULL or the reason for rejecting. */
+static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, size_t len, uint32_t rl, uint32_t bl,
+                                   struct fxs_particles *p)
 {
-    size_t pos = FXS_PARTICLES_HEADER_BYTES;
-    if (!d->f.n) return rl || bl || len != FXS_PARTICLES_HEADER_BYTES ? "bad sizes" : NULL;
-    for (int s = 0; s < FXS_PT_NSTREAMS; s++) {
-        if (fxs_pt_table_read(buf, len, &pos, &d->tab[s])) return "corrupt frequency table";
-        fxs_pt_lookup(&d->tab[s], d->lookup[s]);
-    }
-    if ((uint64_t)pos + rl + bl != len) return "section sizes do not match the payload length";
-    d->rp = buf + pos;
-    d->rend = d->rp + rl;
-    d->bits.p = d->rend;
-    d->bits.end = d->rend + bl;
-    return NULL;
+    const uint8_t *body = buf + FXS_PARTICLES_HEADER_BYTES;
+    uint32_t *qa;
+    const char *why = NULL;
+    if ((uint64_t)FXS_PARTICLES_HEADER_BYTES + rl + bl != len) return "section sizes do not match the payload length";
+    if (!d->f.n) return rl || bl ? "bad sizes" : NULL;
+    if (fxs_pt_rcr_init(&d->io.rc, body, rl)) return "corrupt particle data";
+    d->io.bits.p = body + rl;
+    d->io.bits.end = body + rl + bl;
+    fxs_pt_steps(&d->f);
+    fxs_pt_schedule(&d->f);
+    fxs_pt_models_init(&d->m);
+    if (!(qa = malloc((size_t)d->f.n * 5 * sizeof *qa))) return "out of memory";
+    d->q = qa;
+    if (fxs_pt_dec_node(d, d->f.n, 0, 0, 0, 0) || d->out != d->f.n ||
+        fxs_pt_dec_attrs(d, p, qa + 3 * (size_t)d->f.n, qa + 4 * (size_t)d->f.n))
+        why = "corrupt particle data";
+    else if (d->io.rc.bad || d->io.rc.p != d->io.rc.end)
+        why = "corrupt particle data (range coder section not consumed exactly)";
+    else if (d->io.bits.p != d->io.bits.end || d->io.bits.acc)
+        why = "corrupt particle data (raw bits not consumed exactly)";
+    free(qa);
+    return why;
 }
 
 int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p, char *err, size_t errlen)
@@ -704,14 +882,14 @@ int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p
     if (!buf) return fxs_pt_fail(err, errlen, "no input");
     if (!(d = calloc(1, sizeof *d))) return fxs_pt_fail(err, errlen, "out of memory");
     r = fxs_pt_parse_header(buf, len, &d->f, &rl, &bl);
-    why = r == -1 ? "not a codec 1 payload (short or bad magic)" : r == -2 ? "unsupported version" : NULL;
+    why = r == -1   ? "not a codec 2 payload (short or bad magic)"
+          : r == -2 ? "unsupported version"
+          : r == -3 ? "reserved byte not 0"
+                    : NULL;
     if (!why) why = fxs_pt_check_frame(&d->f);
-    if (!why) why = fxs_pt_setup(d, buf, len, rl, bl);
+    if (!why && (uint64_t)FXS_PARTICLES_HEADER_BYTES + rl + bl != len) why = "section sizes do not match the payload length";
     if (!why && fxs_pt_alloc_out(p, d->f.n)) why = "out of memory";
-    if (!why && d->f.n && fxs_pt_decode_all(d, p)) {
-        fxs_particles_free(p);
-        why = "corrupt particle data";
-    }
+    if (!why && (why = fxs_pt_dec_body(d, buf, len, rl, bl, p))) fxs_particles_free(p);
     free(d);
     return why ? fxs_pt_fail(err, errlen, why) : 0;
 }

@@ -10,7 +10,7 @@
 #include <stdint.h>
 
 /* Codec id of kind 1 payloads in the frame header. */
-#define FXS_CODEC_PARTICLES 1u
+#define FXS_CODEC_PARTICLES 2u
 
 /* Particles as the encoder takes them and the decoder returns them. */
 struct fxs_particles {
@@ -22,9 +22,11 @@ struct fxs_particles {
 };
 
 struct fxs_particles_opts {
-    int pos_bits;    /* quantisation of each coordinate relative to the frame's bounds, 8..24 */
-    /* Added with codec 1 (0 = default): bits of temperature and fuel relative to the
-     * frame's [min, max] of each, 2..16. Defaults below. */
+    /* Positions: one step for all three axes, (largest extent of the frame's bounding box)
+     * / (2^pos_bits - 1) (as Draco's -qp), 8..24. 0 = default. */
+    int pos_bits;
+    /* Bits of temperature and fuel relative to the frame's [min, max] of each, 2..16
+     * (0 = default). Defaults below. */
     int temp_bits;
     int fuel_bits;
 };

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "config.h"
+#include "effects/eye_model.h"
 #include "jsonfile.h"
 #include "log.h"
 
@@ -23,6 +24,7 @@ void config_usage(FILE *out)
           "  --device SPEC      OpenCL device: auto (default: a GPU if any, else the CPU), cpu, gpu,\n"
           "                     or P:D (platform index:device index, as `clinfo -l` lists them)\n"
           "  --web-root DIR     static files served at / (default: clients/web next to the binary)\n"
+          "  --assets-dir DIR   OBJ models offered to compound_eye's `model` parameter (default: none)\n"
           "  --log-level LEVEL  error, warn, info (default) or debug\n"
           "  --help             this text\n"
           "\n"
@@ -140,7 +142,8 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
         cfg->port = (int)e->valuedouble;
         return 0;
     }
-    static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "log_level", NULL};
+    static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "assets_dir", "log_level",
+                                              NULL};
     bool known = false;
     for (const char *const *n = string_keys; *n && !known; n++) known = !strcmp(*n, k);
     if (!known) return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
@@ -150,6 +153,7 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
     if (!strcmp(k, "state_dir")) return config_str(cfg->state_dir, sizeof cfg->state_dir, v, k, err);
     if (!strcmp(k, "web_root")) return config_str(cfg->web_root, sizeof cfg->web_root, v, k, err);
     if (!strcmp(k, "device")) return config_device(v, cfg->device, sizeof cfg->device, err);
+    if (!strcmp(k, "assets_dir")) return eye_models_set_dir(v, err);
     int lv = log_parse_level(v); /* the last string key: log_level */
     if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
     cfg->log_level = lv;
@@ -173,13 +177,14 @@ static int config_load_file(struct config *cfg, const char *path, struct fx_err 
 
 /* ---- flags ---- */
 
-enum { OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP };
+enum { OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP, OPT_ASSETS };
 
 static const struct option config_options[] = {
     {"port", required_argument, NULL, OPT_PORT},       {"listen", required_argument, NULL, OPT_LISTEN},
     {"config", required_argument, NULL, OPT_CONFIG},   {"state-dir", required_argument, NULL, OPT_STATE},
     {"device", required_argument, NULL, OPT_DEVICE},   {"web-root", required_argument, NULL, OPT_WEB},
     {"log-level", required_argument, NULL, OPT_LOG},   {"help", no_argument, NULL, OPT_HELP},
+    {"assets-dir", required_argument, NULL, OPT_ASSETS},
     {NULL, 0, NULL, 0},
 };
 
@@ -194,6 +199,7 @@ static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_e
     case OPT_STATE: return config_str(cfg->state_dir, sizeof cfg->state_dir, arg, "--state-dir", err);
     case OPT_DEVICE: return config_device(arg, cfg->device, sizeof cfg->device, err);
     case OPT_WEB: return config_str(cfg->web_root, sizeof cfg->web_root, arg, "--web-root", err);
+    case OPT_ASSETS: return eye_models_set_dir(arg, err);
     case OPT_LOG:
         if ((cfg->log_level = log_parse_level(arg)) < 0)
             return fx_fail(err, "bad_request", "log-level", "--log-level: expected error, warn, info or debug");

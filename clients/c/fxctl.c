@@ -16,6 +16,8 @@
 
 #include "fxclient.h"
 #include "fxs_particles.h"
+#include "lutpack.h"
+#include "png.h"
 
 #define FXCTL_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
 #define FXCTL_DEFAULT_TIMEOUT_MS 10000
@@ -53,7 +55,8 @@ static const char fxctl_help[] =
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
     "                                width and height, or count, flags) and any params\n"
     "                                event of NAME; with --out writes the payload to\n"
-    "                                DIR/NAME-SEQ.exr (texture, codec 1), the decoded\n"
+    "                                DIR/NAME-SEQ.exr (texture, codec 1), DIR/NAME-SEQ-PROD.png\n"
+    "                                per look-up-table product (kind 4), the decoded\n"
     "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 1:\n"
     "                                binary PLY, x y z temperature fuel flags) or the\n"
     "                                payload to .bin (others), and the line to\n"
@@ -335,13 +338,35 @@ static int fxctl_decode_particles(const struct fxc_msg *m, struct fxs_particles 
     return 0;
 }
 
-/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 1) or .bin. */
+/* Writes each product of a look-up table container (kind 4 codec 1) as BASE-NAME.png. */
+static int fxctl_write_lut(const char *base, const struct fxc_msg *m)
+{
+    char msg[160] = "", path[4300];
+    struct lutpack_product e;
+    const uint8_t *p = m->payload;
+    size_t len = m->header.payload_bytes;
+    int count = lutpack_entry(p, len, 0, &e, msg, sizeof msg);
+    for (int i = 0; i < count && !msg[0]; i++) {
+        uint8_t *px = lutpack_entry(p, len, i, &e, msg, sizeof msg) < 0 ? NULL : lutpack_texels(p, len, &e, msg, sizeof msg);
+        if (!px) break;
+        snprintf(path, sizeof path, "%s-%s.png", base, e.name);
+        if (png_write_rgba8(path, px, e.width, e.height)) snprintf(msg, sizeof msg, "cannot write %.100s: %.40s", path, strerror(errno));
+        free(px);
+    }
+    if (!msg[0]) return 0;
+    fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", m->header.seq, msg);
+    return -1;
+}
+
+/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 1) or .bin,
+ * plus one PNG per product of a look-up table (kind 4 codec 1). */
 static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const struct fxs_particles *p)
 {
     const struct fxs_header *h = &m->header;
     int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
     char path[4200];
     snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr ? "exr" : "bin");
+    if (h->kind == FXS_KIND_LUT && h->codec == FXS_CODEC_LUT_PACK && fxctl_write_lut(base, m)) return -1;
     return p ? fxctl_write_ply(path, p) : fxctl_write_file(path, m->payload, h->payload_bytes);
 }
 

@@ -1,31 +1,32 @@
 // fxs_particles.js — browser/Node decoder of fxstream.v1 kind 1 particle payloads
-// (codec 1, protocol/PROTOCOL.md §7.5) and parser of the 64-byte frame header (§7.1).
+// (codec 2, protocol/PROTOCOL.md §7.5) and parser of the 64-byte frame header (§7.1).
 //
-// Plain ES module, no dependencies, no build step: the entropy stage is a static-table
-// rANS that takes a few lines here. Mirrors protocol/fxs_particles.c (the C decoder)
-// value for value: positions, T and F are float32(lo + q * step) computed in double,
-// so both decoders give identical floats (checked against tests/data/particles/).
+// Plain ES module, no dependencies, no build step: the entropy stage is an adaptive
+// binary range coder (LZMA's) that takes a few lines here. Mirrors
+// protocol/fxs_particles.c (the C decoder) value for value: positions, T and F are
+// float32(lo + q * step) computed in double, so both decoders give identical floats
+// (checked against tests/data/particles/).
 //
 //   import { parseHeader, decode } from './fxs_particles.js';
 //   const h = parseHeader(msg);                       // throws on a bad frame
-//   if (h.kind === 1 && h.codec === 1) {
+//   if (h.kind === 1 && h.codec === 2) {
 //     const p = decode(new Uint8Array(msg, h.headerBytes, h.payloadBytes));
 //     // p.n, p.xyz (Float32Array 3n), p.temp, p.fuel (Float32Array n), p.flags (Uint8Array n)
 //   }
 
 export const KIND_PARTICLES = 1;
-export const CODEC_PARTICLES = 1;
+export const CODEC_PARTICLES = 2;
 export const MAX_PARTICLES = 1 << 22;
 
-const PROB_BITS = 12;
-const PROB_SCALE = 1 << PROB_BITS;
-const RANS_L = 1 << 23;
-const NTOK = 72;
-const NSTREAMS = 8;
 const HEADER_BYTES = 64;
-// value kinds (table order)
-const CELL = 0, XSAME = 1, XNEW = 2, Y = 3;
-const POW2 = Array.from({ length: 33 }, (_, i) => 2 ** i);
+const PROB_BITS = 12;
+const PROB_INIT = 1 << (PROB_BITS - 1);
+const ADAPT = 5;
+const TOP = 1 << 24;
+const NEAR = 8;
+const MAXK = 24;
+const CNT_U = 3, T_U = 2, F_U = 2;
+const IPROBS = (u) => u + 2 * MAXK;
 
 function bytesOf(buf) {
   if (buf instanceof Uint8Array) return buf;
@@ -70,65 +71,64 @@ export function payloadOf(buf, header) {
   return b.subarray(header.headerBytes, header.headerBytes + header.payloadBytes);
 }
 
-function readTables(b, pos) {
-  const tabs = [];
-  for (let s = 0; s < NSTREAMS; s++) {
-    if (pos >= b.length) fail('corrupt frequency table');
-    const nsym = b[pos++];
-    if (nsym > NTOK) fail('corrupt frequency table');
-    const freq = new Uint32Array(NTOK), start = new Uint32Array(NTOK);
-    let sum = 0;
-    for (let t = 0; t < nsym; t++) {
-      if (pos >= b.length) fail('corrupt frequency table');
-      let f = b[pos++];
-      if (f & 0x80) {
-        if (pos >= b.length || b[pos] & 0x80) fail('corrupt frequency table');
-        f = (f & 0x7f) | (b[pos++] << 7);
-      }
-      if (f > PROB_SCALE) fail('corrupt frequency table');
-      freq[t] = f;
-      sum += f;
-    }
-    if (sum !== PROB_SCALE && sum !== 0) fail('corrupt frequency table');
-    const lookup = new Uint8Array(PROB_SCALE);
-    for (let t = 1; t < NTOK; t++) start[t] = start[t - 1] + freq[t - 1];
-    for (let t = 0; t < nsym; t++) lookup.fill(t, start[t], start[t] + freq[t]);
-    tabs.push({ nsym, freq, start, lookup });
-  }
-  return { tabs, pos };
-}
-
 function parsePayloadHeader(b) {
-  if (b.length < HEADER_BYTES || b[0] !== 0x46 || b[1] !== 0x58 || b[2] !== 0x50 || b[3] !== 0x31)
-    fail('not a codec 1 payload (short or bad magic)');
-  if (b[4] !== 1) fail('unsupported version');
+  if (b.length < HEADER_BYTES || b[0] !== 0x46 || b[1] !== 0x58 || b[2] !== 0x50 || b[3] !== 0x32)
+    fail('not a codec 2 payload (short or bad magic)');
+  if (b[4] !== 2) fail('unsupported version');
+  if (b[11] !== 0) fail('reserved byte not 0');
   const v = new DataView(b.buffer, b.byteOffset, b.byteLength);
-  const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], cellBits: b[8], n: v.getUint32(12, true) };
+  const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], abits: [b[8], b[9], b[10]], n: v.getUint32(12, true) };
   f.lo = [v.getFloat32(16, true), v.getFloat32(20, true), v.getFloat32(24, true), v.getFloat32(40, true), v.getFloat32(48, true)];
   f.hi = [v.getFloat32(28, true), v.getFloat32(32, true), v.getFloat32(36, true), v.getFloat32(44, true), v.getFloat32(52, true)];
-  f.ransBytes = v.getUint32(56, true);
+  f.rcBytes = v.getUint32(56, true);
   f.bitsBytes = v.getUint32(60, true);
   if (f.posBits < 8 || f.posBits > 24 || f.tempBits < 2 || f.tempBits > 16 || f.fuelBits < 2 || f.fuelBits > 16)
     fail('bad bit widths');
-  if (f.cellBits > 10 || f.cellBits > f.posBits) fail('bad cell_bits');
+  for (let a = 0; a < 3; a++) if (f.abits[a] > f.posBits) fail('bad axis bits');
   if (f.n > MAX_PARTICLES) fail('particle count over the limit');
   for (let c = 0; c < 5; c++)
     if (!Number.isFinite(f.lo[c]) || !Number.isFinite(f.hi[c]) || f.lo[c] > f.hi[c]) fail('bad bounds');
   return f;
 }
 
-// The decoding state: rANS reader and LSB-first raw-bit reader over one byte array.
+const corrupt = () => fail('corrupt particle data');
+
+// Adaptive binary range decoder (LZMA's, 12-bit probabilities) and LSB-first raw bits.
 class Reader {
-  constructor(b, rp, rend, bend, tabs) {
-    this.b = b; this.rp = rp; this.rend = rend; this.bp = rend; this.bend = bend; this.tabs = tabs;
+  constructor(b, rp, rend, bend) {
+    if (rend - rp < 5 || b[rp] !== 0) corrupt();
+    this.b = b; this.rp = rp + 5; this.rend = rend; this.bp = rend; this.bend = bend;
+    this.range = -1; // 0xFFFFFFFF
+    this.code = (b[rp + 1] << 24) | (b[rp + 2] << 16) | (b[rp + 3] << 8) | b[rp + 4];
+    if (this.code === -1) corrupt();
     this.acc = 0; this.cnt = 0;
-    if (rend - rp < 4) fail('corrupt particle data');
-    this.x = (b[rp] | (b[rp + 1] << 8) | (b[rp + 2] << 16) | (b[rp + 3] << 24)) >>> 0;
-    this.rp += 4;
   }
-  bits(n) { // n <= 16 per call keeps acc within 32 bits
+  // range and code are kept as int32 bit patterns (small integers for the engine), compared unsigned
+  bit(p, i) { // p: Uint16Array of probabilities, i: index
+    const pr = p[i], bound = Math.imul(this.range >>> PROB_BITS, pr); // < 2^32, exact
+    let bit, range, code = this.code;
+    if ((code >>> 0) < (bound >>> 0)) {
+      range = bound;
+      p[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT);
+      bit = 0;
+    } else {
+      code = (code - bound) | 0;
+      range = (this.range - bound) | 0;
+      p[i] = pr - (pr >> ADAPT);
+      bit = 1;
+    }
+    if ((range >>> 0) < TOP) { // code < range < 2^24 here
+      if (this.rp >= this.rend) corrupt();
+      range = range << 8;
+      code = (code << 8) | this.b[this.rp++];
+    }
+    this.range = range;
+    this.code = code;
+    return bit;
+  }
+  raw(n) { // n <= 16 per call keeps acc within 32 bits
     while (this.cnt < n) {
-      if (this.bp >= this.bend) fail('corrupt particle data');
+      if (this.bp >= this.bend) corrupt();
       this.acc |= this.b[this.bp++] << this.cnt;
       this.cnt += 8;
     }
@@ -137,83 +137,145 @@ class Reader {
     this.cnt -= n;
     return v;
   }
-  extra(n) {
-    return n <= 16 ? this.bits(n) : this.bits(16) + this.bits(n - 16) * 65536;
+  rawBits(n) {
+    return n <= 16 ? this.raw(n) : this.raw(16) + this.raw(n - 16) * 65536;
   }
-  get(stream) {
-    const t = this.tabs[stream];
-    if (!t.nsym) fail('corrupt particle data');
-    const slot = this.x & (PROB_SCALE - 1);
-    const s = t.lookup[slot];
-    // x < 2^31 throughout, so 32-bit integer operations are exact
-    let x = t.freq[s] * (this.x >>> PROB_BITS) + slot - t.start[s];
-    while (x < RANS_L) {
-      if (this.rp >= this.rend) fail('corrupt particle data');
-      x = (x << 8) | this.b[this.rp++];
-    }
-    this.x = x;
-    if (s < 16) return s;
-    const nb = 3 + ((s - 16) >> 1);
-    return (2 + ((s - 16) & 1)) * POW2[nb] + this.extra(nb);
+  // unary prefix of u decisions, Exp-Golomb class in unary, top mantissa bit modelled
+  int(p, o, u) {
+    for (let i = 0; i < u; i++) if (!this.bit(p, o + i)) return i;
+    let k = 0;
+    while (this.bit(p, o + u + k)) if (++k === MAXK) corrupt();
+    let e = 1;
+    if (k) e = (2 + this.bit(p, o + u + MAXK + k)) * 2 ** (k - 1) + this.rawBits(k - 1);
+    return e + u - 1;
   }
 }
 
-const unzigzag = (z) => (z & 1 ? -((z + 1) / 2) : z / 2); // z < 2^17
+const unzigzag = (z) => (z % 2 ? -(z + 1) / 2 : z / 2);
+const rclass = (z) => (z < 2 ? z : z >= 32 ? 6 : 32 - Math.clz32(z));
+function cclass(c) {
+  if (c <= 8) return c - 2;
+  if (c <= 12) return 7;
+  if (c <= 16) return 8;
+  if (c > 256) return 13;
+  return 9 + (31 - Math.clz32(c - 1)) - 4;
+}
 
-function decodeAll(f, rd, out) {
-  const k = f.cellBits, m = f.posBits - k, omask = 2 ** m - 1, cm = 2 ** k - 1;
-  const steps = [0, 1, 2, 3, 4].map((c) => (f.hi[c] - f.lo[c]) / (2 ** (c < 3 ? f.posBits : c === 3 ? f.tempBits : f.fuelBits) - 1));
-  const cellLimit = 2 ** (3 * k), tlim = 2 ** f.tempBits, flim = 2 ** f.fuelBits;
-  const [lx, ly, lz, lt, lf] = f.lo, [sx, sy, sz, st, sf] = steps, m2 = 2 ** m;
-  let cell = 0, x = 0, t = 0, fu = 0;
+// Splits from the top bit down; at each bit x, then y, then z (axes that have it).
+function schedule(abits) {
+  const axis = [], left = [], l = abits.slice();
+  const top = Math.max(...abits);
+  for (let b = top - 1; b >= 0; b--)
+    for (let a = 0; a < 3; a++)
+      if (b < abits[a]) {
+        left.push(l.slice());
+        axis.push(a);
+        l[a]--;
+      }
+  left.push([0, 0, 0]);
+  return { axis, left, depth: axis.length };
+}
+
+function decodeTree(f, rd, q) {
+  const { axis, left, depth } = schedule(f.abits);
+  const cnt = new Uint16Array(14 * 3 * IPROBS(CNT_U)).fill(PROB_INIT);
+  let out = 0;
+  const node = (c, d, bx, by, bz) => {
+    const base = [bx, by, bz];
+    while (c >= 2 && d < depth) {
+      const a = axis[d], bit = 2 ** (left[d][a] - 1);
+      const lo = (c >>> 1) + unzigzag(rd.int(cnt, (cclass(c) * 3 + a) * IPROBS(CNT_U), CNT_U));
+      if (lo < 0 || lo > c) corrupt();
+      d++;
+      if (lo && lo < c) {
+        node(lo, d, base[0], base[1], base[2]);
+        c -= lo;
+        base[a] += bit;
+      } else if (!lo) {
+        base[a] += bit;
+      }
+    }
+    if (c === 1) for (let a = 0; a < 3; a++) base[a] += rd.rawBits(left[d][a]);
+    for (let k = 0; k < c; k++, out++) {
+      q[3 * out] = base[0]; q[3 * out + 1] = base[1]; q[3 * out + 2] = base[2];
+    }
+  };
+  node(f.n, 0, 0, 0, 0);
+  if (out !== f.n) corrupt();
+}
+
+function decodeAttrs(f, rd, q, out) {
+  const n = f.n, TP = IPROBS(T_U), FP = IPROBS(F_U);
+  const pt = new Uint16Array(7 * 8 * 2 * TP).fill(PROB_INIT), pf = new Uint16Array(7 * 2 * 2 * FP).fill(PROB_INIT);
+  const same = new Uint16Array(16).fill(PROB_INIT), tree = new Uint16Array(256).fill(PROB_INIT);
+  const qt = new Uint32Array(n), qf = new Uint32Array(n);
+  const r = Math.max(f.hi[0] - f.lo[0], f.hi[1] - f.lo[1], f.hi[2] - f.lo[2], 0);
+  const sp = r / (2 ** f.posBits - 1);
+  const st = (f.hi[3] - f.lo[3]) / (2 ** f.tempBits - 1), sf = (f.hi[4] - f.lo[4]) / (2 ** f.fuelBits - 1);
+  const tlim = 2 ** f.tempBits, flim = 2 ** f.fuelBits;
+  const [lx, ly, lz, lt, lf] = f.lo;
   const { xyz, temp, fuel, flags } = out;
-  for (let j = 0; j < f.n; j++) {
-    const gap = rd.get(CELL);
-    const same = gap === 0 && j > 0;
-    const vx = rd.get(same ? XSAME : XNEW);
-    if (vx > omask) fail('corrupt particle data');
-    const vy = rd.get(Y), vz = rd.get(Y + 1), dt = rd.get(Y + 2), df = rd.get(Y + 3), fl = rd.get(Y + 4);
-    cell += gap;
-    x = same ? x + vx : vx;
-    t += unzigzag(dt);
-    fu += unzigzag(df);
-    if (cell >= cellLimit || x > omask || vy > omask || vz > omask) fail('corrupt particle data');
-    if (t < 0 || t >= tlim || fu < 0 || fu >= flim || fl > 255) fail('corrupt particle data');
-    const cx = cell & cm, cy = (cell >>> k) & cm, cz = cell >>> (2 * k); // cell < 2^30
-    xyz[3 * j] = lx + (cx * m2 + x) * sx;
-    xyz[3 * j + 1] = ly + (cy * m2 + vy) * sy;
-    xyz[3 * j + 2] = lz + (cz * m2 + vz) * sz;
+  let zt = 0, zf = 0;
+  for (let j = 0; j < n; j++) {
+    // nearest of the NEAR particles before j (the latest on ties); squares < 2^50 are exact
+    let nb = -1, bd = Infinity;
+    const cx = q[3 * j], cy = q[3 * j + 1], cz = q[3 * j + 2];
+    for (let k = 1; k <= NEAR && k <= j; k++) {
+      const o = 3 * (j - k), dx = cx - q[o], dy = cy - q[o + 1], dz = cz - q[o + 2];
+      const dd = dx * dx + dy * dy + dz * dz;
+      if (dd < bd) { bd = dd; nb = j - k; }
+    }
+    const nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb], nfl = nb < 0 ? 0 : flags[nb];
+    const f0 = nf === 0 ? 1 : 0;
+    let v = nfl;
+    if (rd.bit(same, (nfl & 7) * 2 + f0)) {
+      let m = 1;
+      while (m < 256) m = 2 * m + rd.bit(tree, m);
+      v = m - 256;
+      if (v === nfl) corrupt();
+    }
+    const ot = ((rclass(zt) * 8 + (v & 7)) * 2 + f0) * TP, of = ((rclass(zf) * 2 + f0) * 2 + ((v >> 2) & 1)) * FP;
+    zt = rd.int(pt, ot, T_U);
+    zf = rd.int(pf, of, F_U);
+    const t = nt + unzigzag(zt), fu = nf + unzigzag(zf);
+    if (t < 0 || t >= tlim || fu < 0 || fu >= flim) corrupt();
+    qt[j] = t; qf[j] = fu; flags[j] = v;
+    xyz[3 * j] = lx + cx * sp;
+    xyz[3 * j + 1] = ly + cy * sp;
+    xyz[3 * j + 2] = lz + cz * sp;
     temp[j] = lt + t * st;
     fuel[j] = lf + fu * sf;
-    flags[j] = fl;
   }
-  if (rd.rp !== rd.rend || rd.x !== RANS_L || rd.bp !== rd.bend || rd.acc !== 0) fail('corrupt particle data');
 }
 
 /**
- * Decodes a codec 1 payload (the bytes after the frame header).
+ * Decodes a codec 2 payload (the bytes after the frame header).
  * Returns {n, xyz: Float32Array(3n), temp: Float32Array(n), fuel: Float32Array(n), flags: Uint8Array(n)}.
  * Throws Error('particles: ...') on truncated, corrupt or oversized input.
  */
 export function decode(buf) {
   const b = bytesOf(buf);
   const f = parsePayloadHeader(b);
+  if (HEADER_BYTES + f.rcBytes + f.bitsBytes !== b.length) fail('section sizes do not match the payload length');
   const out = { n: f.n, xyz: new Float32Array(3 * f.n), temp: new Float32Array(f.n), fuel: new Float32Array(f.n), flags: new Uint8Array(f.n) };
   if (f.n === 0) {
-    if (f.ransBytes || f.bitsBytes || b.length !== HEADER_BYTES) fail('bad sizes');
+    if (f.rcBytes || f.bitsBytes) fail('bad sizes');
     return out;
   }
-  const { tabs, pos } = readTables(b, HEADER_BYTES);
-  if (pos + f.ransBytes + f.bitsBytes !== b.length) fail('section sizes do not match the payload length');
-  const rd = new Reader(b, pos, pos + f.ransBytes, pos + f.ransBytes + f.bitsBytes, tabs);
-  decodeAll(f, rd, out);
+  const rend = HEADER_BYTES + f.rcBytes;
+  const rd = new Reader(b, HEADER_BYTES, rend, rend + f.bitsBytes);
+  const q = new Float64Array(3 * f.n);
+  decodeTree(f, rd, q);
+  decodeAttrs(f, rd, q, out);
+  if (rd.rp !== rd.rend) fail('corrupt particle data (range coder section not consumed exactly)');
+  if (rd.bp !== rd.bend || rd.acc !== 0) fail('corrupt particle data (raw bits not consumed exactly)');
   return out;
 }
 
 /** Decodes a whole kind 1 frame (header + payload); returns {header, particles}. */
 export function decodeFrame(buf) {
   const header = parseHeader(buf);
-  if (header.kind !== KIND_PARTICLES || header.codec !== CODEC_PARTICLES) throw new Error('frame: not a codec 1 particle frame');
+  if (header.kind !== KIND_PARTICLES || header.codec !== CODEC_PARTICLES) throw new Error('frame: not a codec 2 particle frame');
   const particles = decode(payloadOf(buf, header));
   if (particles.n !== header.count) throw new Error('frame: count does not match the payload');
   return { header, particles };

@@ -7,12 +7,14 @@
 
 #include "../effect.h"
 
+extern const struct effect_ops compound_eye_effect;
 extern const struct effect_ops energy_wave_effect;
 extern const struct effect_ops flame_effect;
 
 static const struct effect_ops *const registry_effects[] = {
     &energy_wave_effect,
     &flame_effect,
+    &compound_eye_effect,
     NULL,
 };
 

@@ -2,15 +2,17 @@
  *
  * On the same frames, one line per figure: bytes per particle, encode and decode time
  * per million particles of
- *   (a) codec 1 (protocol/fxs_particles.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
- *       16 bits with T and F at 8 bits (the quantisation given to Draco);
+ *   (a) codec 2 (protocol/fxs_particles.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
+ *       12/16/20 bits with T and F at 8 bits: the quantisation given to Draco (equal
+ *       quantisation: codec 2's position step is Draco's -qp step, largest extent /
+ *       (2^B - 1) for all axes; T and F 8 bits over their range in both);
  *   (b) Draco point cloud (draco_encoder/draco_decoder, -qp = pos bits, cl 7 and 10),
  *       fed a PLY with x, y, z and T, F, flags as red, green, blue (uchar: T and F
  *       quantised to 8 bits over their range, flags exact), because Draco's PLY reader
  *       keeps no other attribute; its own "ms to encode/decode" figures (no file I/O);
  *   (c) zstd level 1 and 3 of the raw arrays (xyz, T, F as float32, flags u8);
- *   (d) the same quantised values as codec 1 (grid order, deltas) as LEB128 byte
- *       streams + zstd -3: zstd instead of our rANS as the entropy stage.
+ *   (d) codec 1's values (grid order, deltas) as LEB128 byte streams + zstd -3: zstd as
+ *       the entropy stage of an ordered scheme, for comparison.
  * Frames: synthetic SPH-like flames (tests/unit/particles_gen.h: 10k, 50k, 200k),
  * plus every DIR/<stream>-<seq>.ply that `fxctl subscribe flame --out DIR` wrote when
  * FXS_BENCH_PLY_DIR=DIR is set (real flame frames). Each line says which. */
@@ -39,7 +41,7 @@ static void bp_line(const char *frame, uint32_t n, const char *what, double byte
            frame, n, what, bytes / n, enc_s * 1e9 / n, dec_s * 1e9 / n, enc_s * 1e7 / n, dec_s * 1e7 / n);
 }
 
-/* ---- (a) codec 1 ------------------------------------------------------------------------ */
+/* ---- (a) codec 2 ------------------------------------------------------------------------ */
 
 static void bp_ours(const char *frame, const struct fxs_particles *p, int pb, int tb, int fb)
 {
@@ -62,7 +64,7 @@ static void bp_ours(const char *frame, const struct fxs_particles *p, int pb, in
         fxs_particles_free(&d);
         te = fmin(te, t1 - t0), td = fmin(td, t2 - t1);
     }
-    snprintf(what, sizeof what, "fxs codec 1 pos %d T %d F %d", pb, tb ? tb : FXS_PARTICLES_DEFAULT_TEMP_BITS,
+    snprintf(what, sizeof what, "fxs codec 2 pos %d T %d F %d", pb, tb ? tb : FXS_PARTICLES_DEFAULT_TEMP_BITS,
              fb ? fb : FXS_PARTICLES_DEFAULT_FUEL_BITS);
     bp_line(frame, p->n, what, (double)len, te, td);
     free(enc);
@@ -267,7 +269,7 @@ static void bp_frame(const char *name, const struct fxs_particles *p)
 {
     static const int bits[] = { 12, 16, 20 };
     for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 0, 0);
-    bp_ours(name, p, 16, 8, 8);
+    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 8, 8);
     for (int b = 0; b < 3; b++) bp_draco(name, p, bits[b], 7);
     bp_draco(name, p, 16, 10);
     bp_zstd_raw(name, p, 1);

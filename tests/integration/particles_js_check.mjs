@@ -1,4 +1,4 @@
-// particles_js_check.mjs — decodes the C encoder's test vectors (tests/data/particles/*.bin)
+// particles_js_check.mjs — decodes the C encoder's codec 2 test vectors (tests/data/particles/*.bin)
 // with clients/web/fxs_particles.js and compares with what the C decoder gave (*.json):
 // every float bit for bit (both decoders compute float32(lo + q * step) in double), flags
 // exactly. Also: a frame header round trip, and truncated/corrupt payloads must throw a
@@ -46,7 +46,7 @@ function frameOf(payload, n) {
   v.setUint32(8, 7, true);
   v.setBigUint64(16, 42n, true);
   v.setFloat64(24, 1.5, true);
-  v.setUint32(40, 1, true);
+  v.setUint32(40, 2, true);
   v.setUint32(44, payload.length, true);
   v.setUint32(48, n, true);
   msg.set(payload, 64);
@@ -91,6 +91,18 @@ for (const name of names) {
     return null;
   });
 }
+check('codec 1 payload rejected', () => {
+  const bin = new Uint8Array(readFileSync(join(dir, 'flame64.bin')));
+  const old = bin.slice();
+  old[3] = 0x31; // 'FXP1'
+  old[4] = 1;
+  try {
+    decode(old);
+    return 'accepted';
+  } catch (e) {
+    return e.message.startsWith('particles: ') ? null : e.message;
+  }
+});
 check('header: bad magic rejected', () => {
   try {
     parseHeader(new Uint8Array(64));

@@ -1,9 +1,11 @@
-/* test_particles.c — the kind 1 particle codec (protocol/fxs_particles.c, PROTOCOL.md §7.5).
+/* test_particles.c — the kind 1 particle codec 2 (protocol/fxs_particles.c, PROTOCOL.md §7.5).
  *
- * Round trips of random and SPH-like sets (n = 0, 1, 2, 1e6, degenerate bounds, every
- * pos_bits 8..24, several T/F widths) checked particle by particle against the order the
- * spec prescribes, within the documented quantisation bounds; corrupt and truncated
- * payloads are rejected without reading out of bounds (run it under valgrind too).
+ * Round trips of random, SPH-like and real flame sets (n = 0, 1, 2, 1e6, all particles
+ * identical, degenerate and extreme bounds, every pos_bits 8..24, every T/F width) checked
+ * particle by particle against the order the spec prescribes (Morton order, ties in
+ * input order), within the documented quantisation bounds; corrupt, truncated and
+ * codec 1 payloads are rejected without reading out of bounds (build with
+ * -fsanitize=address,undefined or run under valgrind too).
  * Test vectors: tests/data/particles/NAME.bin with NAME.json (what decoding gives) are
  * checked here and by the JavaScript decoder; `test_particles --write-vectors`
  * regenerates them after a deliberate format change. FXS_TEST_QUICK=1 skips the 1e6 set. */
@@ -22,24 +24,6 @@ static void free_set(struct fxs_particles *p) { fxs_particles_free(p); }
 
 /* ---- the order of the spec ------------------------------------------------------------ */
 
-struct ord {
-    uint64_t key;
-    uint32_t i;
-};
-static int ord_cmp(const void *a, const void *b)
-{
-    const struct ord *x = a, *y = b;
-    return x->key < y->key ? -1 : x->key > y->key ? 1 : (x->i > y->i) - (x->i < y->i);
-}
-
-static uint32_t quant(float v, float lo, float hi, int bits)
-{
-    uint32_t qmax = (1u << bits) - 1u;
-    double s = hi > lo ? (double)qmax / ((double)hi - (double)lo) : 0, q = ((double)v - lo) * s + 0.5;
-    uint32_t u = q <= 0 ? 0 : (uint32_t)q;
-    return u > qmax ? qmax : u;
-}
-
 static float getf(const uint8_t *b)
 {
     float f;
@@ -48,23 +32,83 @@ static float getf(const uint8_t *b)
     return f;
 }
 
-/* Input index of each decoded particle: by (cell, x offset), ties in input order. */
+/* Position step of a payload: largest extent / (2^B - 1), one for all axes. */
+static double pos_step(const uint8_t *enc)
+{
+    double r = 0;
+    for (int a = 0; a < 3; a++) r = fmax(r, (double)getf(enc + 28 + 4 * a) - (double)getf(enc + 16 + 4 * a));
+    return r / (double)((1u << enc[5]) - 1u);
+}
+
+static uint32_t quant_pos(float v, float lo, double step, int bits)
+{
+    uint32_t qmax = (1u << bits) - 1u;
+    double s = step > 0 ? 1.0 / step : 0, q = ((double)v - lo) * s + 0.5;
+    uint32_t u = q <= 0 ? 0 : (uint32_t)q;
+    return u > qmax ? qmax : u;
+}
+
+struct ord128 {
+    unsigned __int128 key;
+    uint32_t i;
+};
+static int ord128_cmp(const void *a, const void *b)
+{
+    const struct ord128 *x = a, *y = b;
+    return x->key < y->key ? -1 : x->key > y->key ? 1 : (x->i > y->i) - (x->i < y->i);
+}
+
+/* Input index of each decoded particle: by Morton key (at each bit from the top, x
+ * above y above z), ties in input order. */
 static uint32_t *spec_order(const struct fxs_particles *p, const uint8_t *enc)
 {
-    int b = enc[5], k = enc[8], m = b - k;
-    struct ord *o = malloc((p->n ? p->n : 1) * sizeof *o);
+    int b = enc[5];
+    double step = pos_step(enc);
+    struct ord128 *o = malloc((p->n ? p->n : 1) * sizeof *o);
     uint32_t *idx = malloc((p->n ? p->n : 1) * sizeof *idx);
     for (uint32_t i = 0; i < p->n && o; i++) {
         uint32_t q[3];
-        for (int a = 0; a < 3; a++) q[a] = quant(p->xyz[3 * i + a], getf(enc + 16 + 4 * a), getf(enc + 28 + 4 * a), b);
-        o[i].key = ((uint64_t)(q[2] >> m) << (2 * k) | (uint64_t)(q[1] >> m) << k | (q[0] >> m)) << m | (q[0] & ((1u << m) - 1));
+        for (int a = 0; a < 3; a++) q[a] = quant_pos(p->xyz[3 * i + a], getf(enc + 16 + 4 * a), step, b);
+        o[i].key = 0;
+        for (int bit = 23; bit >= 0; bit--)
+            for (int a = 0; a < 3; a++) o[i].key = o[i].key << 1 | ((q[a] >> bit) & 1u);
         o[i].i = i;
     }
-    if (o) qsort(o, p->n, sizeof *o, ord_cmp);
+    if (o) qsort(o, p->n, sizeof *o, ord128_cmp);
     for (uint32_t j = 0; j < p->n && o && idx; j++) idx[j] = o[j].i;
     free(o);
     return idx;
 }
+
+/* Reads a binary PLY as fxctl writes it (x y z temperature fuel flags). */
+static int read_ply(const char *path, struct fxs_particles *p)
+{
+    FILE *f = fopen(path, "rb");
+    char line[256];
+    unsigned n = 0;
+    int ok = 0;
+    if (!f) return -1;
+    while (fgets(line, sizeof line, f)) {
+        if (sscanf(line, "element vertex %u", &n) == 1) continue;
+        if (!strcmp(line, "end_header\n")) {
+            ok = 1;
+            break;
+        }
+    }
+    if (ok && !pgen_alloc(p, n))
+        for (uint32_t i = 0; i < n && ok; i++) {
+            uint8_t rec[21];
+            ok = fread(rec, 1, 21, f) == 21;
+            memcpy(p->xyz + 3 * i, rec, 12), memcpy(p->temp + i, rec + 12, 4), memcpy(p->fuel + i, rec + 16, 4);
+            p->flags[i] = rec[20];
+        }
+    fclose(f);
+    return ok ? 0 : -1;
+}
+
+/* 600 particles of a real flame frame (fxctl subscribe flame --out, the first 600 in the
+ * file), the input of the real_flame600 vectors. */
+#define REAL_PLY VEC_DIR "/real_flame600.ply"
 
 /* ---- round trips ------------------------------------------------------------------------ */
 
@@ -81,6 +125,8 @@ static int compare(const struct fxs_particles *in, const struct fxs_particles *o
     int bad = 0, bits[5] = { enc[5], enc[5], enc[5], enc[6], enc[7] };
     double t[5];
     for (int c = 0; c < 5; c++) t[c] = tol(getf(enc + (c < 3 ? 16 + 4 * c : 40 + 8 * (c - 3))), getf(enc + (c < 3 ? 28 + 4 * c : 44 + 8 * (c - 3))), bits[c]);
+    for (int c = 0; c < 3; c++) /* one step for all axes */
+        t[c] = pos_step(enc) / 2 * (1 + 1e-9) + fmax(fabs(getf(enc + 16 + 4 * c)), fabs(getf(enc + 28 + 4 * c))) * FLT_EPSILON;
     for (uint32_t j = 0; j < in->n && idx; j++) {
         uint32_t i = idx[j];
         double e[5] = { in->xyz[3 * i] - out->xyz[3 * j], in->xyz[3 * i + 1] - out->xyz[3 * j + 1],
@@ -146,20 +192,23 @@ static void test_temp_fuel_bits(void)
 {
     struct fxs_particles p = { 0 };
     pgen_flame(&p, 5000);
-    for (int b = 2; b <= 16; b += 7) CHECK(round_trip(&p, 16, b, 18 - b) > 0, "temp_bits %d", b);
+    for (int b = 2; b <= 16; b++) CHECK(round_trip(&p, 16, b, 18 - b) > 0, "temp_bits %d, fuel_bits %d", b, 18 - b);
     free_set(&p);
 }
 
-/* Synthetic flame: 5.4 B/particle at 16 bits, 3.9 at 12 (bench_particles); guards regressions. */
+/* Synthetic flame: 4.80 B/particle at 16 bits, 3.30 at 12, 4.56 with T and F at 8 bits
+ * (bench_particles; Draco: 4.80 at 16 bits with T and F at 8); guards regressions. */
 static void test_flame_size(void)
 {
     struct fxs_particles p = { 0 };
     long len;
     pgen_flame(&p, 50000);
     len = round_trip(&p, 16, 0, 0);
-    CHECK(len > 0 && (double)len / p.n < 5.6, "%.2f bytes/particle", (double)len / p.n);
+    CHECK(len > 0 && (double)len / p.n < 4.9, "%.2f bytes/particle", (double)len / p.n);
     len = round_trip(&p, 12, 0, 0);
-    CHECK(len > 0 && (double)len / p.n < 4.1, "%.2f bytes/particle at 12 bits", (double)len / p.n);
+    CHECK(len > 0 && (double)len / p.n < 3.4, "%.2f bytes/particle at 12 bits", (double)len / p.n);
+    len = round_trip(&p, 16, 8, 8);
+    CHECK(len > 0 && (double)len / p.n < 4.7, "%.2f bytes/particle with T and F at 8 bits", (double)len / p.n);
     free_set(&p);
 }
 
@@ -178,6 +227,34 @@ static void test_degenerate(void)
     CHECK(round_trip(&p, 24, 0, 0) > 0, "a line");
     for (uint32_t i = 0; i < p.n; i++) p.xyz[3 * i] = 1e6f + (float)(i % 7) * 0.0625f; /* far from 0 */
     CHECK(round_trip(&p, 24, 16, 16) > 0, "far from the origin");
+    for (uint32_t i = 0; i < p.n; i++) { /* extreme bounds: spans near FLT_MAX */
+        for (int a = 0; a < 3; a++) p.xyz[3 * i + a] = (float)((pgen_rand() - 0.5) * 6e38);
+        p.temp[i] = (float)((pgen_rand() - 0.5) * 6e38);
+        p.fuel[i] = i % 2 ? -FLT_MAX : FLT_MAX;
+        p.flags[i] = (uint8_t)(pgen_rand() * 256);
+    }
+    for (int b = 8; b <= 24; b += 8) CHECK(round_trip(&p, b, 16, 2) > 0, "extreme bounds, pos_bits %d", b);
+    free_set(&p);
+    for (uint32_t n = 1; n <= 3; n++) { /* identical particles, tiny n */
+        pgen_random(&p, n, 1.0);
+        for (uint32_t i = 1; i < n; i++) {
+            memcpy(p.xyz + 3 * i, p.xyz, 3 * sizeof *p.xyz);
+            p.temp[i] = p.temp[0], p.fuel[i] = p.fuel[0], p.flags[i] = p.flags[0];
+        }
+        CHECK(round_trip(&p, 16, 0, 0) > 0, "%u identical", n);
+        free_set(&p);
+    }
+}
+
+static void test_real_frame(void)
+{
+    struct fxs_particles p = { 0 };
+    if (read_ply(REAL_PLY, &p)) {
+        CHECK(0, "read %s", REAL_PLY);
+        return;
+    }
+    for (int b = 8; b <= 24; b += 4) CHECK(round_trip(&p, b, 0, 0) > 0, "real frame, pos_bits %d", b);
+    CHECK(round_trip(&p, 16, 8, 8) > 0, "real frame, T and F 8 bits");
     free_set(&p);
 }
 
@@ -290,7 +367,7 @@ static void test_header_limits(void)
     uint8_t *enc, *bad;
     size_t len = small_payload(&enc, 50);
     static const struct { int at; uint8_t v; } byte_cases[] = {
-        { 0, 'X' }, { 4, 2 }, { 5, 7 }, { 5, 25 }, { 6, 1 }, { 7, 17 }, { 8, 11 },
+        { 0, 'X' }, { 3, '1' }, { 4, 1 }, { 5, 7 }, { 5, 25 }, { 6, 1 }, { 7, 17 }, { 8, 17 }, { 10, 25 }, { 11, 1 },
     };
     if (!enc) {
         CHECK(0, "encode");
@@ -333,10 +410,22 @@ static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts 
         pgen_random(p, 5, 1.0);
         for (int i = 0; i < 5; i++) p->xyz[3 * i + 1] = 2.5f; /* flat in y */
     }
+    if (v == 6 || v == 7) {
+        CHECK(read_ply(REAL_PLY, p) == 0, "read %s", REAL_PLY);
+        if (v == 7) *o = (struct fxs_particles_opts){ 12, 8, 8 };
+    }
+    if (v == 8) { /* all identical */
+        pgen_random(p, 9, 1.0);
+        for (int i = 1; i < 9; i++) {
+            memcpy(p->xyz + 3 * i, p->xyz, 3 * sizeof *p->xyz);
+            p->temp[i] = p->temp[0], p->fuel[i] = p->fuel[0], p->flags[i] = p->flags[0];
+        }
+    }
 }
 
-static const char *const vec_names[] = { "empty", "one", "seven_8bit", "flame64", "flame64_24bit", "flat_y" };
-#define NVEC 6
+static const char *const vec_names[] = { "empty", "one", "seven_8bit", "flame64", "flame64_24bit", "flat_y",
+                                         "real_flame600", "real_flame600_12bit", "identical9" };
+#define NVEC 9
 
 /* The JSON the decoder must produce: floats as %.9g (float32 round trips exactly). */
 static char *vec_json(const struct fxs_particles *d)
@@ -420,6 +509,7 @@ int main(int argc, char **argv)
     RUN(test_temp_fuel_bits);
     RUN(test_flame_size);
     RUN(test_degenerate);
+    RUN(test_real_frame);
     RUN(test_large);
     RUN(test_bad_input);
     RUN(test_truncated);

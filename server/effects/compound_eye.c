@@ -1,0 +1,589 @@
+/* compound_eye.c — effect `compound_eye` (seed 004, Sagawa 2014; spec: digest 004).
+ *
+ * Owns the parameter table, the host side of kernels/compound_eye.cl and the two modes:
+ * "lut" regenerates the lens table (eye_lut.h) only when a parameter that shapes it
+ * changes and then emits it once, as one kind 4 frame (the hub keeps the latest frame
+ * per kind for late subscribers, so all products travel together); "bake" renders the
+ * model's view texture (eye_model.h) and emits a kind 2 EXR whenever anything changed.
+ * A step with nothing new emits nothing. */
+#include "compound_eye.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../buf.h"
+#include "../codec/exr.h"
+#include "../effect.h"
+#include "../ocl.h"
+#include "eye_lut.h"
+#include "eye_model.h"
+#include "fxs_frame.h"
+
+#define EYE_KERNEL_FILE "compound_eye.cl"
+#define EYE_BUILD_OPTS "-cl-fast-relaxed-math"
+
+enum eye_mode { EYE_MODE_LUT, EYE_MODE_BAKE };
+static const char *const eye_mode_names[] = {"lut", "bake", NULL};
+static const char *const eye_lattice_names[] = {"square", "hex", NULL};
+static const char *const eye_search_names[] = {"exact", "slices", NULL};
+static const char *const eye_select_names[] = {"all", "thesis4", NULL};
+static const char *const eye_tir_names[] = {"reflect", "miss", "absorb", NULL};
+static const char *const eye_normal_names[] = {"object", "lens", NULL};
+
+/* ---- parameters -------------------------------------------------------------------- */
+
+#define EYE_LUT_DOC(text) text " (regenerates the lens table)"
+#define EYE_COLOR(nm, dflt, what) \
+    {.name = nm, .type = PARAM_COLOR, .def = dflt, .min = 0, .max = 1, .unit = "linear RGB", .doc = EYE_LUT_DOC(what)}
+#define EYE_FRAC(nm, dflt, lo, hi, what) \
+    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = "pitch", .doc = EYE_LUT_DOC(what)}
+#define EYE_COEF(nm, dflt, what) \
+    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = 0, .max = 1, .unit = "", .doc = what}
+
+const struct param_def compound_eye_params[] = {
+    {.name = "mode", .type = PARAM_ENUM, .def = "\"lut\"", .choices = eye_mode_names, .unit = "", .flags = PARAM_RESTART,
+     .doc = "lut: send the lens look-up table (kind 4) on each change that affects it, the client shades; "
+            "bake: send the model's shaded view texture (kind 2 EXR) on each change"},
+    {.name = "lattice", .type = PARAM_ENUM, .def = "\"square\"", .choices = eye_lattice_names, .unit = "",
+     .doc = EYE_LUT_DOC("lens lattice: square (thesis, 4 side pupils) or hex (real eyes, 6 side pupils)")},
+    {.name = "density", .type = PARAM_FLOAT, .def = "40", .min = 1, .max = 1000, .unit = "cells per UV unit",
+     .doc = "ommatidium density R_t (eq. 5.1); a client uniform in mode lut (thesis: 300 on its own UV layout)"},
+    EYE_FRAC("lens_radius", "1.0", 0.5, 3.0,
+             "lens sphere radius r / pitch; gap-free coverage needs >= 0.7071 (square) or >= 0.5774 (hex)"),
+    {.name = "refractive_index", .type = PARAM_FLOAT, .def = "1.491", .min = 1.05, .max = 1.95, .unit = "",
+     .doc = EYE_LUT_DOC("lens refractive index n (thesis: 1.491, PMMA)")},
+    {.name = "pigment_depth", .type = PARAM_FLOAT, .def = "2.0", .min = 2.0, .max = 4.0, .unit = "lens radii",
+     .doc = EYE_LUT_DOC("depth of the pigment plane below the surface (thesis: 2r; below 2r it would cut the lenses)")},
+    {.name = "max_passes", .type = PARAM_INT, .def = "8", .min = 0, .max = 64, .unit = "",
+     .doc = EYE_LUT_DOC("l: neighbouring lenses a ray may pass through (0: exit the first lens; >= 3 converged)")},
+    {.name = "sphere_search", .type = PARAM_ENUM, .def = "\"exact\"", .choices = eye_search_names, .unit = "",
+     .doc = EYE_LUT_DOC("entry lens: exact (walk the crossed cells) or slices (the thesis's slice planes)")},
+    {.name = "slice_steps", .type = PARAM_INT, .def = "16", .min = 4, .max = 64, .unit = "",
+     .doc = EYE_LUT_DOC("slice planes down to depth r, with sphere_search slices")},
+    {.name = "neighbor_select", .type = PARAM_ENUM, .def = "\"all\"", .choices = eye_select_names, .unit = "",
+     .doc = EYE_LUT_DOC("next lens: all (any overlapping lens, farthest exit wins) or thesis4 (3 lenses of the "
+                        "region R_dir points into)")},
+    {.name = "tir_policy", .type = PARAM_ENUM, .def = "\"reflect\"", .choices = eye_tir_names, .unit = "",
+     .doc = EYE_LUT_DOC("total internal reflection at exit: reflect (up to 4 times, then miss), miss (base "
+                        "colour) or absorb (pigment colour)")},
+    EYE_FRAC("dot_radius", "0.2", 0.05, 0.5, "pigment dot radius"),
+    EYE_FRAC("dot_softness", "0.03", 0.0, 0.2, "width of the dot's smoothstep edge"),
+    EYE_COLOR("dot_color", "[0.02,0.02,0.02]", "pigment dot colour"),
+    EYE_COLOR("base_color", "[0.8,0.78,0.72]", "pigment-free (body fluid) colour, also what missed rays see"),
+    EYE_FRAC("ring_inner", "0", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)"),
+    EYE_FRAC("ring_outer", "0", 0.0, 0.5, "outer radius of the optional pigment ring"),
+    EYE_COLOR("ring_color", "[0.25,0.1,0.05]", "ring colour"),
+    EYE_FRAC("glow_radius", "0", 0.0, 0.5, "radius of an optional additive central glow (0: off)"),
+    EYE_COLOR("glow_color", "[0.6,0.15,0.05]", "central glow colour (added)"),
+    {.name = "pigment_res", .type = PARAM_INT, .def = "128", .min = 32, .max = 256, .unit = "texels",
+     .doc = EYE_LUT_DOC("pigment tile width (height x sqrt 3 on the hex lattice)")},
+    {.name = "lut_cells", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "texels",
+     .doc = EYE_LUT_DOC("C: in-cell samples per axis of each direction tile")},
+    {.name = "lut_dirs", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
+     .doc = EYE_LUT_DOC("D: direction tiles per axis (hemi-octahedral map)")},
+    {.name = "lut_supersample", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
+     .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1 keeps a table "
+                        "change near 250 ms on 2 CPU cores; 2 is 4x the rays)")},
+    EYE_COEF("ka", "0.2", "ambient coefficient a of eq. 5.31 (client uniform in mode lut)"),
+    EYE_COEF("kd", "0.8", "diffuse coefficient d of eq. 5.31"),
+    EYE_COEF("ks", "0.3", "specular coefficient s of eq. 5.31"),
+    {.name = "shininess", .type = PARAM_FLOAT, .def = "32", .min = 1, .max = 256, .unit = "",
+     .doc = "Phong exponent of the specular term"},
+    {.name = "shading_normal", .type = PARAM_ENUM, .def = "\"lens\"", .choices = eye_normal_names, .unit = "",
+     .doc = "normal for Phong: lens (the lens sphere at the entry point, thesis Fig. 6.20 c-d) or object"},
+    {.name = "model", .type = PARAM_ENUM, .def = "\"hemisphere\"", .choices = eye_model_names, .unit = "",
+     .flags = PARAM_RESTART,
+     .doc = "mode bake: a built-in model or the name of an OBJ file (without .obj) in the assets directory"},
+    {.name = "bake_size", .type = PARAM_INT, .def = "512", .min = 128, .max = 2048, .unit = "texels",
+     .flags = PARAM_RESTART, .doc = "mode bake: width and height of the view texture"},
+    {.name = "eye", .type = PARAM_VEC3, .def = "[0.4,0.3,3]", .min = -1000, .max = 1000, .unit = "model units",
+     .doc = "mode bake: eye position in the model's space"},
+    {.name = "light", .type = PARAM_VEC3, .def = "[0.4,0.6,1]", .min = -1000, .max = 1000, .unit = "direction",
+     .flags = PARAM_NONZERO, .doc = "mode bake: direction towards the light, normalised by the server"},
+    {.name = "compression", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
+     .doc = "mode bake: OpenEXR compression of the view texture"},
+    {.name = "fps", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 120, .unit = "1/s",
+     .doc = "steps per second; a step sends a frame only when something changed"},
+    {0},
+};
+
+/* Every parameter whose change regenerates the lens table (mode lut). */
+static const char *const eye_lut_keys[] = {
+    "lattice", "lens_radius", "refractive_index", "pigment_depth", "max_passes", "sphere_search", "slice_steps",
+    "neighbor_select", "tir_policy", "dot_radius", "dot_softness", "dot_color", "base_color", "ring_inner",
+    "ring_outer", "ring_color", "glow_radius", "glow_color", "pigment_res", "lut_cells", "lut_dirs",
+    "lut_supersample", NULL,
+};
+
+/* ---- state ------------------------------------------------------------------------- */
+
+struct compound_eye {
+    struct ocl *ocl;
+    cl_kernel k_lut, k_bake;
+    cJSON *params;   /* the document in use */
+    int mode, dirty; /* dirty: the next step has something new to send */
+    struct eye_optics optics;
+    struct eye_pigment pigment;
+    float *pig;      /* pigment tile, pw x ph RGBA */
+    int pw, ph;
+    cl_mem d_pig, d_lut, d_geo, d_out;
+    size_t d_pig_bytes, d_lut_bytes;
+    float *samples;  /* LUT kernel output */
+    struct fx_buf table;
+    /* bake */
+    int size, compression;
+    float *rgba;
+    struct fx_buf exr;
+};
+
+static int eye_enum(const char *const *names, const char *s)
+{
+    for (int i = 0; names[i]; i++)
+        if (!strcmp(names[i], s)) return i;
+    return 0;
+}
+
+static void eye_rgb(const cJSON *p, const char *name, double out[3]) { params_vec3(p, name, out); }
+
+void eye_optics_from_params(const cJSON *p, struct eye_optics *o)
+{
+    memset(o, 0, sizeof *o);
+    o->lattice = eye_enum(eye_lattice_names, params_str(p, "lattice"));
+    o->r = (float)params_num(p, "lens_radius");
+    o->n = (float)params_num(p, "refractive_index");
+    o->plane = (float)(params_num(p, "pigment_depth") * params_num(p, "lens_radius"));
+    o->tile_h = o->lattice == EYE_HEX ? (float)EYE_SQRT3 : 1.0f;
+    o->max_passes = (int)params_num(p, "max_passes");
+    o->search = eye_enum(eye_search_names, params_str(p, "sphere_search"));
+    o->slices = (int)params_num(p, "slice_steps");
+    o->select = eye_enum(eye_select_names, params_str(p, "neighbor_select"));
+    o->tir = eye_enum(eye_tir_names, params_str(p, "tir_policy"));
+}
+
+static void eye_pigment_from_params(const cJSON *p, struct eye_pigment *pg)
+{
+    pg->lattice = eye_enum(eye_lattice_names, params_str(p, "lattice"));
+    pg->dot_radius = params_num(p, "dot_radius");
+    pg->softness = params_num(p, "dot_softness");
+    pg->ring_inner = params_num(p, "ring_inner");
+    pg->ring_outer = params_num(p, "ring_outer");
+    pg->glow_radius = params_num(p, "glow_radius");
+    eye_rgb(p, "dot_color", pg->dot);
+    eye_rgb(p, "base_color", pg->base);
+    eye_rgb(p, "ring_color", pg->ring);
+    eye_rgb(p, "glow_color", pg->glow);
+}
+
+static int eye_table_changed(const cJSON *a, const cJSON *b)
+{
+    for (int i = 0; eye_lut_keys[i]; i++)
+        if (!cJSON_Compare(cJSON_GetObjectItemCaseSensitive(a, eye_lut_keys[i]),
+                           cJSON_GetObjectItemCaseSensitive(b, eye_lut_keys[i]), 1))
+            return 1;
+    return 0;
+}
+
+static cl_mem eye_buffer(struct compound_eye *ce, cl_mem_flags flags, size_t bytes, void *host, struct fx_err *err)
+{
+    cl_int rc;
+    cl_mem m = clCreateBuffer(ocl_context(ce->ocl), flags, bytes, host, &rc);
+    if (rc != CL_SUCCESS) fx_fail(err, "internal", "", "clCreateBuffer(%zu bytes): %s", bytes, ocl_errstr(rc));
+    return m;
+}
+
+/* Recomputes the pigment tile and uploads it (buffer regrown when needed). */
+static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *err)
+{
+    eye_pigment_size(res, ce->pigment.lattice, &ce->pw, &ce->ph);
+    size_t bytes = (size_t)ce->pw * ce->ph * 4 * sizeof(float);
+    float *pig = realloc(ce->pig, bytes);
+    if (!pig) return fx_fail(err, "internal", "", "out of memory for the pigment tile");
+    ce->pig = pig;
+    eye_pigment_tile(&ce->pigment, ce->pw, ce->ph, ce->pig);
+    if (bytes > ce->d_pig_bytes) {
+        if (ce->d_pig) clReleaseMemObject(ce->d_pig);
+        ce->d_pig_bytes = 0;
+        if (!(ce->d_pig = eye_buffer(ce, CL_MEM_READ_ONLY, bytes, NULL, err))) return -1;
+        ce->d_pig_bytes = bytes;
+    }
+    cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_pig, CL_TRUE, 0, bytes, ce->pig, 0, NULL, NULL);
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "pigment upload: %s", ocl_errstr(rc));
+}
+
+int compound_eye_set(struct compound_eye *ce, const cJSON *params, struct fx_err *err)
+{
+    if (!ce->params || ce->mode == EYE_MODE_BAKE || eye_table_changed(ce->params, params)) ce->dirty = 1;
+    cJSON *copy = cJSON_Duplicate(params, 1);
+    if (!copy) return fx_fail(err, "internal", "", "out of memory");
+    cJSON_Delete(ce->params);
+    ce->params = copy;
+    eye_optics_from_params(params, &ce->optics);
+    eye_pigment_from_params(params, &ce->pigment);
+    ce->compression = exr_codec_parse(params_str(params, "compression"));
+    if (ce->compression < 0) ce->compression = EXR_CODEC_RLE;
+    return eye_pigment_upload(ce, (int)params_num(params, "pigment_res"), err);
+}
+
+/* ---- OpenCL ------------------------------------------------------------------------ */
+
+/* Mirrors struct eye_shading in kernels/compound_eye.cl. */
+struct eye_shading {
+    cl_float4 eye, light;
+    float ka, kd, ks, shininess, density;
+    int lens_normal, pad0, pad1;
+};
+
+static cl_float4 eye_f4(const double v[3], double w)
+{
+    cl_float4 f = {{(float)v[0], (float)v[1], (float)v[2], (float)w}};
+    return f;
+}
+
+static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
+{
+    cl_int rc;
+    cl_program prog = ocl_program(ce->ocl, EYE_KERNEL_FILE, EYE_BUILD_OPTS, err);
+    if (!prog) return -1;
+    ce->k_lut = clCreateKernel(prog, "eye_lut", &rc);
+    if (rc == CL_SUCCESS) ce->k_bake = clCreateKernel(prog, "eye_bake", &rc);
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
+}
+
+/* Runs kernel k over a 1-D or 2-D range and reads `bytes` of out back into host. */
+static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, int dims, const size_t *global, cl_mem out,
+                   size_t bytes, void *host, struct fx_err *err)
+{
+    cl_event ev;
+    cl_command_queue q = ocl_queue(ce->ocl);
+    cl_int rc = clEnqueueNDRangeKernel(q, k, (cl_uint)dims, NULL, global, NULL, 0, NULL, &ev);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
+    rc = clEnqueueReadBuffer(q, out, CL_TRUE, 0, bytes, host, 0, NULL, NULL);
+    if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
+    clReleaseEvent(ev);
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
+}
+
+/* ---- mode lut ---------------------------------------------------------------------- */
+
+static int eye_lut_samples(struct compound_eye *ce, int cells, int dirs, int ss, struct fx_err *err)
+{
+    size_t n = (size_t)cells * cells * dirs * dirs, bytes = n * 4 * sizeof(float);
+    if (bytes > ce->d_lut_bytes) {
+        float *s = realloc(ce->samples, bytes);
+        if (!s) return fx_fail(err, "internal", "", "out of memory for %zu table samples", n);
+        ce->samples = s;
+        if (ce->d_lut) clReleaseMemObject(ce->d_lut);
+        ce->d_lut_bytes = 0;
+        if (!(ce->d_lut = eye_buffer(ce, CL_MEM_WRITE_ONLY, bytes, NULL, err))) return -1;
+        ce->d_lut_bytes = bytes;
+    }
+    cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
+    cl_int rc = 0, i = 0;
+    cl_kernel k = ce->k_lut;
+    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_lut);
+    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_pig);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->pw);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->ph);
+    rc |= clSetKernelArg(k, i++, sizeof ce->optics, &ce->optics);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &cells);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &dirs);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &ss);
+    rc |= clSetKernelArg(k, i++, sizeof dot, &dot);
+    rc |= clSetKernelArg(k, i++, sizeof base, &base);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(eye_lut) failed");
+    size_t global[2] = {(size_t)cells * cells, (size_t)dirs * dirs};
+    return eye_run(ce, k, "eye_lut", 2, global, ce->d_lut, bytes, ce->samples, err);
+}
+
+int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, struct fx_err *err)
+{
+    const cJSON *p = ce->params;
+    struct eye_lut_table t = {
+        .lattice = ce->optics.lattice,
+        .max_passes = ce->optics.max_passes,
+        .cells = (int)params_num(p, "lut_cells"),
+        .dirs = (int)params_num(p, "lut_dirs"),
+        .supersample = (int)params_num(p, "lut_supersample"),
+        .tile_h = ce->optics.tile_h,
+        .lens_radius = ce->optics.r,
+        .refractive_index = ce->optics.n,
+        .pigment_depth = (float)params_num(p, "pigment_depth"),
+        .pigment = ce->pig,
+        .pw = ce->pw,
+        .ph = ce->ph,
+    };
+    if (eye_lut_samples(ce, t.cells, t.dirs, t.supersample, err)) return -1;
+    t.samples = ce->samples;
+    if (eye_lut_pack(&t, &ce->table, err)) return -1;
+    *data = ce->table.data;
+    *len = ce->table.len;
+    return 0;
+}
+
+/* ---- mode bake --------------------------------------------------------------------- */
+
+static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err *err)
+{
+    struct eye_mesh mesh;
+    ce->size = (int)params_num(p, "bake_size");
+    size_t texels = (size_t)ce->size * ce->size;
+    if (eye_model_load(params_str(p, "model"), &mesh, err)) return -1;
+    float *geo = malloc(texels * 16 * sizeof(float));
+    ce->rgba = malloc(texels * 4 * sizeof(float));
+    if (!geo || !ce->rgba) {
+        free(geo);
+        eye_mesh_free(&mesh);
+        return fx_fail(err, "internal", "", "out of memory for a %d^2 bake", ce->size);
+    }
+    eye_model_atlas(&mesh, ce->size, geo);
+    eye_mesh_free(&mesh);
+    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, texels * 16 * sizeof(float), geo, err);
+    free(geo);
+    if (!ce->d_geo) return -1;
+    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, texels * 4 * sizeof(float), NULL, err);
+    return ce->d_out ? 0 : -1;
+}
+
+int compound_eye_bake_size(const struct compound_eye *ce) { return ce->size; }
+
+int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
+{
+    const cJSON *p = ce->params;
+    double eye[3], light[3];
+    params_vec3(p, "eye", eye);
+    params_vec3(p, "light", light);
+    double ll = sqrt(light[0] * light[0] + light[1] * light[1] + light[2] * light[2]);
+    for (int k = 0; k < 3; k++) light[k] /= ll;
+    struct eye_shading s = {
+        .eye = eye_f4(eye, 1.0),
+        .light = eye_f4(light, 0.0),
+        .ka = (float)params_num(p, "ka"),
+        .kd = (float)params_num(p, "kd"),
+        .ks = (float)params_num(p, "ks"),
+        .shininess = (float)params_num(p, "shininess"),
+        .density = (float)params_num(p, "density"),
+        .lens_normal = eye_enum(eye_normal_names, params_str(p, "shading_normal")),
+    };
+    cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
+    cl_int rc = 0, i = 0;
+    cl_kernel k = ce->k_bake;
+    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_out);
+    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_geo);
+    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_pig);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->pw);
+    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->ph);
+    rc |= clSetKernelArg(k, i++, sizeof ce->optics, &ce->optics);
+    rc |= clSetKernelArg(k, i++, sizeof s, &s);
+    rc |= clSetKernelArg(k, i++, sizeof dot, &dot);
+    rc |= clSetKernelArg(k, i++, sizeof base, &base);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(eye_bake) failed");
+    size_t global = (size_t)ce->size * ce->size;
+    return eye_run(ce, k, "eye_bake", 1, &global, ce->d_out, global * 4 * sizeof(float), rgba, err);
+}
+
+/* ---- life cycle -------------------------------------------------------------------- */
+
+struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+{
+    struct compound_eye *ce = calloc(1, sizeof *ce);
+    if (!ce) {
+        fx_fail(err, "internal", "", "out of memory");
+        return NULL;
+    }
+    ce->ocl = ocl;
+    ce->mode = eye_enum(eye_mode_names, params_str(params, "mode"));
+    if (eye_kernels_create(ce, err) || compound_eye_set(ce, params, err) ||
+        (ce->mode == EYE_MODE_BAKE && eye_bake_setup(ce, params, err))) {
+        compound_eye_free(ce);
+        return NULL;
+    }
+    return ce;
+}
+
+void compound_eye_free(struct compound_eye *ce)
+{
+    if (!ce) return;
+    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out};
+    for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
+        if (mems[i]) clReleaseMemObject(mems[i]);
+    if (ce->k_lut) clReleaseKernel(ce->k_lut);
+    if (ce->k_bake) clReleaseKernel(ce->k_bake);
+    cJSON_Delete(ce->params);
+    free(ce->pig);
+    free(ce->samples);
+    free(ce->rgba);
+    fx_buf_free(&ce->table);
+    fx_buf_free(&ce->exr);
+    free(ce);
+}
+
+/* ---- effect_ops -------------------------------------------------------------------- */
+
+static double eye_now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static int eye_emit_table(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
+{
+    const void *data;
+    size_t len;
+    double t0 = eye_now_ms();
+    if (compound_eye_table(ce, &data, &len, err)) return -1;
+    int W = eye_lut_atlas_width((int)params_num(ce->params, "lut_cells"), (int)params_num(ce->params, "lut_dirs"));
+    struct effect_frame fr = {
+        .kind = FXS_KIND_LUT,
+        .codec = FXS_CODEC_LUT_PACK,
+        .count_or_width = (uint32_t)W,
+        .height = (uint32_t)W,
+        .payload = data,
+        .payload_bytes = len,
+        .encode_ms = eye_now_ms() - t0,
+    };
+    return emit(ctx, &fr);
+}
+
+static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
+{
+    if (compound_eye_bake(ce, ce->rgba, err)) return -1;
+    double t0 = eye_now_ms();
+    struct exr_image im = {ce->size, ce->size, 4, ce->rgba, ce->compression};
+    ce->exr.len = 0;
+    if (exr_write_mem(&im, &ce->exr, err)) return -1;
+    struct effect_frame fr = {
+        .kind = FXS_KIND_TEXTURE,
+        .codec = FXS_CODEC_EXR,
+        .count_or_width = (uint32_t)ce->size,
+        .height = (uint32_t)ce->size,
+        .payload = ce->exr.data,
+        .payload_bytes = ce->exr.len,
+        .encode_ms = eye_now_ms() - t0,
+    };
+    return emit(ctx, &fr);
+}
+
+static int eye_step(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err)
+{
+    struct compound_eye *ce = self;
+    (void)sim_time;
+    (void)dt;
+    if (!ce->dirty) return 0; /* nothing new: the hub still holds the last frame */
+    int rc = ce->mode == EYE_MODE_LUT ? eye_emit_table(ce, emit, ctx, err) : eye_emit_bake(ce, emit, ctx, err);
+    if (!rc) ce->dirty = 0;
+    return rc;
+}
+
+/* Cross-parameter rules: gap-free lens coverage (digest §2.1 [D]: the union of the
+ * spheres covers the plane at depth r only if r >= the lattice's covering radius), a
+ * ring with inner <= outer, and an OBJ model that loads. */
+static int eye_check(const cJSON *p, struct fx_err *err)
+{
+    int hex = !strcmp(params_str(p, "lattice"), "hex");
+    double r = params_num(p, "lens_radius"), rmin = hex ? 1.0 / EYE_SQRT3 : sqrt(0.5);
+    if (r < rmin - 1e-9)
+        return fx_fail(err, "bad_param", "lens_radius",
+                       "lens_radius %g leaves gaps between the lenses of the %s lattice (needs >= %.4f)", r,
+                       hex ? "hex" : "square", rmin);
+    if (params_num(p, "ring_inner") > params_num(p, "ring_outer"))
+        return fx_fail(err, "bad_param", "ring_inner", "ring_inner must not exceed ring_outer");
+    return eye_model_check(params_str(p, "model"), err);
+}
+
+static void *eye_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+{
+    return compound_eye_new(ocl, params, err);
+}
+
+static int eye_apply(void *self, const cJSON *params, struct fx_err *err) { return compound_eye_set(self, params, err); }
+
+/* A reset sends the current table (or view) again. */
+static int eye_reset(void *self, struct fx_err *err)
+{
+    (void)err;
+    ((struct compound_eye *)self)->dirty = 1;
+    return 0;
+}
+
+static void eye_destroy(void *self) { compound_eye_free(self); }
+
+const struct effect_ops compound_eye_effect = {
+    .name = "compound_eye",
+    .doc = "Compound eye (Sagawa 2014): view rays refract through a lattice of overlapping ommatidium lens spheres "
+           "onto a pigment plane, which shows the moving pseudopupils. Mode lut sends a lens look-up table (kind 4: "
+           "pigment tile, in-cell position x view direction atlas, far-field map) whenever a parameter that shapes "
+           "it changes, for one look-up per pixel on the client; mode bake sends a model's shaded view texture "
+           "(kind 2 EXR) whenever the view changes.",
+    .params = compound_eye_params,
+    .outputs_json = "[{\"kind\":4,\"codec\":\"lut_pack\",\"products\":\"PIGM, LLUT, LMAC (RGBA8, zstd)\","
+                    "\"size\":\"LLUT atlas lut_dirs*(lut_cells+2) square\",\"rate\":\"on change, mode lut\"},"
+                    "{\"kind\":2,\"codec\":\"exr\",\"channels\":\"RGBA (half)\",\"size\":\"bake_size square\","
+                    "\"rate\":\"on change, at most fps, mode bake\"}]",
+    .check = eye_check,
+    .create = eye_create,
+    .apply = eye_apply,
+    .step = eye_step,
+    .reset = eye_reset,
+    .destroy = eye_destroy,
+};
+
+/* ---- raw traces, for tests and the benchmark ---------------------------------------- */
+
+int eye_trace_rays(struct ocl *ocl, const struct eye_optics *o, int n, const float *p, const float *d,
+                   struct eye_rays_out *out, struct fx_err *err)
+{
+    cl_int rc;
+    cl_program prog = ocl_program(ocl, EYE_KERNEL_FILE, EYE_BUILD_OPTS, err);
+    if (!prog) return -1;
+    cl_kernel k = clCreateKernel(prog, "eye_trace_rays", &rc);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel(eye_trace_rays): %s", ocl_errstr(rc));
+    size_t bytes = (size_t)n * 4 * sizeof(float);
+    float *in_p = calloc((size_t)n, 4 * sizeof(float)), *in_d = calloc((size_t)n, 4 * sizeof(float));
+    float *res = malloc(bytes), *nrm = malloc(bytes);
+    cl_mem m[4] = {0};
+    int ret = -1;
+    if (!in_p || !in_d || !res || !nrm) {
+        fx_fail(err, "internal", "", "out of memory for %d rays", n);
+        goto done;
+    }
+    for (int i = 0; i < n; i++) {
+        memcpy(in_p + 4 * i, p + 2 * i, 2 * sizeof(float));
+        memcpy(in_d + 4 * i, d + 3 * i, 3 * sizeof(float));
+    }
+    cl_context ctx = ocl_context(ocl);
+    m[0] = clCreateBuffer(ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, in_p, &rc);
+    if (rc == CL_SUCCESS) m[1] = clCreateBuffer(ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, in_d, &rc);
+    if (rc == CL_SUCCESS) m[2] = clCreateBuffer(ctx, CL_MEM_WRITE_ONLY, bytes, NULL, &rc);
+    if (rc == CL_SUCCESS) m[3] = clCreateBuffer(ctx, CL_MEM_WRITE_ONLY, bytes, NULL, &rc);
+    for (int i = 0; i < 4 && rc == CL_SUCCESS; i++) rc = clSetKernelArg(k, (cl_uint)i, sizeof(cl_mem), &m[i]);
+    if (rc == CL_SUCCESS) rc = clSetKernelArg(k, 4, sizeof *o, o);
+    size_t global = (size_t)n;
+    cl_command_queue q = ocl_queue(ocl);
+    if (rc == CL_SUCCESS) rc = clEnqueueNDRangeKernel(q, k, 1, NULL, &global, NULL, 0, NULL, NULL);
+    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, m[2], CL_TRUE, 0, bytes, res, 0, NULL, NULL);
+    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, m[3], CL_TRUE, 0, bytes, nrm, 0, NULL, NULL);
+    if (rc != CL_SUCCESS) {
+        fx_fail(err, "internal", "", "eye_trace_rays: %s", ocl_errstr(rc));
+        goto done;
+    }
+    for (int i = 0; i < n; i++) {
+        if (out->land) memcpy(out->land + 2 * i, res + 4 * i, 2 * sizeof(float));
+        if (out->status) out->status[i] = (int)res[4 * i + 2];
+        if (out->passes) out->passes[i] = (int)res[4 * i + 3];
+        if (out->normal) memcpy(out->normal + 3 * i, nrm + 4 * i, 3 * sizeof(float));
+        if (out->entered) out->entered[i] = (int)nrm[4 * i + 3];
+    }
+    ret = 0;
+done:
+    for (int i = 0; i < 4; i++)
+        if (m[i]) clReleaseMemObject(m[i]);
+    clReleaseKernel(k);
+    free(in_p);
+    free(in_d);
+    free(res);
+    free(nrm);
+    return ret;
+}

@@ -1,0 +1,199 @@
+/* eye_lut.c — see eye_lut.h. The byte layout written here is PROTOCOL.md §7.6; the
+ * integration test (tests/integration/test_eye_stream.py) decodes it independently. */
+#include "eye_lut.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zstd.h>
+
+#include "compound_eye.h"
+#include "fxs_frame.h"
+
+#define EYE_LUT_ZSTD_LEVEL 1 /* level 1: ~5x faster than 3 and within a few % of its size here */
+
+/* ---- pigment (digest G14, §3.4.1 ring and glow) ------------------------------------ */
+
+void eye_pigment_size(int res, int lattice, int *w, int *h)
+{
+    *w = res;
+    *h = lattice == EYE_HEX ? (int)lround(res * EYE_SQRT3) : res;
+}
+
+/* Distance from (x, y) to the nearest lattice point, pitches (lattice as in the kernel). */
+static double eye_lattice_dist(int lattice, double x, double y)
+{
+    if (lattice != EYE_HEX) {
+        double dx = x - floor(x) - 0.5, dy = y - floor(y) - 0.5;
+        return sqrt(dx * dx + dy * dy);
+    }
+    const double h = EYE_SQRT3, ax = 0.5, ay = 0.25 * h, bx = 0.0, by = 0.75 * h;
+    double dax = x - ax - round(x - ax), day = y - ay - h * round((y - ay) / h);
+    double dbx = x - bx - round(x - bx), dby = y - by - h * round((y - by) / h);
+    return sqrt(fmin(dax * dax + day * day, dbx * dbx + dby * dby));
+}
+
+/* 1 inside radius rad, 0 outside, smoothstep over a band of width soft centred on rad. */
+static double eye_disc(double d, double rad, double soft)
+{
+    if (soft <= 0.0) return d < rad ? 1.0 : 0.0;
+    double t = (d - (rad - 0.5 * soft)) / soft;
+    t = t < 0.0 ? 0.0 : (t > 1.0 ? 1.0 : t);
+    return 1.0 - t * t * (3.0 - 2.0 * t);
+}
+
+void eye_pigment_at(const struct eye_pigment *pg, double x, double y, double rgb[3])
+{
+    double d = eye_lattice_dist(pg->lattice, x, y);
+    double dot = eye_disc(d, pg->dot_radius, pg->softness);
+    double ring = pg->ring_outer > pg->ring_inner
+                      ? eye_disc(d, pg->ring_outer, pg->softness) * (1.0 - eye_disc(d, pg->ring_inner, pg->softness))
+                      : 0.0;
+    double glow = pg->glow_radius > 0.0 ? eye_disc(d, 0.5 * pg->glow_radius, pg->glow_radius) : 0.0;
+    for (int k = 0; k < 3; k++) {
+        double c = pg->base[k] + dot * (pg->dot[k] - pg->base[k]);
+        c += ring * (pg->ring[k] - c);
+        c += glow * pg->glow[k];
+        rgb[k] = c < 0.0 ? 0.0 : (c > 1.0 ? 1.0 : c);
+    }
+}
+
+void eye_pigment_tile(const struct eye_pigment *pg, int w, int h, float *rgba)
+{
+    double tile_h = pg->lattice == EYE_HEX ? EYE_SQRT3 : 1.0;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            double rgb[3];
+            eye_pigment_at(pg, (x + 0.5) / w, (y + 0.5) / h * tile_h, rgb);
+            float *px = rgba + 4 * ((size_t)y * w + x);
+            for (int k = 0; k < 3; k++) px[k] = (float)rgb[k];
+            px[3] = 1.0f;
+        }
+}
+
+/* ---- products -------------------------------------------------------------------- */
+
+static uint8_t eye_u8(float v) { return (uint8_t)(v <= 0.0f ? 0 : v >= 1.0f ? 255 : (int)(v * 255.0f + 0.5f)); }
+
+int eye_lut_atlas_width(int cells, int dirs) { return dirs * (cells + 2 * EYE_LUT_GUTTER); }
+
+/* Tile (ti, tj) occupies texels [ti*(C+2), (ti+1)*(C+2)) in x (likewise y); its gutter
+ * repeats the opposite edge of the cell (the pattern is periodic), so bilinear filtering
+ * inside a tile never reads a neighbouring direction. */
+void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
+{
+    const int C = t->cells, T = C + 2 * EYE_LUT_GUTTER, W = eye_lut_atlas_width(C, t->dirs);
+    for (int y = 0; y < W; y++)
+        for (int x = 0; x < W; x++) {
+            int tile = (y / T) * t->dirs + x / T;
+            int ci = (x % T - EYE_LUT_GUTTER + C) % C, cj = (y % T - EYE_LUT_GUTTER + C) % C;
+            const float *s = t->samples + 4 * ((size_t)tile * C * C + (size_t)cj * C + ci);
+            uint8_t *px = atlas + 4 * ((size_t)y * W + x);
+            for (int k = 0; k < 4; k++) px[k] = eye_u8(s[k]);
+        }
+}
+
+void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
+{
+    const size_t per = (size_t)t->cells * t->cells;
+    for (int tile = 0; tile < t->dirs * t->dirs; tile++) {
+        double acc[4] = {0};
+        const float *s = t->samples + 4 * per * tile;
+        for (size_t i = 0; i < per; i++)
+            for (int k = 0; k < 4; k++) acc[k] += s[4 * i + k];
+        for (int k = 0; k < 4; k++) macro[4 * tile + k] = eye_u8((float)(acc[k] / per));
+    }
+}
+
+/* ---- the container (PROTOCOL.md §7.6) ------------------------------------------- */
+
+struct eye_product {
+    const char *name;
+    int w, h, tile, tiles, inner;
+    const uint8_t *rgba;
+};
+
+static void eye_put_f32(uint8_t *p, float v)
+{
+    uint32_t u;
+    memcpy(&u, &v, 4);
+    fxs_put_u32(p, u);
+}
+
+static void eye_lut_header(const struct eye_lut_table *t, int count, uint8_t h[EYE_LUT_HEADER_BYTES])
+{
+    memset(h, 0, EYE_LUT_HEADER_BYTES);
+    memcpy(h, EYE_LUT_MAGIC, 4);
+    fxs_put_u16(h + 4, 1);
+    fxs_put_u16(h + 6, EYE_LUT_HEADER_BYTES);
+    fxs_put_u16(h + 8, (uint16_t)count);
+    fxs_put_u16(h + 10, EYE_LUT_ENTRY_BYTES);
+    fxs_put_u32(h + 12, (uint32_t)t->lattice);
+    eye_put_f32(h + 16, t->tile_h);
+    eye_put_f32(h + 20, t->lens_radius);
+    eye_put_f32(h + 24, t->refractive_index);
+    eye_put_f32(h + 28, t->pigment_depth);
+    fxs_put_u32(h + 32, (uint32_t)t->max_passes);
+    fxs_put_u32(h + 36, (uint32_t)t->cells);
+    fxs_put_u32(h + 40, (uint32_t)t->dirs);
+    fxs_put_u32(h + 44, EYE_LUT_GUTTER);
+    fxs_put_u32(h + 48, (uint32_t)t->supersample);
+}
+
+/* Appends one zstd-compressed product at out->len; fills its directory entry. */
+static int eye_lut_add(struct fx_buf *out, const struct eye_product *p, int index, struct fx_err *err)
+{
+    size_t raw = (size_t)p->w * p->h * 4, bound = ZSTD_compressBound(raw);
+    if (fx_buf_reserve(out, bound + 8)) return fx_fail(err, "internal", "", "out of memory packing %s", p->name);
+    while (out->len % 8) out->data[out->len++] = 0; /* products start 8-aligned */
+    uint8_t *entry = out->data + EYE_LUT_HEADER_BYTES + (size_t)index * EYE_LUT_ENTRY_BYTES;
+    size_t n = ZSTD_compress(out->data + out->len, bound, p->rgba, raw, EYE_LUT_ZSTD_LEVEL);
+    if (ZSTD_isError(n)) return fx_fail(err, "internal", "", "zstd (%s): %s", p->name, ZSTD_getErrorName(n));
+    memset(entry, 0, EYE_LUT_ENTRY_BYTES);
+    memcpy(entry, p->name, 4);
+    fxs_put_u32(entry + 4, EYE_LUT_FORMAT_RGBA8);
+    fxs_put_u32(entry + 8, EYE_LUT_CODEC_ZSTD);
+    fxs_put_u32(entry + 12, (uint32_t)p->w);
+    fxs_put_u32(entry + 16, (uint32_t)p->h);
+    fxs_put_u32(entry + 20, (uint32_t)out->len);
+    fxs_put_u32(entry + 24, (uint32_t)n);
+    fxs_put_u32(entry + 28, (uint32_t)raw);
+    fxs_put_u32(entry + 32, (uint32_t)p->tile);
+    fxs_put_u32(entry + 36, (uint32_t)p->tiles);
+    fxs_put_u32(entry + 40, (uint32_t)p->tiles);
+    fxs_put_u32(entry + 44, (uint32_t)p->inner);
+    out->len += n;
+    return 0;
+}
+
+int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err)
+{
+    const int W = eye_lut_atlas_width(t->cells, t->dirs), count = 3;
+    size_t pig_bytes = (size_t)t->pw * t->ph * 4, atlas_bytes = (size_t)W * W * 4;
+    uint8_t *pig = malloc(pig_bytes), *atlas = malloc(atlas_bytes), *macro = malloc((size_t)t->dirs * t->dirs * 4);
+    int rc = -1;
+    out->len = 0;
+    size_t dir_bytes = EYE_LUT_HEADER_BYTES + (size_t)count * EYE_LUT_ENTRY_BYTES;
+    if (!pig || !atlas || !macro || fx_buf_reserve(out, dir_bytes)) {
+        fx_fail(err, "internal", "", "out of memory for a %dx%d lens table", W, W);
+        goto done;
+    }
+    for (size_t i = 0; i < pig_bytes; i++) pig[i] = eye_u8(t->pigment[i]);
+    eye_lut_atlas(t, atlas);
+    eye_lut_macro(t, macro);
+    const struct eye_product products[3] = {
+        {"PIGM", t->pw, t->ph, 0, 1, 0, pig},
+        {"LLUT", W, W, t->cells + 2 * EYE_LUT_GUTTER, t->dirs, t->cells, atlas},
+        {"LMAC", t->dirs, t->dirs, 1, t->dirs, 1, macro},
+    };
+    eye_lut_header(t, count, out->data);
+    out->len = dir_bytes;
+    for (int i = 0; i < count; i++)
+        if (eye_lut_add(out, &products[i], i, err)) goto done;
+    rc = 0;
+done:
+    free(pig);
+    free(atlas);
+    free(macro);
+    return rc;
+}

@@ -1,0 +1,60 @@
+/* eye_lut.h — the products of the compound eye's lens look-up table (digest §8.1) and
+ * their kind 4 container (protocol/PROTOCOL.md §7.6).
+ *
+ * The pigment tile is computed here on the host (it is small and the LUT kernel samples
+ * it); the LUT samples come from kernels/compound_eye.cl (eye_lut) and are laid out here
+ * into the atlas with gutters; the macro map is their per-direction mean. All three are
+ * RGBA8 (linear values, not sRGB), each compressed with zstd, behind one directory. */
+#ifndef FX_EYE_LUT_H
+#define FX_EYE_LUT_H
+
+#include <stdint.h>
+
+#include "../buf.h"
+#include "../err.h"
+
+#define EYE_LUT_MAGIC "FXL1"
+#define EYE_LUT_HEADER_BYTES 64
+#define EYE_LUT_ENTRY_BYTES 64
+#define EYE_LUT_GUTTER 1
+#define EYE_LUT_FORMAT_RGBA8 1
+#define EYE_LUT_CODEC_ZSTD 1
+
+/* The pigment pattern (digest G14): a disc per lens with a smoothstep edge, an optional
+ * ring and an optional additive central glow; distances in pitches from the nearest
+ * lattice point. */
+struct eye_pigment {
+    int lattice; /* enum eye_lattice */
+    double dot_radius, softness, ring_inner, ring_outer, glow_radius;
+    double dot[3], base[3], ring[3], glow[3];
+};
+
+/* Tile size for a resolution: res x res (square lattice) or res x round(res*sqrt3) (hex). */
+void eye_pigment_size(int res, int lattice, int *w, int *h);
+
+/* Fills rgba (w*h*4 floats, row 0 first) with the pattern sampled at texel centres. */
+void eye_pigment_tile(const struct eye_pigment *pg, int w, int h, float *rgba);
+
+/* The pigment colour at a point given in pitches (periodic). */
+void eye_pigment_at(const struct eye_pigment *pg, double x, double y, double rgb[3]);
+
+/* What goes into one container. samples: the eye_lut kernel's output, dirs*dirs tiles of
+ * cells*cells float4 (tile = tj*dirs + ti, sample = cj*cells + ci). */
+struct eye_lut_table {
+    int lattice, max_passes, cells, dirs, supersample;
+    float tile_h, lens_radius, refractive_index, pigment_depth;
+    const float *pigment; /* pw x ph x 4 floats */
+    int pw, ph;
+    const float *samples;
+};
+
+/* Packs the container into out (reset to empty first). */
+int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err);
+
+/* The LLUT atlas (RGBA8, atlas_w x atlas_w with atlas_w = dirs*(cells+2)) and the LMAC map
+ * (dirs x dirs) of a table, as packed; exposed for tests. */
+int eye_lut_atlas_width(int cells, int dirs);
+void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas);
+void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro);
+
+#endif

@@ -1,0 +1,254 @@
+/* test_eye_kernel.c — the compound eye's OpenCL tracer (kernels/compound_eye.cl through
+ * server/effects/compound_eye.h) against the double-precision reference (tests/ref/eye_ref),
+ * plus the digest §6 properties that concern the device code: no NaN or infinity over the
+ * whole hemisphere of view directions (every TIR policy, both lattices), lattice
+ * translation invariance, and the look-up table products (sizes, gutters, macro map). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../ref/eye_ref.h"
+#include "check.h"
+#include "effects/compound_eye.h"
+#include "effects/eye_lut.h"
+#include "fxs_frame.h"
+#include "ocl.h"
+#include "params.h"
+
+#define TEK_N 4096
+
+static struct ocl *tek_ocl;
+static unsigned long long tek_rng = 0x9e3779b97f4a7c15ull;
+
+static double tek_rand(double lo, double hi)
+{
+    tek_rng ^= tek_rng << 13;
+    tek_rng ^= tek_rng >> 7;
+    tek_rng ^= tek_rng << 17;
+    return lo + (hi - lo) * ((tek_rng >> 11) * (1.0 / 9007199254740992.0));
+}
+
+static struct eye_optics tek_optics(int hex, double r, double n, int passes, int tir)
+{
+    struct eye_optics o = {.r = (float)r, .n = (float)n, .plane = (float)(2 * r),
+                           .tile_h = hex ? (float)EYE_SQRT3 : 1.0f, .lattice = hex, .max_passes = passes,
+                           .slices = 16, .tir = tir};
+    return o;
+}
+
+static struct eye_ref_optics tek_ref(const struct eye_optics *o)
+{
+    struct eye_ref_optics r = {o->lattice == EYE_HEX, o->r, o->n, o->plane, o->max_passes, o->tir,
+                               o->search == EYE_SEARCH_SLICES ? o->slices : 0, o->select == EYE_SELECT_THESIS4};
+    return r;
+}
+
+/* A random view direction with polar angle <= max_deg (towards the surface). */
+static void tek_dir(double max_deg, double d[3])
+{
+    double ct = cos(max_deg * M_PI / 180), z = tek_rand(ct, 1.0), ph = tek_rand(0, 2 * M_PI), s = sqrt(1 - z * z);
+    d[0] = s * cos(ph);
+    d[1] = s * sin(ph);
+    d[2] = -z;
+}
+
+struct tek_batch {
+    float p[2 * TEK_N], d[3 * TEK_N], land[2 * TEK_N], normal[3 * TEK_N];
+    int status[TEK_N], passes[TEK_N], entered[TEK_N];
+};
+static struct tek_batch tek_b;
+
+static int tek_trace(const struct eye_optics *o, int n)
+{
+    struct fx_err err = {0};
+    struct eye_rays_out out = {tek_b.land, tek_b.status, tek_b.passes, tek_b.entered, tek_b.normal};
+    int rc = eye_trace_rays(tek_ocl, o, n, tek_b.p, tek_b.d, &out, &err);
+    CHECK(rc == 0, "eye_trace_rays: %s", err.message);
+    return rc;
+}
+
+/* Kernel vs reference on random rays: the landing must agree for the great majority;
+ * rays near a decision boundary (which lens, TIR or not) may legitimately differ in float. */
+static void tek_compare(const struct eye_optics *o, double max_deg, const char *what)
+{
+    struct eye_ref_optics ro = tek_ref(o);
+    for (int i = 0; i < TEK_N; i++) {
+        double d[3];
+        tek_dir(max_deg, d);
+        tek_b.p[2 * i] = (float)tek_rand(0, 1);
+        tek_b.p[2 * i + 1] = (float)tek_rand(0, o->tile_h);
+        for (int k = 0; k < 3; k++) tek_b.d[3 * i + k] = (float)d[k];
+    }
+    if (tek_trace(o, TEK_N)) return;
+    int agree = 0, status_agree = 0;
+    double worst = 0;
+    for (int i = 0; i < TEK_N; i++) {
+        double d[3] = {tek_b.d[3 * i], tek_b.d[3 * i + 1], tek_b.d[3 * i + 2]};
+        struct eye_ref_hit h;
+        eye_ref_trace(&ro, tek_b.p[2 * i], tek_b.p[2 * i + 1], d, &h);
+        if (h.status != tek_b.status[i]) continue;
+        status_agree++;
+        double e = h.status == EYE_REF_LANDED
+                       ? hypot(h.land[0] - tek_b.land[2 * i], h.land[1] - tek_b.land[2 * i + 1])
+                       : 0.0;
+        if (e < 1e-3 * (1 + hypot(h.land[0], h.land[1])) && h.passes == tek_b.passes[i]) agree++;
+        else if (e > worst) worst = e;
+    }
+    CHECK(status_agree >= TEK_N * 0.99, "%s: status agrees on %d of %d rays", what, status_agree, TEK_N);
+    CHECK(agree >= TEK_N * 0.98, "%s: %d of %d rays agree with the reference (worst miss %.3g pitches)", what, agree,
+          TEK_N, worst);
+}
+
+static void test_kernel_matches_reference(void)
+{
+    struct eye_optics o = tek_optics(0, 1.0, 1.491, 10, EYE_TIR_REFLECT);
+    tek_compare(&o, 75, "square r=1 l=10 reflect");
+    o = tek_optics(0, 0.75, 1.491, 3, EYE_TIR_MISS);
+    tek_compare(&o, 75, "square r=0.75 l=3 miss");
+    o = tek_optics(1, 1.2, 1.6, 10, EYE_TIR_ABSORB);
+    tek_compare(&o, 75, "hex r=1.2 n=1.6 l=10 absorb");
+    o = tek_optics(0, 1.5, 1.3, 0, EYE_TIR_REFLECT);
+    tek_compare(&o, 80, "square r=1.5 l=0");
+    o = tek_optics(0, 1.0, 1.491, 10, EYE_TIR_REFLECT);
+    o.search = EYE_SEARCH_SLICES;
+    o.select = EYE_SELECT_THESIS4;
+    tek_compare(&o, 70, "square slices + thesis4");
+    o = tek_optics(1, 0.9, 1.491, 8, EYE_TIR_REFLECT);
+    o.select = EYE_SELECT_THESIS4;
+    tek_compare(&o, 70, "hex thesis4");
+}
+
+/* §6.14: no NaN/Inf anywhere on the hemisphere, grazing rays included. */
+static void test_no_nan_over_hemisphere(void)
+{
+    const int g = 64, n = g * g;
+    for (int cfg = 0; cfg < 6; cfg++) {
+        struct eye_optics o = tek_optics(cfg & 1, cfg < 2 ? 0.75 : cfg < 4 ? 1.0 : 2.5, cfg < 4 ? 1.491 : 1.9, 10, cfg % 3);
+        for (int k = 0; k < n; k++) {
+            double th = (k % g + 0.5) / g * 0.5 * M_PI * 0.9999, ph = (k / g) * 2 * M_PI / g;
+            tek_b.d[3 * k] = (float)(sin(th) * cos(ph));
+            tek_b.d[3 * k + 1] = (float)(sin(th) * sin(ph));
+            tek_b.d[3 * k + 2] = (float)-cos(th);
+            tek_b.p[2 * k] = (float)tek_rand(0, 1);
+            tek_b.p[2 * k + 1] = (float)tek_rand(0, 1);
+        }
+        if (tek_trace(&o, n)) return;
+        int bad = 0;
+        for (int k = 0; k < n; k++) {
+            int fin = isfinite(tek_b.normal[3 * k]) && isfinite(tek_b.normal[3 * k + 1]) && isfinite(tek_b.normal[3 * k + 2]);
+            if (tek_b.status[k] == EYE_LANDED) fin = fin && isfinite(tek_b.land[2 * k]) && isfinite(tek_b.land[2 * k + 1]);
+            bad += !fin || tek_b.status[k] < 0 || tek_b.status[k] > 2;
+        }
+        CHECK(bad == 0, "config %d: %d non-finite results", cfg, bad);
+    }
+}
+
+/* §6.7: shifting the entry point by whole periods shifts the landing by the same (float:
+ * a ray within rounding of a lens or TIR boundary may flip, hence 98%). */
+static void test_lattice_translation(void)
+{
+    for (int hex = 0; hex < 2; hex++) {
+        struct eye_optics o = tek_optics(hex, 1.0, 1.491, 10, EYE_TIR_REFLECT);
+        const int n = 1024;
+        for (int i = 0; i < n; i++) {
+            double d[3];
+            tek_dir(60, d);
+            int k = i % (n / 2), shift = i >= n / 2;
+            if (!shift) {
+                tek_b.p[2 * k] = (float)tek_rand(0, 1);
+                tek_b.p[2 * k + 1] = (float)tek_rand(0, o.tile_h);
+                for (int c = 0; c < 3; c++) tek_b.d[3 * k + c] = (float)d[c];
+            } else {
+                tek_b.p[2 * i] = tek_b.p[2 * k] + 3.0f;
+                tek_b.p[2 * i + 1] = tek_b.p[2 * k + 1] - 2.0f * o.tile_h;
+                memcpy(tek_b.d + 3 * i, tek_b.d + 3 * k, 3 * sizeof(float));
+            }
+        }
+        if (tek_trace(&o, n)) return;
+        int same = 0;
+        for (int k = 0; k < n / 2; k++) {
+            int i = k + n / 2;
+            float ex = tek_b.land[2 * i] - 3.0f - tek_b.land[2 * k];
+            float ey = tek_b.land[2 * i + 1] + 2.0f * o.tile_h - tek_b.land[2 * k + 1];
+            same += tek_b.status[i] == tek_b.status[k] &&
+                    (tek_b.status[k] != EYE_LANDED || (fabsf(ex) < 2e-3f && fabsf(ey) < 2e-3f));
+        }
+        CHECK(same >= n / 2 * 0.98, "%s: %d of %d shifted rays identical", hex ? "hex" : "square", same, n / 2);
+    }
+}
+
+/* The table: built from the default document, packed, and consistent with its parts. */
+static void test_table_products(void)
+{
+    cJSON *doc = params_defaults(compound_eye_params), *small = NULL;
+    cJSON *partial = cJSON_Parse("{\"lut_cells\":8,\"lut_dirs\":8,\"lut_supersample\":1,\"lattice\":\"hex\"}");
+    struct fx_err err = {0};
+    CHECK(params_merge(compound_eye_params, doc, partial, &small, &err) == 0, "merge: %s", err.message);
+    struct compound_eye *ce = small ? compound_eye_new(tek_ocl, small, &err) : NULL;
+    CHECK(ce != NULL, "compound_eye_new: %s", err.message);
+    const void *data = NULL;
+    size_t len = 0;
+    if (ce) CHECK(compound_eye_table(ce, &data, &len, &err) == 0, "table: %s", err.message);
+    if (data) {
+        const uint8_t *b = data;
+        CHECK(!memcmp(b, EYE_LUT_MAGIC, 4), "magic");
+        CHECK(fxs_get_u16(b + 8) == 3, "three products");
+        const char *names[3] = {"PIGM", "LLUT", "LMAC"};
+        int w[3] = {128, 8 * 10, 8}, h[3] = {(int)lround(128 * EYE_SQRT3), 8 * 10, 8};
+        for (int i = 0; i < 3; i++) {
+            const uint8_t *e = b + EYE_LUT_HEADER_BYTES + i * EYE_LUT_ENTRY_BYTES;
+            CHECK(!memcmp(e, names[i], 4), "product %d is %s", i, names[i]);
+            CHECK((int)fxs_get_u32(e + 12) == w[i] && (int)fxs_get_u32(e + 16) == h[i], "%s size %ux%u", names[i],
+                  fxs_get_u32(e + 12), fxs_get_u32(e + 16));
+            CHECK(fxs_get_u32(e + 20) + fxs_get_u32(e + 24) <= len && fxs_get_u32(e + 20) % 8 == 0, "%s within the payload",
+                  names[i]);
+        }
+    }
+    compound_eye_free(ce);
+    cJSON_Delete(doc);
+    cJSON_Delete(partial);
+    cJSON_Delete(small);
+}
+
+/* The atlas gutter repeats the opposite edge of its own tile; the macro map is the tile mean. */
+static void test_atlas_gutters(void)
+{
+    enum { C = 4, D = 2 };
+    static float samples[D * D * C * C * 4];
+    for (int i = 0; i < D * D * C * C * 4; i++) samples[i] = (float)((i * 37) % 251) / 250.0f;
+    struct eye_lut_table t = {.cells = C, .dirs = D, .samples = samples};
+    int W = eye_lut_atlas_width(C, D);
+    CHECK(W == D * (C + 2), "atlas width %d", W);
+    uint8_t atlas[D * (C + 2) * D * (C + 2) * 4], macro[D * D * 4];
+    eye_lut_atlas(&t, atlas);
+    eye_lut_macro(&t, macro);
+    for (int tile = 0; tile < D * D; tile++) {
+        int ox = (tile % D) * (C + 2), oy = (tile / D) * (C + 2);
+        for (int k = 0; k < 4; k++) {
+            /* left gutter column = last sample column, top gutter row = last sample row */
+            CHECK(atlas[4 * ((oy + 1) * W + ox) + k] == atlas[4 * ((oy + 1) * W + ox + C) + k], "left gutter");
+            CHECK(atlas[4 * (oy * W + ox + 2) + k] == atlas[4 * ((oy + C) * W + ox + 2) + k], "top gutter");
+            CHECK(atlas[4 * ((oy + C + 1) * W + ox + 3) + k] == atlas[4 * ((oy + 1) * W + ox + 3) + k], "bottom gutter");
+            double mean = 0;
+            for (int s = 0; s < C * C; s++) mean += samples[4 * (tile * C * C + s) + k];
+            CHECK(abs(macro[4 * tile + k] - (int)lround(mean / (C * C) * 255)) <= 1, "macro = tile mean");
+        }
+    }
+}
+
+int main(void)
+{
+    struct fx_err err = {0};
+    if (ocl_open(&tek_ocl, "cpu", &err)) {
+        fprintf(stderr, "test_eye_kernel: no OpenCL CPU device: %s\n", err.message);
+        printf("test_eye_kernel: 0 passed, 1 failed\n");
+        return 1;
+    }
+    RUN(test_kernel_matches_reference);
+    RUN(test_no_nan_over_hemisphere);
+    RUN(test_lattice_translation);
+    RUN(test_table_products);
+    RUN(test_atlas_gutters);
+    ocl_close(tek_ocl);
+    return check_summary("test_eye_kernel");
+}
