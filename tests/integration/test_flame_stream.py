@@ -1,5 +1,5 @@
 """test_flame_stream.py — the flame effect end to end through a real daemon: kind 1 particle
-frames (header, codec 1 payload), growth from the burning source, live parameter changes
+frames (header, codec 2 payload), growth from the burning source, live parameter changes
 and reset reaching the frames, and `fxctl subscribe --out` writing readable binary PLY
 whose particles are physically plausible (sources hold T_init/F_init, nothing below
 ambient)."""
@@ -29,9 +29,9 @@ async def test_particle_frames(t):
     t.check(r["op"] == "subscribed", "subscribe flame")
     fs = await frames(c, 4)
     f = fs[0]
-    t.check(f["kind"] == 1 and f["codec"] == 1, "kind 1 frames with codec 1")
+    t.check(f["kind"] == 1 and f["codec"] == 2, "kind 1 frames with codec 2")
     t.check(f["channel"] == r["channel"] and f["height"] == 0, "channel and height 0")
-    t.check(all(x["payload"][:4] == b"FXP1" for x in fs), "payloads are FXP1 particle blocks")
+    t.check(all(x["payload"][:4] == b"FXP2" for x in fs), "payloads are FXP2 particle blocks")
     t.check(all(x["width"] > 0 for x in fs), "frames carry particles (count in the header)")
     t.check(fs[-1]["width"] > fs[0]["width"], "the flame grows from the source (%d -> %d particles)"
             % (fs[0]["width"], fs[-1]["width"]))
