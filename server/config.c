@@ -1,4 +1,5 @@
 /* config.c — see config.h. */
+#include <arpa/inet.h>
 #include <getopt.h>
 #include <libgen.h>
 #include <stdio.h>
@@ -25,11 +26,15 @@ void config_usage(FILE *out)
           "                     or P:D (platform index:device index, as `clinfo -l` lists them)\n"
           "  --web-root DIR     static files served at / (default: clients/web next to the binary)\n"
           "  --assets-dir DIR   OBJ models offered to compound_eye's `model` parameter (default: none)\n"
+          "  --tls-cert FILE    PEM certificate (chain): serve only TLS (https://, wss://)\n"
+          "  --tls-key FILE     PEM private key of --tls-cert\n"
           "  --log-level LEVEL  error, warn, info (default) or debug\n"
           "  --help             this text\n"
           "\n"
           "Endpoints: GET /healthz (JSON), GET /metrics (Prometheus), WebSocket /v1/ws\n"
-          "(subprotocol fxstream.v1; protocol/PROTOCOL.md).\n",
+          "(subprotocol fxstream.v1; protocol/PROTOCOL.md).\n"
+          "Access tokens: the config file's \"tokens\" and FXSTREAMD_TOKENS=role:token,...\n"
+          "(roles view, tune, admin); with none the daemon listens on loopback only.\n",
           out);
 }
 
@@ -122,10 +127,37 @@ static int config_limits(const cJSON *obj, struct limits *l, struct fx_err *err)
     return 0;
 }
 
+/* "tokens": [{"role": "tune", "token": "..."}] */
+static int config_tokens(const cJSON *arr, struct access *a, struct fx_err *err)
+{
+    if (!cJSON_IsArray(arr)) return fx_fail(err, "bad_request", "tokens", "tokens: expected an array");
+    for (const cJSON *t = arr->child; t; t = t->next) {
+        const cJSON *role = cJSON_GetObjectItemCaseSensitive(t, "role");
+        const cJSON *tok = cJSON_GetObjectItemCaseSensitive(t, "token");
+        if (!cJSON_IsObject(t) || cJSON_GetArraySize(t) != 2 || !cJSON_IsString(role) || !cJSON_IsString(tok))
+            return fx_fail(err, "bad_request", "tokens", "tokens: each entry is {\"role\": ..., \"token\": ...}");
+        if (access_add_token(a, role->valuestring, tok->valuestring, "tokens", err)) return -1;
+    }
+    return 0;
+}
+
+static int config_origins(const cJSON *arr, struct access *a, struct fx_err *err)
+{
+    if (!cJSON_IsArray(arr)) return fx_fail(err, "bad_request", "allowed_origins", "allowed_origins: expected an array");
+    for (const cJSON *o = arr->child; o; o = o->next) {
+        if (!cJSON_IsString(o))
+            return fx_fail(err, "bad_request", "allowed_origins", "allowed_origins: expected strings");
+        if (access_add_origin(a, o->valuestring, err)) return -1;
+    }
+    return 0;
+}
+
 static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *err)
 {
     const char *k = e->string;
     if (!strcmp(k, "limits")) return config_limits(e, &cfg->limits, err);
+    if (!strcmp(k, "tokens")) return config_tokens(e, &cfg->access, err);
+    if (!strcmp(k, "allowed_origins")) return config_origins(e, &cfg->access, err);
     if (!strcmp(k, "streams")) {
         if (!cJSON_IsArray(e)) return fx_fail(err, "bad_request", k, "streams: expected an array");
         cfg->streams = cJSON_Duplicate(e, 1);
@@ -142,8 +174,8 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
         cfg->port = (int)e->valuedouble;
         return 0;
     }
-    static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "assets_dir", "log_level",
-                                              NULL};
+    static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "assets_dir",
+                                              "tls_cert", "tls_key", "log_level", NULL};
     bool known = false;
     for (const char *const *n = string_keys; *n && !known; n++) known = !strcmp(*n, k);
     if (!known) return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
@@ -154,6 +186,8 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
     if (!strcmp(k, "web_root")) return config_str(cfg->web_root, sizeof cfg->web_root, v, k, err);
     if (!strcmp(k, "device")) return config_device(v, cfg->device, sizeof cfg->device, err);
     if (!strcmp(k, "assets_dir")) return eye_models_set_dir(v, err);
+    if (!strcmp(k, "tls_cert")) return config_str(cfg->tls_cert, sizeof cfg->tls_cert, v, k, err);
+    if (!strcmp(k, "tls_key")) return config_str(cfg->tls_key, sizeof cfg->tls_key, v, k, err);
     int lv = log_parse_level(v); /* the last string key: log_level */
     if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
     cfg->log_level = lv;
@@ -177,14 +211,18 @@ static int config_load_file(struct config *cfg, const char *path, struct fx_err 
 
 /* ---- flags ---- */
 
-enum { OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP, OPT_ASSETS };
+enum {
+    OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP, OPT_ASSETS, OPT_CERT,
+    OPT_KEY
+};
 
 static const struct option config_options[] = {
     {"port", required_argument, NULL, OPT_PORT},       {"listen", required_argument, NULL, OPT_LISTEN},
     {"config", required_argument, NULL, OPT_CONFIG},   {"state-dir", required_argument, NULL, OPT_STATE},
     {"device", required_argument, NULL, OPT_DEVICE},   {"web-root", required_argument, NULL, OPT_WEB},
     {"log-level", required_argument, NULL, OPT_LOG},   {"help", no_argument, NULL, OPT_HELP},
-    {"assets-dir", required_argument, NULL, OPT_ASSETS},
+    {"assets-dir", required_argument, NULL, OPT_ASSETS}, {"tls-cert", required_argument, NULL, OPT_CERT},
+    {"tls-key", required_argument, NULL, OPT_KEY},
     {NULL, 0, NULL, 0},
 };
 
@@ -200,12 +238,41 @@ static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_e
     case OPT_DEVICE: return config_device(arg, cfg->device, sizeof cfg->device, err);
     case OPT_WEB: return config_str(cfg->web_root, sizeof cfg->web_root, arg, "--web-root", err);
     case OPT_ASSETS: return eye_models_set_dir(arg, err);
+    case OPT_CERT: return config_str(cfg->tls_cert, sizeof cfg->tls_cert, arg, "--tls-cert", err);
+    case OPT_KEY: return config_str(cfg->tls_key, sizeof cfg->tls_key, arg, "--tls-key", err);
     case OPT_LOG:
         if ((cfg->log_level = log_parse_level(arg)) < 0)
             return fx_fail(err, "bad_request", "log-level", "--log-level: expected error, warn, info or debug");
         return 0;
     default: return 0;
     }
+}
+
+static bool config_is_loopback(const char *addr)
+{
+    struct in_addr a;
+    if (!strcmp(addr, "localhost")) return true;
+    return inet_pton(AF_INET, addr, &a) == 1 && (ntohl(a.s_addr) >> 24) == 127;
+}
+
+/* Rules across keys, and files that must exist. */
+static int config_check(const struct config *cfg, struct fx_err *err)
+{
+    struct stat st;
+    if (cfg->web_root[0] && (stat(cfg->web_root, &st) || !S_ISDIR(st.st_mode)))
+        return fx_fail(err, "bad_request", "web-root", "web root %s is not a directory", cfg->web_root);
+    if (!cfg->tls_cert[0] != !cfg->tls_key[0])
+        return fx_fail(err, "bad_request", "tls", "TLS needs both a certificate (--tls-cert) and its key (--tls-key)");
+    const char *files[] = {cfg->tls_cert, cfg->tls_key};
+    for (int i = 0; i < 2; i++)
+        if (files[i][0] && access(files[i], R_OK))
+            return fx_fail(err, "bad_request", "tls", "cannot read %s", files[i]);
+    if (!cfg->access.ntokens && !config_is_loopback(cfg->listen))
+        return fx_fail(err, "bad_request", "listen",
+                       "no access tokens are configured, so every client would be admin: refusing to listen on %s "
+                       "(configure tokens, README \"Security\", or listen on 127.0.0.1)",
+                       cfg->listen);
+    return 0;
 }
 
 enum config_result config_parse(int argc, char **argv, struct config *cfg, struct fx_err *err)
@@ -236,12 +303,9 @@ enum config_result config_parse(int argc, char **argv, struct config *cfg, struc
     optind = 1;
     while ((opt = getopt_long(argc, argv, ":", config_options, NULL)) != -1)
         if (config_flag(cfg, opt, optarg, err)) return CONFIG_ERROR;
-    struct stat st;
-    if (cfg->web_root[0] && (stat(cfg->web_root, &st) || !S_ISDIR(st.st_mode))) {
-        fx_fail(err, "bad_request", "web-root", "web root %s is not a directory", cfg->web_root);
-        return CONFIG_ERROR;
-    }
-    return CONFIG_OK;
+    const char *env = getenv("FXSTREAMD_TOKENS");
+    if (env && access_add_env(&cfg->access, env, err)) return CONFIG_ERROR;
+    return config_check(cfg, err) ? CONFIG_ERROR : CONFIG_OK;
 }
 
 void config_free(struct config *cfg)

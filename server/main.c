@@ -105,8 +105,11 @@ static int main_serve(struct server *srv, struct fx_err *err)
     if (!rc) rc = engine_start(&srv->engine, &srv->hub, srv->ocl, srv->cfg.pause_idle, err);
     if (!rc) {
         int port = net_port(main_net);
-        printf("fxstreamd: listening on http://%s:%d/ (WebSocket ws://%s:%d/v1/ws)\n", srv->cfg.listen, port,
-               srv->cfg.listen, port);
+        bool tls = srv->cfg.tls_cert[0];
+        printf("fxstreamd: listening on %s://%s:%d/ (WebSocket %s://%s:%d/v1/ws)\n", tls ? "https" : "http",
+               srv->cfg.listen, port, tls ? "wss" : "ws", srv->cfg.listen, port);
+        if (srv->cfg.access.ntokens) log_info("access: %d tokens; connections start without a role", srv->cfg.access.ntokens);
+        else log_info("access: no tokens configured, so every client is admin; listening on loopback only");
         fflush(stdout);
         if (!srv->cfg.web_root[0]) log_warn("no web root: / serves nothing (use --web-root)");
         main_signals();

@@ -196,7 +196,7 @@ static int net_writable(struct net *net, struct session *ss)
         return -1;
     }
     if (ss->kill) {
-        lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (uint8_t *)"replies not read", 16);
+        lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (uint8_t *)ss->kill, strlen(ss->kill));
         return -1;
     }
     struct outmsg *m;
@@ -216,15 +216,45 @@ static int net_writable(struct net *net, struct session *ss)
 
 /* ---- WebSocket: connection life ---- */
 
+/* A header's value, or NULL when absent or longer than the buffer. */
+static const char *net_header(struct lws *wsi, enum lws_token_indexes t, char *buf, int cap)
+{
+    int n = lws_hdr_total_length(wsi, t);
+    if (n <= 0 || n >= cap || lws_hdr_copy(wsi, buf, cap, t) != n) return NULL;
+    return buf;
+}
+
 static bool net_accept(struct net *net, struct lws *wsi)
 {
-    char uri[256] = "";
+    char uri[256] = "", origin[ACCESS_ORIGIN_MAX], host[ACCESS_ORIGIN_MAX];
     if (net->stopping) return false;
     if (lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI) <= 0 || strcmp(uri, NET_WS_PATH) != 0) {
         log_info("refused WebSocket on \"%.64s\" (the endpoint is %s)", uri, NET_WS_PATH);
         return false;
     }
+    bool has_origin = lws_hdr_total_length(wsi, WSI_TOKEN_ORIGIN) > 0;
+    const char *o = net_header(wsi, WSI_TOKEN_ORIGIN, origin, sizeof origin);
+    const char *h = net_header(wsi, WSI_TOKEN_HOST, host, sizeof host);
+    if (has_origin && (!o || !access_origin_ok(&net->srv->cfg.access, o, h, lws_is_ssl(wsi)))) {
+        log_warn("refused WebSocket from origin \"%.80s\" (not in allowed_origins)", o ? o : "(too long)");
+        return false;
+    }
     return true;
+}
+
+/* The role the handshake establishes: "Authorization: Bearer TOKEN", else the default.
+ * *bad is set when a token was presented and matches none. */
+static enum access_role net_role(struct net *net, struct lws *wsi, bool *bad)
+{
+    char auth[ACCESS_TOKEN_MAX + 16];
+    const struct access *a = &net->srv->cfg.access;
+    bool present = lws_hdr_total_length(wsi, WSI_TOKEN_HTTP_AUTHORIZATION) > 0;
+    const char *v = net_header(wsi, WSI_TOKEN_HTTP_AUTHORIZATION, auth, sizeof auth);
+    *bad = false;
+    if (!present) return access_default_role(a);
+    enum access_role r = v && !strncmp(v, "Bearer ", 7) ? access_lookup(a, v + 7, strlen(v + 7)) : ACCESS_NONE;
+    *bad = r == ACCESS_NONE;
+    return r;
 }
 
 /* The engine published frames or errors, or a stop was requested. */
@@ -240,6 +270,22 @@ static void net_on_wake(struct net *net)
     }
 }
 
+static int net_established(struct net *net, struct session *ss, struct lws *wsi)
+{
+    bool bad;
+    if (net->srv->nsessions >= net->srv->cfg.limits.max_connections) {
+        log_warn("connection refused: limit of %d connections", net->srv->cfg.limits.max_connections);
+        lws_close_reason(wsi, (enum lws_close_status)1013 /* try again later */, (uint8_t *)"connection limit reached", 24);
+        return -1;
+    }
+    session_open(ss, net->srv, wsi, net_role(net, wsi, &bad));
+    if (bad) {
+        log_warn("connection closed: invalid token in its Authorization header");
+        ss->kill = "invalid token in the Authorization header";
+    }
+    return 0;
+}
+
 static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
 {
     struct lws_context *ctx = lws_get_context(wsi);
@@ -249,13 +295,7 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
         return net_accept(net, wsi) ? 0 : 1;
     case LWS_CALLBACK_ESTABLISHED:
-        if (net->srv->nsessions >= net->srv->cfg.limits.max_connections) {
-            log_warn("connection refused: limit of %d connections", net->srv->cfg.limits.max_connections);
-            lws_close_reason(wsi, (enum lws_close_status)1013 /* try again later */, (uint8_t *)"connection limit reached", 24);
-            return -1;
-        }
-        session_open(ss, net->srv, wsi);
-        break;
+        return net_established(net, ss, wsi);
     case LWS_CALLBACK_RECEIVE:
         session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
         break;
@@ -324,6 +364,7 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     struct lws_context_creation_info info;
     memset(&info, 0, sizeof info);
     info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS | LWS_SERVER_OPTION_DISABLE_IPV6;
+    if (srv->cfg.tls_cert[0]) info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
     info.user = net;
     info.fd_limit_per_thread = (unsigned)srv->cfg.limits.max_connections + 64;
     net->ctx = lws_create_context(&info);
@@ -337,12 +378,16 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     info.mounts = &net->mounts[0];
     if (!srv->cfg.web_root[0]) net->mounts[1].mount_next = NULL; /* no static files */
     info.vhost_name = "default";
+    if (srv->cfg.tls_cert[0]) { /* TLS only: a plain-text connection fails its handshake */
+        info.ssl_cert_filepath = srv->cfg.tls_cert;
+        info.ssl_private_key_filepath = srv->cfg.tls_key;
+    }
     net->vh = lws_create_vhost(net->ctx, &info);
     if (!net->vh) {
         lws_context_destroy(net->ctx);
         free(net);
-        return fx_fail(err, "internal", NULL, "cannot listen on %s:%d (address in use or not local?)",
-                       srv->cfg.listen, srv->cfg.port);
+        return fx_fail(err, "internal", NULL, "cannot listen on %s:%d (address in use or not local%s?)",
+                       srv->cfg.listen, srv->cfg.port, srv->cfg.tls_cert[0] ? ", or a bad TLS certificate or key" : "");
     }
     srv->wake = net_wake;
     srv->hub.notify = net_notify;

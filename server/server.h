@@ -10,6 +10,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "access.h"
 #include "engine.h"
 #include "hub.h"
 
@@ -34,6 +35,9 @@ struct config {
     int log_level;
     bool pause_idle;
     struct limits limits;
+    struct access access;  /* tokens and allowed origins (access.h) */
+    char tls_cert[PATH_MAX]; /* PEM files; both set: the daemon speaks only TLS (https, wss) */
+    char tls_key[PATH_MAX];
     struct cJSON *streams; /* streams to create at start ([{effect, stream, params}]), NULL = built-in */
 };
 

@@ -11,6 +11,8 @@
 #include "session.h"
 #include "store.h"
 
+#define SESSION_MAX_AUTH_FAILURES 5 /* wrong tokens on one connection before it is closed */
+
 static double session_now(void)
 {
     struct timespec ts;
@@ -25,7 +27,7 @@ void session_send(struct session *ss, cJSON *msg)
     if (!text) return;
     if (ss->q_count >= ss->srv->cfg.limits.max_queued_messages) {
         /* The peer is not reading its replies: close rather than grow without bound. */
-        ss->kill = true;
+        ss->kill = "replies not read";
         free(text);
         if (ss->srv->wake) ss->srv->wake(ss);
         return;
@@ -95,11 +97,19 @@ static cJSON *session_hello(struct server *srv)
     return h;
 }
 
-void session_open(struct session *ss, struct server *srv, void *wsi)
+static void session_add_auth(cJSON *hello, const struct session *ss)
+{
+    cJSON *a = cJSON_AddObjectToObject(hello, "auth");
+    cJSON_AddBoolToObject(a, "required", ss->srv->cfg.access.ntokens > 0);
+    cJSON_AddStringToObject(a, "role", access_role_name(ss->role));
+}
+
+void session_open(struct session *ss, struct server *srv, void *wsi, enum access_role role)
 {
     memset(ss, 0, sizeof *ss);
     ss->srv = srv;
     ss->wsi = wsi;
+    ss->role = role;
     ss->tokens = srv->cfg.limits.max_control_per_sec;
     ss->last_refill = session_now();
     ss->next = srv->sessions;
@@ -107,7 +117,9 @@ void session_open(struct session *ss, struct server *srv, void *wsi)
     srv->sessions = ss;
     srv->nsessions++;
     atomic_fetch_add(&srv->counters.connections_total, 1);
-    session_send(ss, session_hello(srv));
+    cJSON *hello = session_hello(srv);
+    session_add_auth(hello, ss);
+    session_send(ss, hello);
 }
 
 static void session_drop_sub(struct session *ss, int i)
@@ -401,16 +413,54 @@ static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *i
     return 0;
 }
 
+/* {"op":"auth","token":T}: the connection takes the token's role. A wrong token changes
+ * nothing; SESSION_MAX_AUTH_FAILURES of them close the connection. */
+static int session_op_auth(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"token", NULL};
+    if (session_only(req, "auth", allowed, err)) return -1;
+    const char *token = session_str(req, "token", err);
+    if (!token) return -1;
+    enum access_role r = access_lookup(&ss->srv->cfg.access, token, strlen(token));
+    if (r == ACCESS_NONE) {
+        if (++ss->auth_failures >= SESSION_MAX_AUTH_FAILURES) ss->kill = "too many failed authentications";
+        return fx_fail(err, "unauthorized", "token", "invalid token (%d of %d attempts left)",
+                       SESSION_MAX_AUTH_FAILURES - ss->auth_failures, SESSION_MAX_AUTH_FAILURES);
+    }
+    ss->role = r;
+    cJSON *rep = session_reply("auth", id);
+    cJSON_AddStringToObject(rep, "role", access_role_name(r));
+    session_send(ss, rep);
+    return 0;
+}
+
 static const struct {
     const char *op;
     int (*fn)(struct session *, const cJSON *, const cJSON *, struct fx_err *);
+    enum access_role role; /* the least role that may use it */
 } session_ops[] = {
-    {"list", session_op_list},       {"describe", session_op_describe},
-    {"create", session_op_create},   {"destroy", session_op_destroy},
-    {"subscribe", session_op_subscribe}, {"unsubscribe", session_op_unsubscribe},
-    {"get", session_op_get},         {"set", session_op_set},
-    {"reset", session_op_reset},
+    {"auth", session_op_auth, ACCESS_NONE},
+    {"list", session_op_list, ACCESS_VIEW},
+    {"describe", session_op_describe, ACCESS_VIEW},
+    {"create", session_op_create, ACCESS_ADMIN},
+    {"destroy", session_op_destroy, ACCESS_ADMIN},
+    {"subscribe", session_op_subscribe, ACCESS_VIEW},
+    {"unsubscribe", session_op_unsubscribe, ACCESS_VIEW},
+    {"get", session_op_get, ACCESS_VIEW},
+    {"set", session_op_set, ACCESS_TUNE},
+    {"reset", session_op_reset, ACCESS_TUNE},
 };
+
+static int session_allowed(const struct session *ss, const char *op, enum access_role need, struct fx_err *err)
+{
+    if (ss->role >= need) return 0;
+    if (ss->role == ACCESS_NONE)
+        return fx_fail(err, "unauthorized", NULL,
+                       "not authenticated: send {\"op\":\"auth\",\"token\":...} first (or connect with "
+                       "\"Authorization: Bearer TOKEN\")");
+    return fx_fail(err, "forbidden", "op", "%s needs role %s; this connection has role %s", op,
+                   access_role_name(need), access_role_name(ss->role));
+}
 
 /* Nesting depth of JSON text, counted outside strings, without parsing it. */
 static int session_json_depth(const char *t, size_t len)
@@ -455,7 +505,9 @@ static int session_dispatch(struct session *ss, const cJSON *req, const cJSON **
     if (!op) return fx_fail(err, "bad_request", "op", "missing field \"op\"");
     if (!cJSON_IsString(op)) return fx_fail(err, "bad_request", "op", "field \"op\" must be a string");
     for (size_t i = 0; i < sizeof session_ops / sizeof session_ops[0]; i++)
-        if (!strcmp(session_ops[i].op, op->valuestring)) return session_ops[i].fn(ss, req, idv, err);
+        if (!strcmp(session_ops[i].op, op->valuestring))
+            return session_allowed(ss, session_ops[i].op, session_ops[i].role, err) ? -1
+                                                                                  : session_ops[i].fn(ss, req, idv, err);
     return fx_fail(err, "unknown_op", "op", "unknown op \"%.64s\"", op->valuestring);
 }
 

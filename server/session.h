@@ -12,6 +12,7 @@
 #include <stdint.h>
 #include <cjson/cJSON.h>
 
+#include "access.h"
 #include "buf.h"
 #include "frame.h"
 #include "server.h"
@@ -45,11 +46,14 @@ struct session {
     struct fx_buf rx;     /* fragments of the message being received */
     bool rx_overflow;
     double tokens, last_refill;
-    bool kill;            /* too much queued: the network layer closes it */
+    const char *kill;     /* set: the network layer closes the connection (1008) with this reason */
+    enum access_role role;
+    int auth_failures;
 };
 
-/* Links the session into srv->sessions and queues `hello`. */
-void session_open(struct session *ss, struct server *srv, void *wsi);
+/* Links the session into srv->sessions and queues `hello`; role is what the handshake
+ * established (access.h). */
+void session_open(struct session *ss, struct server *srv, void *wsi, enum access_role role);
 /* Unsubscribes everything, frees queued messages, unlinks. */
 void session_close(struct session *ss);
 /* One received piece of a WebSocket message; final marks its last piece. */

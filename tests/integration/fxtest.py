@@ -32,10 +32,11 @@ def parse_frame(data):
 class Daemon:
     """A fxstreamd on 127.0.0.1 with a kernel-chosen port."""
 
-    def __init__(self, *args, state_dir=None):
+    def __init__(self, *args, state_dir=None, env=None):
         self.state_dir = state_dir or tempfile.mkdtemp(prefix="fxs-state-")
         cmd = [DAEMON, "--port", "0", "--state-dir", self.state_dir, "--log-level", "warn", *args]
-        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                     env=dict(os.environ, **(env or {})))
         line = self.proc.stdout.readline()  # bounded by the daemon's own start-up
         if "listening on" not in line:
             self.proc.kill()

@@ -33,7 +33,7 @@ static void t_server_free(void)
 static struct session *t_open(void)
 {
     struct session *s = malloc(sizeof *s);
-    session_open(s, &t_srv, NULL);
+    session_open(s, &t_srv, NULL, ACCESS_ADMIN);
     return s;
 }
 
@@ -273,6 +273,86 @@ static void test_receive_limits(void)
     t_server_free();
 }
 
+/* Sends text and expects a reply with op `op` (and role `role` when given). */
+static void t_expect_op(struct session *s, const char *text, const char *op, const char *role)
+{
+    cJSON *r = t_req(s, text);
+    CHECK(!strcmp(t_op(r), op), "%s -> %s (%s), expected %s", text, t_op(r), t_code(r), op);
+    const cJSON *rl = r ? cJSON_GetObjectItem(r, "role") : NULL;
+    if (role) CHECK(rl && !strcmp(rl->valuestring, role), "%s: role %s", text, rl ? rl->valuestring : "(none)");
+    cJSON_Delete(r);
+    t_drain(s);
+}
+
+/* Roles by token: none < view < tune < admin, each op at its least role (access.h). */
+static void test_roles(void)
+{
+    t_server_init();
+    struct fx_err err = {0};
+    CHECK(!access_add_token(&t_srv.cfg.access, "view", "view-token-0123456789", "t", &err), "%s", err.message);
+    CHECK(!access_add_token(&t_srv.cfg.access, "tune", "tune-token-0123456789", "t", &err), "%s", err.message);
+    CHECK(!access_add_token(&t_srv.cfg.access, "admin", "admin-token-012345678", "t", &err), "%s", err.message);
+    struct session *s = malloc(sizeof *s);
+    session_open(s, &t_srv, NULL, access_default_role(&t_srv.cfg.access));
+    cJSON *h = t_next(s);
+    const cJSON *auth = cJSON_GetObjectItem(h, "auth");
+    CHECK(auth && cJSON_IsTrue(cJSON_GetObjectItem(auth, "required")), "hello says auth is required");
+    CHECK(auth && !strcmp(cJSON_GetObjectItem(auth, "role")->valuestring, "none"), "hello: role none");
+    cJSON_Delete(h);
+    t_expect_error(s, "{\"op\":\"list\"}", "unauthorized");
+    t_expect_error(s, "{\"op\":\"auth\",\"token\":\"view-token-012345678X\"}", "unauthorized");
+    t_expect_error(s, "{\"op\":\"auth\",\"token\":7}", "bad_request");
+    t_expect_error(s, "{\"op\":\"auth\",\"token\":\"view-token-0123456789\",\"x\":1}", "bad_request");
+    t_expect_op(s, "{\"op\":\"auth\",\"token\":\"view-token-0123456789\"}", "auth", "view");
+    t_expect_op(s, "{\"op\":\"list\"}", "list", NULL);
+    t_expect_error(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"a\"}", "forbidden");
+    t_expect_op(s, "{\"op\":\"auth\",\"token\":\"admin-token-012345678\"}", "auth", "admin");
+    t_expect_op(s, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"a\"}", "created", NULL);
+    t_expect_op(s, "{\"op\":\"auth\",\"token\":\"view-token-0123456789\"}", "auth", "view");
+    t_expect_op(s, "{\"op\":\"subscribe\",\"stream\":\"a\"}", "subscribed", NULL);
+    t_expect_op(s, "{\"op\":\"get\",\"stream\":\"a\"}", "params", NULL);
+    t_expect_error(s, "{\"op\":\"set\",\"stream\":\"a\",\"params\":{}}", "forbidden");
+    t_expect_error(s, "{\"op\":\"reset\",\"stream\":\"a\"}", "forbidden");
+    t_expect_op(s, "{\"op\":\"auth\",\"token\":\"tune-token-0123456789\"}", "auth", "tune");
+    t_expect_op(s, "{\"op\":\"set\",\"stream\":\"a\",\"params\":{}}", "params", NULL);
+    t_expect_op(s, "{\"op\":\"reset\",\"stream\":\"a\"}", "reset", NULL);
+    t_expect_error(s, "{\"op\":\"destroy\",\"stream\":\"a\"}", "forbidden");
+    CHECK(s->kill == NULL, "still open after one wrong token");
+    for (int i = 0; i < 4; i++) t_expect_error(s, "{\"op\":\"auth\",\"token\":\"wrong-token-0123456789\"}", "unauthorized");
+    CHECK(s->kill != NULL, "closed after 5 wrong tokens");
+    CHECK(s->role == ACCESS_TUNE, "a wrong token changes nothing (role %s)", access_role_name(s->role));
+    t_server_free();
+}
+
+/* Token and origin rules of access.c. */
+static void test_access_rules(void)
+{
+    struct access a;
+    struct fx_err err = {0};
+    memset(&a, 0, sizeof a);
+    CHECK(access_default_role(&a) == ACCESS_ADMIN, "no tokens: admin");
+    CHECK(access_add_token(&a, "root", "0123456789abcdef", "t", &err) && !strcmp(err.code, "bad_request"), "bad role");
+    CHECK(access_add_token(&a, "view", "short", "t", &err), "short token refused");
+    CHECK(access_add_token(&a, "view", "0123456789 abcdef", "t", &err), "space refused");
+    CHECK(!access_add_env(&a, "view:0123456789abcdef,admin:fedcba9876543210", &err), "env: %s", err.message);
+    CHECK(access_add_env(&a, "tune:0123456789abcdef", &err), "duplicate token refused");
+    CHECK(access_add_env(&a, "tune", &err), "env without a colon refused");
+    CHECK(access_default_role(&a) == ACCESS_NONE, "tokens: none until authenticated");
+    CHECK(access_lookup(&a, "fedcba9876543210", 16) == ACCESS_ADMIN, "admin token");
+    CHECK(access_lookup(&a, "fedcba987654321", 15) == ACCESS_NONE, "a prefix is not the token");
+    CHECK(access_lookup(&a, "fedcba98765432100", 17) == ACCESS_NONE, "an extension is not the token");
+    CHECK(access_origin_ok(&a, NULL, "h:1", false), "no Origin: not a browser, allowed");
+    CHECK(access_origin_ok(&a, "http://h:1", "h:1", false), "own origin allowed");
+    CHECK(!access_origin_ok(&a, "https://h:1", "h:1", false), "scheme must match");
+    CHECK(!access_origin_ok(&a, "http://evil.example", "h:1", false), "foreign origin refused");
+    CHECK(access_origin_ok(&a, "https://h:1", "h:1", true), "own origin over TLS");
+    CHECK(!access_add_origin(&a, "https://studio.example", &err), "origin: %s", err.message);
+    CHECK(access_add_origin(&a, "studio.example", &err), "origin without a scheme refused");
+    CHECK(access_origin_ok(&a, "https://studio.example", "h:1", false), "listed origin allowed");
+    CHECK(access_origin_ok(&a, "http://h:1", "h:1", false), "with a list, the own origin still");
+    CHECK(!access_origin_ok(&a, "http://evil.example", "h:1", false), "with a list, others refused");
+}
+
 static void test_rate_limit(void)
 {
     t_server_init();
@@ -301,5 +381,7 @@ int main(void)
     RUN(test_stream_error_event);
     RUN(test_receive_limits);
     RUN(test_rate_limit);
+    RUN(test_roles);
+    RUN(test_access_rules);
     return check_summary("test_session");
 }

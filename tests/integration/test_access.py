@@ -1,0 +1,168 @@
+"""test_access.py — roles by token, the Origin check and TLS on a real fxstreamd.
+
+Tokens come from a config file and from FXSTREAMD_TOKENS; a connection starts with no
+role and takes one with the `auth` op or an `Authorization: Bearer` header; each op needs
+its least role (PROTOCOL.md §3.11). Browsers' Origin must be the daemon's own or listed.
+With TLS configured the daemon speaks only TLS. Without tokens it refuses to listen
+beyond loopback. Run from the repository root: /usr/bin/python3 tests/integration/test_access.py"""
+import asyncio
+import json
+import os
+import ssl
+import subprocess
+import tempfile
+import urllib.request
+
+import websockets
+
+from fxtest import DAEMON, Client, Daemon, Suite
+
+VIEW, TUNE, ADMIN = "view-token-0123456789", "tune-token-0123456789", "admin-token-012345678"
+
+
+def config_file(extra=None):
+    cfg = {"tokens": [{"role": "view", "token": VIEW}, {"role": "tune", "token": TUNE}]}
+    cfg.update(extra or {})
+    fd, path = tempfile.mkstemp(suffix=".json")
+    with os.fdopen(fd, "w") as f:
+        json.dump(cfg, f)
+    return path
+
+
+def token_daemon(extra=None):
+    return Daemon("--config", config_file(extra), env={"FXSTREAMD_TOKENS": "admin:" + ADMIN})
+
+
+async def connect(d, headers=None, origin=None):
+    ws = await asyncio.wait_for(websockets.connect(
+        d.url, subprotocols=["fxstream.v1"], extra_headers=headers or {}, origin=origin), 10)
+    c = Client(ws)
+    c.hello = await c.text()
+    return c
+
+
+async def test_roles(t):
+    d = token_daemon()
+    try:
+        c = await connect(d)
+        t.check(c.hello["auth"] == {"required": True, "role": "none"}, "hello: auth required, role none")
+        r = await c.request("list")
+        t.check(r["op"] == "error" and r["code"] == "unauthorized", "list before auth: unauthorized")
+        r = await c.request("auth", token="not-a-token-0123456789")
+        t.check(r["code"] == "unauthorized" and r["param"] == "token", "a wrong token: unauthorized")
+        r = await c.request("auth", token=VIEW)
+        t.check(r == {"op": "auth", "id": r["id"], "role": "view"}, "auth with the view token: role view")
+        t.check((await c.request("list"))["op"] == "list", "view may list")
+        t.check((await c.request("subscribe", stream="energy"))["op"] == "subscribed", "view may subscribe")
+        r = await c.request("set", stream="energy", params={"fps": 10})
+        t.check(r["code"] == "forbidden" and "needs role tune" in r["message"], "view may not set: forbidden")
+        r = await c.request("auth", token=TUNE)
+        t.check(r["role"] == "tune", "auth with the tune token: role tune")
+        r = await c.request("set", stream="energy", params={"fps": 10})
+        t.check(r["op"] == "params" and r["rev"] == 2, "tune may set")
+        r = await c.request("create", effect="energy_wave", stream="x")
+        t.check(r["code"] == "forbidden", "tune may not create")
+        r = await c.request("auth", token=ADMIN)
+        t.check(r["role"] == "admin", "the FXSTREAMD_TOKENS admin token works")
+        t.check((await c.request("create", effect="energy_wave", stream="x"))["op"] == "created", "admin may create")
+        t.check((await c.request("destroy", stream="x"))["op"] == "destroyed", "admin may destroy")
+        await c.close()
+
+        c = await connect(d, headers={"Authorization": "Bearer " + TUNE})
+        t.check(c.hello["auth"]["role"] == "tune", "Authorization: Bearer gives the role at connect")
+        t.check((await c.request("reset", stream="energy"))["op"] == "reset", "tune by header may reset")
+        await c.close()
+
+        ws = await asyncio.wait_for(websockets.connect(d.url, subprotocols=["fxstream.v1"], extra_headers={
+            "Authorization": "Bearer wrong-token-0123456789"}), 10)
+        try:
+            await asyncio.wait_for(ws.recv(), 5)
+            t.check(False, "an invalid header token closes the connection before hello")
+        except websockets.ConnectionClosed as e:
+            t.check(e.code == 1008 and "invalid token" in e.reason, "invalid header token: closed 1008 (%s)" % e.reason)
+
+        c = await connect(d)
+        closed = None
+        for i in range(6):
+            try:
+                await c.request("auth", token="wrong-token-%010d" % i, timeout=5)
+            except websockets.ConnectionClosed as e:
+                closed = e
+                break
+        t.check(closed is not None and closed.code == 1008, "5 wrong tokens close the connection (1008)")
+    finally:
+        d.stop()
+
+
+async def test_origin(t):
+    d = token_daemon({"allowed_origins": ["https://studio.example"]})
+    try:
+        c = await connect(d, origin="http://127.0.0.1:%d" % d.port, headers={"Authorization": "Bearer " + VIEW})
+        t.check(c.hello["auth"]["role"] == "view", "the daemon's own page origin is accepted")
+        await c.close()
+        c = await connect(d, origin="https://studio.example")
+        t.check(c.hello["op"] == "hello", "a listed origin is accepted")
+        await c.close()
+        try:
+            await connect(d, origin="http://evil.example")
+            t.check(False, "a foreign origin is refused")
+        except (websockets.InvalidHandshake, websockets.ConnectionClosed, OSError) as e:
+            t.check(True, "a foreign origin is refused (%s)" % type(e).__name__)
+    finally:
+        d.stop()
+
+
+async def test_loopback_only(t):
+    p = subprocess.run([DAEMON, "--listen", "0.0.0.0", "--port", "0"], capture_output=True, text=True, timeout=30,
+                       env={k: v for k, v in os.environ.items() if k != "FXSTREAMD_TOKENS"})
+    t.check(p.returncode == 2 and "no access tokens" in p.stderr, "no tokens: refuses 0.0.0.0 (%s)" % p.stderr.strip())
+    p = subprocess.run([DAEMON, "--port", "0", "--tls-cert", "/nonexistent.pem"], capture_output=True, text=True,
+                       timeout=30)
+    t.check(p.returncode == 2 and "--tls-key" in p.stderr, "a certificate without a key is an error")
+    d = Daemon("--log-level", "info")
+    try:
+        c = await Client.connect(d)
+        t.check(c.hello["auth"] == {"required": False, "role": "admin"}, "no tokens: every client is admin")
+        await c.close()
+    finally:
+        d.stop()
+        t.check("every client is admin; listening on loopback only" in d.proc.stderr.read(), "says so at start")
+
+
+def self_signed(tmp):
+    cert, key = os.path.join(tmp, "cert.pem"), os.path.join(tmp, "key.pem")
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", cert,
+                    "-days", "2", "-subj", "/CN=127.0.0.1", "-addext", "subjectAltName=IP:127.0.0.1"],
+                   check=True, capture_output=True, timeout=60)
+    return cert, key
+
+
+async def test_tls(t):
+    tmp = tempfile.mkdtemp(prefix="fxs-tls-")
+    cert, key = self_signed(tmp)
+    d = Daemon("--tls-cert", cert, "--tls-key", key)
+    try:
+        ctx = ssl.create_default_context(cafile=cert)
+        ws = await asyncio.wait_for(websockets.connect("wss://127.0.0.1:%d/v1/ws" % d.port,
+                                                       subprotocols=["fxstream.v1"], ssl=ctx), 10)
+        c = Client(ws)
+        hello = await c.text()
+        t.check(hello["op"] == "hello", "wss:// handshake and hello")
+        r = await c.request("subscribe", stream="energy")
+        f = await c.frame()
+        t.check(r["op"] == "subscribed" and f["kind"] == 2, "frames over TLS")
+        await c.close()
+        with urllib.request.urlopen("https://127.0.0.1:%d/healthz" % d.port, context=ctx, timeout=10) as resp:
+            t.check(json.loads(resp.read())["status"] == "ok", "https:// /healthz")
+        try:
+            ws = await asyncio.wait_for(websockets.connect(d.url, subprotocols=["fxstream.v1"]), 10)
+            await asyncio.wait_for(ws.recv(), 5)
+            t.check(False, "plain ws:// is refused when TLS is configured")
+        except (websockets.InvalidHandshake, websockets.ConnectionClosed, OSError, asyncio.TimeoutError) as e:
+            t.check(True, "plain ws:// is refused when TLS is configured (%s)" % type(e).__name__)
+    finally:
+        d.stop()
+
+
+if __name__ == "__main__":
+    Suite("test_access").run([test_roles, test_origin, test_loopback_only, test_tls])
