@@ -483,7 +483,9 @@ __kernel void eye_bake(__global float4 *out, __global const float *geo, __global
         nl = v3_sel(N, v3_normalize(v3_mad(v3_mad(v3_mul(T, h.normal.x), h.normal.y, B), h.normal.z, N)), h.entered);
     const v3 L = v3_const(s.light.x, s.light.y, s.light.z);
     v3 H = v3_normalize(v3_sub(L, V));
-    fv diff = fmax(v3_dot(nl, L), 0.0f), spec = pow(fmax(v3_dot(nl, H), 0.0f), (fv)s.shininess);
+    /* spec = pow(max(nl.H, 0), shininess) as exp2(shininess log2(.)): PoCL's pow runs lane
+     * by lane, its exp2 and log2 on the vector (1e-30 for 0: its 2^-100s is 0 in float) */
+    fv diff = fmax(v3_dot(nl, L), 0.0f), spec = exp2(s.shininess * log2(fmax(v3_dot(nl, H), 1e-30f)));
     fv lit = s.ka + s.kd * diff, gloss = s.ks * spec; /* eq. 5.31 */
     fv cr = select((fv)base_col.x, ct.r, traced), cg = select((fv)base_col.y, ct.g, traced);
     fv cb = select((fv)base_col.z, ct.b, traced), zero = 0.0f;
