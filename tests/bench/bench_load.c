@@ -328,7 +328,11 @@ static void bl_search(const char *url, pid_t dpid, const char *stream, struct bl
         if (n < 1 || n == lo) break;
         if (bl_trial(url, dpid, stream, n, &r)) break;
         if (r.mbps > fastest->mbps) *fastest = r;
-        if (r.ok) { *best = r; lo = n; }
+        if (r.ok) {
+            if (!first->n || r.n < first->n) *first = r;
+            *best = r;
+            lo = n;
+        }
         else { *fail = r; hi = n; }
     }
 }
