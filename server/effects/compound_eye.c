@@ -84,8 +84,8 @@ const struct param_def compound_eye_params[] = {
     {.name = "lut_dirs", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
      .doc = EYE_LUT_DOC("D: direction tiles per axis (hemi-octahedral map)")},
     {.name = "lut_supersample", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
-     .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1 keeps a table "
-                        "change near 250 ms on 2 CPU cores; 2 is 4x the rays)")},
+     .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1: a table "
+                        "change takes about 90 ms on 2 CPU cores; 2 is 4x the rays)")},
     EYE_COEF("ka", "0.2", "ambient coefficient a of eq. 5.31 (client uniform in mode lut)"),
     EYE_COEF("kd", "0.8", "diffuse coefficient d of eq. 5.31"),
     EYE_COEF("ks", "0.3", "specular coefficient s of eq. 5.31"),
