@@ -93,8 +93,18 @@ function parsePayloadHeader(b) {
 
 const corrupt = () => fail('corrupt particle data');
 
-// Adaptive binary range decoder (LZMA's, 12-bit probabilities) and LSB-first raw bits.
-class Reader {
+// Decoder state between the phases: the adaptive binary range decoder (LZMA's, 12-bit
+// probabilities) and the LSB-first raw bits. The hot loops below copy it into locals and
+// decode decisions inline (no method call per decision), then store it back:
+//
+//   const pr = P[i], bound = Math.imul(range >>> 12, pr);      // < 2^32, exact
+//   if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + ((4096 - pr) >> 5); bit 0 }
+//   else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> 5); bit 1 }
+//   if ((range >>> 0) < 2^24) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+//
+// range and code are int32 bit patterns compared unsigned. Raw bits: at most 24 per read
+// (acc holds < 32 bits).
+class State {
   constructor(b, rp, rend, bend) {
     if (rend - rp < 5 || b[rp] !== 0) corrupt();
     this.b = b; this.rp = rp + 5; this.rend = rend; this.bp = rend; this.bend = bend;
@@ -102,52 +112,6 @@ class Reader {
     this.code = (b[rp + 1] << 24) | (b[rp + 2] << 16) | (b[rp + 3] << 8) | b[rp + 4];
     if (this.code === -1) corrupt();
     this.acc = 0; this.cnt = 0;
-  }
-  // range and code are kept as int32 bit patterns (small integers for the engine), compared unsigned
-  bit(p, i) { // p: Uint16Array of probabilities, i: index
-    const pr = p[i], bound = Math.imul(this.range >>> PROB_BITS, pr); // < 2^32, exact
-    let bit, range, code = this.code;
-    if ((code >>> 0) < (bound >>> 0)) {
-      range = bound;
-      p[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT);
-      bit = 0;
-    } else {
-      code = (code - bound) | 0;
-      range = (this.range - bound) | 0;
-      p[i] = pr - (pr >> ADAPT);
-      bit = 1;
-    }
-    if ((range >>> 0) < TOP) { // code < range < 2^24 here
-      if (this.rp >= this.rend) corrupt();
-      range = range << 8;
-      code = (code << 8) | this.b[this.rp++];
-    }
-    this.range = range;
-    this.code = code;
-    return bit;
-  }
-  raw(n) { // n <= 16 per call keeps acc within 32 bits
-    while (this.cnt < n) {
-      if (this.bp >= this.bend) corrupt();
-      this.acc |= this.b[this.bp++] << this.cnt;
-      this.cnt += 8;
-    }
-    const v = this.acc & ((1 << n) - 1);
-    this.acc >>>= n;
-    this.cnt -= n;
-    return v;
-  }
-  rawBits(n) {
-    return n <= 16 ? this.raw(n) : this.raw(16) + this.raw(n - 16) * 65536;
-  }
-  // unary prefix of u decisions, Exp-Golomb class in unary, top mantissa bit modelled
-  int(p, o, u) {
-    for (let i = 0; i < u; i++) if (!this.bit(p, o + i)) return i;
-    let k = 0;
-    while (this.bit(p, o + u + k)) if (++k === MAXK) corrupt();
-    let e = 1;
-    if (k) e = (2 + this.bit(p, o + u + MAXK + k)) * 2 ** (k - 1) + this.rawBits(k - 1);
-    return e + u - 1;
   }
 }
 
@@ -160,6 +124,8 @@ function cclass(c) {
   if (c > 256) return 13;
   return 9 + (31 - Math.clz32(c - 1)) - 4;
 }
+const CCLASS = new Uint8Array(257);
+for (let c = 2; c <= 256; c++) CCLASS[c] = cclass(c);
 
 // Splits from the top bit down; at each bit x, then y, then z (axes that have it).
 function schedule(abits) {
@@ -177,45 +143,95 @@ function schedule(abits) {
 }
 
 // The position tree, depth first without recursion: the upper child of a split waits on
-// an explicit stack (at most one entry per depth) while the lower one is decoded.
-function decodeTree(f, rd, q) {
+// an explicit stack (at most one entry per depth) while the lower one is decoded. Counts
+// are integers (§7.5.4) with U = 3. The coordinates (< 2^24) go to X, Y, Z in tree order.
+function decodeTree(f, st, X, Y, Z) {
   const { axis, left, depth } = schedule(f.abits);
-  const cnt = new Uint16Array(14 * 3 * IPROBS(CNT_U)).fill(PROB_INIT);
   const CP = IPROBS(CNT_U);
-  const bitOf = new Float64Array(depth), lx = new Int32Array(depth + 1), ly = new Int32Array(depth + 1), lz = new Int32Array(depth + 1);
-  for (let d = 0; d < depth; d++) bitOf[d] = 2 ** (left[d][axis[d]] - 1);
+  const P = new Uint16Array(14 * 3 * CP).fill(PROB_INIT);
+  const bitOf = new Int32Array(depth), lx = new Int32Array(depth + 1), ly = new Int32Array(depth + 1), lz = new Int32Array(depth + 1);
+  for (let d = 0; d < depth; d++) bitOf[d] = 1 << (left[d][axis[d]] - 1);
   for (let d = 0; d <= depth; d++) { lx[d] = left[d][0]; ly[d] = left[d][1]; lz[d] = left[d][2]; }
   const ax = Int32Array.from(axis);
-  const sc = new Float64Array(depth + 1), sd = new Int32Array(depth + 1);
-  const sx = new Float64Array(depth + 1), sy = new Float64Array(depth + 1), sz = new Float64Array(depth + 1);
-  let sp = 0, out = 0, c = f.n, d = 0, bx = 0, by = 0, bz = 0;
+  const sc = new Int32Array(depth + 1), sd = new Int32Array(depth + 1);
+  const sx = new Int32Array(depth + 1), sy = new Int32Array(depth + 1), sz = new Int32Array(depth + 1);
+  const b = st.b, rend = st.rend, bend = st.bend, n = f.n;
+  let range = st.range, code = st.code, rp = st.rp, acc = st.acc, cnt = st.cnt, bp = st.bp;
+  let sp = 0, out = 0, c = n, d = 0, bx = 0, by = 0, bz = 0;
   for (;;) {
     while (c >= 2 && d < depth) {
-      const a = ax[d], bit = bitOf[d];
-      const z = rd.int(cnt, (cclass(c) * 3 + a) * CP, CNT_U);
-      const lo = (c - (c % 2)) / 2 + (z % 2 ? -(z + 1) / 2 : z / 2);
+      const a = ax[d], o = ((c <= 256 ? CCLASS[c] : 13) * 3 + a) * CP;
+      // integer z: unary prefix of 3, then the Exp-Golomb class, top mantissa bit modelled
+      let z = 0, i = o, bit = 1;
+      for (;;) {
+        const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+        if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+        else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+        if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+        if (!bit) break;
+        if (++z === CNT_U) break;
+        i++;
+      }
+      if (bit) {
+        let k = 0;
+        for (;;) {
+          i = o + CNT_U + k;
+          const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+          if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+          else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+          if (!bit) break;
+          if (++k === MAXK) corrupt();
+        }
+        let e = 1;
+        if (k) {
+          i = o + CNT_U + MAXK + k;
+          const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+          if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+          else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+          const m = k - 1;
+          while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+          e = (((2 + bit) << m) | (acc & ((1 << m) - 1))) >>> 0;
+          acc >>>= m; cnt -= m;
+        }
+        z = e + CNT_U - 1;
+      }
+      const lo = (c >>> 1) + (z % 2 ? -(z + 1) / 2 : z / 2);
       if (lo < 0 || lo > c) corrupt();
+      const bit2 = bitOf[d];
       d++;
       if (lo && lo < c) {
         sc[sp] = c - lo; sd[sp] = d;
-        sx[sp] = a === 0 ? bx + bit : bx; sy[sp] = a === 1 ? by + bit : by; sz[sp] = a === 2 ? bz + bit : bz;
+        sx[sp] = a === 0 ? bx + bit2 : bx; sy[sp] = a === 1 ? by + bit2 : by; sz[sp] = a === 2 ? bz + bit2 : bz;
         sp++;
         c = lo;
       } else if (!lo) {
-        if (a === 0) bx += bit; else if (a === 1) by += bit; else bz += bit;
+        if (a === 0) bx += bit2; else if (a === 1) by += bit2; else bz += bit2;
       }
     }
-    if (c === 1) { bx += rd.rawBits(lx[d]); by += rd.rawBits(ly[d]); bz += rd.rawBits(lz[d]); }
-    if (out + c > f.n) corrupt();
-    for (let k = 0; k < c; k++, out++) { q[3 * out] = bx; q[3 * out + 1] = by; q[3 * out + 2] = bz; }
+    if (c === 1) {
+      let m = lx[d];
+      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+      bx += acc & ((1 << m) - 1); acc >>>= m; cnt -= m;
+      m = ly[d];
+      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+      by += acc & ((1 << m) - 1); acc >>>= m; cnt -= m;
+      m = lz[d];
+      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+      bz += acc & ((1 << m) - 1); acc >>>= m; cnt -= m;
+    }
+    if (out + c > n) corrupt();
+    for (let k = 0; k < c; k++, out++) { X[out] = bx; Y[out] = by; Z[out] = bz; }
     if (sp === 0) break;
     sp--;
     c = sc[sp]; d = sd[sp]; bx = sx[sp]; by = sy[sp]; bz = sz[sp];
   }
-  if (out !== f.n) corrupt();
+  if (out !== n) corrupt();
+  st.range = range; st.code = code; st.rp = rp; st.acc = acc; st.cnt = cnt; st.bp = bp;
 }
 
-function outputs(f, out) {
+function outputs(f) {
   const r = Math.max(f.hi[0] - f.lo[0], f.hi[1] - f.lo[1], f.hi[2] - f.lo[2], 0);
   return {
     sp: r / (2 ** f.posBits - 1),
@@ -224,38 +240,91 @@ function outputs(f, out) {
   };
 }
 
+// An integer of attribute mode 0 (U = 2) with the model at P[o ...]; the decoder state
+// comes in and goes out through s (range, code, rp, acc, cnt, bp) to keep it monomorphic.
+function int2(s, P, o) {
+  const b = s.b, rend = s.rend, bend = s.bend;
+  let range = s.range, code = s.code, rp = s.rp, bit = 1, z = 0, i = o;
+  for (;;) {
+    const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+    if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+    else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+    if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+    if (!bit || ++z === 2) break;
+    i++;
+  }
+  if (bit) {
+    let k = 0;
+    for (;;) {
+      i = o + 2 + k;
+      const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+      if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+      else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+      if (!bit) break;
+      if (++k === MAXK) corrupt();
+    }
+    let e = 1;
+    if (k) {
+      i = o + 2 + MAXK + k;
+      const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+      if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+      else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+      const m = k - 1;
+      let acc = s.acc, cnt = s.cnt, bp = s.bp;
+      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+      e = (((2 + bit) << m) | (acc & ((1 << m) - 1))) >>> 0;
+      s.acc = acc >>> m; s.cnt = cnt - m; s.bp = bp;
+    }
+    z = e + 1;
+  }
+  s.range = range; s.code = code; s.rp = rp;
+  return z;
+}
+
 // Attribute mode 0: flags, T and F predicted from the nearest of the 8 particles before.
-function decodeAttrs0(f, rd, q, out) {
+function decodeAttrs0(f, s, X, Y, Z, out) {
   const n = f.n, TP = IPROBS(T_U), FP = IPROBS(F_U);
   const pt = new Uint16Array(7 * 8 * 2 * TP).fill(PROB_INIT), pf = new Uint16Array(7 * 2 * 2 * FP).fill(PROB_INIT);
   const same = new Uint16Array(16).fill(PROB_INIT), tree = new Uint16Array(256).fill(PROB_INIT);
   const qt = new Int32Array(n), qf = new Int32Array(n);
-  const { sp, st, sf } = outputs(f, out);
+  const { sp, st, sf } = outputs(f);
   const tlim = 2 ** f.tempBits, flim = 2 ** f.fuelBits;
   const [lx, ly, lz, lt, lf] = f.lo;
   const { xyz, temp, fuel, flags } = out;
+  const b = s.b, rend = s.rend;
   let zt = 0, zf = 0;
   for (let j = 0; j < n; j++) {
     // nearest of the NEAR particles before j (the latest on ties); squares < 2^50 are exact
     let nb = -1, bd = Infinity;
-    const cx = q[3 * j], cy = q[3 * j + 1], cz = q[3 * j + 2];
+    const cx = X[j], cy = Y[j], cz = Z[j];
     for (let k = 1; k <= NEAR && k <= j; k++) {
-      const o = 3 * (j - k), dx = cx - q[o], dy = cy - q[o + 1], dz = cz - q[o + 2];
+      const i = j - k, dx = cx - X[i], dy = cy - Y[i], dz = cz - Z[i];
       const dd = dx * dx + dy * dy + dz * dz;
-      if (dd < bd) { bd = dd; nb = j - k; }
+      if (dd < bd) { bd = dd; nb = i; }
     }
     const nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb], nfl = nb < 0 ? 0 : flags[nb];
     const f0 = nf === 0 ? 1 : 0;
     let v = nfl;
-    if (rd.bit(same, (nfl & 7) * 2 + f0)) {
-      let m = 1;
-      while (m < 256) m = 2 * m + rd.bit(tree, m);
-      v = m - 256;
-      if (v === nfl) corrupt();
+    {
+      let range = s.range, code = s.code, rp = s.rp, m = 0, i = (nfl & 7) * 2 + f0, P = same;
+      for (;;) {
+        const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
+        let bit;
+        if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+        else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+        if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+        if (m === 0) { if (!bit) break; m = 1; P = tree; }
+        else { m = 2 * m + bit; if (m >= 256) break; }
+        i = m;
+      }
+      s.range = range; s.code = code; s.rp = rp;
+      if (m) { v = m - 256; if (v === nfl) corrupt(); }
     }
     const ot = ((rclass(zt) * 8 + (v & 7)) * 2 + f0) * TP, of = ((rclass(zf) * 2 + f0) * 2 + ((v >> 2) & 1)) * FP;
-    zt = rd.int(pt, ot, T_U);
-    zf = rd.int(pf, of, F_U);
+    zt = int2(s, pt, ot);
+    zf = int2(s, pf, of);
     const t = nt + unzigzag(zt), fu = nf + unzigzag(zf);
     if (t < 0 || t >= tlim || fu < 0 || fu >= flim) corrupt();
     qt[j] = t; qf[j] = fu; flags[j] = v;
@@ -267,56 +336,109 @@ function decodeAttrs0(f, rd, q, out) {
   }
 }
 
-// The top min(bits, 8) bits with the bit tree p[o + m], then the low bits - 8 raw.
-function tree(rd, p, o, bits) {
-  const low = bits > 8 ? bits - 8 : 0, end = 1 << (bits - low);
-  let m = 1;
-  while (m < end) m = 2 * m + rd.bit(p, o + m);
-  m -= end;
-  return low ? m * (1 << low) + rd.raw(low) : m;
-}
-
-const topOf = (v, bits, keep) => (bits > keep ? v >>> (bits - keep) : v);
-
-// Attribute mode 1: flags, T and F as values in contexts of the neighbours' values.
-function decodeAttrs1(f, rd, q, out) {
+// Attribute mode 1: flags, T and F as values in contexts of the neighbours' values. Value
+// trees (§7.5.4) are decoded inline: the top min(bits, 8) bits with P[o + m], then the
+// low bits - 8 raw.
+function decodeAttrs1(f, s, X, Y, Z, out) {
   const n = f.n, tb = f.tempBits, fb = f.fuelBits;
   const vsame = new Uint16Array(18).fill(PROB_INIT), vfl = new Uint16Array(9 * 256).fill(PROB_INIT);
   const vt = new Uint16Array(72 * 256).fill(PROB_INIT), vf0 = new Uint16Array(256).fill(PROB_INIT);
   const vf = new Uint16Array(64 * 256).fill(PROB_INIT);
   const qt = new Int32Array(n), qf = new Int32Array(n), last = new Int32Array(256).fill(-1);
   const dist = new Float64Array(SAME);
-  const { sp, st, sf } = outputs(f, out);
+  const { sp, st, sf } = outputs(f);
   const flim = 2 ** fb;
+  const t3 = tb > 3 ? tb - 3 : 0, t4 = tb > 4 ? tb - 4 : 0;
+  const tlow = tb > 8 ? tb - 8 : 0, tend = 1 << (tb - tlow), flow = fb > 8 ? fb - 8 : 0, fend = 1 << (fb - flow);
   const [lx, ly, lz, lt, lf] = f.lo;
   const { xyz, temp, fuel, flags } = out;
+  const b = s.b, rend = s.rend, bend = s.bend;
+  let range = s.range, code = s.code, rp = s.rp, acc = s.acc, cnt = s.cnt, bp = s.bp;
   for (let j = 0; j < n; j++) {
-    const cx = q[3 * j], cy = q[3 * j + 1], cz = q[3 * j + 2], kmax = j < SAME ? j : SAME;
+    const cx = X[j], cy = Y[j], cz = Z[j], kmax = j < SAME ? j : SAME, knear = j < NEAR ? j : NEAR;
     let nb = -1, bd = Infinity;
-    for (let k = 1; k <= kmax; k++) {
-      const o = 3 * (j - k), dx = cx - q[o], dy = cy - q[o + 1], dz = cz - q[o + 2];
+    for (let k = 1; k <= knear; k++) {
+      const i = j - k, dx = cx - X[i], dy = cy - Y[i], dz = cz - Z[i];
       const dd = dx * dx + dy * dy + dz * dz;
       dist[k - 1] = dd;
-      if (k <= NEAR && dd < bd) { bd = dd; nb = j - k; }
+      if (dd < bd) { bd = dd; nb = i; }
     }
     const nfl = nb < 0 ? 0 : flags[nb], nc = nb < 0 ? 8 : nfl & 7, nf0 = nb < 0 || qf[nb] === 0 ? 1 : 0;
     let v = nfl;
-    if (rd.bit(vsame, nc * 2 + nf0)) {
-      v = tree(rd, vfl, nc * 256, 8);
-      if (v === nfl) corrupt();
+    // flags: "differs from nfl", then the 8-bit value tree vfl[nc]
+    {
+      const i = nc * 2 + nf0, pr = vsame[i], bound = Math.imul(range >>> PROB_BITS, pr);
+      let bit;
+      if ((code >>> 0) < (bound >>> 0)) { range = bound; vsame[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+      else { code = (code - bound) | 0; range = (range - bound) | 0; vsame[i] = pr - (pr >> ADAPT); bit = 1; }
+      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+      if (bit) {
+        const o = nc * 256;
+        let m = 1;
+        while (m < 256) {
+          const i = o + m, pr = vfl[i], bound = Math.imul(range >>> PROB_BITS, pr);
+          if ((code >>> 0) < (bound >>> 0)) { range = bound; vfl[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); m = 2 * m; }
+          else { code = (code - bound) | 0; range = (range - bound) | 0; vfl[i] = pr - (pr >> ADAPT); m = 2 * m + 1; }
+          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+        }
+        v = m - 256;
+        if (v === nfl) corrupt();
+      }
     }
     const c = v & 7;
     flags[j] = v;
     let sb = -1;
     bd = Infinity;
-    for (let k = 1; k <= kmax; k++) if (flags[j - k] === v && dist[k - 1] < bd) { bd = dist[k - 1]; sb = j - k; }
+    for (let k = 1; k <= knear; k++) if (flags[j - k] === v && dist[k - 1] < bd) { bd = dist[k - 1]; sb = j - k; }
+    for (let k = NEAR + 1; k <= kmax; k++) {
+      const i = j - k;
+      if (flags[i] !== v) continue;
+      const dx = cx - X[i], dy = cy - Y[i], dz = cz - Z[i], dd = dx * dx + dy * dy + dz * dz;
+      if (dd < bd) { bd = dd; sb = i; }
+    }
     if (sb < 0) sb = last[v];
-    const tctx = sb < 0 ? 8 : topOf(qt[sb], tb, 3);
-    const t = tree(rd, vt, (c * 9 + tctx) * 256, tb);
+    // T: the value tree vt[c * 9 + top3 of the same-flags neighbour's T]
+    let t;
+    {
+      const o = (c * 9 + (sb < 0 ? 8 : qt[sb] >>> t3)) * 256;
+      let m = 1;
+      while (m < tend) {
+        const i = o + m, pr = vt[i], bound = Math.imul(range >>> PROB_BITS, pr);
+        if ((code >>> 0) < (bound >>> 0)) { range = bound; vt[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); m = 2 * m; }
+        else { code = (code - bound) | 0; range = (range - bound) | 0; vt[i] = pr - (pr >> ADAPT); m = 2 * m + 1; }
+        if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+      }
+      t = m - tend;
+      if (tlow) {
+        while (cnt < tlow) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+        t = (t << tlow) | (acc & ((1 << tlow) - 1)); acc >>>= tlow; cnt -= tlow;
+      }
+    }
+    // F: "qF != 0" by vf0, then qF - 1 with the value tree vf
     let fu = 0;
-    if (rd.bit(vf0, (c * 16 + topOf(t, tb, 4)) * 2 + nf0)) {
-      fu = tree(rd, vf, (c * 8 + topOf(t, tb, 3)) * 256, fb) + 1;
-      if (fu >= flim) corrupt();
+    {
+      const i = (c * 16 + (t >>> t4)) * 2 + nf0, pr = vf0[i], bound = Math.imul(range >>> PROB_BITS, pr);
+      let bit;
+      if ((code >>> 0) < (bound >>> 0)) { range = bound; vf0[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+      else { code = (code - bound) | 0; range = (range - bound) | 0; vf0[i] = pr - (pr >> ADAPT); bit = 1; }
+      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+      if (bit) {
+        const o = (c * 8 + (t >>> t3)) * 256;
+        let m = 1;
+        while (m < fend) {
+          const i = o + m, pr = vf[i], bound = Math.imul(range >>> PROB_BITS, pr);
+          if ((code >>> 0) < (bound >>> 0)) { range = bound; vf[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); m = 2 * m; }
+          else { code = (code - bound) | 0; range = (range - bound) | 0; vf[i] = pr - (pr >> ADAPT); m = 2 * m + 1; }
+          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
+        }
+        fu = m - fend;
+        if (flow) {
+          while (cnt < flow) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
+          fu = (fu << flow) | (acc & ((1 << flow) - 1)); acc >>>= flow; cnt -= flow;
+        }
+        fu += 1;
+        if (fu >= flim) corrupt();
+      }
     }
     qt[j] = t; qf[j] = fu; last[v] = j;
     xyz[3 * j] = lx + cx * sp;
@@ -325,6 +447,7 @@ function decodeAttrs1(f, rd, q, out) {
     temp[j] = lt + t * st;
     fuel[j] = lf + fu * sf;
   }
+  s.range = range; s.code = code; s.rp = rp; s.acc = acc; s.cnt = cnt; s.bp = bp;
 }
 
 /**
@@ -342,10 +465,10 @@ export function decode(buf) {
     return out;
   }
   const rend = HEADER_BYTES + f.rcBytes;
-  const rd = new Reader(b, HEADER_BYTES, rend, rend + f.bitsBytes);
-  const q = new Float64Array(3 * f.n);
-  decodeTree(f, rd, q);
-  (f.mode ? decodeAttrs1 : decodeAttrs0)(f, rd, q, out);
+  const rd = new State(b, HEADER_BYTES, rend, rend + f.bitsBytes);
+  const X = new Float64Array(f.n), Y = new Float64Array(f.n), Z = new Float64Array(f.n);
+  decodeTree(f, rd, X, Y, Z);
+  (f.mode ? decodeAttrs1 : decodeAttrs0)(f, rd, X, Y, Z, out);
   if (rd.rp !== rd.rend) fail('corrupt particle data (range coder section not consumed exactly)');
   if (rd.bp !== rd.bend || rd.acc !== 0) fail('corrupt particle data (raw bits not consumed exactly)');
   return out;
