@@ -33,13 +33,29 @@ FUZZ_CC     := clang
 FUZZ_FLAGS  := -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FUZZ_SECONDS ?= 300
 KERNELS     := $(wildcard kernels/*.cl)
+# The browser client: npm packages from the committed lock file (npm ci), bundled by esbuild
+# into clients/web/dist/ (git-ignored), which fxstreamd serves with the rest of clients/web.
+WEB_SRC     := $(wildcard clients/web/src/*.js) clients/web/fxs_particles.js clients/web/build.mjs
+WEB_OUT     := clients/web/dist/app.js
+NPM_STAMP   := node_modules/.package-lock.json
 
-.PHONY: all deps run test bench clean unit fuzz fuzz-libs
+.PHONY: all deps run test bench clean unit web fuzz fuzz-libs
 .SECONDARY: # keep object files of tests and benches between runs
-all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload
+all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(WEB_OUT)
 
 deps:
 	@deploy/install-deps.sh
+	@$(MAKE) --no-print-directory $(NPM_STAMP)
+
+web: $(WEB_OUT)
+
+# npm ci installs exactly the lock file (no network at run time: the bundle is static).
+$(NPM_STAMP): package.json package-lock.json
+	npm ci --no-audit --no-fund --loglevel=error
+	@touch $@
+
+$(WEB_OUT): $(WEB_SRC) $(NPM_STAMP)
+	node clients/web/build.mjs
 
 run: deps all
 	$(BUILD)/fxstreamd $(RUN_ARGS)
@@ -57,7 +73,7 @@ bench: deps all $(BENCH_BIN)
 unit: $(UNIT_BIN)
 
 clean:
-	rm -rf $(BUILD)
+	rm -rf $(BUILD) clients/web/dist
 
 $(BUILD)/gen/kernels.c: $(KERNELS) tools/embed_kernels.sh
 	@mkdir -p $(@D)

@@ -1,0 +1,328 @@
+// main.js — the fxstream browser client: connects to the daemon it was served from (or
+// ?url=ws://…), lists the streams, subscribes to each, and renders every kind in one WebGL2
+// canvas split into views: flame particles, the energy-wave billboard, a toon scene lit by
+// the wave's light rig, and the compound eye. A lil-gui panel per stream is generated from
+// `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
+// Query options: url=, rig=0 (do not switch on energy_wave's light rig), rl=N (flame
+// repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
+// drawfps=N (draw at most N frames a second, e.g. under software WebGL).
+import * as THREE from 'three';
+import GUI from 'lil-gui';
+import { parseHeader } from '../fxs_particles.js';
+import { Conn } from './conn.js';
+import { StreamPanel } from './panel.js';
+import { StreamStats } from './stats.js';
+import { FlameView } from './flame.js';
+import { WaveView } from './wave.js';
+import { SceneView } from './scene.js';
+import { EyeView } from './eye.js';
+
+const q = new URLSearchParams(location.search);
+const wsUrl = q.get('url') || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/v1/ws`;
+const httpBase = wsUrl.replace(/^ws/, 'http').replace(/\/v1\/ws.*$/, '');
+const autoRig = q.get('rig') !== '0';
+const $ = (id) => document.getElementById(id);
+
+const canvas = $('view');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: q.get('aa') !== '0', stencil: true, preserveDrawingBuffer: true, powerPreference: 'high-performance' });
+renderer.autoClear = false;
+renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
+
+const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
+const viewSettings = { flameRL: Number(q.get('rl')) || 15, flameThreshold: 0.35, flameGain: 0.22, flameExposure: 1.0, waveGlow: 0.6, waveBlack: 0.55, waveGain: 1.6 };
+const vf = gui.addFolder('view (this page only)');
+vf.add(viewSettings, 'flameRL', 1, 32, 1).name('flame repeat passes RL');
+vf.add(viewSettings, 'flameThreshold', 0.05, 0.95, 0.01).name('flame alpha test');
+vf.add(viewSettings, 'flameGain', 0.1, 5, 0.01).name('flame intensity');
+vf.add(viewSettings, 'flameExposure', 0.1, 5, 0.01).name('flame exposure');
+vf.add(viewSettings, 'waveGlow', 0, 3, 0.01).name('wave glow');
+vf.add(viewSettings, 'waveBlack', 0, 2, 0.01).name('wave black level (B)');
+vf.add(viewSettings, 'waveGain', 0.1, 5, 0.01).name('wave level gain');
+vf.close();
+
+const streams = new Map(); // name -> {name, effect, channel, params, rev, views, panel, stats, error}
+const byChannel = new Map();
+const schemas = new Map(); // effect -> describe reply
+let views = []; // in display order
+const labels = new Map(); // view -> div
+
+function setState(s, detail) {
+  const el = $('conn');
+  el.textContent = detail ? `${s} (${detail})` : s;
+  el.className = `state-${s}`;
+  document.body.dataset.conn = s;
+}
+
+const conn = new Conn(wsUrl, { onOpen: setup, onEvent, onFrame, onState: setState });
+
+async function describe(effect) {
+  if (!schemas.has(effect)) schemas.set(effect, await conn.request('describe', { effect }));
+  return schemas.get(effect);
+}
+
+function makeViews(st) {
+  switch (st.effect) {
+    case 'flame': return [new FlameView(st.name)];
+    case 'energy_wave': {
+      const w = new WaveView(st.name);
+      return [w, new SceneView(st.name, w.wt)];
+    }
+    case 'compound_eye': return [new EyeView(st.name)];
+    default: return [];
+  }
+}
+
+function rebuildViewList() {
+  const order = { flame: 0, wave: 1, scene: 2, eye: 3 };
+  views = [...streams.values()].flatMap((s) => s.views).sort((a, b) => order[a.kind] - order[b.kind]);
+  for (const [v, el] of labels) if (!views.includes(v)) { el.remove(); labels.delete(v); }
+  for (const v of views) if (!labels.has(v)) {
+    const el = document.createElement('div');
+    el.className = 'label';
+    el.dataset.view = `${v.stream}:${v.kind}`;
+    $('labels').appendChild(el);
+    labels.set(v, el);
+  }
+}
+
+function applyParams(st, params, rev) {
+  st.params = params;
+  st.rev = rev;
+  for (const v of st.views) v.setParams(params);
+}
+
+async function attach(info) {
+  let st = streams.get(info.stream);
+  if (st && st.effect !== info.effect) { detach(st); st = null; }
+  const schema = await describe(info.effect);
+  const got = await conn.request('get', { stream: info.stream });
+  if (!st) {
+    st = { name: info.stream, effect: info.effect, channel: 0, stats: new StreamStats(), views: [], panel: null, error: '', pending: new Map() };
+    st.views = makeViews(st);
+    streams.set(st.name, st);
+    rebuildViewList();
+  }
+  applyParams(st, got.params, got.rev);
+  if (info.effect === 'energy_wave' && autoRig && !got.params.light_rig) {
+    const r = await conn.request('set', { stream: st.name, params: { light_rig: true } }).catch(() => null);
+    if (r) applyParams(st, r.params, r.rev);
+  }
+  const send = (partial) => conn.request('set', { stream: st.name, params: partial }).then((m) => { applyParams(st, m.params, m.rev); return m; });
+  if (st.panel) st.panel.update(st.params, st.rev);
+  else {
+    st.panel = new StreamPanel(gui, st.name, st.effect, schema, st.params, st.rev, send);
+    st.panel.folder.close();
+  }
+  st.maxFps = START_FPS * (info.effect === 'energy_wave' ? 2 : 1);
+  st.minLat = undefined;
+  const sub = await conn.request('subscribe', { stream: st.name, max_fps: st.maxFps });
+  st.channel = sub.channel;
+  byChannel.set(sub.channel, st);
+}
+
+function detach(st) {
+  for (const v of st.views) v.dispose?.();
+  st.panel?.destroy();
+  streams.delete(st.name);
+  byChannel.delete(st.channel);
+  rebuildViewList();
+}
+
+async function setup(hello) {
+  $('device').textContent = hello.device;
+  $('server').textContent = hello.server;
+  byChannel.clear();
+  try {
+    const list = await conn.request('list');
+    const names = new Set(list.streams.map((s) => s.stream));
+    for (const st of [...streams.values()]) if (!names.has(st.name)) detach(st);
+    const max = hello.limits?.max_subscriptions ?? 16;
+    for (const s of list.streams.slice(0, max)) await attach(s);
+    document.body.dataset.subscribed = [...streams.values()].filter((s) => s.channel).map((s) => s.name).join(',');
+  } catch (e) {
+    console.warn('setup failed', e);
+  }
+}
+
+function onEvent(m) {
+  if (m.op === 'params') {
+    const st = streams.get(m.stream);
+    if (!st) return;
+    applyParams(st, m.params, m.rev);
+    st.panel?.update(m.params, m.rev);
+  } else if (m.op === 'unsubscribed' && m.reason) {
+    const st = streams.get(m.stream);
+    if (st) detach(st);
+  } else if (m.op === 'error' && m.stream) {
+    const st = streams.get(m.stream);
+    if (st) st.error = m.message;
+  }
+}
+
+// Latest frame wins on this side too (PROTOCOL.md §8.1): a message only replaces the
+// stream's pending frame of its kind; the draw loop decodes the newest one. A page that
+// draws slower than frames arrive skips (counted) instead of building a backlog.
+function onFrame(buf) {
+  let h;
+  try { h = parseHeader(buf); } catch { return; }
+  const st = byChannel.get(h.channel);
+  if (!st) return;
+  st.stats.frame(h, buf.byteLength);
+  if (st.pending.has(h.kind)) st.stats.skipped++;
+  st.pending.set(h.kind, { h, buf });
+}
+
+function deliver(st) {
+  // textures before light rigs, so a rig frame finds its texture
+  for (const kind of [...st.pending.keys()].sort()) {
+    const { h, buf } = st.pending.get(kind);
+    st.pending.delete(kind);
+    for (const v of st.views) {
+      try { v.onFrame(h, buf); } catch (e) { st.error = `frame ${h.seq}: ${e.message}`; }
+    }
+  }
+}
+
+// ---- layout and drawing ------------------------------------------------------------------
+
+function layout() {
+  const w = canvas.clientWidth, h = canvas.clientHeight, n = Math.max(1, views.length);
+  let cols = Math.ceil(Math.sqrt(n)), rows = Math.ceil(n / cols);
+  const g = q.get('grid');
+  if (g) [cols, rows] = g.split('x').map(Number);
+  return views.map((v, i) => {
+    const c = i % cols, r = Math.floor(i / cols);
+    const rw = w / cols, rh = h / rows;
+    return { view: v, css: { left: c * rw, top: r * rh, w: rw, h: rh }, rect: { x: Math.round(c * rw), y: Math.round(h - (r + 1) * rh), w: Math.round(rw), h: Math.round(rh) } };
+  });
+}
+
+// Pacing. A browser reads its WebSocket eagerly into its own buffers, so the server's
+// "latest frame wins" (TCP back-pressure) never engages when the page itself is the slow
+// part: frames would queue in the browser and latency grow without bound. Each
+// subscription therefore carries max_fps (re-subscribing only replaces it, PROTOCOL.md
+// §3.5), adjusted every 2 s: halved while frames arrive later than the stream's best
+// latency + 250 ms, doubled (within 50 ms) or raised by 30% (within 100 ms) up to the
+// stream's fps while they are on time; subscriptions start at 2 frames/s per kind. The
+// comparison is with the best latency seen, so unsynchronised clocks do not matter.
+// A page drawing under 20 frames/s runs about one message task per frame, so there the
+// caps also share the draw rate among the subscribed kinds.
+const START_FPS = 2;
+let rafCount = 0;
+setInterval(() => {
+  const drawFps = rafCount / 2;
+  rafCount = 0;
+  if (conn.state !== 'connected') return;
+  const kindStreams = [...streams.values()].reduce((a, s) => a + (s.effect === 'energy_wave' && s.params?.light_rig ? 2 : 1), 0);
+  for (const st of streams.values()) {
+    if (!st.channel || !st.maxFps) continue;
+    const lat = st.stats.rate.latency, kinds = st.effect === 'energy_wave' && st.params?.light_rig ? 2 : 1;
+    if (!Number.isNaN(lat)) st.minLat = Math.min(st.minLat ?? Infinity, lat);
+    const excess = Number.isNaN(lat) ? 0 : lat - st.minLat, top = kinds * (st.params?.fps ?? 30);
+    let cap = st.maxFps;
+    if (excess > 250) cap = Math.max(0.5 * kinds, cap * 0.5);
+    else if (excess < 100) cap = Math.min(top, cap * (excess < 50 ? 2 : 1.3));
+    if (drawFps < 20) cap = Math.min(cap, Math.max(0.5, (drawFps * kinds) / Math.max(1, kindStreams)));
+    if (Math.abs(cap - st.maxFps) < 0.1 * st.maxFps) continue;
+    st.maxFps = Math.round(cap * 10) / 10;
+    conn.request('subscribe', { stream: st.name, max_fps: st.maxFps }).catch(() => {});
+  }
+}, 2000);
+
+let lastLayout = [];
+const drawCap = Number(q.get('drawfps')) || 0; // frames drawn per second at most (0: every display frame)
+let lastDraw = -1e9;
+function frame(t) {
+  if (drawCap && t - lastDraw < 1000 / drawCap - 2) { requestAnimationFrame(frame); return; }
+  lastDraw = t;
+  rafCount++;
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== Math.round(w * renderer.getPixelRatio()) || canvas.height !== Math.round(h * renderer.getPixelRatio())) renderer.setSize(w, h, false);
+  renderer.setScissorTest(false);
+  renderer.setClearColor(0x05060a, 1);
+  renderer.clear(true, true, true);
+  for (const st of streams.values()) deliver(st);
+  lastLayout = layout();
+  const drawnStreams = new Set();
+  for (const { view, rect, css } of lastLayout) {
+    const v = view;
+    if (v.settings) Object.assign(v.settings, { rl: viewSettings.flameRL, threshold: viewSettings.flameThreshold, gain: viewSettings.flameGain, exposure: viewSettings.flameExposure });
+    for (const m of [v.kind === 'wave' ? v.material : null, v.billboardMat]) {
+      if (!m) continue;
+      Object.assign(m.uniforms.glowGain, { value: viewSettings.waveGlow });
+      m.uniforms.blackLevel.value = viewSettings.waveBlack;
+      m.uniforms.levelGain.value = viewSettings.waveGain;
+    }
+    renderer.setViewport(rect.x, rect.y, rect.w, rect.h);
+    renderer.setScissor(rect.x, rect.y, rect.w, rect.h);
+    renderer.setScissorTest(true);
+    let drew = false;
+    try { drew = v.render(renderer, rect, t / 1000); } catch (e) { const st = streams.get(v.stream); if (st) st.error = `render: ${e.message}`; }
+    if (drew) drawnStreams.add(v.stream);
+    const el = labels.get(v);
+    if (el) Object.assign(el.style, { left: `${css.left}px`, top: `${css.top}px`, width: `${css.w}px` });
+  }
+  for (const name of drawnStreams) streams.get(name)?.stats.drawn();
+  requestAnimationFrame(frame);
+}
+requestAnimationFrame(frame);
+
+const VIEW_TITLES = { flame: 'flame particles', wave: 'energy wave', scene: 'light rig: toon scene', eye: 'compound eye' };
+setInterval(() => {
+  for (const st of streams.values()) st.stats.tick(1);
+  for (const [v, el] of labels) {
+    const st = streams.get(v.stream);
+    if (!st) continue;
+    el.textContent = `${v.stream} · ${VIEW_TITLES[v.kind]} · rev ${st.rev}\n${st.stats.text()}${st.error ? '\n⚠ ' + st.error : ''}`;
+  }
+  const tot = [...streams.values()].reduce((a, s) => ({ fps: a.fps + s.stats.rate.fps, kB: a.kB + s.stats.rate.kBps }), { fps: 0, kB: 0 });
+  $('totals').textContent = `${streams.size} streams · ${tot.fps.toFixed(1)} frames/s · ${tot.kB.toFixed(1)} kB/s`;
+}, 1000);
+
+// ---- operator status (health and streams, as the status page) ---------------------------
+
+async function health() {
+  try {
+    const hz = await (await fetch(`${httpBase}/healthz`)).json();
+    $('health').textContent = `${hz.status} · v${hz.version} · up ${Math.round(hz.uptime_s)} s · ${hz.connections} connections · ${hz.platform}`;
+    const rows = hz.streams.map((s) => `<tr><td>${s.stream}</td><td>${s.effect}</td><td>${s.rev}</td><td>${s.subscribers}</td><td class="err">${s.last_error ? String(s.last_error).replace(/</g, '&lt;') : ''}</td></tr>`);
+    $('health-streams').innerHTML = rows.join('');
+  } catch {
+    $('health').textContent = 'unreachable';
+  }
+}
+setInterval(health, 2000);
+health();
+
+// ---- hooks for the browser tests (tests/integration/test_web_browser.*) -------------------
+
+function sample(kind, stream) {
+  const entry = lastLayout.find((e) => e.view.kind === kind && (!stream || e.view.stream === stream));
+  if (!entry) return null;
+  const pr = renderer.getPixelRatio(), r = entry.rect;
+  const x = Math.round(r.x * pr), y = Math.round(r.y * pr), w = Math.round(r.w * pr), h = Math.round(r.h * pr);
+  const gl = renderer.getContext(), px = new Uint8Array(w * h * 4);
+  gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  gl.readPixels(x, y, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  let sr = 0, sg = 0, sb = 0, lit = 0, bright = 0, warm = 0, max = 0;
+  const n = w * h;
+  for (let i = 0; i < n; i++) {
+    const R = px[4 * i], G = px[4 * i + 1], B = px[4 * i + 2];
+    sr += R; sg += G; sb += B;
+    const l = 0.2126 * R + 0.7152 * G + 0.0722 * B;
+    if (l > 24) lit++;
+    if (l > 128) bright++;
+    if (R > 96 && R >= G && G >= B && R > B + 32) warm++;
+    if (l > max) max = l;
+  }
+  let hash = 0;
+  for (let i = 0; i < px.length; i += 97) hash = (hash * 31 + px[i]) >>> 0;
+  return { w, h, mean: [sr / n, sg / n, sb / n], lit: lit / n, bright: bright / n, warm: warm / n, max, hash, css: entry.css };
+}
+
+window.fxs = {
+  conn, streams, get views() { return views.map((v) => `${v.stream}:${v.kind}`); }, sample,
+  stats: () => Object.fromEntries([...streams.values()].map((s) => [s.name, { rev: s.rev, channel: s.channel, maxFps: s.maxFps, latency: s.stats.rate.latency, frames: s.stats.totalFrames, drawn: s.stats.totalDrawn, kinds: [...s.stats.kindsSeen], skipped: s.stats.skipped, error: s.error }])),
+  flame: () => { const v = views.find((x) => x.kind === 'flame'); return v ? { center: v.center, extent: v.extent, count: v.count, cam: v.camera.position.toArray() } : null; },
+  scene: () => { const v = views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
+};

@@ -1,0 +1,29 @@
+#!/bin/sh
+# test_web_decoders.sh — the browser client's decoders under node against what the C side
+# produced: light-rig frames written by the real encoder (build/tests/test_light_rig --dump,
+# with the values they must decode to), and kind 3 payloads captured by fxctl from a real
+# daemon on a random loopback port. Runs web_decoders_check.mjs; its last line is
+# "test_web_decoders: N passed, M failed". Run from the repo root.
+cd "$(dirname "$0")/../.." || exit 1
+summary_fail() { echo "test_web_decoders: $1"; echo "test_web_decoders: 0 passed, 1 failed"; exit 1; }
+command -v node >/dev/null 2>&1 || summary_fail "node not found"
+[ -x build/tests/test_light_rig ] || summary_fail "build/tests/test_light_rig missing (make unit)"
+tmp=$(mktemp -d)
+pid=""
+cleanup() { [ -n "$pid" ] && kill "$pid" 2>/dev/null; rm -rf "$tmp"; }
+trap cleanup EXIT
+mkdir -p "$tmp/vec" "$tmp/real"
+build/tests/test_light_rig --dump "$tmp/vec" >/dev/null || summary_fail "dump failed"
+
+# A real daemon: energy with the light rig on, 6 frames (3 of each kind) captured by fxctl.
+build/fxstreamd --port 0 --state-dir "$tmp/state" --log-level warn >"$tmp/d.out" 2>"$tmp/d.err" &
+pid=$!
+i=0
+while [ $i -lt 100 ] && ! grep -q "listening on" "$tmp/d.out"; do sleep 0.1; i=$((i + 1)); done
+port=$(sed -n 's/.*127\.0\.0\.1:\([0-9]*\)\/.*/\1/p' "$tmp/d.out" | head -n 1)
+[ -n "$port" ] || summary_fail "daemon did not start"
+url="ws://127.0.0.1:$port"
+timeout 20 build/fxctl --url "$url" set energy light_rig=true 'ramp=[{"m_min":-1,"color":[0.1,0.2,0.3]},{"m_min":0.25,"color":[1,0.5,0]}]' >/dev/null \
+    || summary_fail "set light_rig failed"
+timeout 30 build/fxctl --url "$url" subscribe energy --frames 6 --out "$tmp/real" >"$tmp/real/lines.txt" 2>"$tmp/real/err.txt"
+node tests/integration/web_decoders_check.mjs "$tmp/vec" "$tmp/real"

@@ -1,0 +1,189 @@
+// web_browser_check.mjs — the browser client in Debian's chromium (headless, software
+// WebGL through SwiftShader), driven by playwright-core, against a real fxstreamd on a
+// random loopback port that this script starts (and restarts, for the reconnect check).
+// Checks: the page loads and subscribes to every default stream; frames arrive and are
+// drawn (canvas read back: the flame region bright and warm, the wave billboard lit, the
+// toon scene lit with its shadows); a panel slider changes the server's rev and the
+// picture; a change made in a second page appears in the first; a server error shows next
+// to its field; the page reconnects after a daemon restart. Screenshots go to
+// build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
+import { chromium } from 'playwright-core';
+import { spawn } from 'node:child_process';
+import { mkdtempSync, mkdirSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join, resolve, dirname } from 'node:path';
+import { fileURLToPath } from 'node:url';
+
+const ROOT = resolve(dirname(fileURLToPath(import.meta.url)), '..', '..');
+const ART = join(ROOT, 'build', 'artifacts');
+const LOOK_ONLY = process.argv.includes('--look'); // screenshots only (development)
+mkdirSync(ART, { recursive: true });
+let passed = 0, failed = 0;
+function check(ok, name, detail = '') {
+  if (ok) { passed++; console.log('ok   ' + name); } else { failed++; console.log('FAIL ' + name + (detail ? ': ' + detail : '')); }
+}
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+async function until(fn, ms, step = 200) { // bounded polling; returns the last value
+  const end = Date.now() + ms;
+  let v;
+  while (Date.now() < end) { try { v = await fn(); if (v) return v; } catch { /* retry */ } await sleep(step); }
+  return v;
+}
+const hardStop = setTimeout(() => { console.log('FAIL overall time limit (100 s)'); finish(1); }, 100000);
+
+const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
+const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
+let daemon = null, ctx = null;
+
+function startDaemon(port) {
+  return new Promise((res, rej) => {
+    const p = spawn(join(ROOT, 'build', 'fxstreamd'), ['--port', String(port), '--state-dir', stateDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'] });
+    let out = '';
+    const t = setTimeout(() => rej(new Error('daemon did not start: ' + out)), 15000);
+    p.stdout.on('data', (d) => {
+      out += d;
+      const m = out.match(/127\.0\.0\.1:(\d+)\//);
+      if (m) { clearTimeout(t); res({ proc: p, port: Number(m[1]) }); }
+    });
+    p.on('exit', () => rej(new Error('daemon exited: ' + out)));
+  });
+}
+function stopDaemon(d) {
+  return new Promise((res) => {
+    if (!d || d.proc.exitCode !== null) { res(); return; }
+    const t = setTimeout(() => { d.proc.kill('SIGKILL'); res(); }, 5000);
+    d.proc.once('exit', () => { clearTimeout(t); res(); });
+    d.proc.kill('SIGTERM');
+  });
+}
+async function finish(code) {
+  clearTimeout(hardStop);
+  try { await ctx?.close(); } catch { /* ignore */ }
+  await stopDaemon(daemon);
+  rmSync(profile, { recursive: true, force: true });
+  rmSync(stateDir, { recursive: true, force: true });
+  console.log(`test_web_browser: ${passed} passed, ${failed} failed`);
+  process.exit(code ?? (failed ? 1 : 0));
+}
+
+async function healthRev(port, stream) {
+  const h = await (await fetch(`http://127.0.0.1:${port}/healthz`)).json();
+  return h.streams.find((s) => s.stream === stream)?.rev;
+}
+
+// A lil-gui controller of stream S for parameter path P (data-param set by panel.js).
+const ctl = (page, stream, path) => page.locator(`[data-stream="${stream}"] [data-param="${path}"]`).first();
+async function openFolder(page, stream) {
+  const f = page.locator(`.lil-gui[data-stream="${stream}"]`).first();
+  if (await f.evaluate((el) => el.classList.contains('closed'))) await f.locator(':scope > .title').click();
+}
+async function setNumber(page, stream, path, value) {
+  const input = ctl(page, stream, path).locator('input').first();
+  await input.fill(String(value));
+  await input.press('Enter');
+}
+
+try {
+  daemon = await startDaemon(0);
+  const port = daemon.port;
+  ctx = await chromium.launchPersistentContext(profile, {
+    executablePath: '/usr/bin/chromium', headless: true, viewport: { width: 960, height: 560 },
+    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
+      '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+  });
+  const page = ctx.pages()[0] || await ctx.newPage();
+  const logs = [];
+  page.on('console', (m) => { if ((m.type() === 'error' || m.type() === 'warning') && !m.text().includes('GL Driver Message')) logs.push(m.text()); });
+  page.on('pageerror', (e) => logs.push('pageerror: ' + e.message));
+  const url = `http://127.0.0.1:${port}/?rl=2&aa=0&drawfps=3`;
+  const resp = await page.goto(url, { timeout: 20000 });
+  check(resp && resp.ok(), 'page served at / by fxstreamd');
+  const connected = await until(() => page.evaluate(() => document.body.dataset.conn === 'connected'), 20000);
+  check(connected, 'connects (state shown: connected)');
+  const subscribed = await until(() => page.evaluate(() => document.body.dataset.subscribed), 30000);
+  check(subscribed === 'energy,flame', 'subscribes to every default stream', String(subscribed));
+  const drawn = await until(async () => {
+    const s = await page.evaluate(() => window.fxs.stats());
+    return s.energy?.drawn > 2 && s.flame?.drawn > 1 && s.energy.kinds.includes(3) ? s : null;
+  }, 40000, 500);
+  check(!!drawn, 'frames arrive (kinds 1, 2, 3) and are drawn', JSON.stringify(drawn || await page.evaluate(() => window.fxs.stats())));
+  await sleep(1500);
+  const flame = await page.evaluate(() => window.fxs.sample('flame'));
+  const wave = await page.evaluate(() => window.fxs.sample('wave'));
+  const scene = await page.evaluate(() => window.fxs.sample('scene'));
+  await page.screenshot({ path: join(ART, 'web-viewer.png') });
+  for (const [k, s] of [['flame', flame], ['wave', wave], ['scene', scene]])
+    if (s) await page.screenshot({ path: join(ART, `web-${k}.png`), clip: { x: s.css.left, y: s.css.top, width: s.css.w, height: s.css.h } });
+  console.log('samples', JSON.stringify({ flame, wave, scene }), JSON.stringify(await page.evaluate(() => window.fxs.flame())), JSON.stringify(await page.evaluate(() => window.fxs.stats())));
+  if (LOOK_ONLY) { console.log(JSON.stringify(await page.evaluate(() => window.fxsRecent))); console.log('clock', Date.now(), await page.evaluate(() => [Date.now(), performance.timeOrigin + performance.now()])); console.log(logs.join('\n')); await finish(0); }
+  check(flame && flame.warm > 0.003 && flame.max > 180 && flame.mean[0] > 1.3 * flame.mean[2], 'flame region is bright and warm', JSON.stringify(flame));
+  check(wave && wave.lit > 0.01 && wave.mean[2] > wave.mean[0], 'wave billboard is not empty (and blue, C_e)', JSON.stringify(wave));
+  const rig = await page.evaluate(() => window.fxs.scene());
+  check(rig && rig.rig && rig.nSeg === 16, 'toon scene has the light rig (16 segments, constants)', JSON.stringify(rig));
+  check(rig && rig.shadows.length === 4 && rig.shadows.every((s) => s.k[1] < 0), 'every model casts a shadow downwards', JSON.stringify(rig?.shadows));
+  check(scene && scene.lit > 0.3, 'toon scene is lit', JSON.stringify(scene));
+  check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
+
+  // A panel toggle and slider: animate off, then the attenuation gain up.
+  await openFolder(page, 'energy');
+  const rev0 = await healthRev(port, 'energy');
+  await ctl(page, 'energy', 'animate').locator('input').click();
+  const rev1 = await until(async () => { const r = await healthRev(port, 'energy'); return r > rev0 ? r : null; }, 10000);
+  check(rev1 > rev0, 'a panel toggle changes the server rev', `${rev0} -> ${rev1}`);
+  await until(() => page.evaluate((r) => window.fxs.stats().energy.rev >= r, rev1), 5000);
+  await sleep(800);
+  const before = await page.evaluate(() => window.fxs.sample('wave'));
+  const slider = ctl(page, 'energy', 'alpha').locator('.slider');
+  await slider.scrollIntoViewIfNeeded();
+  const box = await slider.boundingBox();
+  await page.mouse.move(box.x + 2, box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(box.x + box.width * 0.3, box.y + box.height / 2, { steps: 5 });
+  await page.mouse.move(box.x + box.width * 0.6, box.y + box.height / 2, { steps: 5 });
+  await page.mouse.up();
+  const rev2 = await until(async () => { const r = await healthRev(port, 'energy'); return r > rev1 ? r : null; }, 10000);
+  check(rev2 > rev1, 'moving the alpha slider changes the server rev', `${rev1} -> ${rev2}`);
+  const alpha = await until(async () => {
+    const r = await fetch(`http://127.0.0.1:${port}/healthz`); await r.json();
+    return page.evaluate(() => window.fxs.streams.get('energy').params.alpha);
+  }, 5000);
+  check(alpha > 20, 'the slider sent a large alpha', String(alpha));
+  await until(() => page.evaluate((r) => window.fxs.stats().energy.rev >= r, rev2), 5000);
+  await sleep(1500);
+  const after = await page.evaluate(() => window.fxs.sample('wave'));
+  check(after.lit > 1.5 * before.lit || after.mean[2] > 1.5 * before.mean[2], 'and the picture (the wave brightens)', `${JSON.stringify(before)} -> ${JSON.stringify(after)}`);
+  await page.screenshot({ path: join(ART, 'web-after-slider.png') });
+
+  // A second page changes beta; the first shows it (the params broadcast).
+  const page2 = await ctx.newPage();
+  await page2.goto(url, { timeout: 20000 });
+  await until(() => page2.evaluate(() => document.body.dataset.subscribed === 'energy,flame'), 30000);
+  await openFolder(page2, 'energy');
+  await setNumber(page2, 'energy', 'beta', 2.5);
+  const seen = await until(() => page.evaluate(() => {
+    const el = document.querySelector('[data-stream="energy"] [data-param="beta"] input');
+    return el && Number(el.value) === 2.5 && window.fxs.streams.get('energy').params.beta === 2.5;
+  }), 10000);
+  check(seen, 'a change made in a second page appears in the first');
+  // A value the server refuses: the error shows next to the field.
+  await setNumber(page2, 'energy', 'curves[0].W', '2, 2, 2');
+  const err = await until(() => page2.evaluate(() => document.querySelector('.fxs-param-error')?.textContent), 10000);
+  check(err && err.includes('curves[0].W') && err.includes('bad_param'), 'a server error shows next to its field', String(err));
+  await page2.screenshot({ path: join(ART, 'web-panel-error.png') });
+  await page2.close();
+
+  // Restart the daemon on the same port: the page reconnects and frames flow again.
+  await stopDaemon(daemon);
+  const down = await until(() => page.evaluate(() => document.body.dataset.conn !== 'connected'), 10000);
+  check(down, 'shows the lost connection');
+  daemon = await startDaemon(port);
+  const framesBefore = await page.evaluate(() => window.fxs.stats().flame?.frames ?? 0);
+  const back = await until(async () => {
+    const s = await page.evaluate(() => ({ c: document.body.dataset.conn, f: window.fxs.stats().flame?.frames ?? 0 }));
+    return s.c === 'connected' && s.f > framesBefore + 2;
+  }, 30000, 500);
+  check(back, 'reconnects with backoff after a restart and frames flow again');
+} catch (e) {
+  check(false, 'browser session', e.stack || String(e));
+}
+await finish();
