@@ -75,6 +75,9 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_printf(out, "fxs_frames_sent_total %llu\n", (unsigned long long)atomic_load(&c->frames_sent));
     metrics_head(out, "fxs_frames_skipped_total", "counter", "Frames subscribers skipped, all streams.");
     metrics_printf(out, "fxs_frames_skipped_total %llu\n", (unsigned long long)atomic_load(&c->frames_skipped));
+    metrics_head(out, "fxs_connections_stalled_total", "counter",
+                 "Connections closed because their socket stayed full for stall_timeout_s.");
+    metrics_printf(out, "fxs_connections_stalled_total %llu\n", (unsigned long long)atomic_load(&c->stalled_closed));
     metrics_head(out, "fxs_bytes_sent_total", "counter", "Frame bytes sent, all streams.");
     metrics_printf(out, "fxs_bytes_sent_total %llu\n", (unsigned long long)atomic_load(&c->bytes_sent));
     metrics_head(out, "fxs_streams", "gauge", "Streams defined.");

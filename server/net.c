@@ -200,6 +200,7 @@ static int net_writable(struct net *net, struct session *ss)
         return -1;
     }
     struct outmsg *m;
+    ss->last_write = net_now();
     if (ss->cur) {
         if (net_send_chunk(ss)) return -1;
     } else if ((m = session_pop(ss))) {
@@ -257,6 +258,19 @@ static enum access_role net_role(struct net *net, struct lws *wsi, bool *bad)
     return r;
 }
 
+/* A client that stops reading fills its socket; frames are then skipped (latest frame wins)
+ * and after stall_timeout_s without a write the connection is closed, so it holds no
+ * server memory beyond the socket's buffers and one chunk. Checked on every wake. */
+static void net_check_stall(struct net *net, struct session *ss, double now)
+{
+    if (ss->kill || now - ss->last_write < net->srv->cfg.limits.stall_timeout_s || !lws_send_pipe_choked(ss->wsi))
+        return;
+    log_warn("closing a connection that has not read for %d s", net->srv->cfg.limits.stall_timeout_s);
+    atomic_fetch_add(&net->srv->counters.stalled_closed, 1);
+    ss->kill = "not reading";
+    lws_set_timeout(ss->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
+}
+
 /* The engine published frames or errors, or a stop was requested. */
 static void net_on_wake(struct net *net)
 {
@@ -264,7 +278,9 @@ static void net_on_wake(struct net *net)
         net->stopping = true;
         log_info("shutting down: closing %d connections", net->srv->nsessions);
     }
+    double now = net_now();
     for (struct session *ss = net->srv->sessions; ss; ss = ss->next) {
+        net_check_stall(net, ss, now);
         session_poll_errors(ss);
         if (net->stopping || ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
     }
@@ -279,6 +295,7 @@ static int net_established(struct net *net, struct session *ss, struct lws *wsi)
         return -1;
     }
     session_open(ss, net->srv, wsi, net_role(net, wsi, &bad));
+    ss->last_write = net_now();
     if (bad) {
         log_warn("connection closed: invalid token in its Authorization header");
         ss->kill = "invalid token in the Authorization header";

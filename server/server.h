@@ -24,6 +24,7 @@ struct limits {
     int max_json_depth;
     int max_control_per_sec; /* per connection, token bucket with a burst of this size */
     int max_queued_messages; /* text replies/events queued per connection before it is closed */
+    int stall_timeout_s;     /* a connection whose socket stays full this long is closed */
 };
 
 struct config {
@@ -43,6 +44,7 @@ struct config {
 
 struct counters {
     atomic_uint_fast64_t connections_total, messages_in, errors_out, frames_sent, frames_skipped, bytes_sent;
+    atomic_uint_fast64_t stalled_closed; /* connections closed for not reading (stall_timeout_s) */
 };
 
 struct session;

@@ -46,6 +46,7 @@ struct session {
     struct fx_buf rx;     /* fragments of the message being received */
     bool rx_overflow;
     double tokens, last_refill;
+    double last_write;    /* CLOCK_MONOTONIC seconds of the last write to the socket (net.c) */
     const char *kill;     /* set: the network layer closes the connection (1008) with this reason */
     enum access_role role;
     int auth_failures;

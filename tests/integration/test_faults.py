@@ -1,0 +1,171 @@
+"""test_faults.py — fxstreamd under a stalled reader, a kill -9 and a failing simulation.
+
+A client that stops reading gets frames skipped and is closed after stall_timeout_s while
+another subscriber of the same stream keeps its frame rate and the daemon's memory stays
+bounded; `kill -9` during a burst of `set` loses no acknowledged change; a stream whose
+simulation blows up reports `error` events and resets while the other streams run on.
+Run from the repository root: /usr/bin/python3 tests/integration/test_faults.py"""
+import asyncio
+import base64
+import json
+import os
+import re
+import signal
+import socket
+import tempfile
+import time
+import urllib.request
+
+from fxtest import Client, Daemon, Suite
+
+
+def config_file(cfg):
+    fd, path = tempfile.mkstemp(suffix=".json")
+    with os.fdopen(fd, "w") as f:
+        json.dump(cfg, f)
+    return path
+
+
+def metric(d, name):
+    with urllib.request.urlopen(d.http + "/metrics", timeout=10) as r:
+        m = re.search(r"^%s (\S+)$" % re.escape(name), r.read().decode(), re.M)
+    return float(m.group(1)) if m else None
+
+
+def rss_kib(d):
+    with open("/proc/%d/status" % d.proc.pid) as f:
+        return int(re.search(r"VmRSS:\s+(\d+)", f.read()).group(1))
+
+
+def stalled_reader(port, stream):
+    """A raw WebSocket client with a tiny receive buffer that subscribes and never reads."""
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.settimeout(10)
+    s.connect(("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
+               % (port, key)).encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += s.recv(1)  # byte by byte: nothing after the headers is consumed
+    payload = json.dumps({"op": "subscribe", "stream": stream}).encode()
+    mask = os.urandom(4)
+    s.sendall(bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
+    return s, head
+
+
+def closed_by_peer(s, timeout=10):
+    """Drains the socket; True when the server closed it."""
+    s.settimeout(timeout)
+    try:
+        while s.recv(1 << 20):
+            pass
+        return True
+    except ConnectionResetError:
+        return True
+    except socket.timeout:
+        return False
+
+
+async def test_stalled_reader(t):
+    d = Daemon("--config", config_file({"limits": {"stall_timeout_s": 2}, "streams": [
+        {"stream": "big", "effect": "energy_wave", "params": {"width": 512, "height": 512, "output": "RGBA",
+                                                            "fps": 10}}]}))
+    try:
+        good = await Client.connect(d)
+        await good.request("subscribe", stream="big")
+        first = await good.frame(30)  # the stream runs
+        s, head = stalled_reader(d.port, "big")
+        t.check(b" 101 " in head.split(b"\r\n")[0], "the stalled client's handshake succeeded")
+        rss0 = rss_kib(d)
+        seqs, t0 = [first["seq"]], time.monotonic()
+        while time.monotonic() - t0 < 6:
+            seqs.append((await good.frame(10))["seq"])
+        span = seqs[-1] - seqs[0]
+        t.check(span > 0 and (len(seqs) - 1) >= 0.9 * span,
+                "the other subscriber got %d of %d frames while one client stalled" % (len(seqs) - 1, span))
+        stalled = metric(d, "fxs_connections_stalled_total")
+        t.check(stalled == 1, "the stalled connection was closed after stall_timeout_s (metric %s)" % stalled)
+        t.check(closed_by_peer(s), "the stalled client's socket is closed by the server")
+        growth = rss_kib(d) - rss0
+        t.check(growth < 64 * 1024, "daemon memory bounded while stalled (RSS +%d KiB)" % growth)
+        t.check(metric(d, "fxs_connections") == 1, "one connection left")
+        await good.close()
+    finally:
+        d.stop()
+
+
+async def test_kill9_burst(t):
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    d = Daemon(state_dir=state)
+    acked = {}
+    try:
+        c = await Client.connect(d)
+
+        async def burst():
+            for i in range(1000):
+                await c.ws.send(json.dumps({"op": "set", "id": i, "stream": "energy", "params": {"fps": 1 + i % 50}}))
+            while True:
+                m = await c.text(10)
+                if m.get("op") == "params" and "id" in m:
+                    acked[m["rev"]] = m["params"]["fps"]
+
+        task = asyncio.ensure_future(burst())
+        while len(acked) < 100:
+            await asyncio.sleep(0.005)
+        d.proc.send_signal(signal.SIGKILL)
+        try:
+            await asyncio.wait_for(task, 10)
+        except Exception:
+            pass
+    finally:
+        d.stop()
+    last = max(acked)
+    t.check(d.proc.returncode == -signal.SIGKILL, "killed with -9 after %d acknowledged sets" % len(acked))
+    d2 = Daemon(state_dir=state)
+    try:
+        c = await Client.connect(d2)
+        r = await c.request("get", stream="energy")
+        t.check(r["rev"] >= last, "restart: revision %d, last acknowledged %d" % (r["rev"], last))
+        want = acked.get(r["rev"], 1 + (r["rev"] - 2) % 50)
+        t.check(r["params"]["fps"] == want, "restart: fps %s is that of revision %d" % (r["params"]["fps"], r["rev"]))
+        await c.close()
+    finally:
+        d2.stop()
+
+
+async def test_failing_stream(t):
+    d = Daemon()
+    try:
+        c = await Client.connect(d)
+        r = await c.request("create", effect="flame", stream="blowup", params={
+            "diffusion_mode": "literal", "k_f": 0.01, "k_h": 0.1, "sources": [{"radius": 0.015}]})
+        t.check(r["op"] == "created", "create a flame that blows up (literal diffusion)")
+        await c.request("subscribe", stream="blowup")
+        await c.request("subscribe", stream="energy")
+        errors, energy, t0 = [], 0, time.monotonic()
+        while time.monotonic() - t0 < 20 and (len(errors) < 2 or energy < 20):
+            m = await c.recv(10)
+            if isinstance(m, bytes):
+                energy += m[6] == 2  # kind byte of the header
+            else:
+                m = json.loads(m)
+                if m.get("op") == "error":
+                    errors.append(m)
+        t.check(len(errors) >= 2 and all(e["code"] == "internal" and e["stream"] == "blowup" for e in errors),
+                "the failing stream reports error events (%s)" % (errors[0]["message"] if errors else "none"))
+        t.check(energy >= 20, "the energy stream keeps sending frames meanwhile (%d)" % energy)
+        n = metric(d, 'fxs_stream_errors_total{stream="blowup",effect="flame"}')
+        t.check(n is not None and n >= 2, "/metrics counts the stream's errors (%s)" % n)
+        with urllib.request.urlopen(d.http + "/healthz", timeout=10) as resp:
+            h = json.loads(resp.read())
+        t.check(h["status"] == "ok", "the daemon stays up")
+        await c.close()
+    finally:
+        t.check(d.stop() == 0, "clean exit afterwards")
+
+
+if __name__ == "__main__":
+    Suite("test_faults").run([test_stalled_reader, test_kill9_burst, test_failing_stream], timeout=90)
