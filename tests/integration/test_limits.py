@@ -1,0 +1,87 @@
+"""test_limits.py — every configurable limit of PROTOCOL.md §6, hit on a real fxstreamd with
+small limits: the `limit` error (with the param the spec names) or the close code that
+says why, and the connection or daemon still usable afterwards.
+Run from the repository root: /usr/bin/python3 tests/integration/test_limits.py"""
+import asyncio
+import json
+import os
+import tempfile
+
+import websockets
+
+from fxtest import Client, Daemon, Suite
+
+LIMITS = {"max_connections": 3, "max_streams": 3, "max_subscriptions": 2, "max_control_per_sec": 20,
+          "max_message_bytes": 2048}
+
+
+def small_daemon():
+    fd, path = tempfile.mkstemp(suffix=".json")
+    with os.fdopen(fd, "w") as f:
+        json.dump({"limits": LIMITS}, f)
+    return Daemon("--config", path)
+
+
+async def test_connections(t):
+    d = small_daemon()
+    try:
+        cs = [await Client.connect(d) for _ in range(3)]
+        t.check(all(c.hello["limits"]["max_connections"] == 3 for c in cs), "hello reports max_connections 3")
+        ws = await asyncio.wait_for(websockets.connect(d.url, subprotocols=["fxstream.v1"]), 10)
+        try:
+            await asyncio.wait_for(ws.recv(), 10)
+            t.check(False, "a 4th connection is refused")
+        except websockets.ConnectionClosed as e:
+            t.check(e.code == 1013 and e.reason == "connection limit reached", "a 4th connection: 1013 (%s)" % e.reason)
+        await cs[0].close()
+        await asyncio.sleep(0.2)
+        c = await Client.connect(d)
+        t.check(c.hello["op"] == "hello", "a slot freed by a close is usable again")
+        for x in cs[1:] + [c]:
+            await x.close()
+    finally:
+        d.stop()
+
+
+async def test_streams_and_subscriptions(t):
+    d = small_daemon()
+    try:
+        c = await Client.connect(d)
+        t.check((await c.request("create", effect="energy_wave", stream="third"))["op"] == "created",
+                "the 3rd stream is created")
+        r = await c.request("create", effect="energy_wave", stream="fourth")
+        t.check(r["op"] == "error" and r["code"] == "limit" and r.get("param") == "stream", "a 4th stream: limit")
+        t.check(len((await c.request("list"))["streams"]) == 3, "nothing half-created")
+        for s in ("energy", "flame"):
+            await c.request("subscribe", stream=s)
+        r = await c.request("subscribe", stream="third")
+        t.check(r["code"] == "limit" and r.get("param") == "stream", "a 3rd subscription: limit")
+        t.check((await c.request("unsubscribe", stream="flame"))["op"] == "unsubscribed", "unsubscribe frees one")
+        t.check((await c.request("subscribe", stream="third"))["op"] == "subscribed", "then the subscription works")
+        await c.close()
+    finally:
+        d.stop()
+
+
+async def test_rate_and_size(t):
+    d = small_daemon()
+    try:
+        c = await Client.connect(d)
+        for i in range(40):
+            await c.ws.send(json.dumps({"op": "list", "id": i}))
+        replies = [await c.text() for _ in range(40)]
+        limited = [m for m in replies if m["op"] == "error" and m["code"] == "limit"]
+        t.check(15 <= len(limited) <= 25 and all("id" not in m for m in limited),
+                "40 messages at once with 20/s: %d dropped with limit and no id" % len(limited))
+        await asyncio.sleep(1.1)
+        t.check((await c.request("list"))["op"] == "list", "the bucket refills")
+        r = await c.raw(json.dumps({"op": "list", "pad": "x" * 2100}))
+        t.check(r["code"] == "limit" and "2048" in r["message"], "a 2100-byte message: limit (%s)" % r["message"])
+        t.check((await c.request("list"))["op"] == "list", "the connection stays usable")
+        await c.close()
+    finally:
+        d.stop()
+
+
+if __name__ == "__main__":
+    Suite("test_limits").run([test_connections, test_streams_and_subscriptions, test_rate_and_size])
