@@ -26,9 +26,14 @@ CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o)
 REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
 UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
 BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))
+FUZZ_BIN    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
+# libFuzzer targets: clang with ASan/UBSan over sanitized copies of both libraries (BUILD/fz).
+FUZZ_CC     := clang
+FUZZ_FLAGS  := -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=undefined
+FUZZ_SECONDS ?= 300
 KERNELS     := $(wildcard kernels/*.cl)
 
-.PHONY: all deps run test bench clean unit
+.PHONY: all deps run test bench clean unit fuzz fuzz-libs
 .SECONDARY: # keep object files of tests and benches between runs
 all: $(BUILD)/fxstreamd $(BUILD)/fxctl
 
@@ -38,8 +43,12 @@ deps:
 run: deps all
 	$(BUILD)/fxstreamd $(RUN_ARGS)
 
-test: deps all $(UNIT_BIN)
+test: deps all $(UNIT_BIN) $(FUZZ_BIN)
 	@tests/run.sh
+
+# Longer fuzzing than make test's bounded run; new inputs are merged into tests/fuzz/corpus.
+fuzz: deps $(FUZZ_BIN)
+	@tests/fuzz/run.sh $(FUZZ_SECONDS) merge
 
 bench: deps all $(BENCH_BIN)
 	@tests/bench/run.sh
@@ -82,5 +91,14 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
 	@mkdir -p $(@D)
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
+
+fuzz-libs:
+	@$(MAKE) --no-print-directory BUILD=$(BUILD)/fz CC=$(FUZZ_CC) CFLAGS="$(FUZZ_FLAGS) -fsanitize=fuzzer-no-link" \
+	    $(BUILD)/fz/libfxserver.a $(BUILD)/fz/libfxclient.a
+
+$(BUILD)/fuzz/%: tests/fuzz/%.c fuzz-libs
+	@mkdir -p $(@D)
+	$(FUZZ_CC) $(FX_CFLAGS) $(FUZZ_FLAGS) -fsanitize=fuzzer $< $(BUILD)/fz/libfxserver.a $(BUILD)/fz/libfxclient.a \
+	    -o $@ $(FX_LDLIBS)
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)

@@ -30,6 +30,7 @@ static inline int fx_buf_reserve(struct fx_buf *b, size_t extra)
 
 static inline int fx_buf_append(struct fx_buf *b, const void *src, size_t n)
 {
+    if (n == 0) return 0; /* b->data may still be NULL (and src too) */
     if (fx_buf_reserve(b, n)) return -1;
     memcpy(b->data + b->len, src, n);
     b->len += n;
