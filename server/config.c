@@ -55,6 +55,7 @@ static void config_defaults(struct config *cfg)
         .max_control_per_sec = 100,
         .max_queued_messages = 1024,
         .stall_timeout_s = 10,
+        .max_buffered_bytes = 256 * 1024,
     };
     /* The web client next to the binary: <dir of fxstreamd>/../clients/web. */
     char exe[PATH_MAX];
@@ -110,6 +111,7 @@ static const struct config_limit_key config_limit_keys[] = {
     {"max_control_per_sec", offsetof(struct limits, max_control_per_sec), 1, 1000000},
     {"max_queued_messages", offsetof(struct limits, max_queued_messages), 16, 1000000},
     {"stall_timeout_s", offsetof(struct limits, stall_timeout_s), 1, 3600},
+    {"max_buffered_bytes", offsetof(struct limits, max_buffered_bytes), 16 * 1024, 64 * 1024 * 1024},
 };
 
 static int config_limits(const cJSON *obj, struct limits *l, struct fx_err *err)

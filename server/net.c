@@ -14,6 +14,9 @@
 #include <string.h>
 #include <time.h>
 
+#include <linux/sockios.h>
+#include <sys/ioctl.h>
+
 #include <libwebsockets.h>
 
 #include "log.h"
@@ -24,6 +27,7 @@
 #define NET_CHUNK (64 * 1024)
 #define NET_WS_PATH "/v1/ws"
 #define NET_SHUTDOWN_GRACE_S 2.0
+#define NET_BACKLOG_RETRY_US 10000 /* a backlogged connection looks again after 10 ms */
 
 _Static_assert(LWS_PRE <= FRAME_HEADROOM, "frame headroom must hold the WebSocket framing");
 
@@ -189,6 +193,21 @@ static bool net_has_frame(struct session *ss)
     return false;
 }
 
+/* Bytes written to the socket that the peer has not acknowledged yet (Linux SIOCOUTQ). */
+static size_t net_unsent(struct lws *wsi)
+{
+    int n = 0;
+    return ioctl(lws_get_socket_fd(wsi), SIOCOUTQ, &n) == 0 && n > 0 ? (size_t)n : 0;
+}
+
+/* Whether the connection holds max_buffered_bytes or more that the client has not read:
+ * then no new frame starts (frames are skipped, latest frame wins), so a slow client's
+ * latency stays about max_buffered_bytes / its read rate instead of the kernel's buffer. */
+static bool net_backlogged(const struct net *net, struct session *ss)
+{
+    return lws_send_pipe_choked(ss->wsi) || net_unsent(ss->wsi) >= (size_t)net->srv->cfg.limits.max_buffered_bytes;
+}
+
 static int net_writable(struct net *net, struct session *ss)
 {
     if (net->stopping) {
@@ -200,7 +219,6 @@ static int net_writable(struct net *net, struct session *ss)
         return -1;
     }
     struct outmsg *m;
-    ss->last_write = net_now();
     if (ss->cur) {
         if (net_send_chunk(ss)) return -1;
     } else if ((m = session_pop(ss))) {
@@ -208,9 +226,15 @@ static int net_writable(struct net *net, struct session *ss)
         size_t len = m->len;
         free(m);
         if (w < (int)len) return -1;
+    } else if (net_has_frame(ss) && net_backlogged(net, ss)) {
+        lws_set_timer_usecs(ss->wsi, NET_BACKLOG_RETRY_US);
+        return 0;
     } else if (net_pick_frame(ss)) {
         if (net_send_chunk(ss)) return -1;
+    } else {
+        return 0;
     }
+    ss->last_write = net_now();
     if (ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
     return 0;
 }
@@ -263,8 +287,7 @@ static enum access_role net_role(struct net *net, struct lws *wsi, bool *bad)
  * server memory beyond the socket's buffers and one chunk. Checked on every wake. */
 static void net_check_stall(struct net *net, struct session *ss, double now)
 {
-    if (ss->kill || now - ss->last_write < net->srv->cfg.limits.stall_timeout_s || !lws_send_pipe_choked(ss->wsi))
-        return;
+    if (ss->kill || now - ss->last_write < net->srv->cfg.limits.stall_timeout_s || !net_backlogged(net, ss)) return;
     log_warn("closing a connection that has not read for %d s", net->srv->cfg.limits.stall_timeout_s);
     atomic_fetch_add(&net->srv->counters.stalled_closed, 1);
     ss->kill = "not reading";

@@ -37,10 +37,11 @@ def rss_kib(d):
         return int(re.search(r"VmRSS:\s+(\d+)", f.read()).group(1))
 
 
-def stalled_reader(port, stream):
-    """A raw WebSocket client with a tiny receive buffer that subscribes and never reads."""
+def stalled_reader(port, stream, rcvbuf=4096):
+    """A raw WebSocket client with a small receive buffer that subscribes and reads nothing
+    more itself (the caller may read slowly)."""
     s = socket.socket()
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
     s.settimeout(10)
     s.connect(("127.0.0.1", port))
     key = base64.b64encode(os.urandom(16)).decode()
@@ -93,6 +94,65 @@ async def test_stalled_reader(t):
         t.check(growth < 64 * 1024, "daemon memory bounded while stalled (RSS +%d KiB)" % growth)
         t.check(metric(d, "fxs_connections") == 1, "one connection left")
         await good.close()
+    finally:
+        d.stop()
+
+
+def ws_frames(sock, buf):
+    """Splits complete server WebSocket messages off buf (unmasked, FIN set: frames are sent
+    as one message of continuation fragments, which this joins); returns (messages, rest)."""
+    out, msg = [], b""
+    while True:
+        if len(buf) < 2:
+            return out, buf
+        n, off = buf[1] & 0x7F, 2
+        if n == 126:
+            if len(buf) < 4:
+                return out, buf
+            n, off = int.from_bytes(buf[2:4], "big"), 4
+        elif n == 127:
+            if len(buf) < 10:
+                return out, buf
+            n, off = int.from_bytes(buf[2:10], "big"), 10
+        if len(buf) < off + n:
+            return out, buf
+        msg += buf[off:off + n]
+        fin, buf = buf[0] & 0x80, buf[off + n:]
+        if fin:
+            out.append(msg)
+            msg = b""
+        elif not buf:
+            return out, b""
+
+
+async def test_slow_reader_latency(t):
+    d = Daemon("--config", config_file({"limits": {"max_buffered_bytes": 131072}, "streams": [
+        {"stream": "big", "effect": "energy_wave", "params": {"width": 256, "height": 256, "fps": 30}}]}))
+    try:
+        s, _ = stalled_reader(d.port, "big", rcvbuf=32768)
+        ages, seqs, buf, t0, got = [], [], b"", time.monotonic(), 0
+        s.settimeout(1)
+        while time.monotonic() - t0 < 8:  # at most 320 kB/s, far below the stream's ~3 MB/s
+            try:
+                chunk = s.recv(32768)
+            except socket.timeout:
+                continue
+            if not chunk:
+                break
+            got += len(chunk)
+            msgs, buf = ws_frames(s, buf + chunk)
+            for m in msgs:
+                if len(m) >= 64 and m[:4] == b"FXS1" and m[6] == 2:  # textures only (kind 3 rigs are tiny)
+                    seq, t_us = int.from_bytes(m[16:24], "little"), int.from_bytes(m[32:40], "little")
+                    ages.append(time.time() - t_us / 1e6)
+                    seqs.append(seq)
+            await asyncio.sleep(0.1)
+        late = ages[len(ages) // 2:]
+        t.check(len(seqs) >= 4 and seqs[-1] - seqs[0] > len(seqs),
+                "a slow reader gets frames skipped (%d frames, seq %s..%s)" % (len(seqs), seqs[:1], seqs[-1:]))
+        t.check(late and max(late) < 2.5, "its frames stay fresh: age at most %.2f s (max_buffered_bytes 128 KiB)"
+                % (max(late) if late else -1))
+        s.close()
     finally:
         d.stop()
 
@@ -168,4 +228,4 @@ async def test_failing_stream(t):
 
 
 if __name__ == "__main__":
-    Suite("test_faults").run([test_stalled_reader, test_kill9_burst, test_failing_stream], timeout=90)
+    Suite("test_faults").run([test_stalled_reader, test_slow_reader_latency, test_kill9_burst, test_failing_stream], timeout=90)
