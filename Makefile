@@ -35,7 +35,7 @@ KERNELS     := $(wildcard kernels/*.cl)
 
 .PHONY: all deps run test bench clean unit fuzz fuzz-libs
 .SECONDARY: # keep object files of tests and benches between runs
-all: $(BUILD)/fxstreamd $(BUILD)/fxctl
+all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload
 
 deps:
 	@deploy/install-deps.sh
@@ -82,6 +82,9 @@ $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/fxctl: $(BUILD)/obj/clients/c/fxctl.o $(BUILD)/libfxclient.a
+	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
+
+$(BUILD)/fxload: $(BUILD)/obj/clients/c/fxload.o $(BUILD)/libfxclient.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a

@@ -5,7 +5,7 @@
 # as root, or through sudo when available. Set FXS_NO_INSTALL=1 to only check.
 set -eu
 
-PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo
+PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo gnuplot-nox
 libwebsockets-dev libopenexr-dev openexr libcjson-dev libzstd-dev zstd draco nodejs python3 python3-websockets python3-numpy python3-jsonschema"
 
 missing=""

@@ -10,6 +10,11 @@
  * eye_bake (a view texture over a model's UV atlas, §8.2) and eye_trace_rays (raw
  * landings, for the tests and the benchmark).
  *
+ * Each work-item traces EYE_LANES = 8 neighbouring rays (adjacent texels or table
+ * samples, so their paths are alike) as float8 lanes: PoCL does not vectorise the
+ * divergent walks across work-items, but emits AVX for float8 code. Loops run while any
+ * lane still needs them, lanes that are done are masked (select instead of if).
+ *
  * The host (server/effects/compound_eye.c, eye_lut.c) mirrors struct eye_optics and the
  * EYE_* constants; tests/ref/eye_ref.c is the independent double-precision reference. */
 
@@ -30,6 +35,8 @@
 #define EYE_MAX_BOUNCES 4 /* digest §7 G8: reflect at most 4 times, then count a miss */
 #define EYE_WALK_MAX 96   /* Voronoi cells walked looking for the entry lens */
 #define EYE_SQRT3 1.7320508f
+#define EYE_LANES 8
+#define EYE_BIG 1e30f /* "none yet" (finite: the build may assume finite math) */
 
 /* Mirrors struct eye_optics in server/effects/compound_eye.h: 4-byte fields only. */
 struct eye_optics {
@@ -46,31 +53,66 @@ struct eye_optics {
     int pad0, pad1;
 };
 
+typedef float8 fv;
+typedef int8 iv; /* lane masks: -1 where true (vector comparisons), 0 elsewhere */
+typedef struct {
+    fv x, y, z;
+} v3;
+
 struct eye_hit {
-    float2 land;   /* landing point on the pigment plane, pitches (valid when EYE_LANDED) */
-    float3 normal; /* outward lens normal at the entry point (0,0,1 when no lens was hit) */
-    int status;
-    int entered;   /* 1 when the ray entered a lens */
-    int passes;    /* neighbour switches taken */
+    fv lx, ly;  /* landing point on the pigment plane, pitches (lanes with EYE_LANDED) */
+    v3 normal;  /* outward lens normal at the entry point ((0,0,1) where no lens was hit) */
+    iv status;  /* EYE_LANDED | EYE_MISSED | EYE_ABSORBED */
+    iv entered; /* mask: the ray entered a lens */
+    iv passes;  /* neighbour switches taken */
 };
+
+/* ---- 3-vectors of lanes ------------------------------------------------------------ */
+
+static v3 v3_make(fv x, fv y, fv z)
+{
+    v3 r = {x, y, z};
+    return r;
+}
+static v3 v3_sub(v3 a, v3 b) { return v3_make(a.x - b.x, a.y - b.y, a.z - b.z); }
+static v3 v3_mul(v3 a, fv k) { return v3_make(a.x * k, a.y * k, a.z * k); }
+static fv v3_dot(v3 a, v3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+/* a + k·b */
+static v3 v3_mad(v3 a, fv k, v3 b) { return v3_make(mad(k, b.x, a.x), mad(k, b.y, a.y), mad(k, b.z, a.z)); }
+static v3 v3_normalize(v3 a) { return v3_mul(a, rsqrt(v3_dot(a, a))); }
+static v3 v3_const(float x, float y, float z) { return v3_make((fv)x, (fv)y, (fv)z); }
+/* m ? b : a, per lane */
+static v3 v3_sel(v3 a, v3 b, iv m) { return v3_make(select(a.x, b.x, m), select(a.y, b.y, m), select(a.z, b.z, m)); }
+
+static float eye_max_lane(fv v)
+{
+    float4 m4 = fmax(v.lo, v.hi);
+    float2 m2 = fmax(m4.lo, m4.hi);
+    return fmax(m2.x, m2.y);
+}
 
 /* ---- lattice ----------------------------------------------------------------------- */
 /* Lattice points are o + i*(1,0) + j*e2: square o=(1/2,1/2), e2=(0,1) (cell centres, eqs.
  * 5.17-5.20 = floor+1/2, G4); hex o=(1/2,sqrt3/4), e2=(1/2,sqrt3/2) (G18), pitch 1. */
 
-inline float2 eye_origin(int lattice) { return lattice == EYE_HEX ? (float2)(0.5f, 0.25f * EYE_SQRT3) : (float2)(0.5f, 0.5f); }
-inline float2 eye_e2(int lattice) { return lattice == EYE_HEX ? (float2)(0.5f, 0.5f * EYE_SQRT3) : (float2)(0.0f, 1.0f); }
+static float2 eye_e2(int lattice) { return lattice == EYE_HEX ? (float2)(0.5f, 0.5f * EYE_SQRT3) : (float2)(0.0f, 1.0f); }
 
 /* Nearest lattice point (the Voronoi cell containing q): the lens whose cap is the top of
  * the lens layer above q. Hex: the closer of the two rectangular sub-lattices. */
-inline float2 eye_nearest(int lattice, float2 q)
+static void eye_nearest(int lattice, fv qx, fv qy, fv *cx, fv *cy)
 {
-    if (lattice != EYE_HEX) return floor(q) + 0.5f;
-    const float2 per = (float2)(1.0f, EYE_SQRT3);
-    float2 a0 = (float2)(0.5f, 0.25f * EYE_SQRT3), b0 = (float2)(0.0f, 0.75f * EYE_SQRT3);
-    float2 a = a0 + per * rint((q - a0) / per), b = b0 + per * rint((q - b0) / per);
-    float2 da = q - a, db = q - b;
-    return dot(da, da) <= dot(db, db) ? a : b;
+    if (lattice != EYE_HEX) {
+        *cx = floor(qx) + 0.5f;
+        *cy = floor(qy) + 0.5f;
+        return;
+    }
+    const float h = EYE_SQRT3;
+    fv ax = 0.5f + rint(qx - 0.5f), ay = 0.25f * h + h * rint((qy - 0.25f * h) / h);
+    fv bx = rint(qx), by = 0.75f * h + h * rint((qy - 0.75f * h) / h);
+    fv dax = qx - ax, day = qy - ay, dbx = qx - bx, dby = qy - by;
+    iv pick_a = dax * dax + day * day <= dbx * dbx + dby * dby;
+    *cx = select(bx, ax, pick_a);
+    *cy = select(by, ay, pick_a);
 }
 
 /* Unit vectors to the Voronoi neighbours (all at distance 1 = one pitch). */
@@ -79,16 +121,15 @@ __constant float2 eye_square_walls[4] = {(float2)(1.0f, 0.0f), (float2)(0.0f, 1.
 __constant float2 eye_hex_walls[6] = {(float2)(1.0f, 0.0f), (float2)(0.5f, 0.8660254f), (float2)(-0.5f, 0.8660254f),
                                       (float2)(-1.0f, 0.0f), (float2)(-0.5f, -0.8660254f), (float2)(0.5f, -0.8660254f)};
 
-/* Ray o + t d (d unit) against the sphere (c, r): the two roots, or false. */
-inline bool eye_roots(float3 o, float3 d, float3 c, float r, float *t1, float *t2)
+/* Rays o + t d (d unit) against the spheres (c, r): the lanes that meet them, with the
+ * two roots t1 <= t2. */
+static iv eye_roots(v3 o, v3 d, v3 c, float r, fv *t1, fv *t2)
 {
-    float3 oc = o - c;
-    float b = dot(oc, d), disc = b * b - (dot(oc, oc) - r * r);
-    if (disc < 0.0f) return false;
-    float s = sqrt(disc);
+    v3 oc = v3_sub(o, c);
+    fv b = v3_dot(oc, d), disc = b * b - (v3_dot(oc, oc) - r * r), s = sqrt(fmax(disc, 0.0f));
     *t1 = -b - s;
     *t2 = -b + s;
-    return true;
+    return disc >= 0.0f;
 }
 
 /* ---- entry lens (digest §2.4, G3) -------------------------------------------------- */
@@ -96,151 +137,194 @@ inline bool eye_roots(float3 o, float3 d, float3 c, float r, float *t1, float *t
 /* Exact: walk the Voronoi cells the ray's projection crosses. Inside one cell the top of
  * the (equal, equally deep) lens layer is that cell's sphere, so the first root found
  * within the cell's stretch of the ray is the first lens hit. The walk ends at depth r,
- * where the thesis stops looking (§2.4): below it the ray goes on unrefracted. */
-static bool eye_enter_exact(const struct eye_optics *o, float2 p, float3 d, float3 *c_out, float *t_out)
+ * where the thesis stops looking (§2.4): below it the ray goes on unrefracted. Returns
+ * the lanes that entered a lens, with its centre (cx, cy) and the entry distance t. */
+static iv eye_enter_exact(const struct eye_optics *o, fv px, fv py, v3 d, iv live, fv *cx, fv *cy, fv *t)
 {
     const float r = o->r;
-    const float tmax = r / -d.z; /* the ray is at depth r */
-    float2 c = eye_nearest(o->lattice, p), dh = d.xy;
-    const int nn = o->lattice == EYE_HEX ? 6 : 4;
-    float t_in = 0.0f;
-    for (int k = 0; k < EYE_WALK_MAX && t_in <= tmax; k++) {
-        float t1, t2;
-        float3 c3 = (float3)(c, -r);
-        float t_exit = INFINITY;
-        float2 step = (float2)(0.0f);
-        for (int e = 0; e < nn; e++) { /* the cell's walls: bisectors to its Voronoi neighbours */
-            float2 v = o->lattice == EYE_HEX ? eye_hex_walls[e] : eye_square_walls[e];
-            float den = dot(dh, v);
-            if (den <= 1e-9f) continue;
-            float t = (dot(c - p, v) + 0.5f) / den;
-            if (t < t_exit) { t_exit = t; step = v; }
+    const int hex = o->lattice == EYE_HEX, walls = hex ? 6 : 4;
+    const v3 p = v3_make(px, py, (fv)0.0f);
+    fv tmax = r / -d.z, t_in = 0.0f, wx, wy; /* tmax: the ray is at depth r */
+    eye_nearest(o->lattice, px, py, &wx, &wy);
+    iv search = live, hit = 0;
+    for (int k = 0; k < EYE_WALK_MAX && any(search); k++) {
+        fv t_exit = EYE_BIG, sx = 0.0f, sy = 0.0f, t1, t2;
+        for (int e = 0; e < walls; e++) { /* the cell's walls: bisectors to its Voronoi neighbours */
+            float2 v = hex ? eye_hex_walls[e] : eye_square_walls[e];
+            fv den = d.x * v.x + d.y * v.y;
+            iv toward = den > 1e-9f;
+            fv te = ((wx - px) * v.x + (wy - py) * v.y + 0.5f) / select((fv)1.0f, den, toward);
+            iv nearer = toward & (te < t_exit);
+            t_exit = select(t_exit, te, nearer);
+            sx = select(sx, (fv)v.x, nearer);
+            sy = select(sy, (fv)v.y, nearer);
         }
-        if (eye_roots((float3)(p, 0.0f), d, c3, r, &t1, &t2) && t2 >= t_in && t1 <= t_exit) {
-            float t = fmax(t1, 0.0f);
-            if (t > tmax) return false;
-            *c_out = c3;
-            *t_out = t;
-            return true;
-        }
+        iv found = search & eye_roots(p, d, v3_make(wx, wy, (fv)(-r)), r, &t1, &t2) & (t2 >= t_in) & (t1 <= t_exit);
+        *cx = select(*cx, wx, found);
+        *cy = select(*cy, wy, found);
+        *t = select(*t, fmax(t1, 0.0f), found);
+        hit |= found;
         t_in = t_exit;
-        c = eye_nearest(o->lattice, c + step); /* snap, so rounding never drifts off-lattice */
+        search &= ~found & (t_in <= tmax);
+        eye_nearest(o->lattice, wx + sx, wy + sy, &wx, &wy); /* snap, so rounding never drifts off-lattice */
     }
-    return false;
+    return hit & (*t <= tmax);
 }
 
 /* The thesis's slice planes (eqs. 5.23-5.27): at depths h = 0, r/s, ..., r take the lens
  * whose cell contains the ray's point at depth h lifted back to the surface; the first
  * one the ray meets is the entry lens. */
-static bool eye_enter_slices(const struct eye_optics *o, float2 p, float3 d, float3 *c_out, float *t_out)
+static iv eye_enter_slices(const struct eye_optics *o, fv px, fv py, v3 d, iv live, fv *cx, fv *cy, fv *t)
 {
     const float r = o->r;
-    for (int s = 0; s <= o->slices; s++) {
-        float t = r * (float)s / (float)o->slices / -d.z;
-        float3 c3 = (float3)(eye_nearest(o->lattice, p + d.xy * t), -r);
-        float t1, t2;
-        if (eye_roots((float3)(p, 0.0f), d, c3, r, &t1, &t2) && t2 >= 0.0f) {
-            *c_out = c3;
-            *t_out = fmax(t1, 0.0f);
-            return true;
-        }
+    const v3 p = v3_make(px, py, (fv)0.0f);
+    iv search = live, hit = 0;
+    for (int s = 0; s <= o->slices && any(search); s++) {
+        fv ts = r * (float)s / (float)o->slices / -d.z, wx, wy, t1, t2;
+        eye_nearest(o->lattice, px + d.x * ts, py + d.y * ts, &wx, &wy);
+        iv found = search & eye_roots(p, d, v3_make(wx, wy, (fv)(-r)), r, &t1, &t2) & (t2 >= 0.0f);
+        *cx = select(*cx, wx, found);
+        *cy = select(*cy, wy, found);
+        *t = select(*t, fmax(t1, 0.0f), found);
+        hit |= found;
+        search &= ~found;
     }
-    return false;
+    return hit;
 }
 
 /* ---- internal pass (digest §2.6, G5, G6) ------------------------------------------- */
 
-/* thesis4 (Fig. 5.10): only the three neighbours of the region R_dir points into. */
-static bool eye_thesis4(int lattice, float2 dc, float2 dir)
+/* Lanes where the thesis's sign of x (+1 when x > 0, else -1) equals i. */
+static iv eye_sign_is(int i, fv x) { return i == 1 ? x > 0.0f : i == -1 ? x <= 0.0f : (iv)0; }
+
+/* thesis4 (Fig. 5.10): only the three neighbours of the region R_dir points into; v is
+ * the candidate's offset from the current lens. */
+static iv eye_thesis4(int lattice, float2 v, v3 dir)
 {
-    if (lattice == EYE_HEX) return dot(dc, dc) < 1.5f && dot(dc, dir) > 0.0f;
-    float2 a = fabs(dir);
-    int ix = (int)rint(dc.x), iy = (int)rint(dc.y);
-    if (a.x >= a.y) return ix == (dir.x > 0.0f ? 1 : -1) && abs(iy) <= 1;
-    return iy == (dir.y > 0.0f ? 1 : -1) && abs(ix) <= 1;
+    if (lattice == EYE_HEX) return dot(v, v) < 1.5f ? v.x * dir.x + v.y * dir.y > 0.0f : (iv)0;
+    int ix = (int)rint(v.x), iy = (int)rint(v.y);
+    iv along_x = abs(iy) <= 1 ? eye_sign_is(ix, dir.x) : (iv)0, along_y = abs(ix) <= 1 ? eye_sign_is(iy, dir.y) : (iv)0;
+    return select(along_y, along_x, fabs(dir.x) >= fabs(dir.y));
 }
 
-/* From the far root tf of lens *c on the ray (org, dir): while the far point lies inside
+/* From the far root tf of lens c on the ray (org, dir): while the far point f lies inside
  * other lenses, move to the one whose own far root is farthest (G5), on the same unbent
- * ray (G6); each move counts one pass against l. */
-static float eye_inner_pass(const struct eye_optics *o, float3 org, float3 dir, float3 *c, float tf, int *passes)
+ * ray (G6); each move counts one pass against l. A lens contains f when its centre is
+ * within rho (the radius of the lenses' section at f's height: all centres lie at
+ * z = -r) of f horizontally, so the candidates are the lattice offsets from c in the box
+ * that holds every lane's disc (f - c, rho); the lanes are neighbouring rays, so the box
+ * is hardly larger than one disc. */
+static fv eye_inner_pass(const struct eye_optics *o, v3 org, v3 dir, fv *cx, fv *cy, fv tf, iv *passes, iv live)
 {
     const float r = o->r, r2 = r * r;
-    const float2 o0 = eye_origin(o->lattice), e2 = eye_e2(o->lattice);
-    while (*passes < o->max_passes) {
-        float3 f = org + dir * tf;
-        float dz = f.z + r, rho2 = r2 - dz * dz;
-        if (rho2 <= 0.0f) break;
-        float rho = sqrt(rho2), best_t = tf * (1.0f + 1e-6f) + 1e-6f;
-        float3 best = *c;
-        int j0 = (int)ceil((f.y - o0.y - rho) / e2.y), j1 = (int)floor((f.y - o0.y + rho) / e2.y);
-        for (int j = j0; j <= j1; j++) {
-            float x0 = o0.x + e2.x * (float)j, y = o0.y + e2.y * (float)j;
-            int i0 = (int)ceil(f.x - x0 - rho), i1 = (int)floor(f.x - x0 + rho);
-            for (int i = i0; i <= i1; i++) {
-                float3 cn = (float3)(x0 + (float)i, y, -r);
-                float3 q = f - cn;
-                if (dot(q, q) >= r2) continue;
-                float2 dc = cn.xy - c->xy;
-                if (dot(dc, dc) < 1e-4f) continue; /* the current lens itself */
-                if (o->select == EYE_SELECT_THESIS4 && !eye_thesis4(o->lattice, dc, dir.xy)) continue;
-                float t1, t2;
-                if (eye_roots(org, dir, cn, r, &t1, &t2) && t2 > best_t) { best_t = t2; best = cn; }
+    const float2 e2 = eye_e2(o->lattice);
+    iv go = live & (*passes < o->max_passes);
+    while (any(go)) {
+        v3 f = v3_mad(org, tf, dir);
+        fv hx = f.x - *cx, hy = f.y - *cy, dz = f.z + r, rho2 = r2 - dz * dz, rho = sqrt(fmax(rho2, 0.0f));
+        fv qd0 = hx * dir.x + hy * dir.y + dz * dir.z; /* (f - c).dir */
+        float x0 = -eye_max_lane(select((fv)-EYE_BIG, rho - hx, go)), x1 = eye_max_lane(select((fv)-EYE_BIG, hx + rho, go));
+        float y0 = -eye_max_lane(select((fv)-EYE_BIG, rho - hy, go)), y1 = eye_max_lane(select((fv)-EYE_BIG, hy + rho, go));
+        fv best = tf * 1e-6f + 1e-6f, bx = 0.0f, by = 0.0f; /* the far root must gain this much */
+        iv moved = 0;
+        for (int j = (int)ceil(fmax(y0, -2.0f * r) / e2.y); j <= (int)floor(fmin(y1, 2.0f * r) / e2.y); j++) {
+            float y = (float)j * e2.y, xj = (float)j * e2.x;
+            for (int i = (int)ceil(fmax(x0, -2.0f * r) - xj); i <= (int)floor(fmin(x1, 2.0f * r) - xj); i++) {
+                if (i == 0 && j == 0) continue; /* the current lens itself */
+                float2 v = (float2)((float)i + xj, y);
+                fv qx = hx - v.x, qy = hy - v.y, h2 = qx * qx + qy * qy;
+                fv qd = qd0 - (v.x * dir.x + v.y * dir.y);
+                fv t2 = sqrt(fmax(qd * qd + rho2 - h2, 0.0f)) - qd; /* far root, measured from f */
+                iv better = go & (h2 < rho2) & (t2 > best);
+                if (o->select == EYE_SELECT_THESIS4) better &= eye_thesis4(o->lattice, v, dir);
+                best = select(best, t2, better);
+                bx = select(bx, (fv)v.x, better);
+                by = select(by, (fv)v.y, better);
+                moved |= better;
             }
         }
-        if (best_t <= tf * (1.0f + 1e-6f) + 1e-6f) break;
-        *c = best;
-        tf = best_t;
-        (*passes)++;
+        fv nx, ny;
+        eye_nearest(o->lattice, *cx + bx, *cy + by, &nx, &ny); /* snap to the lattice */
+        *cx = select(*cx, nx, moved);
+        *cy = select(*cy, ny, moved);
+        tf = select(tf, tf + best, moved);
+        *passes = select(*passes, *passes + 1, moved);
+        go = moved & (*passes < o->max_passes);
     }
     return tf;
 }
 
 /* ---- the core ---------------------------------------------------------------------- */
 
-/* d: unit view direction (towards the surface, d.z < 0); p: in-cell entry point. */
-static struct eye_hit eye_trace(const struct eye_optics *o, float2 p, float3 d)
+/* Lanes `live` inside their lens (c, r) on the ray (org, dir): internal pass, then refract
+ * out and land, or total internal reflection by the TIR policy (G8). */
+static void eye_exit(const struct eye_optics *o, v3 org, v3 dir, fv cx, fv cy, iv live, struct eye_hit *h)
 {
-    struct eye_hit h = {(float2)(0.0f), (float3)(0.0f, 0.0f, 1.0f), EYE_LANDED, 0, 0};
-    float3 c, org, dir = d;
-    float t;
-    bool in = o->search == EYE_SEARCH_SLICES ? eye_enter_slices(o, p, d, &c, &t) : eye_enter_exact(o, p, d, &c, &t);
-    if (!in) { /* §2.4: no lens down to depth r, the ray goes on unrefracted */
-        h.land = p + d.xy * (o->plane / -d.z);
-        return h;
-    }
-    h.entered = 1;
-    org = (float3)(p, 0.0f) + d * t;
-    float3 nn = (org - c) / o->r; /* eq. 5.28 */
-    h.normal = nn;
-    float eta = 1.0f / o->n, ci = -dot(nn, d);
-    dir = normalize(eta * d + (eta * ci - sqrt(fmax(0.0f, 1.0f - eta * eta * (1.0f - ci * ci)))) * nn);
-    float t1, tf;
-    if (!eye_roots(org, dir, c, o->r, &t1, &tf)) tf = 0.0f;
-    for (int bounce = 0;; bounce++) {
-        tf = eye_inner_pass(o, org, dir, &c, tf, &h.passes);
-        float3 f = org + dir * tf, nf = (f - c) / o->r;
-        float cosi = dot(dir, nf), k = 1.0f - o->n * o->n * (1.0f - cosi * cosi);
-        if (k >= 0.0f) { /* refract out: GLSL refract(dir, -nf, n) */
-            float3 out = o->n * dir - (o->n * cosi - sqrt(k)) * nf;
-            if (out.z >= -1e-6f) { h.status = EYE_MISSED; return h; } /* G9 */
-            h.land = f.xy + out.xy * ((-o->plane - f.z) / out.z);
-            return h;
-        }
+    const float r = o->r, n = o->n;
+    fv t1, tf;
+    iv meets = eye_roots(org, dir, v3_make(cx, cy, (fv)(-r)), r, &t1, &tf);
+    tf = select((fv)0.0f, tf, meets);
+    for (int bounce = 0; any(live); bounce++) {
+        tf = eye_inner_pass(o, org, dir, &cx, &cy, tf, &h->passes, live);
+        v3 c = v3_make(cx, cy, (fv)(-r)), f = v3_mad(org, tf, dir), nf = v3_mul(v3_sub(f, c), (fv)(1.0f / r));
+        fv cosi = v3_dot(dir, nf), k = 1.0f - n * n * (1.0f - cosi * cosi);
+        iv out = live & (k >= 0.0f);
+        /* refract out: GLSL refract(dir, -nf, n) */
+        v3 ro = v3_sub(v3_mul(dir, (fv)n), v3_mul(nf, n * cosi - sqrt(fmax(k, 0.0f))));
+        iv up = ro.z >= -1e-6f, land = out & ~up;
+        fv tl = (-o->plane - f.z) / select((fv)-1.0f, ro.z, land);
+        h->status = select(h->status, (iv)EYE_MISSED, out & up); /* G9 */
+        h->lx = select(h->lx, f.x + ro.x * tl, land);
+        h->ly = select(h->ly, f.y + ro.y * tl, land);
         /* G8: total internal reflection, which the thesis never handled */
-        if (o->tir == EYE_TIR_ABSORB) { h.status = EYE_ABSORBED; return h; }
-        if (o->tir == EYE_TIR_MISS || bounce == EYE_MAX_BOUNCES) { h.status = EYE_MISSED; return h; }
-        dir = normalize(dir - 2.0f * cosi * nf);
-        org = f;
-        if (!eye_roots(org, dir, c, o->r, &t1, &tf)) tf = 0.0f;
+        iv tir = live & ~out;
+        if (o->tir != EYE_TIR_REFLECT || bounce == EYE_MAX_BOUNCES) {
+            h->status = select(h->status, (iv)(o->tir == EYE_TIR_ABSORB ? EYE_ABSORBED : EYE_MISSED), tir);
+            return;
+        }
+        dir = v3_sel(dir, v3_normalize(v3_mad(dir, -2.0f * cosi, nf)), tir);
+        org = v3_sel(org, f, tir);
+        meets = eye_roots(org, dir, c, r, &t1, &tf);
+        tf = select((fv)0.0f, tf, meets);
+        live = tir;
     }
+}
+
+/* d: unit view directions (towards the surface, d.z < 0); (px, py): in-cell entry
+ * points; only the `live` lanes are traced. */
+static struct eye_hit eye_trace(const struct eye_optics *o, fv px, fv py, v3 d, iv live)
+{
+    struct eye_hit h;
+    fv tp = o->plane / -d.z, cx = 0.0f, cy = 0.0f, t = 0.0f;
+    h.lx = px + d.x * tp; /* §2.4: no lens down to depth r, the ray goes on unrefracted */
+    h.ly = py + d.y * tp;
+    h.normal = v3_const(0.0f, 0.0f, 1.0f);
+    h.status = EYE_LANDED;
+    h.entered = 0;
+    h.passes = 0;
+    iv in = o->search == EYE_SEARCH_SLICES ? eye_enter_slices(o, px, py, d, live, &cx, &cy, &t)
+                                           : eye_enter_exact(o, px, py, d, live, &cx, &cy, &t);
+    if (!any(in)) return h;
+    h.entered = in;
+    v3 org = v3_mad(v3_make(px, py, (fv)0.0f), t, d);
+    v3 nn = v3_mul(v3_sub(org, v3_make(cx, cy, (fv)(-o->r))), (fv)(1.0f / o->r)); /* eq. 5.28 */
+    h.normal = v3_sel(h.normal, nn, in);
+    float eta = 1.0f / o->n;
+    fv ci = -v3_dot(nn, d);
+    v3 dir = v3_normalize(v3_mad(v3_mul(d, (fv)eta), eta * ci - sqrt(fmax(0.0f, 1.0f - eta * eta * (1.0f - ci * ci))), nn));
+    eye_exit(o, org, dir, cx, cy, in, &h);
+    return h;
 }
 
 /* ---- pigment and the drivers ------------------------------------------------------- */
 
+struct eye_rgba {
+    fv r, g, b, a;
+};
+
 /* Bilinear, periodic sample of the pigment tile (w x h RGBA floats) at a point in
  * pitches; the tile spans 1 x tile_h pitches with texel centres at (x+1/2)/w. */
-inline float4 eye_pigment(__global const float4 *pig, int w, int h, float tile_h, float2 q)
+static float4 eye_pigment(__global const float4 *pig, int w, int h, float tile_h, float2 q)
 {
     float fx = q.x * (float)w - 0.5f, fy = q.y / tile_h * (float)h - 0.5f;
     float x0 = floor(fx), y0 = floor(fy);
@@ -253,52 +337,106 @@ inline float4 eye_pigment(__global const float4 *pig, int w, int h, float tile_h
     return mix(top, bot, ay);
 }
 
-/* Pigment colour seen along a traced ray; alpha 1 when it reached pigment, 0 when missed. */
-inline float4 eye_shade_hit(const struct eye_hit *h, __global const float4 *pig, int pw, int ph, float tile_h,
-                            float4 dot_col, float4 base_col)
+/* Pigment colour seen along the lanes' rays; alpha 1 where they reached pigment, 0 where
+ * they missed. The tile is read lane by lane (a gather). */
+static struct eye_rgba eye_shade(const struct eye_hit *h, __global const float4 *pig, int pw, int ph, float tile_h,
+                                 float4 dot_col, float4 base_col)
 {
-    if (h->status == EYE_ABSORBED) return (float4)(dot_col.xyz, 1.0f);
-    if (h->status == EYE_MISSED) return (float4)(base_col.xyz, 0.0f);
-    return (float4)(eye_pigment(pig, pw, ph, tile_h, h->land).xyz, 1.0f);
+    float lx[EYE_LANES], ly[EYE_LANES], cr[EYE_LANES], cg[EYE_LANES], cb[EYE_LANES];
+    int st[EYE_LANES];
+    vstore8(h->lx, 0, lx);
+    vstore8(h->ly, 0, ly);
+    vstore8(h->status, 0, st);
+    for (int i = 0; i < EYE_LANES; i++) {
+        float4 c = st[i] == EYE_ABSORBED ? dot_col
+                   : st[i] == EYE_MISSED ? base_col
+                                         : eye_pigment(pig, pw, ph, tile_h, (float2)(lx[i], ly[i]));
+        cr[i] = c.x;
+        cg[i] = c.y;
+        cb[i] = c.z;
+    }
+    struct eye_rgba c = {vload8(0, cr), vload8(0, cg), vload8(0, cb), select((fv)1.0f, (fv)0.0f, h->status == EYE_MISSED)};
+    return c;
 }
+
+/* Writes lane i as out[k0 + i] = (x, y, z, w) for k0 + i < n. */
+static void eye_store(__global float4 *out, int k0, int n, fv x, fv y, fv z, fv w)
+{
+    float a[EYE_LANES], b[EYE_LANES], c[EYE_LANES], e[EYE_LANES];
+    vstore8(x, 0, a);
+    vstore8(y, 0, b);
+    vstore8(z, 0, c);
+    vstore8(w, 0, e);
+    for (int i = 0; i < EYE_LANES && k0 + i < n; i++) out[k0 + i] = (float4)(a[i], b[i], c[i], e[i]);
+}
+
+/* Lanes i of in[k0 + i] (the last element for k0 + i >= n). */
+static void eye_load(__global const float4 *in, int k0, int n, fv *x, fv *y, fv *z)
+{
+    float a[EYE_LANES], b[EYE_LANES], c[EYE_LANES];
+    for (int i = 0; i < EYE_LANES; i++) {
+        float4 v = in[min(k0 + i, n - 1)];
+        a[i] = v.x;
+        b[i] = v.y;
+        c[i] = v.z;
+    }
+    *x = vload8(0, a);
+    *y = vload8(0, b);
+    *z = vload8(0, c);
+}
+
+static iv eye_lane_index(void) { return (int)get_global_id(0) * EYE_LANES + (iv)(0, 1, 2, 3, 4, 5, 6, 7); }
 
 /* Hemi-octahedral map: square coordinates (u,v) in [-1,1]^2 -> unit direction, z >= 0. */
-inline float3 eye_octa_dir(float2 uv)
+static v3 eye_octa_dir(fv u, fv v)
 {
-    float2 p = (float2)(uv.x + uv.y, uv.x - uv.y) * 0.5f;
-    return normalize((float3)(p, 1.0f - fabs(p.x) - fabs(p.y)));
+    fv px = (u + v) * 0.5f, py = (u - v) * 0.5f;
+    return v3_normalize(v3_make(px, py, 1.0f - fabs(px) - fabs(py)));
 }
 
-/* The lens LUT, one work-item per (direction tile, in-cell sample): global size
- * (C*C, D*D). Output: out[tile * C*C + cj*C + ci], the mean over ss x ss sub-rays
- * spread over the sample's footprint in the cell (digest §8.1). */
+/* The lens LUT, 8 samples per work-item over the flat index k = tile * C*C + cj*C + ci
+ * (global size ceil(D*D*C*C / 8)). Output: out[k], the mean over ss x ss sub-rays spread
+ * over the sample's footprint in the cell (digest §8.1). */
 __kernel void eye_lut(__global float4 *out, __global const float4 *pig, int pw, int ph, struct eye_optics o,
                       int cells, int dirs, int ss, float4 dot_col, float4 base_col)
 {
-    int cell = get_global_id(0), tile = get_global_id(1);
-    int ci = cell % cells, cj = cell / cells, ti = tile % dirs, tj = tile / dirs;
-    float3 w = eye_octa_dir((float2)((2 * ti + 1) / (float)dirs - 1.0f, (2 * tj + 1) / (float)dirs - 1.0f));
-    float4 acc = (float4)(0.0f);
+    const int per = cells * cells, total = per * dirs * dirs;
+    iv k = eye_lane_index(), live = k < total;
+    k = min(k, total - 1);
+    iv cell = k % per, tile = k / per;
+    iv ci = cell % cells, cj = cell / cells, ti = tile % dirs, tj = tile / dirs;
+    v3 w = eye_octa_dir(convert_float8(2 * ti + 1) / (float)dirs - 1.0f, convert_float8(2 * tj + 1) / (float)dirs - 1.0f);
+    v3 d = v3_mul(w, (fv)-1.0f);
+    struct eye_rgba acc = {(fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f};
     float inv = 1.0f / (float)(cells * ss);
     for (int sy = 0; sy < ss; sy++)
         for (int sx = 0; sx < ss; sx++) {
-            float2 q = (float2)(((float)(ci * ss + sx) + 0.5f) * inv, ((float)(cj * ss + sy) + 0.5f) * inv * o.tile_h);
-            struct eye_hit h = eye_trace(&o, q, -w);
-            acc += eye_shade_hit(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
+            fv qx = (convert_float8(ci * ss + sx) + 0.5f) * inv, qy = (convert_float8(cj * ss + sy) + 0.5f) * inv * o.tile_h;
+            struct eye_hit h = eye_trace(&o, qx, qy, d, live);
+            struct eye_rgba c = eye_shade(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
+            acc.r += c.r;
+            acc.g += c.g;
+            acc.b += c.b;
+            acc.a += c.a;
         }
-    out[tile * cells * cells + cell] = acc / (float)(ss * ss);
+    float m = 1.0f / (float)(ss * ss);
+    eye_store(out, (int)get_global_id(0) * EYE_LANES, total, acc.r * m, acc.g * m, acc.b * m, acc.a * m);
 }
 
-/* Raw traces for tests and benches: ray k enters at pd[k].xy with direction pd[k+n]...
- * packed as in_p[k] = (p.x, p.y, _, _), in_d[k] = (d, _). out[k] = (land, status, passes),
- * nrm[k] = (entry normal, entered). */
+/* Raw traces for tests and benches, 8 rays per work-item (global size ceil(n / 8)): ray k
+ * enters at in_p[k] = (p.x, p.y, _, _) with direction in_d[k] = (d, _). out[k] = (land,
+ * status, passes), nrm[k] = (entry normal, entered). */
 __kernel void eye_trace_rays(__global const float4 *in_p, __global const float4 *in_d, __global float4 *out,
-                             __global float4 *nrm, struct eye_optics o)
+                             __global float4 *nrm, struct eye_optics o, int n)
 {
-    int k = get_global_id(0);
-    struct eye_hit h = eye_trace(&o, in_p[k].xy, in_d[k].xyz);
-    out[k] = (float4)(h.land, (float)h.status, (float)h.passes);
-    nrm[k] = (float4)(h.normal, (float)h.entered);
+    int k0 = (int)get_global_id(0) * EYE_LANES;
+    fv px, py, pz;
+    v3 d;
+    eye_load(in_p, k0, n, &px, &py, &pz);
+    eye_load(in_d, k0, n, &d.x, &d.y, &d.z);
+    struct eye_hit h = eye_trace(&o, px, py, d, eye_lane_index() < n);
+    eye_store(out, k0, n, h.lx, h.ly, convert_float8(h.status), convert_float8(h.passes));
+    eye_store(nrm, k0, n, h.normal.x, h.normal.y, h.normal.z, convert_float8(h.entered & 1));
 }
 
 /* Shading constants of the bake (eq. 5.31, G15). */
@@ -311,30 +449,46 @@ struct eye_shading {
     int pad0, pad1;
 };
 
-/* The baked view texture (digest §8.2), one work-item per atlas texel. geo holds four
- * float4 per texel: (P, u), (N_face, v), (dP/du, mask), (dP/dv, 0), with u, v the raw
- * OBJ texture coordinates; eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
-__kernel void eye_bake(__global float4 *out, __global const float4 *geo, __global const float4 *pig, int pw, int ph,
+/* The baked view texture (digest §8.2), 8 atlas texels per work-item (global size
+ * n8 / 8). geo holds 16 planes of n8 floats (plane i, texel k at geo[i * n8 + k]):
+ * P, u, N_face, v, dP/du, mask, dP/dv, 0, with u, v the raw OBJ texture coordinates;
+ * eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
+__kernel void eye_bake(__global float4 *out, __global const float *geo, __global const float4 *pig, int pw, int ph,
                        struct eye_optics o, struct eye_shading s, float4 dot_col, float4 base_col)
 {
-    int k = get_global_id(0);
-    float4 g0 = geo[4 * k], g1 = geo[4 * k + 1], g2 = geo[4 * k + 2], g3 = geo[4 * k + 3];
-    if (g2.w == 0.0f) { out[k] = (float4)(0.0f); return; }
-    float3 P = g0.xyz, N = g1.xyz, du = g2.xyz / s.density, dv = g3.xyz / s.density;
-    float lu = length(du), lv = length(dv), pitch = sqrt(lu * lv);
-    float3 T = du / lu, B = dv / lv, V = normalize(P - s.eye.xyz);
-    /* V in cell units of the frame (D_u, D_v, N) (G1, G2: face normal for the lattice) */
-    float3 d = normalize((float3)(dot(V, du) / (lu * lu), dot(V, dv) / (lv * lv), dot(V, N) / pitch));
-    float a = g0.w * s.density, b = g1.w * s.density;
-    float2 q = (float2)(a - floor(a), b - o.tile_h * floor(b / o.tile_h));
-    float4 ct = base_col;
-    float3 nl = N;
-    if (d.z < -1e-4f) {
-        struct eye_hit h = eye_trace(&o, q, d);
-        ct = eye_shade_hit(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
-        if (s.lens_normal && h.entered) nl = normalize(h.normal.x * T + h.normal.y * B + h.normal.z * N);
+    const int n8 = (int)get_global_size(0) * EYE_LANES, k0 = (int)get_global_id(0) * EYE_LANES;
+#define EYE_GEO(i) vload8(0, geo + (i) * n8 + k0)
+    iv covered = EYE_GEO(11) != 0.0f;
+    if (!any(covered)) {
+        eye_store(out, k0, n8, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f);
+        return;
     }
-    float3 L = s.light.xyz, H = normalize(L - V);
-    float diff = fmax(dot(nl, L), 0.0f), spec = pow(fmax(dot(nl, H), 0.0f), s.shininess);
-    out[k] = (float4)(ct.xyz * (s.ka + s.kd * diff) + s.ks * spec, 1.0f); /* eq. 5.31 */
+    const v3 up = v3_const(0.0f, 0.0f, 1.0f), eye = v3_const(s.eye.x, s.eye.y, s.eye.z);
+    v3 P = v3_make(EYE_GEO(0), EYE_GEO(1), EYE_GEO(2)), N = v3_sel(up, v3_make(EYE_GEO(4), EYE_GEO(5), EYE_GEO(6)), covered);
+    v3 du = v3_sel(v3_const(1.0f, 0.0f, 0.0f), v3_mul(v3_make(EYE_GEO(8), EYE_GEO(9), EYE_GEO(10)), (fv)(1.0f / s.density)), covered);
+    v3 dv = v3_sel(v3_const(0.0f, 1.0f, 0.0f), v3_mul(v3_make(EYE_GEO(12), EYE_GEO(13), EYE_GEO(14)), (fv)(1.0f / s.density)), covered);
+    fv a = EYE_GEO(3) * s.density, b = EYE_GEO(7) * s.density;
+#undef EYE_GEO
+    fv lu = sqrt(v3_dot(du, du)), lv = sqrt(v3_dot(dv, dv)), pitch = sqrt(lu * lv);
+    v3 T = v3_mul(du, 1.0f / lu), B = v3_mul(dv, 1.0f / lv), V = v3_normalize(v3_sub(P, eye));
+    /* V in cell units of the frame (D_u, D_v, N) (G1, G2: face normal for the lattice) */
+    v3 d = v3_normalize(v3_make(v3_dot(V, du) / (lu * lu), v3_dot(V, dv) / (lv * lv), v3_dot(V, N) / pitch));
+    fv qx = a - floor(a), qy = b - o.tile_h * floor(b / o.tile_h);
+    iv traced = covered & (d.z < -1e-4f);
+    struct eye_hit h = eye_trace(&o, select((fv)0.0f, qx, traced), select((fv)0.0f, qy, traced),
+                                 v3_sel(v3_const(0.0f, 0.0f, -1.0f), d, traced), traced);
+    struct eye_rgba ct = eye_shade(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
+    v3 nl = N;
+    if (s.lens_normal)
+        nl = v3_sel(N, v3_normalize(v3_mad(v3_mad(v3_mul(T, h.normal.x), h.normal.y, B), h.normal.z, N)), h.entered);
+    const v3 L = v3_const(s.light.x, s.light.y, s.light.z);
+    v3 H = v3_normalize(v3_sub(L, V));
+    /* spec = pow(max(nl.H, 0), shininess) as exp2(shininess log2(.)): PoCL's pow runs lane
+     * by lane, its exp2 and log2 on the vector (1e-30 for 0: its 2^-100s is 0 in float) */
+    fv diff = fmax(v3_dot(nl, L), 0.0f), spec = exp2(s.shininess * log2(fmax(v3_dot(nl, H), 1e-30f)));
+    fv lit = s.ka + s.kd * diff, gloss = s.ks * spec; /* eq. 5.31 */
+    fv cr = select((fv)base_col.x, ct.r, traced), cg = select((fv)base_col.y, ct.g, traced);
+    fv cb = select((fv)base_col.z, ct.b, traced), zero = 0.0f;
+    eye_store(out, k0, n8, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
+              select(zero, cb * lit + gloss, covered), select(zero, (fv)1.0f, covered));
 }

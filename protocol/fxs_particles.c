@@ -9,9 +9,12 @@
  *     each node with c >= 2 points sends how many lie in its lower half, a lone point
  *     sends its remaining bits raw. The set is unordered, so this costs close to the
  *     set's entropy, and the adaptive count models learn the particles' even spacing;
- *   - particles are sent in the tree's depth-first order; each one's flags, T and F are
- *     predicted from the nearest of the 8 particles before it and coded with contexts
- *     (the neighbour's flags and fuel, the particle's own flags, the previous residual);
+ *   - particles are sent in the tree's depth-first order; their flags, T and F in one of
+ *     two modes picked per frame by a static estimate: mode 0 predicts each from the
+ *     nearest of the 8 particles before it and codes the residual with contexts (smooth
+ *     fields); mode 1 codes the values as bit trees in contexts of the neighbours' values
+ *     (the nearest's flags, the nearest same-flags particle's T, own T for F: real flames,
+ *     where burning and cold particles mix and residuals cost more than values);
  *   - one adaptive binary range coder (LZMA's, 12-bit probabilities) for every modelled
  *     decision, and a raw LSB-first bit section for the incompressible bits.
  * Both sides are a few hundred lines of integer code, so the browser decoder
@@ -31,6 +34,7 @@
 #define FXS_PT_ADAPT 5
 #define FXS_PT_TOP (1u << 24)
 #define FXS_PT_NEAR 8           /* neighbours searched for the attribute prediction */
+#define FXS_PT_SAME 16          /* mode 1: neighbours searched for one with the same flags */
 #define FXS_PT_MAXK 24          /* Exp-Golomb classes 0..23 */
 #define FXS_PT_MAXD 72          /* kd-tree depth: bits of x + y + z */
 
@@ -53,6 +57,12 @@ struct fxs_pt_models {
     fxs_pt_prob f[FXS_PT_F_CTX][FXS_PT_IPROBS(FXS_PT_F_U)];
     fxs_pt_prob same[FXS_PT_FL_CTX];
     fxs_pt_prob tree[256];
+    /* attribute mode 1 (direct values, §7.5.4) */
+    fxs_pt_prob vsame[9 * 2];       /* flags differ from the neighbour's, by its flags & 7 (8: none) x its F == 0 */
+    fxs_pt_prob vfl[9][256];        /* flags by the neighbour's flags & 7 (8: none) */
+    fxs_pt_prob vt[8 * 9][256];     /* T by own flags & 7 x the same-flags neighbour's T / 8 (8: none) */
+    fxs_pt_prob vf0[8 * 16 * 2];    /* F = 0 by own flags & 7 x T / 16 x neighbour F == 0 */
+    fxs_pt_prob vf[8 * 8][256];     /* F - 1 by own flags & 7 x T / 8 */
 };
 
 static void fxs_pt_models_init(struct fxs_pt_models *m)
@@ -330,11 +340,38 @@ static inline int fxs_pt_get_int(struct fxs_pt_dec_io *io, fxs_pt_prob *p, int u
     return 0;
 }
 
+/* ---- values as bit trees (attribute mode 1) ----------------------------------------------- */
+
+/* The top min(bits, 8) bits of v, high bit first, with the bit tree p[m] (m = 1, then
+ * 2m + bit); the low bits - 8 bits raw. */
+static inline void fxs_pt_put_tree(struct fxs_pt_enc_io *io, fxs_pt_prob *p, uint32_t v, int bits)
+{
+    int low = bits > 8 ? bits - 8 : 0;
+    uint32_t top = v >> low, m = 1;
+    for (int b = bits - low; b-- > 0;) {
+        uint32_t bit = top >> b & 1u;
+        fxs_pt_rc_bit(&io->rc, p + m, (int)bit);
+        m = 2 * m + bit;
+    }
+    fxs_pt_bits_put(&io->bits, v, low);
+}
+
+static inline int fxs_pt_get_tree(struct fxs_pt_dec_io *io, fxs_pt_prob *p, int bits, uint32_t *v)
+{
+    int low = bits > 8 ? bits - 8 : 0;
+    uint32_t m = 1, end = 1u << (bits - low), r = 0;
+    while (m < end) m = 2 * m + (uint32_t)fxs_pt_rc_get(&io->rc, p + m);
+    if (low && fxs_pt_bits_get(&io->bits, low, &r)) return -1;
+    *v = (m - end) << low | r;
+    return 0;
+}
+
 /* ---- frame description -------------------------------------------------------------- */
 
 struct fxs_pt_frame {
     uint32_t n;
     int pos_bits, temp_bits, fuel_bits;
+    int mode;                /* attribute mode 0 or 1 (§7.5.4) */
     int abits[3];            /* bits of each axis' quantised coordinate */
     float lo[5], hi[5];      /* x, y, z, T, F */
     double step[5];
@@ -399,24 +436,38 @@ static int fxs_pt_bounds(const struct fxs_particles *p, struct fxs_pt_frame *f)
     return 0;
 }
 
-/* Index among the FXS_PT_NEAR particles before j of the one nearest to q (the latest
- * on ties), or -1 for j = 0. */
-static inline int64_t fxs_pt_nearest(const uint32_t *q, uint32_t j)
+/* Keys (squared distance << 5 | k, exact integers: distances < 2^50) of particle j to
+ * j - k for k = 1 ... kmax (those >= 0) into d[k - 1]; returns the index among
+ * j - 1 ... j - FXS_PT_NEAR of the nearest (the latest on ties), or -1 for j = 0. */
+static inline int64_t fxs_pt_near(const uint32_t *q, uint32_t j, uint64_t *d, uint32_t kmax)
 {
-    int64_t best = -1;
-    uint64_t bd = UINT64_MAX;
+    uint64_t best = UINT64_MAX;
     const uint32_t *c = q + 3 * (size_t)j;
-    for (uint32_t k = 1; k <= FXS_PT_NEAR && k <= j; k++) {
+    if (j < kmax) kmax = j;
+    for (uint32_t k = 1; k <= kmax; k++) {
         const uint32_t *o = c - 3 * (size_t)k;
         int64_t dx = (int64_t)c[0] - o[0], dy = (int64_t)c[1] - o[1], dz = (int64_t)c[2] - o[2];
-        uint64_t d = (uint64_t)(dx * dx) + (uint64_t)(dy * dy) + (uint64_t)(dz * dz);
-        if (d < bd) {
-            bd = d;
-            best = (int64_t)(j - k);
-        }
+        d[k - 1] = ((uint64_t)(dx * dx) + (uint64_t)(dy * dy) + (uint64_t)(dz * dz)) << 5 | k;
     }
-    return best;
+    for (uint32_t k = 1; k <= FXS_PT_NEAR && k <= kmax; k++) best = d[k - 1] < best ? d[k - 1] : best;
+    return best == UINT64_MAX ? -1 : (int64_t)j - (int64_t)(best & 31u);
 }
+
+/* Mode 1: the nearest of j - 1 ... j - FXS_PT_SAME with flags v (the latest on ties),
+ * else the latest particle before j with flags v (last[v]), else -1. */
+static inline int64_t fxs_pt_same(const uint8_t *fl, uint32_t j, const uint64_t *d, unsigned v, const int64_t *last)
+{
+    uint64_t best = UINT64_MAX;
+    uint32_t kmax = j < FXS_PT_SAME ? j : FXS_PT_SAME;
+    for (uint32_t k = 1; k <= kmax; k++) {
+        uint64_t key = fl[j - k] == v ? d[k - 1] : UINT64_MAX;
+        best = key < best ? key : best;
+    }
+    return best != UINT64_MAX ? (int64_t)j - (int64_t)(best & 31u) : last[v];
+}
+
+/* Mode 1 context indices. */
+static inline int fxs_pt_top(uint32_t q, int bits, int keep) { return (int)(bits > keep ? q >> (bits - keep) : q); }
 
 /* ---- encoder --------------------------------------------------------------------------- */
 
@@ -558,24 +609,13 @@ static void fxs_pt_enc_node(struct fxs_pt_enc *e, struct fxs_pt_pt *p, struct fx
         for (int a = 0; a < 3; a++) fxs_pt_bits_put(&e->io.bits, p->q[a], f->left[d][a]);
 }
 
-/* Flags, T and F of every particle in tree order. */
-static void fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p, uint32_t *q)
+/* Mode 0: flags, T and F predicted from the nearest recent neighbour nb[j]. */
+static void fxs_pt_enc_attrs0(struct fxs_pt_enc *e, const uint32_t *qt, const uint32_t *qf, const uint8_t *fl,
+                              const int32_t *nbs)
 {
-    const struct fxs_pt_frame *f = &e->f;
-    uint32_t n = f->n, tmax = (1u << f->temp_bits) - 1u, fmax = (1u << f->fuel_bits) - 1u;
-    double ts = f->hi[3] > f->lo[3] ? (double)tmax / ((double)f->hi[3] - (double)f->lo[3]) : 0;
-    double fs = f->hi[4] > f->lo[4] ? (double)fmax / ((double)f->hi[4] - (double)f->lo[4]) : 0;
-    uint32_t *qt = q + 3 * (size_t)n, *qf = qt + n, zt = 0, zf = 0;
-    uint8_t *fl = (uint8_t *)(qf + n);
-    for (uint32_t j = 0; j < n; j++) {
-        uint32_t i = e->pts[j].i;
-        memcpy(q + 3 * (size_t)j, e->pts[j].q, sizeof e->pts[j].q);
-        qt[j] = fxs_pt_quant(p->temp[i], f->lo[3], ts, tmax);
-        qf[j] = fxs_pt_quant(p->fuel[i], f->lo[4], fs, fmax);
-        fl[j] = p->flags[i];
-    }
-    for (uint32_t j = 0; j < n; j++) {
-        int64_t nb = fxs_pt_nearest(q, j);
+    uint32_t zt = 0, zf = 0;
+    for (uint32_t j = 0; j < e->f.n; j++) {
+        int32_t nb = nbs[j];
         uint32_t nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb];
         unsigned nfl = nb < 0 ? 0 : fl[nb], v = fl[j];
         int f0 = nf == 0;
@@ -593,6 +633,100 @@ static void fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p
         fxs_pt_put_int(&e->io, pt, FXS_PT_T_U, zt);
         fxs_pt_put_int(&e->io, pf, FXS_PT_F_U, zf);
     }
+}
+
+/* Mode 1: flags, T and F as values (bit trees) in contexts of the neighbours' values. */
+static void fxs_pt_enc_attrs1(struct fxs_pt_enc *e, const uint32_t *q, const uint32_t *qt, const uint32_t *qf,
+                              const uint8_t *fl)
+{
+    const struct fxs_pt_frame *f = &e->f;
+    int64_t last[256];
+    uint64_t d[FXS_PT_SAME];
+    for (int i = 0; i < 256; i++) last[i] = -1;
+    for (uint32_t j = 0; j < f->n; j++) {
+        int64_t nb = fxs_pt_near(q, j, d, FXS_PT_SAME), sb;
+        unsigned v = fl[j], c = v & 7u;
+        int nf0 = nb < 0 || qf[nb] == 0, tb;
+        unsigned nfl = nb < 0 ? 0 : fl[nb], nc = nb < 0 ? 8 : nfl & 7u;
+        fxs_pt_rc_bit(&e->io.rc, &e->m.vsame[nc * 2 + (unsigned)nf0], v != nfl);
+        if (v != nfl) fxs_pt_put_tree(&e->io, e->m.vfl[nc], v, 8);
+        sb = fxs_pt_same(fl, j, d, v, last);
+        tb = sb < 0 ? 8 : fxs_pt_top(qt[sb], f->temp_bits, 3);
+        fxs_pt_put_tree(&e->io, e->m.vt[c * 9 + (unsigned)tb], qt[j], f->temp_bits);
+        fxs_pt_rc_bit(&e->io.rc, &e->m.vf0[(c * 16 + (unsigned)fxs_pt_top(qt[j], f->temp_bits, 4)) * 2 + (unsigned)nf0],
+                      qf[j] != 0);
+        if (qf[j]) fxs_pt_put_tree(&e->io, e->m.vf[c * 8 + (unsigned)fxs_pt_top(qt[j], f->temp_bits, 3)], qf[j] - 1, f->fuel_bits);
+        last[v] = j;
+    }
+}
+
+/* Static estimate (bits) of the T and F residuals of mode 0 against their values by flags
+ * in mode 1; returns the mode to use. */
+static int fxs_pt_choose(const struct fxs_pt_frame *f, const uint32_t *qt, const uint32_t *qf, const uint8_t *fl,
+                         const int32_t *nbs)
+{
+    enum { C = 18 };
+    uint32_t n = f->n, rc[2][C] = { { 0 } }, *h = calloc(8 * 256 * 2 + 8 * 2, sizeof *h);
+    double res = 0, dir = 0;
+    int low = f->temp_bits > 8 ? f->temp_bits - 8 : 0, lowf = f->fuel_bits > 8 ? f->fuel_bits - 8 : 0;
+    if (!h) return 0;
+    for (uint32_t j = 0; j < n; j++) {
+        int32_t nb = nbs[j];
+        uint32_t zt = fxs_pt_zigzag((int32_t)qt[j] - (int32_t)(nb < 0 ? 0 : qt[nb]));
+        uint32_t zf = fxs_pt_zigzag((int32_t)qf[j] - (int32_t)(nb < 0 ? 0 : qf[nb]));
+        int ct = zt ? 32 - __builtin_clz(zt) : 0, cf = zf ? 32 - __builtin_clz(zf) : 0;
+        rc[0][ct]++, rc[1][cf]++;
+        res += (ct > 1 ? ct - 1 : 0) + (cf > 1 ? cf - 1 : 0);
+        unsigned c = fl[j] & 7u;
+        h[c * 256 + (qt[j] >> low)]++;
+        h[2048 + 16 + c * 256 + (qf[j] ? (qf[j] - 1) >> lowf : 0)] += qf[j] != 0;
+        h[2048 + c * 2 + (qf[j] != 0)]++;
+    }
+    for (int a = 0; a < 2; a++)
+        for (int k = 0; k < C; k++)
+            if (rc[a][k]) res += rc[a][k] * log2((double)n / rc[a][k]);
+    dir = (double)n * (low + lowf);
+    for (int g = 0; g < 2; g++) /* T by flags, F - 1 by flags */
+        for (unsigned c = 0; c < 8; c++) {
+            const uint32_t *hh = h + (g ? 2048 + 16 : 0) + c * 256;
+            uint32_t tot = 0;
+            for (int k = 0; k < 256; k++) tot += hh[k];
+            for (int k = 0; k < 256; k++)
+                if (hh[k]) dir += hh[k] * log2((double)tot / hh[k]) + 6; /* + learning */
+        }
+    for (unsigned c = 0; c < 8; c++) { /* F = 0 by flags */
+        uint32_t a = h[2048 + 2 * c], b = h[2048 + 2 * c + 1];
+        if (a && b) dir += a * log2((double)(a + b) / a) + b * log2((double)(a + b) / b);
+    }
+    free(h);
+    return dir < res;
+}
+
+/* Flags, T and F of every particle in tree order, in the mode the estimate picks. */
+static int fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p, uint32_t *q)
+{
+    const struct fxs_pt_frame *f = &e->f;
+    uint32_t n = f->n, tmax = (1u << f->temp_bits) - 1u, fmax = (1u << f->fuel_bits) - 1u;
+    double ts = f->hi[3] > f->lo[3] ? (double)tmax / ((double)f->hi[3] - (double)f->lo[3]) : 0;
+    double fs = f->hi[4] > f->lo[4] ? (double)fmax / ((double)f->hi[4] - (double)f->lo[4]) : 0;
+    uint32_t *qt = q + 3 * (size_t)n, *qf = qt + n;
+    uint8_t *fl = (uint8_t *)(qf + n);
+    int32_t *nbs = malloc((size_t)n * sizeof *nbs);
+    uint64_t d[FXS_PT_SAME];
+    if (!nbs) return -1;
+    for (uint32_t j = 0; j < n; j++) {
+        uint32_t i = e->pts[j].i;
+        memcpy(q + 3 * (size_t)j, e->pts[j].q, sizeof e->pts[j].q);
+        qt[j] = fxs_pt_quant(p->temp[i], f->lo[3], ts, tmax);
+        qf[j] = fxs_pt_quant(p->fuel[i], f->lo[4], fs, fmax);
+        fl[j] = p->flags[i];
+    }
+    for (uint32_t j = 0; j < n; j++) nbs[j] = (int32_t)fxs_pt_near(q, j, d, FXS_PT_NEAR);
+    e->f.mode = fxs_pt_choose(f, qt, qf, fl, nbs);
+    if (e->f.mode) fxs_pt_enc_attrs1(e, q, qt, qf, fl);
+    else fxs_pt_enc_attrs0(e, qt, qf, fl, nbs);
+    free(nbs);
+    return 0;
 }
 
 /* Quantises positions into e->pts and sets the axis bits. */
@@ -621,6 +755,7 @@ static void fxs_pt_header(const struct fxs_pt_frame *f, uint8_t *out, uint32_t r
     out[6] = (uint8_t)f->temp_bits;
     out[7] = (uint8_t)f->fuel_bits;
     for (int a = 0; a < 3; a++) out[8 + a] = (uint8_t)f->abits[a];
+    out[11] = (uint8_t)f->mode;
     fxs_pt_put32(out + 12, f->n);
     for (int c = 0; c < 3; c++) {
         fxs_pt_putf(out + 16 + 4 * c, f->lo[c]);
@@ -677,7 +812,7 @@ static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, u
             fxs_pt_enc_node(e, e->pts, tmp, n, 0);
             free(tmp);
         }
-        fxs_pt_enc_attrs(e, p, q);
+        if (fxs_pt_enc_attrs(e, p, q)) goto done;
         fxs_pt_rc_flush(&e->io.rc);
         fxs_pt_bits_flush(&e->io.bits);
         if (e->io.rc.b.oom || e->io.bits.b.oom) goto done;
@@ -762,13 +897,23 @@ static int fxs_pt_dec_node(struct fxs_pt_dec *d, uint32_t c, int depth, uint32_t
     return 0;
 }
 
-static int fxs_pt_dec_attrs(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
+/* float32(lo + q * step) of every value of particle j. */
+static inline void fxs_pt_dec_out(const struct fxs_pt_frame *f, struct fxs_particles *p, const uint32_t *q, uint32_t j,
+                                  uint32_t t, uint32_t fu)
+{
+    for (int a = 0; a < 3; a++) p->xyz[3 * j + a] = (float)(f->lo[a] + q[3 * j + a] * f->step[a]);
+    p->temp[j] = (float)(f->lo[3] + t * f->step[3]);
+    p->fuel[j] = (float)(f->lo[4] + fu * f->step[4]);
+}
+
+static int fxs_pt_dec_attrs0(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
 {
     const struct fxs_pt_frame *f = &d->f;
     const uint32_t *q = d->q;
     uint32_t zt = 0, zf = 0;
+    uint64_t dist[FXS_PT_SAME];
     for (uint32_t j = 0; j < f->n; j++) {
-        int64_t nb = fxs_pt_nearest(q, j);
+        int64_t nb = fxs_pt_near(q, j, dist, FXS_PT_NEAR);
         uint32_t nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb];
         unsigned nfl = nb < 0 ? 0 : p->flags[nb], v = nfl;
         int f0 = nf == 0;
@@ -788,9 +933,45 @@ static int fxs_pt_dec_attrs(struct fxs_pt_dec *d, struct fxs_particles *p, uint3
         qt[j] = (uint32_t)t;
         qf[j] = (uint32_t)fu;
         p->flags[j] = (uint8_t)v;
-        for (int a = 0; a < 3; a++) p->xyz[3 * j + a] = (float)(f->lo[a] + q[3 * j + a] * f->step[a]);
-        p->temp[j] = (float)(f->lo[3] + qt[j] * f->step[3]);
-        p->fuel[j] = (float)(f->lo[4] + qf[j] * f->step[4]);
+        fxs_pt_dec_out(f, p, q, j, qt[j], qf[j]);
+    }
+    return 0;
+}
+
+static int fxs_pt_dec_attrs1(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
+{
+    const struct fxs_pt_frame *f = &d->f;
+    const uint32_t *q = d->q;
+    uint8_t *fl = p->flags;
+    int64_t last[256];
+    uint64_t dist[FXS_PT_SAME];
+    for (int i = 0; i < 256; i++) last[i] = -1;
+    for (uint32_t j = 0; j < f->n; j++) {
+        int64_t nb = fxs_pt_near(q, j, dist, FXS_PT_SAME), sb;
+        uint32_t v, t, fu = 0;
+        unsigned c;
+        int nf0 = nb < 0 || qf[nb] == 0, tb;
+        unsigned nfl = nb < 0 ? 0 : fl[nb], nc = nb < 0 ? 8 : nfl & 7u;
+        v = nfl;
+        if (fxs_pt_rc_get(&d->io.rc, &d->m.vsame[nc * 2 + (unsigned)nf0])) {
+            if (fxs_pt_get_tree(&d->io, d->m.vfl[nc], 8, &v)) return -1;
+            if (v == nfl) return -1;
+        }
+        c = v & 7u;
+        fl[j] = (uint8_t)v;
+        sb = fxs_pt_same(fl, j, dist, v, last);
+        tb = sb < 0 ? 8 : fxs_pt_top(qt[sb], f->temp_bits, 3);
+        if (fxs_pt_get_tree(&d->io, d->m.vt[c * 9 + (unsigned)tb], f->temp_bits, &t)) return -1;
+        if (fxs_pt_rc_get(&d->io.rc, &d->m.vf0[(c * 16 + (unsigned)fxs_pt_top(t, f->temp_bits, 4)) * 2 + (unsigned)nf0])) {
+            if (fxs_pt_get_tree(&d->io, d->m.vf[c * 8 + (unsigned)fxs_pt_top(t, f->temp_bits, 3)], f->fuel_bits, &fu))
+                return -1;
+            if (++fu >> f->fuel_bits) return -1;
+        }
+        if (d->io.rc.bad) return -1;
+        qt[j] = t;
+        qf[j] = fu;
+        last[v] = j;
+        fxs_pt_dec_out(f, p, q, j, t, fu);
     }
     return 0;
 }
@@ -803,6 +984,7 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     f->temp_bits = buf[6];
     f->fuel_bits = buf[7];
     for (int a = 0; a < 3; a++) f->abits[a] = buf[8 + a];
+    f->mode = buf[11];
     f->n = fxs_pt_get32(buf + 12);
     for (int c = 0; c < 3; c++) {
         f->lo[c] = fxs_pt_getf(buf + 16 + 4 * c);
@@ -814,7 +996,7 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     f->hi[4] = fxs_pt_getf(buf + 52);
     *rl = fxs_pt_get32(buf + 56);
     *bl = fxs_pt_get32(buf + 60);
-    return buf[11] ? -3 : 0;
+    return buf[11] > 1 ? -3 : 0;
 }
 
 static const char *fxs_pt_check_frame(const struct fxs_pt_frame *f)
@@ -861,7 +1043,7 @@ static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, siz
     if (!(qa = malloc((size_t)d->f.n * 5 * sizeof *qa))) return "out of memory";
     d->q = qa;
     if (fxs_pt_dec_node(d, d->f.n, 0, 0, 0, 0) || d->out != d->f.n ||
-        fxs_pt_dec_attrs(d, p, qa + 3 * (size_t)d->f.n, qa + 4 * (size_t)d->f.n))
+        (d->f.mode ? fxs_pt_dec_attrs1 : fxs_pt_dec_attrs0)(d, p, qa + 3 * (size_t)d->f.n, qa + 4 * (size_t)d->f.n))
         why = "corrupt particle data";
     else if (d->io.rc.bad || d->io.rc.p != d->io.rc.end)
         why = "corrupt particle data (range coder section not consumed exactly)";
@@ -884,7 +1066,7 @@ int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p
     r = fxs_pt_parse_header(buf, len, &d->f, &rl, &bl);
     why = r == -1   ? "not a codec 2 payload (short or bad magic)"
           : r == -2 ? "unsupported version"
-          : r == -3 ? "reserved byte not 0"
+          : r == -3 ? "unknown attribute mode"
                     : NULL;
     if (!why) why = fxs_pt_check_frame(&d->f);
     if (!why && (uint64_t)FXS_PARTICLES_HEADER_BYTES + rl + bl != len) why = "section sizes do not match the payload length";

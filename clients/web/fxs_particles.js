@@ -23,7 +23,7 @@ const PROB_BITS = 12;
 const PROB_INIT = 1 << (PROB_BITS - 1);
 const ADAPT = 5;
 const TOP = 1 << 24;
-const NEAR = 8;
+const NEAR = 8, SAME = 16;
 const MAXK = 24;
 const CNT_U = 3, T_U = 2, F_U = 2;
 const IPROBS = (u) => u + 2 * MAXK;
@@ -75,9 +75,9 @@ function parsePayloadHeader(b) {
   if (b.length < HEADER_BYTES || b[0] !== 0x46 || b[1] !== 0x58 || b[2] !== 0x50 || b[3] !== 0x32)
     fail('not a codec 2 payload (short or bad magic)');
   if (b[4] !== 2) fail('unsupported version');
-  if (b[11] !== 0) fail('reserved byte not 0');
+  if (b[11] > 1) fail('unknown attribute mode');
   const v = new DataView(b.buffer, b.byteOffset, b.byteLength);
-  const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], abits: [b[8], b[9], b[10]], n: v.getUint32(12, true) };
+  const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], abits: [b[8], b[9], b[10]], mode: b[11], n: v.getUint32(12, true) };
   f.lo = [v.getFloat32(16, true), v.getFloat32(20, true), v.getFloat32(24, true), v.getFloat32(40, true), v.getFloat32(48, true)];
   f.hi = [v.getFloat32(28, true), v.getFloat32(32, true), v.getFloat32(36, true), v.getFloat32(44, true), v.getFloat32(52, true)];
   f.rcBytes = v.getUint32(56, true);
@@ -176,42 +176,61 @@ function schedule(abits) {
   return { axis, left, depth: axis.length };
 }
 
+// The position tree, depth first without recursion: the upper child of a split waits on
+// an explicit stack (at most one entry per depth) while the lower one is decoded.
 function decodeTree(f, rd, q) {
   const { axis, left, depth } = schedule(f.abits);
   const cnt = new Uint16Array(14 * 3 * IPROBS(CNT_U)).fill(PROB_INIT);
-  let out = 0;
-  const node = (c, d, bx, by, bz) => {
-    const base = [bx, by, bz];
+  const CP = IPROBS(CNT_U);
+  const bitOf = new Float64Array(depth), lx = new Int32Array(depth + 1), ly = new Int32Array(depth + 1), lz = new Int32Array(depth + 1);
+  for (let d = 0; d < depth; d++) bitOf[d] = 2 ** (left[d][axis[d]] - 1);
+  for (let d = 0; d <= depth; d++) { lx[d] = left[d][0]; ly[d] = left[d][1]; lz[d] = left[d][2]; }
+  const ax = Int32Array.from(axis);
+  const sc = new Float64Array(depth + 1), sd = new Int32Array(depth + 1);
+  const sx = new Float64Array(depth + 1), sy = new Float64Array(depth + 1), sz = new Float64Array(depth + 1);
+  let sp = 0, out = 0, c = f.n, d = 0, bx = 0, by = 0, bz = 0;
+  for (;;) {
     while (c >= 2 && d < depth) {
-      const a = axis[d], bit = 2 ** (left[d][a] - 1);
-      const lo = (c >>> 1) + unzigzag(rd.int(cnt, (cclass(c) * 3 + a) * IPROBS(CNT_U), CNT_U));
+      const a = ax[d], bit = bitOf[d];
+      const z = rd.int(cnt, (cclass(c) * 3 + a) * CP, CNT_U);
+      const lo = (c - (c % 2)) / 2 + (z % 2 ? -(z + 1) / 2 : z / 2);
       if (lo < 0 || lo > c) corrupt();
       d++;
       if (lo && lo < c) {
-        node(lo, d, base[0], base[1], base[2]);
-        c -= lo;
-        base[a] += bit;
+        sc[sp] = c - lo; sd[sp] = d;
+        sx[sp] = a === 0 ? bx + bit : bx; sy[sp] = a === 1 ? by + bit : by; sz[sp] = a === 2 ? bz + bit : bz;
+        sp++;
+        c = lo;
       } else if (!lo) {
-        base[a] += bit;
+        if (a === 0) bx += bit; else if (a === 1) by += bit; else bz += bit;
       }
     }
-    if (c === 1) for (let a = 0; a < 3; a++) base[a] += rd.rawBits(left[d][a]);
-    for (let k = 0; k < c; k++, out++) {
-      q[3 * out] = base[0]; q[3 * out + 1] = base[1]; q[3 * out + 2] = base[2];
-    }
-  };
-  node(f.n, 0, 0, 0, 0);
+    if (c === 1) { bx += rd.rawBits(lx[d]); by += rd.rawBits(ly[d]); bz += rd.rawBits(lz[d]); }
+    if (out + c > f.n) corrupt();
+    for (let k = 0; k < c; k++, out++) { q[3 * out] = bx; q[3 * out + 1] = by; q[3 * out + 2] = bz; }
+    if (sp === 0) break;
+    sp--;
+    c = sc[sp]; d = sd[sp]; bx = sx[sp]; by = sy[sp]; bz = sz[sp];
+  }
   if (out !== f.n) corrupt();
 }
 
-function decodeAttrs(f, rd, q, out) {
+function outputs(f, out) {
+  const r = Math.max(f.hi[0] - f.lo[0], f.hi[1] - f.lo[1], f.hi[2] - f.lo[2], 0);
+  return {
+    sp: r / (2 ** f.posBits - 1),
+    st: (f.hi[3] - f.lo[3]) / (2 ** f.tempBits - 1),
+    sf: (f.hi[4] - f.lo[4]) / (2 ** f.fuelBits - 1),
+  };
+}
+
+// Attribute mode 0: flags, T and F predicted from the nearest of the 8 particles before.
+function decodeAttrs0(f, rd, q, out) {
   const n = f.n, TP = IPROBS(T_U), FP = IPROBS(F_U);
   const pt = new Uint16Array(7 * 8 * 2 * TP).fill(PROB_INIT), pf = new Uint16Array(7 * 2 * 2 * FP).fill(PROB_INIT);
   const same = new Uint16Array(16).fill(PROB_INIT), tree = new Uint16Array(256).fill(PROB_INIT);
-  const qt = new Uint32Array(n), qf = new Uint32Array(n);
-  const r = Math.max(f.hi[0] - f.lo[0], f.hi[1] - f.lo[1], f.hi[2] - f.lo[2], 0);
-  const sp = r / (2 ** f.posBits - 1);
-  const st = (f.hi[3] - f.lo[3]) / (2 ** f.tempBits - 1), sf = (f.hi[4] - f.lo[4]) / (2 ** f.fuelBits - 1);
+  const qt = new Int32Array(n), qf = new Int32Array(n);
+  const { sp, st, sf } = outputs(f, out);
   const tlim = 2 ** f.tempBits, flim = 2 ** f.fuelBits;
   const [lx, ly, lz, lt, lf] = f.lo;
   const { xyz, temp, fuel, flags } = out;
@@ -248,6 +267,66 @@ function decodeAttrs(f, rd, q, out) {
   }
 }
 
+// The top min(bits, 8) bits with the bit tree p[o + m], then the low bits - 8 raw.
+function tree(rd, p, o, bits) {
+  const low = bits > 8 ? bits - 8 : 0, end = 1 << (bits - low);
+  let m = 1;
+  while (m < end) m = 2 * m + rd.bit(p, o + m);
+  m -= end;
+  return low ? m * (1 << low) + rd.raw(low) : m;
+}
+
+const topOf = (v, bits, keep) => (bits > keep ? v >>> (bits - keep) : v);
+
+// Attribute mode 1: flags, T and F as values in contexts of the neighbours' values.
+function decodeAttrs1(f, rd, q, out) {
+  const n = f.n, tb = f.tempBits, fb = f.fuelBits;
+  const vsame = new Uint16Array(18).fill(PROB_INIT), vfl = new Uint16Array(9 * 256).fill(PROB_INIT);
+  const vt = new Uint16Array(72 * 256).fill(PROB_INIT), vf0 = new Uint16Array(256).fill(PROB_INIT);
+  const vf = new Uint16Array(64 * 256).fill(PROB_INIT);
+  const qt = new Int32Array(n), qf = new Int32Array(n), last = new Int32Array(256).fill(-1);
+  const dist = new Float64Array(SAME);
+  const { sp, st, sf } = outputs(f, out);
+  const flim = 2 ** fb;
+  const [lx, ly, lz, lt, lf] = f.lo;
+  const { xyz, temp, fuel, flags } = out;
+  for (let j = 0; j < n; j++) {
+    const cx = q[3 * j], cy = q[3 * j + 1], cz = q[3 * j + 2], kmax = j < SAME ? j : SAME;
+    let nb = -1, bd = Infinity;
+    for (let k = 1; k <= kmax; k++) {
+      const o = 3 * (j - k), dx = cx - q[o], dy = cy - q[o + 1], dz = cz - q[o + 2];
+      const dd = dx * dx + dy * dy + dz * dz;
+      dist[k - 1] = dd;
+      if (k <= NEAR && dd < bd) { bd = dd; nb = j - k; }
+    }
+    const nfl = nb < 0 ? 0 : flags[nb], nc = nb < 0 ? 8 : nfl & 7, nf0 = nb < 0 || qf[nb] === 0 ? 1 : 0;
+    let v = nfl;
+    if (rd.bit(vsame, nc * 2 + nf0)) {
+      v = tree(rd, vfl, nc * 256, 8);
+      if (v === nfl) corrupt();
+    }
+    const c = v & 7;
+    flags[j] = v;
+    let sb = -1;
+    bd = Infinity;
+    for (let k = 1; k <= kmax; k++) if (flags[j - k] === v && dist[k - 1] < bd) { bd = dist[k - 1]; sb = j - k; }
+    if (sb < 0) sb = last[v];
+    const tctx = sb < 0 ? 8 : topOf(qt[sb], tb, 3);
+    const t = tree(rd, vt, (c * 9 + tctx) * 256, tb);
+    let fu = 0;
+    if (rd.bit(vf0, (c * 16 + topOf(t, tb, 4)) * 2 + nf0)) {
+      fu = tree(rd, vf, (c * 8 + topOf(t, tb, 3)) * 256, fb) + 1;
+      if (fu >= flim) corrupt();
+    }
+    qt[j] = t; qf[j] = fu; last[v] = j;
+    xyz[3 * j] = lx + cx * sp;
+    xyz[3 * j + 1] = ly + cy * sp;
+    xyz[3 * j + 2] = lz + cz * sp;
+    temp[j] = lt + t * st;
+    fuel[j] = lf + fu * sf;
+  }
+}
+
 /**
  * Decodes a codec 2 payload (the bytes after the frame header).
  * Returns {n, xyz: Float32Array(3n), temp: Float32Array(n), fuel: Float32Array(n), flags: Uint8Array(n)}.
@@ -266,7 +345,7 @@ export function decode(buf) {
   const rd = new Reader(b, HEADER_BYTES, rend, rend + f.bitsBytes);
   const q = new Float64Array(3 * f.n);
   decodeTree(f, rd, q);
-  decodeAttrs(f, rd, q, out);
+  (f.mode ? decodeAttrs1 : decodeAttrs0)(f, rd, q, out);
   if (rd.rp !== rd.rend) fail('corrupt particle data (range coder section not consumed exactly)');
   if (rd.bp !== rd.bend || rd.acc !== 0) fail('corrupt particle data (raw bits not consumed exactly)');
   return out;

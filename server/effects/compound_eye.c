@@ -84,8 +84,8 @@ const struct param_def compound_eye_params[] = {
     {.name = "lut_dirs", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
      .doc = EYE_LUT_DOC("D: direction tiles per axis (hemi-octahedral map)")},
     {.name = "lut_supersample", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
-     .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1 keeps a table "
-                        "change near 250 ms on 2 CPU cores; 2 is 4x the rays)")},
+     .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1: a table "
+                        "change takes about 90 ms on 2 CPU cores; 2 is 4x the rays)")},
     EYE_COEF("ka", "0.2", "ambient coefficient a of eq. 5.31 (client uniform in mode lut)"),
     EYE_COEF("kd", "0.8", "diffuse coefficient d of eq. 5.31"),
     EYE_COEF("ks", "0.3", "specular coefficient s of eq. 5.31"),
@@ -251,13 +251,16 @@ static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
-/* Runs kernel k over a 1-D or 2-D range and reads `bytes` of out back into host. */
-static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, int dims, const size_t *global, cl_mem out,
+/* Work-items for n rays: each traces EYE_LANES of them (kernels/compound_eye.cl). */
+static size_t eye_groups(size_t n) { return (n + EYE_LANES - 1) / EYE_LANES; }
+
+/* Runs kernel k over a 1-D range and reads `bytes` of out back into host. */
+static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, const size_t *global, cl_mem out,
                    size_t bytes, void *host, struct fx_err *err)
 {
     cl_event ev;
     cl_command_queue q = ocl_queue(ce->ocl);
-    cl_int rc = clEnqueueNDRangeKernel(q, k, (cl_uint)dims, NULL, global, NULL, 0, NULL, &ev);
+    cl_int rc = clEnqueueNDRangeKernel(q, k, 1, NULL, global, NULL, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
     rc = clEnqueueReadBuffer(q, out, CL_TRUE, 0, bytes, host, 0, NULL, NULL);
     if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
@@ -293,8 +296,8 @@ static int eye_lut_samples(struct compound_eye *ce, int cells, int dirs, int ss,
     rc |= clSetKernelArg(k, i++, sizeof dot, &dot);
     rc |= clSetKernelArg(k, i++, sizeof base, &base);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(eye_lut) failed");
-    size_t global[2] = {(size_t)cells * cells, (size_t)dirs * dirs};
-    return eye_run(ce, k, "eye_lut", 2, global, ce->d_lut, bytes, ce->samples, err);
+    size_t global = eye_groups(n);
+    return eye_run(ce, k, "eye_lut", &global, ce->d_lut, bytes, ce->samples, err);
 }
 
 int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, struct fx_err *err)
@@ -324,25 +327,37 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 
 /* ---- mode bake --------------------------------------------------------------------- */
 
+/* The bake kernel reads the atlas as 16 planes of n8 floats (texels rounded up to whole
+ * work-items, the padding uncovered), so 8 texels' field is one vector load. */
+static void eye_geo_planes(const float *geo, size_t texels, size_t n8, float *planes)
+{
+    memset(planes, 0, n8 * 16 * sizeof(float));
+    for (size_t k = 0; k < texels; k++)
+        for (int i = 0; i < 16; i++) planes[i * n8 + k] = geo[16 * k + i];
+}
+
 static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err *err)
 {
     struct eye_mesh mesh;
     ce->size = (int)params_num(p, "bake_size");
-    size_t texels = (size_t)ce->size * ce->size;
+    size_t texels = (size_t)ce->size * ce->size, n8 = eye_groups(texels) * EYE_LANES;
     if (eye_model_load(params_str(p, "model"), &mesh, err)) return -1;
-    float *geo = malloc(texels * 16 * sizeof(float));
+    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(n8 * 16 * sizeof(float));
     ce->rgba = malloc(texels * 4 * sizeof(float));
-    if (!geo || !ce->rgba) {
+    if (!geo || !planes || !ce->rgba) {
         free(geo);
+        free(planes);
         eye_mesh_free(&mesh);
         return fx_fail(err, "internal", "", "out of memory for a %d^2 bake", ce->size);
     }
     eye_model_atlas(&mesh, ce->size, geo);
     eye_mesh_free(&mesh);
-    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, texels * 16 * sizeof(float), geo, err);
+    eye_geo_planes(geo, texels, n8, planes);
     free(geo);
+    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n8 * 16 * sizeof(float), planes, err);
+    free(planes);
     if (!ce->d_geo) return -1;
-    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, texels * 4 * sizeof(float), NULL, err);
+    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, n8 * 4 * sizeof(float), NULL, err);
     return ce->d_out ? 0 : -1;
 }
 
@@ -379,8 +394,8 @@ int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
     rc |= clSetKernelArg(k, i++, sizeof dot, &dot);
     rc |= clSetKernelArg(k, i++, sizeof base, &base);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(eye_bake) failed");
-    size_t global = (size_t)ce->size * ce->size;
-    return eye_run(ce, k, "eye_bake", 1, &global, ce->d_out, global * 4 * sizeof(float), rgba, err);
+    size_t texels = (size_t)ce->size * ce->size, global = eye_groups(texels);
+    return eye_run(ce, k, "eye_bake", &global, ce->d_out, texels * 4 * sizeof(float), rgba, err);
 }
 
 /* ---- life cycle -------------------------------------------------------------------- */
@@ -560,7 +575,8 @@ int eye_trace_rays(struct ocl *ocl, const struct eye_optics *o, int n, const flo
     if (rc == CL_SUCCESS) m[3] = clCreateBuffer(ctx, CL_MEM_WRITE_ONLY, bytes, NULL, &rc);
     for (int i = 0; i < 4 && rc == CL_SUCCESS; i++) rc = clSetKernelArg(k, (cl_uint)i, sizeof(cl_mem), &m[i]);
     if (rc == CL_SUCCESS) rc = clSetKernelArg(k, 4, sizeof *o, o);
-    size_t global = (size_t)n;
+    if (rc == CL_SUCCESS) rc = clSetKernelArg(k, 5, sizeof n, &n);
+    size_t global = eye_groups((size_t)n);
     cl_command_queue q = ocl_queue(ocl);
     if (rc == CL_SUCCESS) rc = clEnqueueNDRangeKernel(q, k, 1, NULL, &global, NULL, 0, NULL, NULL);
     if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, m[2], CL_TRUE, 0, bytes, res, 0, NULL, NULL);

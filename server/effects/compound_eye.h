@@ -33,6 +33,7 @@ struct eye_optics {
 };
 
 #define EYE_SQRT3 1.7320508075688772
+#define EYE_LANES 8 /* rays per work-item in every kernel (float8 lanes) */
 
 extern const struct param_def compound_eye_params[];
 extern const struct effect_ops compound_eye_effect;

@@ -79,18 +79,21 @@ int eye_lut_atlas_width(int cells, int dirs) { return dirs * (cells + 2 * EYE_LU
 
 /* Tile (ti, tj) occupies texels [ti*(C+2), (ti+1)*(C+2)) in x (likewise y); its gutter
  * repeats the opposite edge of the cell (the pattern is periodic), so bilinear filtering
- * inside a tile never reads a neighbouring direction. */
+ * inside a tile never reads a neighbouring direction. Written a tile row at a time. */
 void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
 {
     const int C = t->cells, T = C + 2 * EYE_LUT_GUTTER, W = eye_lut_atlas_width(C, t->dirs);
-    for (int y = 0; y < W; y++)
-        for (int x = 0; x < W; x++) {
-            int tile = (y / T) * t->dirs + x / T;
-            int ci = (x % T - EYE_LUT_GUTTER + C) % C, cj = (y % T - EYE_LUT_GUTTER + C) % C;
-            const float *s = t->samples + 4 * ((size_t)tile * C * C + (size_t)cj * C + ci);
-            uint8_t *px = atlas + 4 * ((size_t)y * W + x);
-            for (int k = 0; k < 4; k++) px[k] = eye_u8(s[k]);
+    for (int y = 0; y < W; y++) {
+        int tj = y / T, cj = (y % T - EYE_LUT_GUTTER + C) % C;
+        for (int ti = 0; ti < t->dirs; ti++) {
+            const float *row = t->samples + 4 * ((size_t)(tj * t->dirs + ti) * C * C + (size_t)cj * C);
+            uint8_t *px = atlas + 4 * ((size_t)y * W + (size_t)ti * T);
+            for (int x = 0; x < T; x++) {
+                const float *s = row + 4 * ((x - EYE_LUT_GUTTER + C) % C);
+                for (int k = 0; k < 4; k++) px[4 * x + k] = eye_u8(s[k]);
+            }
         }
+    }
 }
 
 void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)

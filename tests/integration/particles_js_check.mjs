@@ -91,6 +91,18 @@ for (const name of names) {
     return null;
   });
 }
+check('unknown attribute mode rejected', () => {
+  const bin = new Uint8Array(readFileSync(join(dir, 'real_flame600.bin')));
+  if (bin[11] !== 1) return `real_flame600 uses attribute mode ${bin[11]}, expected 1`;
+  const bad = bin.slice();
+  bad[11] = 2;
+  try {
+    decode(bad);
+    return 'accepted';
+  } catch (e) {
+    return e.message.startsWith('particles: ') ? null : e.message;
+  }
+});
 check('codec 1 payload rejected', () => {
   const bin = new Uint8Array(readFileSync(join(dir, 'flame64.bin')));
   const old = bin.slice();

@@ -2,7 +2,8 @@
  * server/effects/compound_eye.h) against the double-precision reference (tests/ref/eye_ref),
  * plus the digest §6 properties that concern the device code: no NaN or infinity over the
  * whole hemisphere of view directions (every TIR policy, both lattices), lattice
- * translation invariance, and the look-up table products (sizes, gutters, macro map). */
+ * translation invariance, partial work-items (8 rays each), and the look-up table
+ * products (sizes, gutters, macro map). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,7 +69,8 @@ static int tek_trace(const struct eye_optics *o, int n)
 }
 
 /* Kernel vs reference on random rays: the landing must agree for the great majority;
- * rays near a decision boundary (which lens, TIR or not) may legitimately differ in float. */
+ * rays near a decision boundary (which lens, TIR or not) may legitimately differ in float
+ * (at most 26 of 4096 here, status 1 of 4096). */
 static void tek_compare(const struct eye_optics *o, double max_deg, const char *what)
 {
     struct eye_ref_optics ro = tek_ref(o);
@@ -94,8 +96,8 @@ static void tek_compare(const struct eye_optics *o, double max_deg, const char *
         if (e < 1e-3 * (1 + hypot(h.land[0], h.land[1])) && h.passes == tek_b.passes[i]) agree++;
         else if (e > worst) worst = e;
     }
-    CHECK(status_agree >= TEK_N * 0.99, "%s: status agrees on %d of %d rays", what, status_agree, TEK_N);
-    CHECK(agree >= TEK_N * 0.98, "%s: %d of %d rays agree with the reference (worst miss %.3g pitches)", what, agree,
+    CHECK(status_agree >= TEK_N * 0.998, "%s: status agrees on %d of %d rays", what, status_agree, TEK_N);
+    CHECK(agree >= TEK_N * 0.99, "%s: %d of %d rays agree with the reference (worst miss %.3g pitches)", what, agree,
           TEK_N, worst);
 }
 
@@ -144,7 +146,7 @@ static void test_no_nan_over_hemisphere(void)
 }
 
 /* §6.7: shifting the entry point by whole periods shifts the landing by the same (float:
- * a ray within rounding of a lens or TIR boundary may flip, hence 98%). */
+ * a ray within rounding of a lens or TIR boundary may flip, hence 99%). */
 static void test_lattice_translation(void)
 {
     for (int hex = 0; hex < 2; hex++) {
@@ -173,8 +175,56 @@ static void test_lattice_translation(void)
             same += tek_b.status[i] == tek_b.status[k] &&
                     (tek_b.status[k] != EYE_LANDED || (fabsf(ex) < 2e-3f && fabsf(ey) < 2e-3f));
         }
-        CHECK(same >= n / 2 * 0.98, "%s: %d of %d shifted rays identical", hex ? "hex" : "square", same, n / 2);
+        CHECK(same >= n / 2 * 0.99, "%s: %d of %d shifted rays identical", hex ? "hex" : "square", same, n / 2);
     }
+}
+
+/* Each work-item traces 8 rays: a count that leaves a partial work-item traces the same
+ * as the full batch, and a bake whose texel count is not a multiple of 8 is whole. */
+static void test_partial_work_items(void)
+{
+    struct eye_optics o = tek_optics(1, 1.1, 1.491, 10, EYE_TIR_REFLECT);
+    const int n = 13;
+    for (int i = 0; i < 64; i++) {
+        double d[3];
+        tek_dir(75, d);
+        tek_b.p[2 * i] = (float)tek_rand(0, 1);
+        tek_b.p[2 * i + 1] = (float)tek_rand(0, o.tile_h);
+        for (int k = 0; k < 3; k++) tek_b.d[3 * i + k] = (float)d[k];
+    }
+    if (tek_trace(&o, 64)) return;
+    float land[2 * n];
+    int status[n], passes[n];
+    memcpy(land, tek_b.land, sizeof land);
+    memcpy(status, tek_b.status, sizeof status);
+    memcpy(passes, tek_b.passes, sizeof passes);
+    if (tek_trace(&o, n)) return;
+    CHECK(!memcmp(land, tek_b.land, sizeof land) && !memcmp(status, tek_b.status, sizeof status) &&
+              !memcmp(passes, tek_b.passes, sizeof passes),
+          "13 rays traced alone differ from the same rays in a batch of 64");
+
+    cJSON *doc = params_defaults(compound_eye_params), *bake = NULL;
+    cJSON *partial = cJSON_Parse("{\"mode\":\"bake\",\"bake_size\":129}");
+    struct fx_err err = {0};
+    CHECK(params_merge(compound_eye_params, doc, partial, &bake, &err) == 0, "merge: %s", err.message);
+    struct compound_eye *ce = bake ? compound_eye_new(tek_ocl, bake, &err) : NULL;
+    CHECK(ce != NULL, "compound_eye_new: %s", err.message);
+    static float rgba[129 * 129 * 4];
+    if (ce && compound_eye_bake(ce, rgba, &err) == 0) {
+        int bad = 0, covered = 0;
+        for (int k = 0; k < 129 * 129; k++) {
+            float a = rgba[4 * k + 3];
+            covered += a == 1.0f;
+            bad += !(a == 0.0f || a == 1.0f) || !isfinite(rgba[4 * k]) || (a == 0.0f && rgba[4 * k] != 0.0f);
+        }
+        CHECK(bad == 0 && covered > 129 * 129 / 2, "bake 129^2: %d bad texels, %d covered", bad, covered);
+    } else {
+        CHECK(0, "bake 129^2: %s", err.message);
+    }
+    compound_eye_free(ce);
+    cJSON_Delete(doc);
+    cJSON_Delete(partial);
+    cJSON_Delete(bake);
 }
 
 /* The table: built from the default document, packed, and consistent with its parts. */
@@ -247,6 +297,7 @@ int main(void)
     RUN(test_kernel_matches_reference);
     RUN(test_no_nan_over_hemisphere);
     RUN(test_lattice_translation);
+    RUN(test_partial_work_items);
     RUN(test_table_products);
     RUN(test_atlas_gutters);
     ocl_close(tek_ocl);

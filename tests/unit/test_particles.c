@@ -255,7 +255,27 @@ static void test_real_frame(void)
     }
     for (int b = 8; b <= 24; b += 4) CHECK(round_trip(&p, b, 0, 0) > 0, "real frame, pos_bits %d", b);
     CHECK(round_trip(&p, 16, 8, 8) > 0, "real frame, T and F 8 bits");
+    {   /* mixed burning and cold particles: the encoder picks attribute mode 1 (values) */
+        struct fxs_particles_opts o = { 16, 8, 8 };
+        uint8_t *enc = NULL;
+        size_t len = 0;
+        char err[200];
+        CHECK(!fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) && len > 11 && enc[11] == 1,
+              "real frame: attribute mode %d, expected 1", enc && len > 11 ? enc[11] : -1);
+        free(enc);
+    }
     free_set(&p);
+    {   /* a smooth synthetic flame: mode 0 (residuals) */
+        struct fxs_particles_opts o = { 16, 8, 8 };
+        uint8_t *enc = NULL;
+        size_t len = 0;
+        char err[200];
+        pgen_flame(&p, 20000);
+        CHECK(!fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) && len > 11 && enc[11] == 0,
+              "synthetic frame: attribute mode %d, expected 0", enc && len > 11 ? enc[11] : -1);
+        free(enc);
+        free_set(&p);
+    }
 }
 
 static void test_large(void)
@@ -367,7 +387,7 @@ static void test_header_limits(void)
     uint8_t *enc, *bad;
     size_t len = small_payload(&enc, 50);
     static const struct { int at; uint8_t v; } byte_cases[] = {
-        { 0, 'X' }, { 3, '1' }, { 4, 1 }, { 5, 7 }, { 5, 25 }, { 6, 1 }, { 7, 17 }, { 8, 17 }, { 10, 25 }, { 11, 1 },
+        { 0, 'X' }, { 3, '1' }, { 4, 1 }, { 5, 7 }, { 5, 25 }, { 6, 1 }, { 7, 17 }, { 8, 17 }, { 10, 25 }, { 11, 2 }, { 11, 255 },
     };
     if (!enc) {
         CHECK(0, "encode");

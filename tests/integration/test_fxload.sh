@@ -1,0 +1,234 @@
+#!/bin/sh
+# test_fxload.sh — end-to-end checks of fxload (and so libfxclient's fxpool) against a real fxstreamd.
+#
+# Owns: starting build/fxstreamd --port 0 on a free loopback port (bounded wait for its
+# "listening on" line), running fxload against it in subscribe and set mode, judging
+# the JSON report (python3), the per-second table and the SVG plot (python3's XML
+# parser), a 1000-connection run, option errors, a refused connection, and a daemon
+# killed under a run. Each check counts one pass or fail; the last line is
+# "test_fxload: N passed, M failed". Every fxload call runs under `timeout`, so the
+# suite stays well under 60 s.
+set -u
+cd "$(dirname "$0")/../.."
+
+FXLOAD=build/fxload
+FXCTL=build/fxctl
+DAEMON=build/fxstreamd
+T=30 # seconds any one fxload call may take
+passed=0
+failed=0
+tmp=$(mktemp -d)
+dpid=
+trap 'test -n "$dpid" && kill "$dpid" 2>/dev/null; rm -rf "$tmp"' EXIT INT TERM
+
+pass() { passed=$((passed + 1)); echo "ok   $1"; }
+fail() { failed=$((failed + 1)); echo "FAIL $1"; sed 's/^/     | /' "$tmp/out" "$tmp/err" 2>/dev/null | tail -n 12; }
+
+# ld ARGS...: runs fxload, stdout in $tmp/out, stderr in $tmp/err, exit status in $rc.
+ld() {
+    timeout "$T" "$FXLOAD" "$@" >"$tmp/out" 2>"$tmp/err"
+    rc=$?
+}
+
+# check NAME WANT_RC [STDOUT_PATTERN [STDERR_PATTERN]]: judges the last ld call.
+check() {
+    name=$1 want=$2 outpat=${3:-} errpat=${4:-}
+    if [ "$rc" -ne "$want" ]; then fail "$name (exit $rc, want $want)"; return; fi
+    if [ -n "$outpat" ] && ! grep -q -- "$outpat" "$tmp/out"; then fail "$name (stdout lacks $outpat)"; return; fi
+    if [ -n "$errpat" ] && ! grep -q -- "$errpat" "$tmp/err"; then fail "$name (stderr lacks $errpat)"; return; fi
+    pass "$name"
+}
+
+# jcheck NAME FILE EXPR: EXPR is a python3 expression over d, the JSON document in FILE.
+jcheck() {
+    if /usr/bin/python3 - "$2" "$3" >"$tmp/jc" 2>&1 <<'EOF'
+import json, sys
+d = json.load(open(sys.argv[1]))
+s = {x["stream"]: x for x in d.get("streams", [])}
+ok = eval(sys.argv[2])
+if not ok:
+    print("false:", sys.argv[2])
+    print(json.dumps({k: d[k] for k in ("connections", "totals", "errors") if k in d})[:800])
+sys.exit(0 if ok else 1)
+EOF
+    then pass "$1"
+    else fail "$1"; sed 's/^/     | /' "$tmp/jc" | head -n 6; fi
+}
+
+# wait_for FILE PATTERN TENTHS: polls until FILE contains PATTERN; 0 when it does.
+wait_for() {
+    i=0
+    while [ "$i" -lt "$3" ]; do
+        grep -q -- "$2" "$1" 2>/dev/null && return 0
+        sleep 0.1
+        i=$((i + 1))
+    done
+    return 1
+}
+
+summary() {
+    echo "test_fxload: $passed passed, $failed failed"
+    [ "$failed" -eq 0 ]
+    exit $?
+}
+
+start_daemon() {
+    if [ ! -x "$DAEMON" ] || [ ! -x "$FXLOAD" ] || [ ! -x "$FXCTL" ]; then
+        fail "build/fxstreamd, build/fxctl and build/fxload exist (run make)"
+        summary
+    fi
+    "$DAEMON" --port 0 >"$tmp/daemon.out" 2>"$tmp/daemon.err" &
+    dpid=$!
+    if ! wait_for "$tmp/daemon.out" "listening on http://" 150; then
+        fail "fxstreamd starts within 15 s"
+        sed 's/^/     | /' "$tmp/daemon.err" | tail -n 5
+        summary
+    fi
+    port=$(sed -n 's|.*listening on http://[^:]*:\([0-9][0-9]*\)/.*|\1|p' "$tmp/daemon.out" | head -n 1)
+    URL="ws://127.0.0.1:$port"
+    pass "fxstreamd listening on port $port"
+}
+
+check_usage() {
+    ld --help; check "--help documents the options" 0 "--connections N"
+    ld --connections 0; check "--connections 0: usage error" 2 "" "connections needs an integer"
+    ld --connections 10001; check "--connections 10001: usage error" 2 "" "1 to 10000"
+    ld --connections; check "option without value: usage error" 2 "" "needs a value"
+    ld --frobnicate 3; check "unknown option: usage error" 2 "" "unknown option"
+    ld extra; check "positional argument: usage error" 2 "" "unexpected argument"
+    ld --url http://127.0.0.1:1/; check "bad URL: usage error" 2 "" "bad URL"
+    ld --url wss://127.0.0.1/; check "wss:// refused" 2 "" "TLS not supported"
+    ld --mode fire; check "bad --mode: usage error" 2 "" "subscribe or set"
+    ld --duration 2 --ramp 2; check "--ramp >= --duration: usage error" 2 "" "ramp must be shorter"
+    ld --duration -1; check "negative --duration: usage error" 2 "" "duration needs seconds"
+    ld --streams 'energy,,flame'; check "empty stream item: usage error" 2 "" "streams"
+    ld --streams 'bad name'; check "invalid stream name: usage error" 2 "" "invalid stream name"
+    ld --streams 'flame:0'; check "zero weight: usage error" 2 "" "WEIGHT"
+    ld --set energy.alpha=1..2; check "--set without --mode set: usage error" 2 "" "goes with --mode set"
+    ld --mode set --set energy.alpha=3..1; check "--set LO > HI: usage error" 2 "" "LO <= HI"
+    ld --mode set --set alpha=1; check "--set without STREAM.: usage error" 2 "" "STREAM.PARAM"
+    ld --mode set --set 'energy.alpha=not json'; check "--set bad JSON: usage error" 2 "" "JSON value"
+    ld --mode set --max-fps 5; check "--max-fps in set mode: usage error" 2 "" "goes with --mode subscribe"
+    ld --rate 5; check "--rate in subscribe mode: usage error" 2 "" "goes with --mode set"
+    ld --max-fps 0; check "--max-fps 0: usage error" 2 "" "max-fps needs"
+    ld --plot "$tmp/p.pdf"; check "--plot .pdf: usage error" 2 "" ".svg or .png"
+    ld --url ws://127.0.0.1:1 --connections 3 --duration 3 --json "$tmp/nowhere/r.json"
+    check "unwritable --json fails before the run" 1 "" "cannot write"
+    ld --url ws://127.0.0.1:1 --connections 3 --duration 3 --ramp 0
+    check "refused connection: exit 1 with a clear message" 1 "" "connection refused by 127.0.0.1:1"
+    if grep -q "no connection could be established" "$tmp/err"; then pass "refused: says nothing connected"
+    else fail "refused: says nothing connected"; fi
+}
+
+check_subscribe() {
+    j=$tmp/run.json
+    ld --url "$URL" --connections 50 --duration 4 --ramp 1 --json "$j" --plot "$tmp/run.svg"
+    check "50 connections on energy,flame for 4 s" 0 "frames/s" ""
+    jcheck "report: 50 requested, 50 connected, none failed" "$j" \
+        'd["connections"]["requested"] == 50 and d["connections"]["connected"] == 50 and d["connections"]["failed"] == 0'
+    jcheck "report: no disconnects, no errors" "$j" \
+        'd["connections"]["disconnects"] == 0 and d["totals"]["errors"] == 0 and d["errors"] == []'
+    jcheck "report: frames and bytes > 0 on energy and flame" "$j" \
+        'all(s[n]["frames"] > 0 and s[n]["bytes"] > 0 for n in ("energy", "flame"))'
+    jcheck "report: 25 subscribers per stream" "$j" 's["energy"]["subscribers"] == 25 and s["flame"]["subscribers"] == 25'
+    jcheck "report: energy sends textures (kind 2), flame particles (kind 1)" "$j" \
+        '"2" in s["energy"]["kinds"] and "1" in s["flame"]["kinds"]'
+    jcheck "report: totals add up over streams" "$j" \
+        'd["totals"]["frames"] == sum(x["frames"] for x in d["streams"]) and d["totals"]["bytes"] == sum(x["bytes"] for x in d["streams"])'
+    jcheck "report: 0 < p50 <= p95 <= p99 <= max (total and per stream)" "$j" \
+        'all(0 < L["p50"] <= L["p95"] <= L["p99"] <= L["max"] for L in [d["totals"]["latency_ms"]] + [x["latency_ms"] for x in d["streams"]])'
+    jcheck "report: timed frames counted" "$j" 'd["totals"]["latency_ms"]["count"] > 0 and d["totals"]["latency_ms"]["count"] <= d["totals"]["frames"]'
+    jcheck "report: one row per second, frames summing to the total" "$j" \
+        '4 <= len(d["seconds"]) <= 5 and sum(r["frames"] for r in d["seconds"]) == d["totals"]["frames"]'
+    jcheck "report: 50 connections open in the last full second" "$j" 'd["seconds"][3]["connections"] == 50'
+    rows=$(grep -c -E '^ +[0-9]+\.[0-9] +[0-9]+ +[0-9]+ +[0-9.]+ ' "$tmp/out")
+    if [ "$rows" -ge 4 ]; then pass "table: $rows per-second lines"; else fail "table: per-second lines ($rows)"; fi
+    if grep -q -E '^ +4\.0 +50 +[1-9][0-9]* ' "$tmp/out"; then pass "table: second 4 shows 50 connections and frames"
+    else fail "table: second 4 shows 50 connections and frames"; fi
+    if grep -q -E '^total +50 +[1-9]' "$tmp/out"; then pass "summary: total line"; else fail "summary: total line"; fi
+    if [ -s "$tmp/run.svg" ] && /usr/bin/python3 -c '
+import sys, xml.etree.ElementTree as E
+r = E.parse(sys.argv[1]).getroot()
+sys.exit(0 if r.tag.endswith("svg") and len(list(r.iter())) > 20 else 1)' "$tmp/run.svg" 2>"$tmp/err"
+    then pass "plot: SVG exists and is well-formed XML"
+    else fail "plot: SVG exists and is well-formed XML"; fi
+    if grep -q "p99" "$tmp/run.svg" && grep -q "MB/s" "$tmp/run.svg"; then pass "plot: latency and throughput series"
+    else fail "plot: latency and throughput series"; fi
+
+    ld --url "$URL" --connections 4 --duration 2 --ramp 0 --streams nope,energy --payloads --json "$tmp/u.json"
+    check "unknown stream: run completes, exit 3" 3 "" 'subscribe nope: unknown_stream'
+    jcheck "unknown stream: counted per stream, others still measured" "$tmp/u.json" \
+        's["nope"]["subscribe_errors"] == 2 and s["nope"]["subscribers"] == 0 and s["energy"]["frames"] > 0 and d["totals"]["errors"] == 2'
+
+    ld --url "$URL" --connections 6 --duration 2 --ramp 0 --streams 'energy+flame:2,flame' --max-fps 10 --quiet --json -
+    check "groups, weights, --max-fps, --json - to stdout" 0 '"tool"'
+    sed -n '/^{/,$p' "$tmp/out" >"$tmp/g.json"
+    jcheck "groups: 4 energy+flame and 2 flame connections" "$tmp/g.json" \
+        's["energy"]["subscribers"] == 4 and s["flame"]["subscribers"] == 6'
+    jcheck "max-fps 10 caps the frame rate" "$tmp/g.json" \
+        's["flame"]["frames"] <= 6 * 10 * 2.5 + 12'
+    if ! grep -q "frames/s" "$tmp/out" && grep -q "^total" "$tmp/err"; then pass "--json -: table to stderr, quiet"
+    else fail "--json -: table to stderr, quiet"; fi
+}
+
+check_set() {
+    timeout "$T" "$FXCTL" --url "$URL" get energy >"$tmp/get0" 2>&1
+    rev0=$(grep -o '"rev":[0-9]*' "$tmp/get0" | head -n 1 | cut -d: -f2)
+    ld --url "$URL" --mode set --rate 40 --connections 5 --duration 2 --ramp 0.5 --set 'energy.alpha=0.5..2' \
+        --set 'energy.beta=1' --json "$tmp/set.json" --plot "$tmp/set.png"
+    check "set mode: 40 sets/s from 5 connections" 0 "sets/s"
+    jcheck "set mode: sets ok, none failed, round trips ordered" "$tmp/set.json" \
+        'd["sets"]["ok"] >= 40 and d["sets"]["failed"] == 0 and 0 < d["sets"]["latency_ms"]["p50"] <= d["sets"]["latency_ms"]["p99"] <= d["sets"]["latency_ms"]["max"]'
+    ok=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["sets"]["ok"])' "$tmp/set.json" 2>/dev/null)
+    timeout "$T" "$FXCTL" --url "$URL" get energy >"$tmp/get1" 2>&1
+    rev1=$(grep -o '"rev":[0-9]*' "$tmp/get1" | head -n 1 | cut -d: -f2)
+    # a set still in flight when the run stopped is applied without its reply counted: up to +5
+    if [ -n "$rev0" ] && [ -n "$ok" ] && [ -n "$rev1" ] && [ "$rev1" -ge $((rev0 + ok)) ] && [ "$rev1" -le $((rev0 + ok + 5)) ]; then
+        pass "set mode: server revision $rev0 -> $rev1 ($ok sets acknowledged)"
+    else
+        fail "set mode: server revision advanced by the sets ($rev0 -> $rev1, ok $ok)"
+    fi
+    if grep -q '"alpha"' "$tmp/get1" && [ -s "$tmp/set.png" ] && head -c 8 "$tmp/set.png" | grep -q PNG; then
+        pass "set mode: PNG plot written"
+    else
+        fail "set mode: PNG plot written"
+    fi
+    ld --url "$URL" --mode set --rate 20 --connections 2 --duration 1.5 --ramp 0 --set 'energy.alpha=500..600'
+    check "set mode: rejected values reported (bad_param), exit 3" 3 "" "set energy.alpha: bad_param"
+}
+
+check_scale() {
+    timeout "$T" "$FXCTL" --url "$URL" create energy_wave fxload_small width=32 height=32 >"$tmp/out" 2>"$tmp/err"
+    rc=$?; check "create a small stream for the scale run" 0
+    ld --url "$URL" --connections 1000 --duration 5 --ramp 1.5 --streams fxload_small --max-fps 4 --quiet --json "$tmp/k.json"
+    check "1000 connections: run completes" 0
+    jcheck "1000 connections: all connected at once (peak 1000), none failed" "$tmp/k.json" \
+        'd["connections"]["connected"] == 1000 and d["connections"]["peak"] == 1000 and d["connections"]["failed"] == 0 and d["connections"]["disconnects"] == 0'
+    jcheck "1000 connections: all subscribed and frames flowing" "$tmp/k.json" \
+        's["fxload_small"]["subscribers"] == 1000 and s["fxload_small"]["frames"] >= 1000'
+}
+
+check_daemon_killed() {
+    timeout "$T" "$FXLOAD" --url "$URL" --connections 10 --duration 25 --ramp 0 --json "$tmp/kill.json" \
+        >"$tmp/kill.out" 2>"$tmp/kill.err" &
+    lpid=$!
+    wait_for "$tmp/kill.out" '^ *2\.0 ' 100
+    kill "$dpid"; wait "$dpid" 2>/dev/null; dpid=
+    start=$(date +%s)
+    wait "$lpid"; rc=$?
+    took=$(($(date +%s) - start))
+    cp "$tmp/kill.out" "$tmp/out"; cp "$tmp/kill.err" "$tmp/err"
+    check "daemon killed mid-run: fxload ends, exit 3" 3 "" "server closed the connection\|lost"
+    if [ "$took" -le 10 ]; then pass "daemon killed: fxload ended by itself within ${took} s"
+    else fail "daemon killed: fxload ended by itself (${took} s)"; fi
+    jcheck "daemon killed: 10 disconnects reported, run ended early" "$tmp/kill.json" \
+        'd["connections"]["disconnects"] == 10 and d["end"] == "every connection closed" and d["elapsed_s"] < 20'
+}
+
+start_daemon
+check_usage
+check_subscribe
+check_set
+check_scale
+check_daemon_killed
+summary
