@@ -28,5 +28,9 @@ for bin in build/fuzz/fuzz_*; do
         "$bin" -merge=1 "$seeds" "$scratch" >>"$log" 2>&1 && echo "     merged into $seeds ($(ls "$seeds" | wc -l) inputs)"
     fi
 done
+if [ $((pass + fail)) -eq 0 ]; then
+    echo "FAIL no fuzz target in build/fuzz (make builds them with clang: make test, make fuzz)"
+    fail=1
+fi
 echo "test_fuzz: $pass passed, $fail failed"
 [ "$fail" -eq 0 ]
