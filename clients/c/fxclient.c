@@ -42,6 +42,7 @@ struct fxc_client {
     int closing;                   /* fxc_close asked lws to close */
     char err[256];                 /* why the connection failed or ended */
     struct fxws_url url;           /* host, port, path, host_header */
+    char *token;                   /* sent in the handshake, or NULL */
 
     struct fxws_rx rx;             /* message being reassembled */
 
@@ -250,7 +251,7 @@ static int fxc_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         return 0;
     case LWS_CALLBACK_CLIENT_APPEND_HANDSHAKE_HEADER:
         c->tcp_up = 1;
-        return 0;
+        return fxws_append_auth(wsi, in, len, c->token);
     case LWS_CALLBACK_CLIENT_FILTER_PRE_ESTABLISH:
         return fxc_check_subprotocol(c, wsi);
     case LWS_CALLBACK_CLIENT_ESTABLISHED:
@@ -314,7 +315,7 @@ static int fxc_has_msg(const struct fxc_client *c) { return c->head != NULL; }
 
 /* ---- public API --------------------------------------------------------------- */
 
-static int fxc_start(struct fxc_client *c, char *eb, size_t el)
+static int fxc_start(struct fxc_client *c, const char *ca_file, char *eb, size_t el)
 {
     struct lws_context_creation_info info;
     struct lws_client_connect_info ci;
@@ -328,6 +329,7 @@ static int fxc_start(struct fxc_client *c, char *eb, size_t el)
     info.uid = (uid_t)-1;
     info.fd_limit_per_thread = 16;
     info.user = c;
+    if (c->url.tls) fxws_tls_context(&info, ca_file);
     if (!(c->ctx = lws_create_context(&info))) {
         fxc_set_err(eb, el, "cannot create a libwebsockets context");
         return -1;
@@ -338,8 +340,8 @@ static int fxc_start(struct fxc_client *c, char *eb, size_t el)
     ci.port = c->url.port;
     ci.path = c->url.path;
     ci.host = c->url.host_header;
-    ci.origin = c->url.host_header;
-    ci.protocol = FXC_SUBPROTOCOL;
+    ci.ssl_connection = fxws_ssl_flags(&c->url);
+    ci.protocol = FXC_SUBPROTOCOL; /* no Origin: this is not a browser (PROTOCOL.md §1) */
     ci.pwsi = &c->wsi;
     if (!lws_client_connect_via_info(&ci)) {
         if (!c->err[0]) fxc_on_connect_error(c, "connect failed");
@@ -360,10 +362,17 @@ static void fxc_free(struct fxc_client *c)
     cJSON_Delete(c->reply);
     fxws_rx_free(&c->rx);
     free(c->tx);
+    free(c->token);
     free(c);
 }
 
 int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *eb, size_t el)
+{
+    return fxc_connect_with(out, url, NULL, timeout_ms, eb, el);
+}
+
+int fxc_connect_with(struct fxc_client **out, const char *url, const struct fxc_options *o, int timeout_ms,
+                     char *eb, size_t el)
 {
     struct fxc_client *c = calloc(1, sizeof *c);
     int r;
@@ -373,7 +382,12 @@ int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *
         fxc_free(c);
         return -2;
     }
-    if (fxc_start(c, eb, el)) {
+    if (o && o->token && !(c->token = strdup(o->token))) {
+        fxc_free(c);
+        fxc_set_err(eb, el, "out of memory");
+        return -1;
+    }
+    if (fxc_start(c, o ? o->ca_file : NULL, eb, el)) {
         fxc_free(c);
         return -1;
     }
@@ -383,8 +397,9 @@ int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *
         return 0;
     }
     if (r == 0)
-        fxc_set_err(eb, el, "timeout after %d ms %s ws://%s%s", timeout_ms,
-                    c->state == FXC_OPEN ? "waiting for the hello of" : "connecting to", c->url.host_header, c->url.path);
+        fxc_set_err(eb, el, "timeout after %d ms %s %s://%s%s", timeout_ms,
+                    c->state == FXC_OPEN ? "waiting for the hello of" : "connecting to", fxws_scheme(&c->url),
+                    c->url.host_header, c->url.path);
     else
         fxc_set_err(eb, el, "%s", c->err);
     fxc_free(c);

@@ -19,7 +19,7 @@
  * reassembled up to FXC_MAX_MESSAGE_BYTES; a bigger message closes the connection.
  *
  * Errors: every fallible call takes errbuf/errlen (either may be NULL/0) and writes
- * one line there: "bad URL ...", "TLS not supported yet ...", "connection refused
+ * one line there: "bad URL ...", "connection refused
  * ...", "WebSocket handshake failed ...", "timeout after N ms ...", "server closed
  * the connection (code C: reason)", or the server's "code: message" for a request
  * the server rejected.
@@ -69,14 +69,24 @@ struct fxc_stats {
     uint64_t bad_messages;     /* invalid frame headers, non-object JSON, stray ids */
 };
 
-/* Connects to url, ws://host[:port][/path] (port 7681, path /v1/ws by default; IPv6
- * as ws://[::1]:7681), completes the WebSocket handshake with subprotocol
+/* Connects to url, ws://host[:port][/path] or wss://... (port 7681, path /v1/ws by
+ * default; IPv6 as ws://[::1]:7681), completes the WebSocket handshake with subprotocol
  * fxstream.v1 and waits for the server's `hello`, all within timeout_ms (< 0: no
  * limit). Returns 0 and sets *out; on failure *out = NULL, the reason is in errbuf
- * and the result is -2 when url itself is malformed or unsupported (wss:// gives
- * "TLS not supported yet"), -1 for everything else (name resolution, connection
- * refused, handshake failure or wrong subprotocol, timeout, server closed). */
+ * and the result is -2 when url itself is malformed, -1 for everything else (name
+ * resolution, connection refused, TLS or handshake failure or wrong subprotocol,
+ * timeout, server closed: an unknown token closes with "invalid token ..."). */
 int fxc_connect(struct fxc_client **out, const char *url, int timeout_ms, char *errbuf, size_t errlen);
+
+/* Optional connection settings (PROTOCOL.md §3.11, README "Security"). */
+struct fxc_options {
+    const char *token;   /* access token, sent as "Authorization: Bearer TOKEN"; NULL: none */
+    const char *ca_file; /* PEM bundle that signs the server's certificate (wss://); NULL: the system's */
+};
+
+/* fxc_connect with options (o NULL: none). */
+int fxc_connect_with(struct fxc_client **out, const char *url, const struct fxc_options *o, int timeout_ms,
+                     char *errbuf, size_t errlen);
 
 /* The server's hello message ({"op":"hello","protocol","server","device","effects",
  * "limits",...}); owned by the client, valid until fxc_close. */

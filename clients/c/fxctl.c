@@ -27,6 +27,7 @@ enum { FXCTL_OK = 0, FXCTL_FAIL = 1, FXCTL_USAGE = 2 };
 struct fxctl_opts {
     const char *url;
     int timeout_ms;
+    struct fxc_options conn; /* token, CA file */
     long frames;       /* subscribe --frames, 0 when not given */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     const char *out_dir;
@@ -68,7 +69,10 @@ static const char fxctl_help[] =
     "\n"
     "options (also as --opt=VALUE):\n"
     "  --url URL      server, default $FXCTL_URL or " FXCTL_DEFAULT_URL "\n"
-    "                 (port 7681 and path /v1/ws when omitted; wss:// is not supported)\n"
+    "                 (port 7681 and path /v1/ws when omitted; wss:// for TLS)\n"
+    "  --token T      access token (default $FXSTREAM_TOKEN; PROTOCOL.md §3.11)\n"
+    "  --ca-file F    PEM bundle that signs a wss:// server's certificate\n"
+    "                 (default $FXSTREAM_CA_FILE, else the system's)\n"
     "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
     "                 each frame (default 10000)\n"
     "  --help, -h     this text\n"
@@ -77,7 +81,8 @@ static const char fxctl_help[] =
     "object without the request id). Errors go to stderr as\n"
     "\"fxctl: CODE: MESSAGE\" for server errors or \"fxctl: WHAT\" for transport errors.\n"
     "exit status: 0 success, 1 server or transport error, 2 usage error (bad URL too).\n"
-    "environment: FXCTL_URL default URL; FXCTL_LWS_LOG libwebsockets log level bits\n"
+    "environment: FXCTL_URL default URL; FXSTREAM_TOKEN, FXSTREAM_CA_FILE as above;\n"
+    "FXCTL_LWS_LOG libwebsockets log level bits\n"
     "(default 0, silent).\n";
 
 static int fxctl_usage(const char *why, const char *arg)
@@ -107,6 +112,10 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
     if (!val) return fxctl_usage("option needs a value", name);
     if (!strcmp(name, "--url")) {
         o->url = val;
+    } else if (!strcmp(name, "--token")) {
+        o->conn.token = val;
+    } else if (!strcmp(name, "--ca-file")) {
+        o->conn.ca_file = val;
     } else if (!strcmp(name, "--timeout")) {
         if (fxctl_parse_long(val, 1, &n) || n > 3600000) return fxctl_usage("--timeout needs milliseconds, 1..3600000", val);
         o->timeout_ms = (int)n;
@@ -487,7 +496,7 @@ static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, co
     char err[512];
     int r;
     if (o->out_dir && fxctl_make_dir(o->out_dir)) return FXCTL_FAIL;
-    if ((r = fxc_connect(&c, o->url, o->timeout_ms, err, sizeof err))) {
+    if ((r = fxc_connect_with(&c, o->url, &o->conn, o->timeout_ms, err, sizeof err))) {
         fprintf(stderr, "fxctl: %s\n", err);
         return r == -2 ? FXCTL_USAGE : FXCTL_FAIL;
     }
@@ -514,6 +523,8 @@ int main(int argc, char **argv)
     cJSON *req = NULL;
     int r;
     o.url = getenv("FXCTL_URL") && *getenv("FXCTL_URL") ? getenv("FXCTL_URL") : FXCTL_DEFAULT_URL;
+    o.conn.token = getenv("FXSTREAM_TOKEN");
+    o.conn.ca_file = getenv("FXSTREAM_CA_FILE");
     lws_set_log_level(log ? atoi(log) : 0, NULL);
     if (!(o.args = calloc((size_t)argc, sizeof *o.args))) return FXCTL_FAIL;
     r = fxctl_parse_args(&o, argc, argv);

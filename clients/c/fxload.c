@@ -48,7 +48,9 @@ static const char ld_help[] =
     "\n"
     "options (also as --opt=VALUE):\n"
     "  --url URL          server (default " LD_DEFAULT_URL "); fxload targets\n"
-    "                     only this loopback default or the URL given here\n"
+    "                     only this loopback default or the URL given here (ws://, wss://)\n"
+    "  --token T          access token for every connection (default $FXSTREAM_TOKEN)\n"
+    "  --ca-file F        PEM bundle for a wss:// server (default $FXSTREAM_CA_FILE)\n"
     "  --connections N    connections, 1..10000 (default 10)\n"
     "  --mode M           subscribe (default) or set\n"
     "  --streams LIST     subscribe mode: comma-separated groups GROUP[:WEIGHT]; a group\n"
@@ -109,6 +111,7 @@ struct ld_group {
 
 struct ld_opts {
     const char *url;
+    const char *token, *ca_file; /* --token / $FXSTREAM_TOKEN, --ca-file / $FXSTREAM_CA_FILE */
     long connections;
     int mode;
     const char *streams_spec;
@@ -304,7 +307,8 @@ static int ld_parse_set(struct ld_setspec *sp, const char *arg)
 }
 
 static const char *const ld_value_opts[] = { "--url", "--connections", "--mode", "--streams", "--max-fps", "--set",
-                                              "--rate", "--duration", "--ramp", "--json", "--plot", "--seed", NULL };
+                                              "--rate", "--duration", "--ramp", "--json", "--plot", "--seed",
+                                              "--token", "--ca-file", NULL };
 
 static int ld_set_opt(struct ld_opts *o, const char *name, const char *val)
 {
@@ -320,6 +324,10 @@ static int ld_set_opt(struct ld_opts *o, const char *name, const char *val)
     if (!val) return ld_usage("option needs a value", name);
     if (!strcmp(name, "--url")) {
         o->url = val;
+    } else if (!strcmp(name, "--token")) {
+        o->token = val;
+    } else if (!strcmp(name, "--ca-file")) {
+        o->ca_file = val;
     } else if (!strcmp(name, "--connections")) {
         if (ld_parse_long(val, &o->connections) || o->connections < 1 || o->connections > LD_MAX_CONNECTIONS)
             return ld_usage("--connections needs an integer from 1 to 10000", val);
@@ -810,7 +818,7 @@ static int ld_start_due(struct ld *ld, double now)
 static int ld_run(struct ld *ld)
 {
     struct fxp_callbacks cb = { ld_on_open, ld_on_text, ld_on_frame, ld_on_close };
-    struct fxp_options po = { (int)ld->o->connections, ld->o->payloads, 0 };
+    struct fxp_options po = { (int)ld->o->connections, ld->o->payloads, 0, ld->o->token, ld->o->ca_file };
     char err[300];
     double next_row = 1, now = 0;
     if (fxp_pool_create(&ld->pool, &cb, &po, err, sizeof err)) {
@@ -1158,6 +1166,8 @@ int main(int argc, char **argv)
     struct sigaction sa;
     int r;
     const char *log = getenv("FXLOAD_LWS_LOG");
+    o.token = getenv("FXSTREAM_TOKEN");
+    o.ca_file = getenv("FXSTREAM_CA_FILE");
     lws_set_log_level(log ? atoi(log) : 0, NULL);
     ld.o = &o;
     r = ld_parse_args(&o, argc, argv);

@@ -232,7 +232,7 @@ static int fxp_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         return 0;
     case LWS_CALLBACK_CLIENT_APPEND_HANDSHAKE_HEADER:
         c->tcp_up = 1;
-        return 0;
+        return fxws_append_auth(wsi, in, len, c->pool->o.token);
     case LWS_CALLBACK_CLIENT_FILTER_PRE_ESTABLISH:
         return fxws_check_subprotocol(&c->target->u, wsi, c->why, sizeof c->why);
     case LWS_CALLBACK_CLIENT_ESTABLISHED:
@@ -327,6 +327,7 @@ int fxp_pool_create(struct fxp_pool **out, const struct fxp_callbacks *cb, const
     info.fd_limit_per_thread = (unsigned)need;
     info.pt_serv_buf_size = FXP_READ_BUF;
     info.user = p;
+    fxws_tls_context(&info, o->ca_file); /* any target may be wss:// */
     if (!(p->ctx = lws_create_context(&info))) {
         free(p);
         fxp_set_err(eb, el, "cannot create a libwebsockets context for %d connections", o->max_connections);
@@ -399,8 +400,8 @@ int fxp_connect(struct fxp_pool *p, const char *url, void *user, struct fxp_conn
     ci.port = t->u.port;
     ci.path = t->u.path;
     ci.host = t->u.host_header;
-    ci.origin = t->u.host_header;
-    ci.protocol = FXWS_SUBPROTOCOL;
+    ci.ssl_connection = fxws_ssl_flags(&t->u);
+    ci.protocol = FXWS_SUBPROTOCOL; /* no Origin: not a browser (PROTOCOL.md §1) */
     ci.userdata = c;
     ci.opaque_user_data = c;
     ci.pwsi = &c->wsi;

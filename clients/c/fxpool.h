@@ -72,7 +72,9 @@ struct fxp_options {
     int max_connections;      /* open at the same time, 1..FXP_MAX_CONNECTIONS */
     int payloads;             /* 1: reassemble frames, on_frame gets the payload; 0: headers only */
     size_t max_message_bytes; /* 0: FXC_MAX_MESSAGE_BYTES (256 MiB) */
-};
+    const char *token;        /* access token sent in every handshake (Authorization: Bearer); NULL: none */
+    const char *ca_file;      /* PEM bundle for wss:// servers; NULL: the system's */
+};                            /* (the strings are kept by pointer: they must outlive the pool) */
 
 struct fxp_stats {
     uint64_t connects;       /* fxp_connect calls that started a connection */

@@ -82,15 +82,12 @@ int fxws_url_parse(struct fxws_url *u, const char *url, char *eb, size_t el)
 {
     const char *auth, *slash;
     if (!url) { fxws_set_err(eb, el, "bad URL: none given"); return -1; }
-    if (strncmp(url, "wss://", 6) == 0) {
-        fxws_set_err(eb, el, "TLS not supported yet: use ws:// (%s)", url);
+    u->tls = strncmp(url, "wss://", 6) == 0;
+    if (!u->tls && strncmp(url, "ws://", 5) != 0) {
+        fxws_set_err(eb, el, "bad URL \"%s\": expected ws://host[:port][/path] or wss://...", url);
         return -1;
     }
-    if (strncmp(url, "ws://", 5) != 0) {
-        fxws_set_err(eb, el, "bad URL \"%s\": expected ws://host[:port][/path]", url);
-        return -1;
-    }
-    auth = url + 5;
+    auth = url + (u->tls ? 6 : 5);
     slash = strchr(auth, '/');
     if (!slash) slash = auth + strlen(auth);
     if (fxws_url_authority(u, auth, (size_t)(slash - auth), eb, el)) return -1;
@@ -146,7 +143,7 @@ void fxws_connect_error(const struct fxws_url *u, int tcp_up, const char *why, i
         fxws_set_err(out, outlen, "%s %s:%d", e == ECONNREFUSED ? "connection refused by" : strerror(e), u->host,
                      u->port);
     else if (tcp_up)
-        fxws_set_err(out, outlen, "WebSocket handshake failed with ws://%s%s (%s)%s", u->host_header, u->path, w,
+        fxws_set_err(out, outlen, "WebSocket handshake failed with %s://%s%s (%s)%s", fxws_scheme(u), u->host_header, u->path, w,
                      strstr(w, "HS:") ? "" : ": the server hung up; wrong path or subprotocol?");
     else
         fxws_set_err(out, outlen, "cannot connect to %s:%d (%s)", u->host, u->port, w);
@@ -158,10 +155,10 @@ int fxws_check_subprotocol(const struct fxws_url *u, struct lws *wsi, char *out,
     if (lws_hdr_copy(wsi, proto, sizeof proto, WSI_TOKEN_PROTOCOL) < 0) proto[0] = 0;
     if (!strcmp(proto, FXWS_SUBPROTOCOL)) return 0;
     if (proto[0])
-        fxws_set_err(out, outlen, "WebSocket handshake failed with ws://%s%s: server chose subprotocol \"%s\", not \"%s\"",
+        fxws_set_err(out, outlen, "WebSocket handshake failed with %s://%s%s: server chose subprotocol \"%s\", not \"%s\"", fxws_scheme(u),
                      u->host_header, u->path, proto, FXWS_SUBPROTOCOL);
     else
-        fxws_set_err(out, outlen, "WebSocket handshake failed with ws://%s%s: server did not accept subprotocol \"%s\"",
+        fxws_set_err(out, outlen, "WebSocket handshake failed with %s://%s%s: server did not accept subprotocol \"%s\"", fxws_scheme(u),
                      u->host_header, u->path, FXWS_SUBPROTOCOL);
     return 1;
 }
@@ -220,4 +217,26 @@ void fxws_rx_free(struct fxws_rx *rx)
 {
     free(rx->buf);
     memset(rx, 0, sizeof *rx);
+}
+
+/* ---- TLS and access token ------------------------------------------------------ */
+
+void fxws_tls_context(struct lws_context_creation_info *info, const char *ca_file)
+{
+    info->options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
+    info->client_ssl_ca_filepath = ca_file;
+}
+
+int fxws_ssl_flags(const struct fxws_url *u) { return u->tls ? LCCSCF_USE_SSL : 0; }
+
+const char *fxws_scheme(const struct fxws_url *u) { return u->tls ? "wss" : "ws"; }
+
+int fxws_append_auth(struct lws *wsi, void *in, size_t len, const char *token)
+{
+    char value[300];
+    unsigned char **p = (unsigned char **)in, *end = *p + len;
+    if (!token || !*token) return 0;
+    int n = snprintf(value, sizeof value, "Bearer %s", token);
+    if (n < 0 || (size_t)n >= sizeof value) return -1;
+    return lws_add_http_header_by_token(wsi, WSI_TOKEN_HTTP_AUTHORIZATION, (unsigned char *)value, n, p, end) ? -1 : 0;
 }

@@ -20,16 +20,16 @@ struct addrinfo;
 #define FXWS_DEFAULT_PATH "/v1/ws"
 #define FXWS_SUBPROTOCOL "fxstream.v1"
 
-/* A parsed ws://host[:port][/path] URL. */
+/* A parsed ws:// or wss://host[:port][/path] URL. */
 struct fxws_url {
+    int tls;               /* wss:// */
     char host[256];        /* without [] for IPv6 */
     char path[512];        /* FXWS_DEFAULT_PATH when the URL has none (or just "/") */
     char host_header[300]; /* host[:port] as written, for Host: and messages */
     int port;
 };
 
-/* Parses url into u. Returns 0, or -1 with one line in errbuf: "bad URL ...", or
- * "TLS not supported yet: use ws:// (...)" for wss://. */
+/* Parses url into u. Returns 0, or -1 with one line in errbuf: "bad URL ...". */
 int fxws_url_parse(struct fxws_url *u, const char *url, char *errbuf, size_t errlen);
 
 /* getaddrinfo for u (TCP, any family). NULL with "cannot resolve host ..." on failure;
@@ -61,6 +61,23 @@ int fxws_check_subprotocol(const struct fxws_url *u, struct lws *wsi, char *out,
  * reason text alone. */
 void fxws_peer_close(const uint8_t *in, size_t len, int *code, char *out, size_t outlen, char *reason_out,
                      size_t reason_len);
+
+/* Client options that go into the lws context: TLS set-up for wss:// (ca_file: PEM
+ * bundle to verify the server with, NULL: the system's; certificates are always
+ * verified, host name included). */
+struct lws_context_creation_info;
+void fxws_tls_context(struct lws_context_creation_info *info, const char *ca_file);
+
+/* The lws client connection flags for u (LCCSCF_USE_SSL for wss://). */
+int fxws_ssl_flags(const struct fxws_url *u);
+
+/* "ws" or "wss". */
+const char *fxws_scheme(const struct fxws_url *u);
+
+/* Adds "Authorization: Bearer TOKEN" to a client handshake, from
+ * LWS_CALLBACK_CLIENT_APPEND_HANDSHAKE_HEADER (its in/len). token NULL or "": nothing.
+ * Returns 0, or -1 when it does not fit (the handshake then fails). */
+int fxws_append_auth(struct lws *wsi, void *in, size_t len, const char *token);
 
 /* Reassembly of one message from its fragments. */
 struct fxws_rx {

@@ -15,7 +15,19 @@ import urllib.request
 
 import websockets
 
-from fxtest import DAEMON, Client, Daemon, Suite
+from fxtest import DAEMON, ROOT, Client, Daemon, Suite
+
+FXCTL = os.path.join(ROOT, "build", "fxctl")
+FXLOAD = os.path.join(ROOT, "build", "fxload")
+
+
+def tool(d, args, scheme="ws", env=None):
+    """Runs fxctl or fxload (args[0]) against d; returns (exit status, stdout, stderr)."""
+    url = "%s://127.0.0.1:%d/v1/ws" % (scheme, d.port)
+    e = {k: v for k, v in os.environ.items() if not k.startswith("FXSTREAM_")}
+    e.update(env or {})
+    p = subprocess.run([args[0], "--url", url] + args[1:], capture_output=True, text=True, timeout=60, env=e)
+    return p.returncode, p.stdout, p.stderr
 
 VIEW, TUNE, ADMIN = "view-token-0123456789", "tune-token-0123456789", "admin-token-012345678"
 
@@ -90,6 +102,19 @@ async def test_roles(t):
                 closed = e
                 break
         t.check(closed is not None and closed.code == 1008, "5 wrong tokens close the connection (1008)")
+
+        rc, out, err = tool(d, [FXCTL, "list"])
+        t.check(rc == 1 and "unauthorized" in err, "fxctl without a token: unauthorized (%s)" % err.strip())
+        rc, out, err = tool(d, [FXCTL, "--token", TUNE, "set", "energy", "fps=12"])
+        t.check(rc == 0 and '"fps":12' in out, "fxctl --token (tune) may set")
+        rc, out, err = tool(d, [FXCTL, "destroy", "energy"], env={"FXSTREAM_TOKEN": VIEW})
+        t.check(rc == 1 and "forbidden" in err, "fxctl with $FXSTREAM_TOKEN (view) may not destroy")
+        rc, out, err = tool(d, [FXCTL, "--token", "wrong-token-0123456789", "list"])
+        t.check(rc == 1 and "invalid token" in err, "fxctl with a wrong token: %s" % err.strip())
+        rc, out, err = tool(d, [FXLOAD, "--token", VIEW, "--connections", "2", "--duration", "2", "--ramp", "0",
+                                "--streams", "energy", "--quiet", "--json", "-"])
+        rep = json.loads(out) if rc == 0 else {}
+        t.check(rc == 0 and rep.get("streams"), "fxload --token subscribes (exit %d)" % rc)
     finally:
         d.stop()
 
@@ -152,6 +177,13 @@ async def test_tls(t):
         f = await c.frame()
         t.check(r["op"] == "subscribed" and f["kind"] == 2, "frames over TLS")
         await c.close()
+        rc, out, err = tool(d, [FXCTL, "--ca-file", cert, "list"], scheme="wss")
+        t.check(rc == 0 and '"stream":"energy"' in out, "fxctl over wss:// with --ca-file (%s)" % err.strip())
+        rc, out, err = tool(d, [FXCTL, "list"], scheme="wss")
+        t.check(rc == 1, "fxctl over wss:// refuses an unknown certificate (%s)" % err.strip())
+        rc, out, err = tool(d, [FXLOAD, "--connections", "2", "--duration", "2", "--ramp", "0", "--streams", "energy",
+                                "--quiet", "--json", "-"], scheme="wss", env={"FXSTREAM_CA_FILE": cert})
+        t.check(rc == 0 and json.loads(out).get("streams"), "fxload over wss:// (exit %d)" % rc)
         with urllib.request.urlopen("https://127.0.0.1:%d/healthz" % d.port, context=ctx, timeout=10) as resp:
             t.check(json.loads(resp.read())["status"] == "ok", "https:// /healthz")
         try:

@@ -97,7 +97,6 @@ check_usage() {
     ld --frobnicate 3; check "unknown option: usage error" 2 "" "unknown option"
     ld extra; check "positional argument: usage error" 2 "" "unexpected argument"
     ld --url http://127.0.0.1:1/; check "bad URL: usage error" 2 "" "bad URL"
-    ld --url wss://127.0.0.1/; check "wss:// refused" 2 "" "TLS not supported"
     ld --mode fire; check "bad --mode: usage error" 2 "" "subscribe or set"
     ld --duration 2 --ramp 2; check "--ramp >= --duration: usage error" 2 "" "ramp must be shorter"
     ld --duration -1; check "negative --duration: usage error" 2 "" "duration needs seconds"
