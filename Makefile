@@ -27,7 +27,8 @@ REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
 UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
 BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))
 FUZZ_BIN    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
-# libFuzzer targets: clang with ASan/UBSan over sanitized copies of both libraries (BUILD/fz).
+# libFuzzer targets: clang with ASan/UBSan over sanitized copies of both libraries (BUILD/fz),
+# which also give an ASan/UBSan daemon (BUILD/fz/fxstreamd) for the churn test.
 FUZZ_CC     := clang
 FUZZ_FLAGS  := -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FUZZ_SECONDS ?= 300
@@ -97,7 +98,7 @@ $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(REF_OBJ) $(BUILD)/libfxserver.a
 
 fuzz-libs:
 	@$(MAKE) --no-print-directory BUILD=$(BUILD)/fz CC=$(FUZZ_CC) CFLAGS="$(FUZZ_FLAGS) -fsanitize=fuzzer-no-link" \
-	    $(BUILD)/fz/libfxserver.a $(BUILD)/fz/libfxclient.a
+	    $(BUILD)/fz/libfxserver.a $(BUILD)/fz/libfxclient.a $(BUILD)/fz/fxstreamd
 
 $(BUILD)/fuzz/%: tests/fuzz/%.c fuzz-libs
 	@mkdir -p $(@D)

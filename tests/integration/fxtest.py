@@ -32,9 +32,9 @@ def parse_frame(data):
 class Daemon:
     """A fxstreamd on 127.0.0.1 with a kernel-chosen port."""
 
-    def __init__(self, *args, state_dir=None, env=None):
+    def __init__(self, *args, state_dir=None, env=None, wrapper=(), binary=DAEMON):
         self.state_dir = state_dir or tempfile.mkdtemp(prefix="fxs-state-")
-        cmd = [DAEMON, "--port", "0", "--state-dir", self.state_dir, "--log-level", "warn", *args]
+        cmd = [*wrapper, binary, "--port", "0", "--state-dir", self.state_dir, "--log-level", "warn", *args]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                      env=dict(os.environ, **(env or {})))
         line = self.proc.stdout.readline()  # bounded by the daemon's own start-up
