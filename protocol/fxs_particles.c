@@ -117,62 +117,7 @@ static inline int fxs_pt_cclass(uint32_t c)
     return 9 + (int)(31 - __builtin_clz(c - 1)) - 4;
 }
 
-/* ---- growable byte buffer ---------------------------------------------------------- */
-
-struct fxs_pt_buf {
-    uint8_t *p;
-    size_t len, cap;
-    int oom;
-};
-
-static inline int fxs_pt_reserve(struct fxs_pt_buf *b, size_t more)
-{
-    if (b->len + more <= b->cap) return 0;
-    size_t cap = b->cap ? b->cap : 4096;
-    while (cap < b->len + more) cap *= 2;
-    uint8_t *p = realloc(b->p, cap);
-    if (!p) {
-        b->oom = 1;
-        return -1;
-    }
-    b->p = p;
-    b->cap = cap;
-    return 0;
-}
-
-/* ---- raw bits (LSB first) ------------------------------------------------------------ */
-
-struct fxs_pt_bitw {
-    struct fxs_pt_buf b;
-    uint64_t acc;
-    int cnt;
-};
-
-static inline void fxs_pt_bits_put(struct fxs_pt_bitw *w, uint32_t v, int nbits)
-{
-    if (!nbits) return;
-    w->acc |= (uint64_t)(v & (uint32_t)((1ull << nbits) - 1u)) << w->cnt;
-    w->cnt += nbits;
-    if (w->cnt >= 32) {
-        if (fxs_pt_reserve(&w->b, 4)) return;
-        fxs_pt_put32(w->b.p + w->b.len, (uint32_t)w->acc);
-        w->b.len += 4;
-        w->acc >>= 32;
-        w->cnt -= 32;
-    }
-}
-
-static void fxs_pt_bits_flush(struct fxs_pt_bitw *w)
-{
-    while (w->cnt > 0) {
-        if (fxs_pt_reserve(&w->b, 1)) return;
-        w->b.p[w->b.len++] = (uint8_t)w->acc;
-        w->acc >>= 8;
-        w->cnt -= 8;
-    }
-    w->acc = 0;
-    w->cnt = 0;
-}
+/* ---- raw bits reader (LSB first) ----------------------------------------------------- */
 
 struct fxs_pt_bitr {
     const uint8_t *p, *end;
@@ -195,59 +140,6 @@ static inline int fxs_pt_bits_get(struct fxs_pt_bitr *r, int nbits, uint32_t *v)
 }
 
 /* ---- adaptive binary range coder (LZMA's) ------------------------------------------ */
-
-struct fxs_pt_rcw {
-    struct fxs_pt_buf b;
-    uint64_t low;
-    uint32_t range;
-    uint8_t cache;
-    uint64_t cache_size;
-};
-
-static void fxs_pt_rc_init(struct fxs_pt_rcw *e)
-{
-    e->low = 0;
-    e->range = 0xFFFFFFFFu;
-    e->cache = 0;
-    e->cache_size = 1;
-}
-
-static inline void fxs_pt_rc_shift(struct fxs_pt_rcw *e)
-{
-    if ((uint32_t)e->low < 0xFF000000u || (e->low >> 32) != 0) {
-        uint8_t carry = (uint8_t)(e->low >> 32), out = e->cache;
-        do {
-            if (fxs_pt_reserve(&e->b, 1)) return;
-            e->b.p[e->b.len++] = (uint8_t)(out + carry);
-            out = 0xFF;
-        } while (--e->cache_size);
-        e->cache = (uint8_t)(e->low >> 24);
-    }
-    e->cache_size++;
-    e->low = (e->low & 0x00FFFFFFu) << 8;
-}
-
-static inline void fxs_pt_rc_bit(struct fxs_pt_rcw *e, fxs_pt_prob *p, int bit)
-{
-    uint32_t bound = (e->range >> FXS_PT_PROB_BITS) * *p;
-    if (!bit) {
-        e->range = bound;
-        *p = (fxs_pt_prob)(*p + (((1u << FXS_PT_PROB_BITS) - *p) >> FXS_PT_ADAPT));
-    } else {
-        e->low += bound;
-        e->range -= bound;
-        *p = (fxs_pt_prob)(*p - (*p >> FXS_PT_ADAPT));
-    }
-    if (e->range < FXS_PT_TOP) {
-        e->range <<= 8;
-        fxs_pt_rc_shift(e);
-    }
-}
-
-static void fxs_pt_rc_flush(struct fxs_pt_rcw *e)
-{
-    for (int i = 0; i < 5; i++) fxs_pt_rc_shift(e);
-}
 
 struct fxs_pt_rcr {
     const uint8_t *p, *end;
@@ -290,29 +182,6 @@ static inline int fxs_pt_rc_get(struct fxs_pt_rcr *d, fxs_pt_prob *p)
 
 /* ---- integers: unary prefix, Exp-Golomb class, top mantissa bit modelled ------------ */
 
-struct fxs_pt_enc_io {
-    struct fxs_pt_rcw rc;
-    struct fxs_pt_bitw bits;
-};
-
-static inline void fxs_pt_put_int(struct fxs_pt_enc_io *io, fxs_pt_prob *p, int u, uint32_t z)
-{
-    uint32_t e;
-    int k;
-    for (int i = 0; i < u; i++) {
-        fxs_pt_rc_bit(&io->rc, p + i, z > (uint32_t)i);
-        if (z == (uint32_t)i) return;
-    }
-    e = z - (uint32_t)u + 1u;
-    k = 31 - __builtin_clz(e);
-    for (int i = 0; i < k; i++) fxs_pt_rc_bit(&io->rc, p + u + i, 1);
-    fxs_pt_rc_bit(&io->rc, p + u + k, 0);
-    if (k) {
-        fxs_pt_rc_bit(&io->rc, p + u + FXS_PT_MAXK + k, (int)(e >> (k - 1)) & 1);
-        fxs_pt_bits_put(&io->bits, e, k - 1);
-    }
-}
-
 struct fxs_pt_dec_io {
     struct fxs_pt_rcr rc;
     struct fxs_pt_bitr bits;
@@ -340,21 +209,135 @@ static inline int fxs_pt_get_int(struct fxs_pt_dec_io *io, fxs_pt_prob *p, int u
     return 0;
 }
 
-/* ---- values as bit trees (attribute mode 1) ----------------------------------------------- */
+/* ---- encoder output: range coder and raw bits ------------------------------------------ */
 
-/* The top min(bits, 8) bits of v, high bit first, with the bit tree p[m] (m = 1, then
- * 2m + bit); the low bits - 8 bits raw. */
-static inline void fxs_pt_put_tree(struct fxs_pt_enc_io *io, fxs_pt_prob *p, uint32_t v, int bits)
+/* The encoder's whole output state. The hot loops copy it into a local (the compiler keeps
+ * the fields in registers) and write it back at the end; they make room for the next
+ * particle or node up front (fxs_pt_room), so that coding a decision or raw bits never
+ * checks for space. */
+struct fxs_pt_ew {
+    uint8_t *rp, *bp;        /* next byte of the range-coder and of the raw-bits section */
+    uint64_t low, acc;       /* range coder low (33 bits); raw bits not yet written */
+    uint64_t pending;        /* bytes waiting on a carry: the cache byte and pending - 1 0xFFs */
+    uint32_t range;
+    int cnt;                 /* bits in acc */
+    uint8_t cache;
+};
+
+struct fxs_pt_buf {
+    uint8_t *p;
+    size_t cap;
+};
+
+/* At most this many bytes per particle or tree node go to either section beyond the
+ * pending carry run: every decision shifts out at most one byte (a range >= 2^24 times
+ * the smallest probability 31/4096 is still >= 2^16), a node or particle codes at most
+ * 60 decisions, and sends at most 3 x 24 raw bits. */
+#define FXS_PT_SLACK 96u
+
+/* Grows b so that at + need fits; returns the (moved) at, or NULL when out of memory. */
+static __attribute__((noinline)) uint8_t *fxs_pt_grow(struct fxs_pt_buf *b, uint8_t *at, size_t need)
 {
-    int low = bits > 8 ? bits - 8 : 0;
-    uint32_t top = v >> low, m = 1;
-    for (int b = bits - low; b-- > 0;) {
-        uint32_t bit = top >> b & 1u;
-        fxs_pt_rc_bit(&io->rc, p + m, (int)bit);
-        m = 2 * m + bit;
-    }
-    fxs_pt_bits_put(&io->bits, v, low);
+    size_t used = at ? (size_t)(at - b->p) : 0, cap = b->cap ? b->cap : 4096;
+    uint8_t *p;
+    while (cap < used + need) cap *= 2;
+    if (cap == b->cap) return at;
+    if (!(p = realloc(b->p, cap))) return NULL;
+    b->p = p;
+    b->cap = cap;
+    return p + used;
 }
+
+/* Makes room for one more particle or node in both sections; -1 when out of memory. */
+static inline int fxs_pt_room(struct fxs_pt_buf *rb, struct fxs_pt_buf *bb, struct fxs_pt_ew *w)
+{
+    if ((size_t)(rb->p + rb->cap - w->rp) < FXS_PT_SLACK + w->pending && !(w->rp = fxs_pt_grow(rb, w->rp, FXS_PT_SLACK + w->pending)))
+        return -1;
+    if ((size_t)(bb->p + bb->cap - w->bp) < FXS_PT_SLACK && !(w->bp = fxs_pt_grow(bb, w->bp, FXS_PT_SLACK))) return -1;
+    return 0;
+}
+
+/* Raw bits, LSB first (nbits <= 32). */
+static inline void fxs_pt_bits_put(struct fxs_pt_ew *w, uint32_t v, int nbits)
+{
+    w->acc |= (uint64_t)(v & (uint32_t)((1ull << nbits) - 1u)) << w->cnt;
+    w->cnt += nbits;
+    if (w->cnt >= 32) {
+        fxs_pt_put32(w->bp, (uint32_t)w->acc);
+        w->bp += 4;
+        w->acc >>= 32;
+        w->cnt -= 32;
+    }
+}
+
+/* LZMA's byte output with carry propagation. */
+static inline void fxs_pt_rc_shift(struct fxs_pt_ew *w)
+{
+    if ((uint32_t)w->low < 0xFF000000u || (w->low >> 32) != 0) {
+        uint8_t carry = (uint8_t)(w->low >> 32), out = w->cache;
+        do {
+            *w->rp++ = (uint8_t)(out + carry);
+            out = 0xFF;
+        } while (--w->pending);
+        w->cache = (uint8_t)(w->low >> 24);
+    }
+    w->pending++;
+    w->low = (w->low & 0x00FFFFFFu) << 8;
+}
+
+/* One decision, without a branch on the bit: after a 0 the probability moves up by
+ * (4096 - p) >> 5, after a 1 down by p >> 5, both as p - ((p - t) >> 5) with t = 4065 or 0
+ * (arithmetic shift; p stays in 31..4065). */
+static inline void fxs_pt_rc_bit(struct fxs_pt_ew *w, fxs_pt_prob *p, uint32_t bit)
+{
+    uint32_t pv = *p, bound = (w->range >> FXS_PT_PROB_BITS) * pv, mask = 0u - bit;
+    w->low += bound & mask;
+    w->range = (bound & ~mask) | ((w->range - bound) & mask);
+    *p = (fxs_pt_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_PT_PROB_BITS) - 31u) & ~mask)) >> FXS_PT_ADAPT));
+    if (w->range < FXS_PT_TOP) {
+        w->range <<= 8;
+        fxs_pt_rc_shift(w);
+    }
+}
+
+static void fxs_pt_ew_init(struct fxs_pt_ew *w)
+{
+    memset(w, 0, sizeof *w);
+    w->range = 0xFFFFFFFFu;
+    w->pending = 1;
+}
+
+/* Integers: unary prefix of u decisions, Exp-Golomb class in unary, the top mantissa bit
+ * modelled, the other mantissa bits raw (§7.5.4). */
+static inline void fxs_pt_put_int(struct fxs_pt_ew *w, fxs_pt_prob *p, int u, uint32_t z)
+{
+    uint32_t e;
+    int k;
+    for (int i = 0; i < u; i++) {
+        fxs_pt_rc_bit(w, p + i, z > (uint32_t)i);
+        if (z == (uint32_t)i) return;
+    }
+    e = z - (uint32_t)u + 1u;
+    k = 31 - __builtin_clz(e);
+    for (int i = 0; i < k; i++) fxs_pt_rc_bit(w, p + u + i, 1);
+    fxs_pt_rc_bit(w, p + u + k, 0);
+    if (k) {
+        fxs_pt_rc_bit(w, p + u + FXS_PT_MAXK + k, e >> (k - 1) & 1u);
+        fxs_pt_bits_put(w, e, k - 1);
+    }
+}
+
+/* Value tree (attribute mode 1): the top min(bits, 8) bits of v, high bit first, with
+ * p[m] (m = 1, then 2m + bit); the low bits - 8 bits raw. */
+static inline void fxs_pt_put_tree(struct fxs_pt_ew *w, fxs_pt_prob *p, uint32_t v, int bits)
+{
+    int low = bits > 8 ? bits - 8 : 0, b = bits - low;
+    uint32_t top = v >> low | 1u << b;
+    while (b-- > 0) fxs_pt_rc_bit(w, p + (top >> (b + 1)), top >> b & 1u);
+    fxs_pt_bits_put(w, v, low);
+}
+
+/* ---- values as bit trees (attribute mode 1) ----------------------------------------------- */
 
 static inline int fxs_pt_get_tree(struct fxs_pt_dec_io *io, fxs_pt_prob *p, int bits, uint32_t *v)
 {
@@ -478,10 +461,27 @@ struct fxs_pt_pt {
 
 struct fxs_pt_enc {
     struct fxs_pt_frame f;
-    struct fxs_pt_pt *pts;
-    struct fxs_pt_enc_io io;
+    /* scratch, one allocation: q (3n coordinates, input order then tree order; n qT, n qF,
+     * n flags), Morton keys and indices (two halves each for the radix sort), nbs (n) and
+     * sk (n bytes) of the neighbour search; order: the input index of each particle in
+     * tree order */
+    void *scratch;
+    uint64_t *keys;
+    uint32_t *idx, *q, *order;
+    int32_t *nbs;
+    struct fxs_pt_ew w;
+    struct fxs_pt_buf rb, bb;    /* range-coder and raw-bits sections */
     struct fxs_pt_models m;
 };
+
+/* class(c) of §7.5.3 for c = 2 ... 256 (class 13 above) */
+static uint8_t fxs_pt_cclass_tab[257];
+
+static void fxs_pt_cclass_init(void)
+{
+    if (fxs_pt_cclass_tab[256]) return;
+    for (uint32_t c = 2; c <= 256; c++) fxs_pt_cclass_tab[c] = (uint8_t)fxs_pt_cclass(c);
+}
 
 /* Spreads the low 21 bits of v to every third bit. */
 static inline uint64_t fxs_pt_spread3(uint64_t v)
@@ -495,31 +495,46 @@ static inline uint64_t fxs_pt_spread3(uint64_t v)
     return v;
 }
 
-/* The same tree over points sorted by Morton key (x above y above z at each bit): the
- * lower half of a node is found by binary search. For frames whose axes have <= 21 bits. */
-static void fxs_pt_enc_sorted(struct fxs_pt_enc *e, const uint64_t *key, const struct fxs_pt_pt *p, uint32_t c, int d)
+/* The tree over points sorted by Morton key (x above y above z at each bit), depth first
+ * without recursion (the upper child of a split waits on a stack of at most one entry per
+ * depth): the lower half of a node is found by a branchless binary search. For frames
+ * whose axes have <= 21 bits. -1 when out of memory. */
+static int fxs_pt_enc_sorted(struct fxs_pt_enc *e, const uint64_t *key, const uint32_t *q)
 {
     const struct fxs_pt_frame *f = &e->f;
-    while (c >= 2 && d < f->depth) {
-        int a = f->axis[d], kb = 3 * (f->left[d][a] - 1) + 2 - a;
-        uint32_t lo = 0, hi = c;
-        while (lo < hi) { /* first key with bit kb set */
-            uint32_t mid = (lo + hi) >> 1;
-            if ((key[mid] >> kb) & 1u) hi = mid;
-            else lo = mid + 1;
+    struct fxs_pt_ew w = e->w;
+    uint32_t st_at[FXS_PT_MAXD + 1], st_c[FXS_PT_MAXD + 1], at = 0, c = f->n;
+    int st_d[FXS_PT_MAXD + 1], d = 0, sp = 0;
+    for (;;) {
+        while (c >= 2 && d < f->depth) {
+            int a = f->axis[d], kb = 3 * (f->left[d][a] - 1) + 2 - a;
+            const uint64_t *base = key + at;
+            uint32_t len = c, lo;
+            while (len > 1) { /* first key with bit kb set */
+                uint32_t half = len >> 1;
+                base += half & ((uint32_t)(base[half] >> kb & 1u) - 1u);
+                len -= half;
+            }
+            lo = (uint32_t)(base - key - at) + (uint32_t)(~*base >> kb & 1u);
+            if (fxs_pt_room(&e->rb, &e->bb, &w)) return -1;
+            fxs_pt_put_int(&w, e->m.cnt[(c <= 256 ? fxs_pt_cclass_tab[c] : 13) * 3 + a], FXS_PT_CNT_U,
+                           fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
+            d++;
+            if (lo && lo < c) {
+                st_at[sp] = at + lo, st_c[sp] = c - lo, st_d[sp] = d, sp++;
+                c = lo;
+            }
         }
-        fxs_pt_put_int(&e->io, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
-                       fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
-        d++;
-        if (lo && lo < c) {
-            fxs_pt_enc_sorted(e, key, p, lo, d);
-            p += lo;
-            key += lo;
-            c -= lo;
+        if (c == 1) {
+            if (fxs_pt_room(&e->rb, &e->bb, &w)) return -1;
+            for (int a = 0; a < 3; a++) fxs_pt_bits_put(&w, q[3 * (size_t)at + a], f->left[d][a]);
         }
+        if (!sp) break;
+        sp--;
+        at = st_at[sp], c = st_c[sp], d = st_d[sp];
     }
-    if (c == 1)
-        for (int a = 0; a < 3; a++) fxs_pt_bits_put(&e->io.bits, p->q[a], f->left[d][a]);
+    e->w = w;
+    return 0;
 }
 
 /* LSD radix sort by key (12-bit digits, constant digits skipped) of k[0]/ix[0] using
@@ -553,40 +568,45 @@ static int fxs_pt_radix(uint64_t *k[2], uint32_t *ix[2], uint32_t n, int keybits
     return cur;
 }
 
-/* Sorts e->pts by Morton key and codes the tree; -1 when out of memory. */
+/* Inverse of fxs_pt_spread3. */
+static inline uint32_t fxs_pt_compact3(uint64_t v)
+{
+    v &= 0x1249249249249249ull;
+    v = (v ^ (v >> 2)) & 0x10C30C30C30C30C3ull;
+    v = (v ^ (v >> 4)) & 0x100F00F00F00F00Full;
+    v = (v ^ (v >> 8)) & 0x1F0000FF0000FFull;
+    v = (v ^ (v >> 16)) & 0x1F00000000FFFFull;
+    v = (v ^ (v >> 32)) & 0x1FFFFFull;
+    return (uint32_t)v;
+}
+
+/* Sorts the particles by Morton key (e->q becomes tree order, e->order the input index of
+ * each) and codes the tree; -1 when out of memory. */
 static int fxs_pt_enc_morton(struct fxs_pt_enc *e)
 {
-    uint32_t n = e->f.n;
-    uint64_t *kb = malloc(2 * (size_t)n * sizeof *kb);
-    uint32_t *ib = malloc(2 * (size_t)n * sizeof *ib);
-    struct fxs_pt_pt *sorted = malloc((size_t)n * sizeof *sorted);
-    int r = -1;
-    if (kb && ib && sorted) {
-        uint64_t *k[2] = { kb, kb + n };
-        uint32_t *ix[2] = { ib, ib + n };
-        int top = e->f.depth ? e->f.left[0][e->f.axis[0]] : 0, c;
-        for (uint32_t i = 0; i < n; i++) {
-            const uint32_t *q = e->pts[i].q;
-            kb[i] = fxs_pt_spread3(q[0]) << 2 | fxs_pt_spread3(q[1]) << 1 | fxs_pt_spread3(q[2]);
-            ib[i] = i;
-        }
-        c = fxs_pt_radix(k, ix, n, 3 * top);
-        for (uint32_t j = 0; j < n; j++) sorted[j] = e->pts[ix[c][j]];
-        free(e->pts);
-        e->pts = sorted;
-        sorted = NULL;
-        fxs_pt_enc_sorted(e, k[c], e->pts, n, 0);
-        r = 0;
+    uint32_t n = e->f.n, *q = e->q;
+    uint64_t *k[2] = { e->keys, e->keys + n };
+    uint32_t *ix[2] = { e->idx, e->idx + n };
+    int top = e->f.depth ? e->f.left[0][e->f.axis[0]] : 0, c;
+    for (uint32_t i = 0; i < n; i++) {
+        const uint32_t *qi = q + 3 * (size_t)i;
+        k[0][i] = fxs_pt_spread3(qi[0]) << 2 | fxs_pt_spread3(qi[1]) << 1 | fxs_pt_spread3(qi[2]);
+        ix[0][i] = i;
     }
-    free(kb);
-    free(ib);
-    free(sorted);
-    return r;
+    c = fxs_pt_radix(k, ix, n, 3 * top);
+    for (uint32_t j = 0; j < n; j++) {
+        uint64_t key = k[c][j];
+        q[3 * (size_t)j] = fxs_pt_compact3(key >> 2);
+        q[3 * (size_t)j + 1] = fxs_pt_compact3(key >> 1);
+        q[3 * (size_t)j + 2] = fxs_pt_compact3(key);
+    }
+    e->order = ix[c];
+    return fxs_pt_enc_sorted(e, k[c], q);
 }
 
 /* The tree by stable partitioning (through scratch), for frames with an axis of more
  * than 21 bits: the same order as the Morton path, ties in input order. */
-static void fxs_pt_enc_node(struct fxs_pt_enc *e, struct fxs_pt_pt *p, struct fxs_pt_pt *tmp, uint32_t c, int d)
+static int fxs_pt_enc_node(struct fxs_pt_enc *e, struct fxs_pt_pt *p, struct fxs_pt_pt *tmp, uint32_t c, int d)
 {
     const struct fxs_pt_frame *f = &e->f;
     while (c >= 2 && d < f->depth) {
@@ -596,68 +616,155 @@ static void fxs_pt_enc_node(struct fxs_pt_enc *e, struct fxs_pt_pt *p, struct fx
             if (!((p[i].q[a] >> sh) & 1u)) p[lo++] = p[i];
             else tmp[hi++] = p[i];
         memcpy(p + lo, tmp, hi * sizeof *p);
-        fxs_pt_put_int(&e->io, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
+        if (fxs_pt_room(&e->rb, &e->bb, &e->w)) return -1;
+        fxs_pt_put_int(&e->w, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
                        fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
         d++;
         if (lo && lo < c) {
-            fxs_pt_enc_node(e, p, tmp, lo, d);
+            if (fxs_pt_enc_node(e, p, tmp, lo, d)) return -1;
             p += lo;
             c -= lo;
         }
     }
-    if (c == 1)
-        for (int a = 0; a < 3; a++) fxs_pt_bits_put(&e->io.bits, p->q[a], f->left[d][a]);
+    if (c == 1) {
+        if (fxs_pt_room(&e->rb, &e->bb, &e->w)) return -1;
+        for (int a = 0; a < 3; a++) fxs_pt_bits_put(&e->w, p->q[a], f->left[d][a]);
+    }
+    return 0;
+}
+
+/* The tree of a frame with an axis of more than 21 bits (fxs_pt_enc_node), then e->q in
+ * tree order and e->order; -1 when out of memory. */
+static int fxs_pt_enc_wide(struct fxs_pt_enc *e)
+{
+    uint32_t n = e->f.n;
+    struct fxs_pt_pt *pts = malloc(2 * (size_t)n * sizeof *pts);
+    int r = -1;
+    if (pts) {
+        for (uint32_t i = 0; i < n; i++) {
+            memcpy(pts[i].q, e->q + 3 * (size_t)i, sizeof pts[i].q);
+            pts[i].i = i;
+        }
+        r = fxs_pt_enc_node(e, pts, pts + n, n, 0);
+        e->order = e->idx;
+        for (uint32_t j = 0; j < n; j++) {
+            memcpy(e->q + 3 * (size_t)j, pts[j].q, sizeof pts[j].q);
+            e->order[j] = pts[j].i;
+        }
+        free(pts);
+    }
+    return r;
 }
 
 /* Mode 0: flags, T and F predicted from the nearest recent neighbour nb[j]. */
-static void fxs_pt_enc_attrs0(struct fxs_pt_enc *e, const uint32_t *qt, const uint32_t *qf, const uint8_t *fl,
-                              const int32_t *nbs)
+static int fxs_pt_enc_attrs0(struct fxs_pt_enc *e, const uint32_t *qt, const uint32_t *qf, const uint8_t *fl,
+                             const int32_t *nbs)
 {
-    uint32_t zt = 0, zf = 0;
-    for (uint32_t j = 0; j < e->f.n; j++) {
+    struct fxs_pt_models *m = &e->m;
+    struct fxs_pt_ew w = e->w;
+    uint32_t zt = 0, zf = 0, n = e->f.n;
+    for (uint32_t j = 0; j < n; j++) {
         int32_t nb = nbs[j];
         uint32_t nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb];
         unsigned nfl = nb < 0 ? 0 : fl[nb], v = fl[j];
         int f0 = nf == 0;
-        fxs_pt_rc_bit(&e->io.rc, &e->m.same[(nfl & 7u) * 2 + (unsigned)f0], v != nfl);
-        if (v != nfl)
-            for (unsigned m = 1, b = 8; b-- > 0;) {
-                unsigned bit = v >> b & 1u;
-                fxs_pt_rc_bit(&e->io.rc, &e->m.tree[m], (int)bit);
-                m = 2 * m + bit;
-            }
-        fxs_pt_prob *pt = e->m.t[(fxs_pt_rclass(zt) * 8 + (int)(v & 7u)) * 2 + f0];
-        fxs_pt_prob *pf = e->m.f[(fxs_pt_rclass(zf) * 2 + f0) * 2 + (int)(v >> 2 & 1u)];
+        fxs_pt_prob *pt = m->t[(fxs_pt_rclass(zt) * 8 + (int)(v & 7u)) * 2 + f0];
+        fxs_pt_prob *pf = m->f[(fxs_pt_rclass(zf) * 2 + f0) * 2 + (int)(v >> 2 & 1u)];
+        if (fxs_pt_room(&e->rb, &e->bb, &w)) return -1;
+        fxs_pt_rc_bit(&w, &m->same[(nfl & 7u) * 2 + (unsigned)f0], v != nfl);
+        if (v != nfl) fxs_pt_put_tree(&w, m->tree, v, 8);
         zt = fxs_pt_zigzag((int32_t)qt[j] - (int32_t)nt);
         zf = fxs_pt_zigzag((int32_t)qf[j] - (int32_t)nf);
-        fxs_pt_put_int(&e->io, pt, FXS_PT_T_U, zt);
-        fxs_pt_put_int(&e->io, pf, FXS_PT_F_U, zf);
+        fxs_pt_put_int(&w, pt, FXS_PT_T_U, zt);
+        fxs_pt_put_int(&w, pf, FXS_PT_F_U, zf);
+    }
+    e->w = w;
+    return 0;
+}
+
+/* Key (squared distance << 5 | k, exact: distances < 2^50) of particle c to the one k before. */
+static inline uint64_t fxs_pt_key(const uint32_t *c, uint32_t k)
+{
+    const uint32_t *o = c - 3 * (size_t)k;
+    int64_t dx = (int64_t)c[0] - o[0], dy = (int64_t)c[1] - o[1], dz = (int64_t)c[2] - o[2];
+    return ((uint64_t)(dx * dx) + (uint64_t)(dy * dy) + (uint64_t)(dz * dz)) << 5 | k;
+}
+
+/* The neighbour search of both modes, one pass: nbs[j], the nearest of j - 1 ... j - 8
+ * (-1 for j = 0), and for mode 1 sk[j], the k (1 ... 8) of the nearest of those with the
+ * flags of j (0: none), from which fxs_pt_same finishes the search over j - 9 ... j - 16. */
+static void fxs_pt_neighbours(const uint32_t *q, const uint8_t *fl, uint32_t n, int32_t *nbs, uint8_t *sk)
+{
+    for (uint32_t j = 0; j < n; j++) {
+        const uint32_t *c = q + 3 * (size_t)j;
+        const uint8_t *fj = fl + j;
+        unsigned v = *fj;
+        uint64_t bn = UINT64_MAX, bs = UINT64_MAX;
+        if (j >= FXS_PT_NEAR) {
+            for (uint32_t k = 1; k <= FXS_PT_NEAR; k++) {
+                uint64_t key = fxs_pt_key(c, k), ks = key | ((uint64_t)0 - (uint64_t)(fj[-(int32_t)k] != v));
+                bn = key < bn ? key : bn;
+                bs = ks < bs ? ks : bs;
+            }
+        } else {
+            for (uint32_t k = 1; k <= j; k++) {
+                uint64_t key = fxs_pt_key(c, k), ks = key | ((uint64_t)0 - (uint64_t)(fj[-(int32_t)k] != v));
+                bn = key < bn ? key : bn;
+                bs = ks < bs ? ks : bs;
+            }
+        }
+        nbs[j] = bn != UINT64_MAX ? (int32_t)(j - (uint32_t)(bn & 31u)) : -1;
+        sk[j] = bs != UINT64_MAX ? (uint8_t)(bs & 31u) : 0;
     }
 }
 
+/* Mode 1's same-flags neighbour of j (flags v): the nearest of j - 1 ... j - 16 with flags v,
+ * from sk (the nearest of the first 8), else last[v]. */
+static inline int32_t fxs_pt_same_enc(const uint32_t *q, const uint8_t *fl, uint32_t j, unsigned v, unsigned sk,
+                                      const int32_t *last)
+{
+    const uint32_t *c = q + 3 * (size_t)j;
+    uint64_t bs = sk ? fxs_pt_key(c, sk) : UINT64_MAX;
+    if (j >= FXS_PT_SAME) {
+        for (uint32_t k = FXS_PT_NEAR + 1; k <= FXS_PT_SAME; k++) {
+            uint64_t ks = fxs_pt_key(c, k) | ((uint64_t)0 - (uint64_t)(fl[j - k] != v));
+            bs = ks < bs ? ks : bs;
+        }
+    } else {
+        for (uint32_t k = FXS_PT_NEAR + 1; k <= j; k++) {
+            uint64_t ks = fxs_pt_key(c, k) | ((uint64_t)0 - (uint64_t)(fl[j - k] != v));
+            bs = ks < bs ? ks : bs;
+        }
+    }
+    return bs != UINT64_MAX ? (int32_t)(j - (uint32_t)(bs & 31u)) : last[v];
+}
+
 /* Mode 1: flags, T and F as values (bit trees) in contexts of the neighbours' values. */
-static void fxs_pt_enc_attrs1(struct fxs_pt_enc *e, const uint32_t *q, const uint32_t *qt, const uint32_t *qf,
-                              const uint8_t *fl)
+static int fxs_pt_enc_attrs1(struct fxs_pt_enc *e, const uint32_t *q, const uint32_t *qt, const uint32_t *qf,
+                             const uint8_t *fl, const int32_t *nbs, const uint8_t *sk)
 {
     const struct fxs_pt_frame *f = &e->f;
-    int64_t last[256];
-    uint64_t d[FXS_PT_SAME];
+    struct fxs_pt_models *m = &e->m;
+    struct fxs_pt_ew w = e->w;
+    const int tbits = f->temp_bits, fbits = f->fuel_bits;
+    const int t3 = tbits > 3 ? tbits - 3 : 0, t4 = tbits > 4 ? tbits - 4 : 0;
+    int32_t last[256];
     for (int i = 0; i < 256; i++) last[i] = -1;
     for (uint32_t j = 0; j < f->n; j++) {
-        int64_t nb = fxs_pt_near(q, j, d, FXS_PT_SAME), sb;
-        unsigned v = fl[j], c = v & 7u;
-        int nf0 = nb < 0 || qf[nb] == 0, tb;
+        unsigned v = fl[j], c = v & 7u, t = qt[j], fu = qf[j];
+        int32_t nb = nbs[j], sb = fxs_pt_same_enc(q, fl, j, v, sk[j], last);
+        unsigned nf0 = nb < 0 || qf[nb] == 0;
         unsigned nfl = nb < 0 ? 0 : fl[nb], nc = nb < 0 ? 8 : nfl & 7u;
-        fxs_pt_rc_bit(&e->io.rc, &e->m.vsame[nc * 2 + (unsigned)nf0], v != nfl);
-        if (v != nfl) fxs_pt_put_tree(&e->io, e->m.vfl[nc], v, 8);
-        sb = fxs_pt_same(fl, j, d, v, last);
-        tb = sb < 0 ? 8 : fxs_pt_top(qt[sb], f->temp_bits, 3);
-        fxs_pt_put_tree(&e->io, e->m.vt[c * 9 + (unsigned)tb], qt[j], f->temp_bits);
-        fxs_pt_rc_bit(&e->io.rc, &e->m.vf0[(c * 16 + (unsigned)fxs_pt_top(qt[j], f->temp_bits, 4)) * 2 + (unsigned)nf0],
-                      qf[j] != 0);
-        if (qf[j]) fxs_pt_put_tree(&e->io, e->m.vf[c * 8 + (unsigned)fxs_pt_top(qt[j], f->temp_bits, 3)], qf[j] - 1, f->fuel_bits);
-        last[v] = j;
+        if (fxs_pt_room(&e->rb, &e->bb, &w)) return -1;
+        fxs_pt_rc_bit(&w, &m->vsame[nc * 2 + nf0], v != nfl);
+        if (v != nfl) fxs_pt_put_tree(&w, m->vfl[nc], v, 8);
+        fxs_pt_put_tree(&w, m->vt[c * 9 + (sb < 0 ? 8u : qt[sb] >> t3)], t, tbits);
+        fxs_pt_rc_bit(&w, &m->vf0[(c * 16 + (t >> t4)) * 2 + nf0], fu != 0);
+        if (fu) fxs_pt_put_tree(&w, m->vf[c * 8 + (t >> t3)], fu - 1, fbits);
+        last[v] = (int32_t)j;
     }
+    e->w = w;
+    return 0;
 }
 
 /* Static estimate (bits) of the T and F residuals of mode 0 against their values by flags
@@ -703,33 +810,28 @@ static int fxs_pt_choose(const struct fxs_pt_frame *f, const uint32_t *qt, const
 }
 
 /* Flags, T and F of every particle in tree order, in the mode the estimate picks. */
-static int fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p, uint32_t *q)
+static int fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p)
 {
     const struct fxs_pt_frame *f = &e->f;
     uint32_t n = f->n, tmax = (1u << f->temp_bits) - 1u, fmax = (1u << f->fuel_bits) - 1u;
     double ts = f->hi[3] > f->lo[3] ? (double)tmax / ((double)f->hi[3] - (double)f->lo[3]) : 0;
     double fs = f->hi[4] > f->lo[4] ? (double)fmax / ((double)f->hi[4] - (double)f->lo[4]) : 0;
-    uint32_t *qt = q + 3 * (size_t)n, *qf = qt + n;
+    uint32_t *q = e->q, *qt = q + 3 * (size_t)n, *qf = qt + n;
     uint8_t *fl = (uint8_t *)(qf + n);
-    int32_t *nbs = malloc((size_t)n * sizeof *nbs);
-    uint64_t d[FXS_PT_SAME];
-    if (!nbs) return -1;
+    int32_t *nbs = e->nbs;
+    uint8_t *sk = (uint8_t *)(nbs + n);
     for (uint32_t j = 0; j < n; j++) {
-        uint32_t i = e->pts[j].i;
-        memcpy(q + 3 * (size_t)j, e->pts[j].q, sizeof e->pts[j].q);
+        uint32_t i = e->order[j];
         qt[j] = fxs_pt_quant(p->temp[i], f->lo[3], ts, tmax);
         qf[j] = fxs_pt_quant(p->fuel[i], f->lo[4], fs, fmax);
         fl[j] = p->flags[i];
     }
-    for (uint32_t j = 0; j < n; j++) nbs[j] = (int32_t)fxs_pt_near(q, j, d, FXS_PT_NEAR);
+    fxs_pt_neighbours(q, fl, n, nbs, sk);
     e->f.mode = fxs_pt_choose(f, qt, qf, fl, nbs);
-    if (e->f.mode) fxs_pt_enc_attrs1(e, q, qt, qf, fl);
-    else fxs_pt_enc_attrs0(e, qt, qf, fl, nbs);
-    free(nbs);
-    return 0;
+    return e->f.mode ? fxs_pt_enc_attrs1(e, q, qt, qf, fl, nbs, sk) : fxs_pt_enc_attrs0(e, qt, qf, fl, nbs);
 }
 
-/* Quantises positions into e->pts and sets the axis bits. */
+/* Quantises positions into e->q (input order) and sets the axis bits. */
 static void fxs_pt_enc_quant(struct fxs_pt_enc *e, const struct fxs_particles *p)
 {
     struct fxs_pt_frame *f = &e->f;
@@ -738,10 +840,9 @@ static void fxs_pt_enc_quant(struct fxs_pt_enc *e, const struct fxs_particles *p
     for (uint32_t i = 0; i < p->n; i++) {
         for (int a = 0; a < 3; a++) {
             uint32_t v = fxs_pt_quant(p->xyz[3 * i + a], f->lo[a], scale, qmax);
-            e->pts[i].q[a] = v;
+            e->q[3 * (size_t)i + a] = v;
             all[a] |= v;
         }
-        e->pts[i].i = i;
     }
     for (int a = 0; a < 3; a++) f->abits[a] = all[a] ? 32 - __builtin_clz(all[a]) : 0;
 }
@@ -788,47 +889,49 @@ static int fxs_pt_check_input(const struct fxs_particles *p, char *err, size_t e
     return 0;
 }
 
-/* Runs both passes and assembles header + range-coder bytes + raw bits. */
+/* Runs both passes and assembles header + range-coder bytes + raw bits (the range-coder
+ * section is written after room for the header, the raw bits appended to it). */
 static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, uint8_t **out, size_t *out_len)
 {
-    uint32_t n = p->n, *q = NULL;
-    uint8_t *buf;
-    size_t total;
-    int r = -1;
+    uint32_t n = p->n;
+    size_t rl = 0, bl = 0, nn = n;
+    struct fxs_pt_ew *w = &e->w;
+    uint8_t *s;
     fxs_pt_steps(&e->f);
+    fxs_pt_ew_init(w);
+    if (!(w->rp = fxs_pt_grow(&e->rb, NULL, FXS_PARTICLES_HEADER_BYTES + nn + 4096))) return -1;
+    w->rp += FXS_PARTICLES_HEADER_BYTES;
     if (n) {
-        if (!(e->pts = malloc((size_t)n * sizeof *e->pts))) return -1;
-        /* q: 3n ordered coordinates, n qT, n qF, n flags */
-        if (!(q = malloc((size_t)n * (5 * sizeof *q + 1)))) return -1;
+        /* 16n keys, 8n indices, 4n nbs + n sk (in 8n), 12n + 9n q */
+        if (!(s = e->scratch = malloc(nn * 53 + 8))) return -1;
+        e->keys = (uint64_t *)s;
+        e->idx = (uint32_t *)(e->keys + 2 * nn);
+        e->nbs = (int32_t *)(e->idx + 2 * nn);
+        e->q = (uint32_t *)(e->nbs + 2 * nn);
         fxs_pt_enc_quant(e, p);
         fxs_pt_schedule(&e->f);
         fxs_pt_models_init(&e->m);
-        fxs_pt_rc_init(&e->io.rc);
+        fxs_pt_cclass_init();
+        if (!(w->bp = fxs_pt_grow(&e->bb, NULL, nn + 4096))) return -1;
         if (e->f.abits[0] <= 21 && e->f.abits[1] <= 21 && e->f.abits[2] <= 21) {
-            if (fxs_pt_enc_morton(e)) goto done;
-        } else {
-            struct fxs_pt_pt *tmp = malloc((size_t)n * sizeof *tmp);
-            if (!tmp) goto done;
-            fxs_pt_enc_node(e, e->pts, tmp, n, 0);
-            free(tmp);
+            if (fxs_pt_enc_morton(e)) return -1;
+        } else if (fxs_pt_enc_wide(e)) {
+            return -1;
         }
-        if (fxs_pt_enc_attrs(e, p, q)) goto done;
-        fxs_pt_rc_flush(&e->io.rc);
-        fxs_pt_bits_flush(&e->io.bits);
-        if (e->io.rc.b.oom || e->io.bits.b.oom) goto done;
-        if (e->io.rc.b.len > UINT32_MAX || e->io.bits.b.len > UINT32_MAX) goto done;
+        if (fxs_pt_enc_attrs(e, p) || fxs_pt_room(&e->rb, &e->bb, w)) return -1;
+        for (int i = 0; i < 5; i++) fxs_pt_rc_shift(w);
+        for (; w->cnt > 0; w->cnt -= 8, w->acc >>= 8) *w->bp++ = (uint8_t)w->acc;
+        rl = (size_t)(w->rp - e->rb.p) - FXS_PARTICLES_HEADER_BYTES;
+        bl = (size_t)(w->bp - e->bb.p);
+        if (rl > UINT32_MAX || bl > UINT32_MAX) return -1;
+        if (!(w->rp = fxs_pt_grow(&e->rb, w->rp, bl))) return -1;
+        if (bl) memcpy(w->rp, e->bb.p, bl);
     }
-    total = FXS_PARTICLES_HEADER_BYTES + e->io.rc.b.len + e->io.bits.b.len;
-    if (!(buf = malloc(total))) goto done;
-    fxs_pt_header(&e->f, buf, (uint32_t)e->io.rc.b.len, (uint32_t)e->io.bits.b.len);
-    if (e->io.rc.b.len) memcpy(buf + FXS_PARTICLES_HEADER_BYTES, e->io.rc.b.p, e->io.rc.b.len);
-    if (e->io.bits.b.len) memcpy(buf + FXS_PARTICLES_HEADER_BYTES + e->io.rc.b.len, e->io.bits.b.p, e->io.bits.b.len);
-    *out = buf;
-    *out_len = total;
-    r = 0;
-done:
-    free(q);
-    return r;
+    fxs_pt_header(&e->f, e->rb.p, (uint32_t)rl, (uint32_t)bl);
+    *out = e->rb.p;
+    *out_len = FXS_PARTICLES_HEADER_BYTES + rl + bl;
+    e->rb.p = NULL;
+    return 0;
 }
 
 int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particles_opts *opts, uint8_t **out,
@@ -849,9 +952,9 @@ int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particl
         r = fxs_pt_enc_run(e, p, out, out_len);
         if (r) fxs_pt_fail(err, errlen, "out of memory");
     }
-    free(e->pts);
-    free(e->io.rc.b.p);
-    free(e->io.bits.b.p);
+    free(e->scratch);
+    free(e->rb.p);
+    free(e->bb.p);
     free(e);
     return r;
 }
