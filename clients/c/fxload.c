@@ -818,7 +818,8 @@ static int ld_start_due(struct ld *ld, double now)
 static int ld_run(struct ld *ld)
 {
     struct fxp_callbacks cb = { ld_on_open, ld_on_text, ld_on_frame, ld_on_close };
-    struct fxp_options po = { (int)ld->o->connections, ld->o->payloads, 0, ld->o->token, ld->o->ca_file };
+    struct fxp_options po = { .max_connections = (int)ld->o->connections, .payloads = ld->o->payloads,
+                              .token = ld->o->token, .ca_file = ld->o->ca_file };
     char err[300];
     double next_row = 1, now = 0;
     if (fxp_pool_create(&ld->pool, &cb, &po, err, sizeof err)) {
