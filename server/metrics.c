@@ -78,6 +78,9 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_head(out, "fxs_connections_stalled_total", "counter",
                  "Connections closed because their socket stayed full for stall_timeout_s.");
     metrics_printf(out, "fxs_connections_stalled_total %llu\n", (unsigned long long)atomic_load(&c->stalled_closed));
+    metrics_head(out, "fxs_state_writes_total", "counter",
+                 "State files written to the state directory (one per group of accepted changes).");
+    metrics_printf(out, "fxs_state_writes_total %llu\n", (unsigned long long)atomic_load(&c->state_writes));
     metrics_head(out, "fxs_bytes_sent_total", "counter", "Frame bytes sent, all streams.");
     metrics_printf(out, "fxs_bytes_sent_total %llu\n", (unsigned long long)atomic_load(&c->bytes_sent));
     metrics_head(out, "fxs_streams", "gauge", "Streams defined.");

@@ -46,6 +46,7 @@ struct config {
 struct counters {
     atomic_uint_fast64_t connections_total, messages_in, errors_out, frames_sent, frames_skipped, bytes_sent;
     atomic_uint_fast64_t stalled_closed; /* connections closed for not reading (stall_timeout_s) */
+    atomic_uint_fast64_t state_writes;   /* state files written (one per group commit, store.h) */
 };
 
 struct session;
@@ -59,6 +60,7 @@ struct server {
     struct counters counters;
     struct session *sessions; /* network thread only */
     int nsessions;
+    bool store_dirty;         /* network thread only: accepted changes not yet on disk (store.h) */
     double start_time;        /* CLOCK_MONOTONIC seconds */
     /* Called by the session layer when a session has output queued (net.c asks the
      * socket for a writable callback). */

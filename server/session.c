@@ -252,7 +252,7 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
         cJSON_Delete(doc);
         return -1;
     }
-    store_save(ss->srv);
+    ss->hold |= store_mark(ss->srv);
     log_info("stream %s created (effect %s)", name, fx->name);
     cJSON *r = session_reply("created", id);
     cJSON_AddStringToObject(r, "stream", name);
@@ -272,7 +272,7 @@ static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON 
     if (!s) return -1;
     session_stream_gone(ss->srv, s);
     stream_unref(s);
-    store_save(ss->srv);
+    ss->hold |= store_mark(ss->srv);
     log_info("stream %s destroyed", name);
     cJSON *r = session_reply("destroyed", id);
     cJSON_AddStringToObject(r, "stream", name);
@@ -390,7 +390,7 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
         return -1;
     }
     rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
-    store_save(ss->srv);
+    ss->hold |= store_mark(ss->srv);
     for (struct session *o = ss->srv->sessions; o; o = o->next)
         if (o != ss && session_find_sub(o, s) >= 0)
             session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));

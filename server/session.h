@@ -48,6 +48,7 @@ struct session {
     double tokens, last_refill;
     double last_write;    /* CLOCK_MONOTONIC seconds of the last write to the socket (net.c) */
     const char *kill;     /* set: the network layer closes the connection (1008) with this reason */
+    bool hold;            /* replies wait until the change they acknowledge is on disk (store.h) */
     enum access_role role;
     int auth_failures;
 };

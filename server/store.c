@@ -62,9 +62,17 @@ static int store_write_file(const char *dir, const char *text)
     return 0;
 }
 
-void store_save(struct server *srv)
+bool store_mark(struct server *srv)
 {
-    if (!srv->cfg.state_dir[0]) return;
+    if (srv->cfg.state_dir[0]) srv->store_dirty = true;
+    return srv->store_dirty;
+}
+
+void store_flush(struct server *srv)
+{
+    if (!srv->store_dirty) return;
+    srv->store_dirty = false;
+    atomic_fetch_add(&srv->counters.state_writes, 1);
     cJSON *doc = store_snapshot(srv);
     char *text = cJSON_Print(doc);
     cJSON_Delete(doc);

@@ -138,7 +138,7 @@ static int bl_drain_open(int port, const char *stream)
                      "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n", port);
     if (connect(fd, (struct sockaddr *)&a, sizeof a) || send(fd, req, (size_t)n, 0) != n) goto fail;
     while (got < sizeof head - 1 && !(got >= 4 && !memcmp(head + got - 4, "\r\n\r\n", 4)))
-        if (recv(fd, head + got, 1, 0) != 1) goto fail; /* byte by byte: nothing after the headers */
+        if (recv(fd, head + got++, 1, 0) != 1) goto fail; /* byte by byte: nothing after the headers */
     head[got] = 0;
     if (!strstr(head, " 101 ")) goto fail;
     n = snprintf(msg, sizeof msg, "{\"op\":\"subscribe\",\"stream\":\"%s\"}", stream);

@@ -175,6 +175,9 @@ async def test_kill9_burst(t):
         task = asyncio.ensure_future(burst())
         while len(acked) < 100:
             await asyncio.sleep(0.005)
+        writes = metric(d, "fxs_state_writes_total")
+        t.check(writes is not None and writes < len(acked) / 2,
+                "group commit: %s state writes for %d acknowledged sets" % (writes, len(acked)))
         d.proc.send_signal(signal.SIGKILL)
         try:
             await asyncio.wait_for(task, 10)
