@@ -39,7 +39,7 @@ WEB_SRC     := $(wildcard clients/web/src/*.js) clients/web/fxs_particles.js cli
 WEB_OUT     := clients/web/dist/app.js
 NPM_STAMP   := node_modules/.package-lock.json
 
-.PHONY: all deps run test bench clean unit web fuzz fuzz-libs
+.PHONY: all deps run test bench clean unit web fuzz fuzz-libs install uninstall
 .SECONDARY: # keep object files of tests and benches between runs
 all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(WEB_OUT)
 
@@ -71,6 +71,42 @@ bench: deps all $(BENCH_BIN)
 	@tests/bench/run.sh
 
 unit: $(UNIT_BIN)
+
+# make install [PREFIX=/usr/local] [DESTDIR=...] [SYSCONFDIR=PREFIX/etc]: the three programs,
+# the web client (as the daemon serves it: the pages and the esbuild bundle, without its
+# sources), the systemd unit and an example configuration that points the daemon there.
+# Kernels are embedded in fxstreamd, nothing else to install. An existing config is kept.
+# Paths in deploy/fxstreamd.service and deploy/fxstreamd.json are written for /usr/local.
+PREFIX     ?= /usr/local
+BINDIR     ?= $(PREFIX)/bin
+SYSCONFDIR ?= $(PREFIX)/etc
+FXDATADIR  ?= $(PREFIX)/share/fxstream
+DOCDIR     ?= $(PREFIX)/share/doc/fxstream
+UNITDIR    ?= $(PREFIX)/lib/systemd/system
+WEB_FILES  := $(wildcard clients/web/*.html clients/web/*.js clients/web/*.css)
+FX_PATHS   := -e 's|/usr/local/bin|$(BINDIR)|g' -e 's|/usr/local/etc|$(SYSCONFDIR)|g' \
+              -e 's|/usr/local/share/fxstream|$(FXDATADIR)|g' -e 's|/usr/local/share/doc/fxstream|$(DOCDIR)|g'
+
+install: all
+	install -d $(DESTDIR)$(BINDIR) $(DESTDIR)$(FXDATADIR)/web $(DESTDIR)$(SYSCONFDIR)/fxstream \
+	    $(DESTDIR)$(UNITDIR) $(DESTDIR)$(DOCDIR)
+	install -m 0755 $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(DESTDIR)$(BINDIR)/
+	install -m 0644 $(WEB_FILES) $(DESTDIR)$(FXDATADIR)/web/
+	cp -R clients/web/dist $(DESTDIR)$(FXDATADIR)/web/ && chmod -R u=rwX,go=rX $(DESTDIR)$(FXDATADIR)/web/dist
+	sed $(FX_PATHS) deploy/fxstreamd.service > $(DESTDIR)$(UNITDIR)/fxstreamd.service
+	sed $(FX_PATHS) deploy/fxstreamd.json > $(DESTDIR)$(DOCDIR)/fxstreamd.json
+	test -e $(DESTDIR)$(SYSCONFDIR)/fxstream/fxstreamd.json || \
+	    install -m 0644 $(DESTDIR)$(DOCDIR)/fxstreamd.json $(DESTDIR)$(SYSCONFDIR)/fxstream/fxstreamd.json
+	install -m 0644 README.md deploy/tokens.env.example deploy/nginx/fxstream.conf protocol/PROTOCOL.md \
+	    $(DESTDIR)$(DOCDIR)/
+	install -m 0644 deploy/README.md $(DESTDIR)$(DOCDIR)/DEPLOY.md
+	chmod 0644 $(DESTDIR)$(UNITDIR)/fxstreamd.service
+
+# Keeps SYSCONFDIR/fxstream (the configuration and tokens are the operator's).
+uninstall:
+	rm -f $(DESTDIR)$(BINDIR)/fxstreamd $(DESTDIR)$(BINDIR)/fxctl $(DESTDIR)$(BINDIR)/fxload \
+	    $(DESTDIR)$(UNITDIR)/fxstreamd.service
+	rm -rf $(DESTDIR)$(FXDATADIR) $(DESTDIR)$(DOCDIR)
 
 clean:
 	rm -rf $(BUILD) clients/web/dist
