@@ -14,7 +14,6 @@
 #include "fxws.h"
 
 #include <errno.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -58,16 +57,6 @@ struct fxc_client {
     size_t n_events;
     struct fxc_stats stats;
 };
-
-static void fxc_set_err(char *buf, size_t len, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void fxc_set_err(char *buf, size_t len, const char *fmt, ...)
-{
-    va_list ap;
-    if (!buf || !len) return;
-    va_start(ap, fmt);
-    vsnprintf(buf, len, fmt, ap);
-    va_end(ap);
-}
 
 static int64_t fxc_now_us(clockid_t clk) { return fxws_now_us(clk); }
 
@@ -233,7 +222,7 @@ static int fxc_on_writeable(struct fxc_client *c, struct lws *wsi)
     n = lws_write(wsi, c->tx + LWS_PRE, c->tx_len, LWS_WRITE_TEXT);
     c->tx_len = 0;
     if (n < 0) {
-        fxc_set_err(c->err, sizeof c->err, "write to server failed");
+        fxws_set_err(c->err, sizeof c->err, "write to server failed");
         return -1;
     }
     return 0;
@@ -266,7 +255,7 @@ static int fxc_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         fxc_on_peer_close(c, in, len);
         return 0;
     case LWS_CALLBACK_CLIENT_CLOSED:
-        if (!c->err[0]) fxc_set_err(c->err, sizeof c->err, "connection to %s:%d lost", c->url.host, c->url.port);
+        if (!c->err[0]) fxws_set_err(c->err, sizeof c->err, "connection to %s:%d lost", c->url.host, c->url.port);
         c->state = FXC_CLOSED;
         c->wsi = NULL;
         return 0;
@@ -303,7 +292,7 @@ static int fxc_pump(struct fxc_client *c, int64_t deadline, fxc_cond cond)
         if (now >= deadline) return 0;
         lws_sul_schedule(c->ctx, 0, &c->tick, fxc_tick_cb, deadline - now < FXC_TICK_US ? deadline - now : FXC_TICK_US);
         if (lws_service(c->ctx, 0) < 0) {
-            fxc_set_err(c->err, sizeof c->err, "libwebsockets service failed");
+            fxws_set_err(c->err, sizeof c->err, "libwebsockets service failed");
             c->state = FXC_CLOSED;
         }
     }
@@ -331,7 +320,7 @@ static int fxc_start(struct fxc_client *c, const char *ca_file, char *eb, size_t
     info.user = c;
     if (c->url.tls) fxws_tls_context(&info, ca_file);
     if (!(c->ctx = lws_create_context(&info))) {
-        fxc_set_err(eb, el, "cannot create a libwebsockets context");
+        fxws_set_err(eb, el, "cannot create a libwebsockets context");
         return -1;
     }
     memset(&ci, 0, sizeof ci);
@@ -345,7 +334,7 @@ static int fxc_start(struct fxc_client *c, const char *ca_file, char *eb, size_t
     ci.pwsi = &c->wsi;
     if (!lws_client_connect_via_info(&ci)) {
         if (!c->err[0]) fxc_on_connect_error(c, "connect failed");
-        fxc_set_err(eb, el, "%s", c->err);
+        fxws_set_err(eb, el, "%s", c->err);
         return -1;
     }
     return 0;
@@ -377,14 +366,14 @@ int fxc_connect_with(struct fxc_client **out, const char *url, const struct fxc_
     struct fxc_client *c = calloc(1, sizeof *c);
     int r;
     *out = NULL;
-    if (!c) { fxc_set_err(eb, el, "out of memory"); return -1; }
+    if (!c) { fxws_set_err(eb, el, "out of memory"); return -1; }
     if (fxws_url_parse(&c->url, url, eb, el)) {
         fxc_free(c);
         return -2;
     }
     if (o && o->token && !(c->token = strdup(o->token))) {
         fxc_free(c);
-        fxc_set_err(eb, el, "out of memory");
+        fxws_set_err(eb, el, "out of memory");
         return -1;
     }
     if (fxc_start(c, o ? o->ca_file : NULL, eb, el)) {
@@ -397,11 +386,11 @@ int fxc_connect_with(struct fxc_client **out, const char *url, const struct fxc_
         return 0;
     }
     if (r == 0)
-        fxc_set_err(eb, el, "timeout after %d ms %s %s://%s%s", timeout_ms,
+        fxws_set_err(eb, el, "timeout after %d ms %s %s://%s%s", timeout_ms,
                     c->state == FXC_OPEN ? "waiting for the hello of" : "connecting to", fxws_scheme(&c->url),
                     c->url.host_header, c->url.path);
     else
-        fxc_set_err(eb, el, "%s", c->err);
+        fxws_set_err(eb, el, "%s", c->err);
     fxc_free(c);
     return -1;
 }
@@ -416,7 +405,7 @@ static int fxc_queue_request(struct fxc_client *c, const cJSON *req, char *eb, s
     size_t n;
     if (!copy || !cJSON_IsObject(copy)) {
         cJSON_Delete(copy);
-        fxc_set_err(eb, el, "request must be a JSON object");
+        fxws_set_err(eb, el, "request must be a JSON object");
         return -1;
     }
     cJSON_DeleteItemFromObjectCaseSensitive(copy, "id");
@@ -428,7 +417,7 @@ static int fxc_queue_request(struct fxc_client *c, const cJSON *req, char *eb, s
     if (!text || !(c->tx = malloc(LWS_PRE + n))) {
         free(text);
         c->tx = NULL;
-        fxc_set_err(eb, el, "out of memory");
+        fxws_set_err(eb, el, "out of memory");
         return -1;
     }
     memcpy(c->tx + LWS_PRE, text, n);
@@ -446,7 +435,7 @@ static void fxc_reply_error(const cJSON *r, char *eb, size_t el)
     const cJSON *code = cJSON_GetObjectItemCaseSensitive(r, "code");
     const cJSON *msg = cJSON_GetObjectItemCaseSensitive(r, "message");
     const cJSON *param = cJSON_GetObjectItemCaseSensitive(r, "param");
-    fxc_set_err(eb, el, "%s: %s%s%s%s", cJSON_IsString(code) ? code->valuestring : "error",
+    fxws_set_err(eb, el, "%s: %s%s%s%s", cJSON_IsString(code) ? code->valuestring : "error",
                 cJSON_IsString(msg) ? msg->valuestring : "(no message)",
                 cJSON_IsString(param) ? " (param " : "", cJSON_IsString(param) ? param->valuestring : "",
                 cJSON_IsString(param) ? ")" : "");
@@ -457,7 +446,7 @@ int fxc_request(struct fxc_client *c, const cJSON *req, cJSON **reply, int timeo
     const cJSON *op;
     int r;
     *reply = NULL;
-    if (c->state != FXC_OPEN) { fxc_set_err(eb, el, "%s", c->err); return -1; }
+    if (c->state != FXC_OPEN) { fxws_set_err(eb, el, "%s", c->err); return -1; }
     if (fxc_queue_request(c, req, eb, el)) return -1;
     r = fxc_pump(c, fxc_deadline(timeout_ms), fxc_has_reply);
     if (r != 1) {
@@ -465,10 +454,10 @@ int fxc_request(struct fxc_client *c, const cJSON *req, cJSON **reply, int timeo
         c->tx_len = 0;
         op = cJSON_GetObjectItemCaseSensitive(req, "op");
         if (r == 0)
-            fxc_set_err(eb, el, "timeout after %d ms waiting for the reply to \"%s\"", timeout_ms,
+            fxws_set_err(eb, el, "timeout after %d ms waiting for the reply to \"%s\"", timeout_ms,
                         cJSON_IsString(op) ? op->valuestring : "?");
         else
-            fxc_set_err(eb, el, "%s", c->err);
+            fxws_set_err(eb, el, "%s", c->err);
         return -1;
     }
     *reply = c->reply;
@@ -485,7 +474,7 @@ int fxc_next(struct fxc_client *c, struct fxc_msg *m, int timeout_ms, char *eb, 
     int r = fxc_pump(c, fxc_deadline(timeout_ms), fxc_has_msg);
     memset(m, 0, sizeof *m);
     if (r != 1) {
-        if (r < 0) fxc_set_err(eb, el, "%s", c->err);
+        if (r < 0) fxws_set_err(eb, el, "%s", c->err);
         return r;
     }
     n = fxc_queue_unlink(c, NULL, c->head);
@@ -502,7 +491,7 @@ void fxc_close(struct fxc_client *c)
 {
     if (!c) return;
     if (c->state == FXC_OPEN && c->wsi) {
-        fxc_set_err(c->err, sizeof c->err, "closed by the client");
+        fxws_set_err(c->err, sizeof c->err, "closed by the client");
         lws_close_reason(c->wsi, LWS_CLOSE_STATUS_NORMAL, NULL, 0);
         c->closing = 1; /* the writeable callback returns -1: lws sends the close */
         lws_callback_on_writable(c->wsi);

@@ -15,7 +15,6 @@
 #include "fxws.h"
 
 #include <errno.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -76,16 +75,6 @@ struct fxp_pool {
     struct fxp_stats stats;
 };
 
-static void fxp_set_err(char *buf, size_t len, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void fxp_set_err(char *buf, size_t len, const char *fmt, ...)
-{
-    va_list ap;
-    if (!buf || !len) return;
-    va_start(ap, fmt);
-    vsnprintf(buf, len, fmt, ap);
-    va_end(ap);
-}
-
 /* ---- connection end ----------------------------------------------------------- */
 
 /* Marks c ended (once) and queues the report for fxp_service. */
@@ -95,7 +84,7 @@ static void fxp_mark_ended(struct fxp_conn *c, const char *why_if_none)
     if (c->ended) return;
     c->ended = 1;
     c->wsi = NULL;
-    if (!c->why[0]) fxp_set_err(c->why, sizeof c->why, "%s", why_if_none);
+    if (!c->why[0]) fxws_set_err(c->why, sizeof c->why, "%s", why_if_none);
     c->next_ended = NULL;
     if (p->ended_tail) p->ended_tail->next_ended = c;
     else p->ended = c;
@@ -189,7 +178,7 @@ static void fxp_on_connect_error(struct fxp_conn *c, const char *why)
     int e = 0;
     if (c->why[0]) return; /* our own filter explained it already */
     if (c->by_client) {
-        fxp_set_err(c->why, sizeof c->why, "closed by the client");
+        fxws_set_err(c->why, sizeof c->why, "closed by the client");
         return;
     }
     if (fxws_connect_needs_probe(c->tcp_up, w)) {
@@ -214,7 +203,7 @@ static int fxp_on_writeable(struct fxp_conn *c, struct lws *wsi)
     n = lws_write(wsi, o->data + LWS_PRE, o->len, LWS_WRITE_TEXT);
     free(o);
     if (n < 0) {
-        fxp_set_err(c->why, sizeof c->why, "write to server failed");
+        fxws_set_err(c->why, sizeof c->why, "write to server failed");
         return -1;
     }
     if (c->out_head) lws_callback_on_writable(wsi);
@@ -278,12 +267,12 @@ static int fxp_raise_fd_limit(int need, char *eb, size_t el)
 {
     struct rlimit rl;
     if (getrlimit(RLIMIT_NOFILE, &rl)) {
-        fxp_set_err(eb, el, "cannot read the file descriptor limit: %s", strerror(errno));
+        fxws_set_err(eb, el, "cannot read the file descriptor limit: %s", strerror(errno));
         return -1;
     }
     if (rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur >= (rlim_t)need) return 0;
     if (rl.rlim_max != RLIM_INFINITY && rl.rlim_max < (rlim_t)need) {
-        fxp_set_err(eb, el,
+        fxws_set_err(eb, el,
                     "%d connections need %d file descriptors but the hard limit is %llu "
                     "(raise it, e.g. ulimit -Hn or LimitNOFILE=)",
                     need - FXP_FD_SLACK, need, (unsigned long long)rl.rlim_max);
@@ -291,7 +280,7 @@ static int fxp_raise_fd_limit(int need, char *eb, size_t el)
     }
     rl.rlim_cur = (rlim_t)need;
     if (setrlimit(RLIMIT_NOFILE, &rl)) {
-        fxp_set_err(eb, el, "cannot raise the file descriptor limit to %d: %s", need, strerror(errno));
+        fxws_set_err(eb, el, "cannot raise the file descriptor limit to %d: %s", need, strerror(errno));
         return -1;
     }
     return 0;
@@ -305,13 +294,13 @@ int fxp_pool_create(struct fxp_pool **out, const struct fxp_callbacks *cb, const
     int need;
     *out = NULL;
     if (!o || o->max_connections < 1 || o->max_connections > FXP_MAX_CONNECTIONS) {
-        fxp_set_err(eb, el, "max_connections must be 1..%d", FXP_MAX_CONNECTIONS);
+        fxws_set_err(eb, el, "max_connections must be 1..%d", FXP_MAX_CONNECTIONS);
         return -1;
     }
     need = o->max_connections + FXP_FD_SLACK;
     if (fxp_raise_fd_limit(need, eb, el)) return -1;
     if (!(p = calloc(1, sizeof *p))) {
-        fxp_set_err(eb, el, "out of memory");
+        fxws_set_err(eb, el, "out of memory");
         return -1;
     }
     if (cb) p->cb = *cb;
@@ -330,7 +319,7 @@ int fxp_pool_create(struct fxp_pool **out, const struct fxp_callbacks *cb, const
     fxws_tls_context(&info, o->ca_file); /* any target may be wss:// */
     if (!(p->ctx = lws_create_context(&info))) {
         free(p);
-        fxp_set_err(eb, el, "cannot create a libwebsockets context for %d connections", o->max_connections);
+        fxws_set_err(eb, el, "cannot create a libwebsockets context for %d connections", o->max_connections);
         return -1;
     }
     *out = p;
@@ -346,7 +335,7 @@ static struct fxp_target *fxp_target(struct fxp_pool *p, const char *url, int *r
         if (!strcmp(t->url, url)) return t;
     if (!(t = calloc(1, sizeof *t)) || !(t->url = strdup(url))) {
         free(t);
-        fxp_set_err(eb, el, "out of memory");
+        fxws_set_err(eb, el, "out of memory");
         *rc = -1;
         return NULL;
     }
@@ -373,16 +362,16 @@ int fxp_connect(struct fxp_pool *p, const char *url, void *user, struct fxp_conn
     int rc = -1;
     if (out) *out = NULL;
     if (!url) {
-        fxp_set_err(eb, el, "bad URL: none given");
+        fxws_set_err(eb, el, "bad URL: none given");
         return -2;
     }
     if (!(t = fxp_target(p, url, &rc, eb, el))) return rc;
     if (p->live >= p->o.max_connections) {
-        fxp_set_err(eb, el, "connection limit of the pool reached (%d open)", p->o.max_connections);
+        fxws_set_err(eb, el, "connection limit of the pool reached (%d open)", p->o.max_connections);
         return -1;
     }
     if (!(c = calloc(1, sizeof *c))) {
-        fxp_set_err(eb, el, "out of memory");
+        fxws_set_err(eb, el, "out of memory");
         return -1;
     }
     c->magic = FXP_CONN_MAGIC;

@@ -18,8 +18,7 @@
 #define FXWS_PROBE_WAIT_MS 1000
 #define FXWS_RX_MIN_CAP 65536
 
-static void fxws_set_err(char *buf, size_t len, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static void fxws_set_err(char *buf, size_t len, const char *fmt, ...)
+void fxws_set_err(char *buf, size_t len, const char *fmt, ...)
 {
     va_list ap;
     if (!buf || !len) return;

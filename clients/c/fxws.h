@@ -20,6 +20,10 @@ struct addrinfo;
 #define FXWS_DEFAULT_PATH "/v1/ws"
 #define FXWS_SUBPROTOCOL "fxstream.v1"
 
+/* printf into buf (len bytes; either may be NULL/0: nothing is written): the one-line
+ * error messages of libfxclient. */
+void fxws_set_err(char *buf, size_t len, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+
 /* A parsed ws:// or wss://host[:port][/path] URL. */
 struct fxws_url {
     int tls;               /* wss:// */

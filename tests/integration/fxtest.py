@@ -29,8 +29,16 @@ def parse_frame(data):
                 payload=data[hbytes:])
 
 
+def config_file(doc):
+    """Writes doc as a JSON configuration file for --config; returns its path."""
+    fd, path = tempfile.mkstemp(suffix=".json")
+    with os.fdopen(fd, "w") as f:
+        json.dump(doc, f)
+    return path
+
+
 class Daemon:
-    """A fxstreamd on 127.0.0.1 with a kernel-chosen port."""
+    """A fxstreamd on 127.0.0.1 with a kernel-chosen port; `with Daemon(...) as d:` stops it."""
 
     def __init__(self, *args, state_dir=None, env=None, wrapper=(), binary=DAEMON):
         self.state_dir = state_dir or tempfile.mkdtemp(prefix="fxs-state-")
@@ -44,6 +52,12 @@ class Daemon:
         self.port = int(line.split("127.0.0.1:")[1].split("/")[0])
         self.url = "ws://127.0.0.1:%d/v1/ws" % self.port
         self.http = "http://127.0.0.1:%d" % self.port
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
 
     def stop(self, sig=signal.SIGTERM, timeout=10):
         """Signals the daemon and returns its exit status."""

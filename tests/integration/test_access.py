@@ -15,7 +15,7 @@ import urllib.request
 
 import websockets
 
-from fxtest import DAEMON, ROOT, Client, Daemon, Suite
+from fxtest import DAEMON, ROOT, Client, Daemon, Suite, config_file
 
 FXCTL = os.path.join(ROOT, "build", "fxctl")
 FXLOAD = os.path.join(ROOT, "build", "fxload")
@@ -32,17 +32,9 @@ def tool(d, args, scheme="ws", env=None):
 VIEW, TUNE, ADMIN = "view-token-0123456789", "tune-token-0123456789", "admin-token-012345678"
 
 
-def config_file(extra=None):
-    cfg = {"tokens": [{"role": "view", "token": VIEW}, {"role": "tune", "token": TUNE}]}
-    cfg.update(extra or {})
-    fd, path = tempfile.mkstemp(suffix=".json")
-    with os.fdopen(fd, "w") as f:
-        json.dump(cfg, f)
-    return path
-
-
 def token_daemon(extra=None):
-    return Daemon("--config", config_file(extra), env={"FXSTREAMD_TOKENS": "admin:" + ADMIN})
+    cfg = {"tokens": [{"role": "view", "token": VIEW}, {"role": "tune", "token": TUNE}], **(extra or {})}
+    return Daemon("--config", config_file(cfg), env={"FXSTREAMD_TOKENS": "admin:" + ADMIN})
 
 
 async def connect(d, headers=None, origin=None):

@@ -7,24 +7,19 @@ the normal build under valgrind (no error, nothing definitely or indirectly lost
 tests/integration/valgrind.supp holds one glibc false positive).
 Run from the repository root: /usr/bin/python3 tests/integration/test_churn.py"""
 import asyncio
-import json
 import os
 import re
-import tempfile
 import urllib.request
 
-from fxtest import ROOT, Client, Daemon, Suite
+from fxtest import ROOT, Client, Daemon, Suite, config_file
 
 ASAN_DAEMON = os.path.join(ROOT, "build", "fz", "fxstreamd")
 CYCLES, CONCURRENCY, WARM = 1500, 25, 300
 
 
 def churn_config():
-    fd, cfg = tempfile.mkstemp(suffix=".json")
-    with os.fdopen(fd, "w") as f:
-        json.dump({"streams": [{"stream": "small", "effect": "energy_wave",
-                                "params": {"width": 64, "height": 32, "fps": 60}}]}, f)
-    return cfg
+    return config_file({"streams": [{"stream": "small", "effect": "energy_wave",
+                                     "params": {"width": 64, "height": 32, "fps": 60}}]})
 
 
 def rss_kib(d):

@@ -16,14 +16,7 @@ import tempfile
 import time
 import urllib.request
 
-from fxtest import Client, Daemon, Suite
-
-
-def config_file(cfg):
-    fd, path = tempfile.mkstemp(suffix=".json")
-    with os.fdopen(fd, "w") as f:
-        json.dump(cfg, f)
-    return path
+from fxtest import Client, Daemon, Suite, config_file
 
 
 def metric(d, name):

@@ -4,27 +4,21 @@ says why, and the connection or daemon still usable afterwards.
 Run from the repository root: /usr/bin/python3 tests/integration/test_limits.py"""
 import asyncio
 import json
-import os
-import tempfile
 
 import websockets
 
-from fxtest import Client, Daemon, Suite
+from fxtest import Client, Daemon, Suite, config_file
 
 LIMITS = {"max_connections": 3, "max_streams": 3, "max_subscriptions": 2, "max_control_per_sec": 20,
           "max_message_bytes": 2048}
 
 
 def small_daemon():
-    fd, path = tempfile.mkstemp(suffix=".json")
-    with os.fdopen(fd, "w") as f:
-        json.dump({"limits": LIMITS}, f)
-    return Daemon("--config", path)
+    return Daemon("--config", config_file({"limits": LIMITS}))
 
 
 async def test_connections(t):
-    d = small_daemon()
-    try:
+    with small_daemon() as d:
         cs = [await Client.connect(d) for _ in range(3)]
         t.check(all(c.hello["limits"]["max_connections"] == 3 for c in cs), "hello reports max_connections 3")
         ws = await asyncio.wait_for(websockets.connect(d.url, subprotocols=["fxstream.v1"]), 10)
@@ -39,13 +33,10 @@ async def test_connections(t):
         t.check(c.hello["op"] == "hello", "a slot freed by a close is usable again")
         for x in cs[1:] + [c]:
             await x.close()
-    finally:
-        d.stop()
 
 
 async def test_streams_and_subscriptions(t):
-    d = small_daemon()
-    try:
+    with small_daemon() as d:
         c = await Client.connect(d)
         t.check((await c.request("create", effect="energy_wave", stream="third"))["op"] == "created",
                 "the 3rd stream is created")
@@ -59,13 +50,10 @@ async def test_streams_and_subscriptions(t):
         t.check((await c.request("unsubscribe", stream="flame"))["op"] == "unsubscribed", "unsubscribe frees one")
         t.check((await c.request("subscribe", stream="third"))["op"] == "subscribed", "then the subscription works")
         await c.close()
-    finally:
-        d.stop()
 
 
 async def test_rate_and_size(t):
-    d = small_daemon()
-    try:
+    with small_daemon() as d:
         c = await Client.connect(d)
         for i in range(40):
             await c.ws.send(json.dumps({"op": "list", "id": i}))
@@ -79,8 +67,6 @@ async def test_rate_and_size(t):
         t.check(r["code"] == "limit" and "2048" in r["message"], "a 2100-byte message: limit (%s)" % r["message"])
         t.check((await c.request("list"))["op"] == "list", "the connection stays usable")
         await c.close()
-    finally:
-        d.stop()
 
 
 if __name__ == "__main__":
