@@ -223,6 +223,9 @@ setInterval(() => {
     if (excess > 250) cap = Math.max(0.5 * kinds, cap * 0.5);
     else if (excess < 100) cap = Math.min(top, cap * (excess < 50 ? 2 : 1.3));
     if (drawFps < 20) cap = Math.min(cap, Math.max(0.5, (drawFps * kinds) / Math.max(1, kindStreams)));
+    // Below its step rate a cap holds back later kinds (the texture is always the newest
+    // frame), so a stream with several kinds is never capped under kinds x fps.
+    if (kinds > 1) cap = top;
     if (Math.abs(cap - st.maxFps) < 0.1 * st.maxFps) continue;
     st.maxFps = Math.round(cap * 10) / 10;
     conn.request('subscribe', { stream: st.name, max_fps: st.maxFps }).catch(() => {});
