@@ -37,9 +37,9 @@ const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
 let daemon = null, ctx = null;
 
-function startDaemon(port) {
+function startDaemon(port, env = {}) {
   return new Promise((res, rej) => {
-    const p = spawn(join(ROOT, 'build', 'fxstreamd'), ['--port', String(port), '--state-dir', stateDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'] });
+    const p = spawn(join(ROOT, 'build', 'fxstreamd'), ['--port', String(port), '--state-dir', stateDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, ...env } });
     let out = '';
     const t = setTimeout(() => rej(new Error('daemon did not start: ' + out)), 15000);
     p.stdout.on('data', (d) => {
@@ -197,6 +197,19 @@ try {
     return s.c === 'connected' && s.f > framesBefore + 2;
   }, 30000, 500);
   check(back, 'reconnects with backoff after a restart and frames flow again');
+
+  // With access tokens (PROTOCOL.md §3.11): no token says so; ?token= authenticates and leaves the address bar.
+  await stopDaemon(daemon);
+  const token = 'web-view-token-0123456789';
+  daemon = await startDaemon(port, { FXSTREAMD_TOKENS: `view:${token}` });
+  const p3 = await ctx.newPage();
+  await p3.goto(`http://127.0.0.1:${port}/`);
+  const refused = await until(() => p3.evaluate(() => document.body.dataset.conn === 'unauthorized'), 15000);
+  check(refused, 'without a token the page says the daemon needs one');
+  await p3.goto(`http://127.0.0.1:${port}/?token=${token}`);
+  const authed = await until(() => p3.evaluate(() => document.body.dataset.conn === 'connected'), 15000);
+  check(authed && !p3.url().includes('token'), 'with ?token= it authenticates and drops the token from the URL', p3.url());
+  await p3.close();
 } catch (e) {
   check(false, 'browser session', e.stack || String(e));
 }

@@ -1,9 +1,11 @@
 // conn.js — one fxstream.v1 WebSocket connection (PROTOCOL.md §1-§4): requests with ids
 // answered by promises, events and binary frames to callbacks, reconnection with
 // exponential backoff (0.5 s doubling to 10 s) after the daemon restarts or the link drops.
+// When the daemon requires a token (hello.auth.required, PROTOCOL.md §3.11) and one is given,
+// it is sent with the `auth` op before the connection counts as open.
 export class Conn {
-  constructor(url, { onOpen, onEvent, onFrame, onState }) {
-    Object.assign(this, { url, onOpen, onEvent, onFrame, onState });
+  constructor(url, { onOpen, onEvent, onFrame, onState, token }) {
+    Object.assign(this, { url, onOpen, onEvent, onFrame, onState, token });
     this.nextId = 1;
     this.pending = new Map(); // id -> {resolve, reject, timer}
     this.delay = 500;
@@ -35,8 +37,7 @@ export class Conn {
       if (m.op === 'hello') {
         this.hello = m;
         this.delay = 500;
-        this.setState('connected');
-        this.onOpen?.(m);
+        this.authenticate(m);
         return;
       }
       if (m.id !== undefined && this.pending.has(m.id)) {
@@ -55,6 +56,22 @@ export class Conn {
       this.retry('closed');
     };
     ws.onerror = () => {}; // onclose follows
+  }
+
+  async authenticate(hello) {
+    if (hello.auth?.required && this.token) {
+      try {
+        await this.request('auth', { token: this.token });
+      } catch (e) {
+        this.setState('unauthorized', e.message || 'invalid token');
+        return;
+      }
+    } else if (hello.auth?.required) {
+      this.setState('unauthorized', 'the daemon needs a token: open the page with ?token=…');
+      return;
+    }
+    this.setState('connected');
+    this.onOpen?.(hello);
   }
 
   retry(why) {

@@ -21,6 +21,14 @@ const q = new URLSearchParams(location.search);
 const wsUrl = q.get('url') || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/v1/ws`;
 const httpBase = wsUrl.replace(/^ws/, 'http').replace(/\/v1\/ws.*$/, '');
 const autoRig = q.get('rig') !== '0';
+// Access token (PROTOCOL.md §3.11): ?token= once, then kept for the tab and removed from the
+// address bar so it does not stay in the history.
+const token = q.get('token') || sessionStorage.getItem('fxstream-token') || '';
+if (q.has('token')) {
+  sessionStorage.setItem('fxstream-token', token);
+  q.delete('token');
+  history.replaceState(null, '', `${location.pathname}${q.toString() ? `?${q}` : ''}${location.hash}`);
+}
 const $ = (id) => document.getElementById(id);
 
 const canvas = $('view');
@@ -53,7 +61,7 @@ function setState(s, detail) {
   document.body.dataset.conn = s;
 }
 
-const conn = new Conn(wsUrl, { onOpen: setup, onEvent, onFrame, onState: setState });
+const conn = new Conn(wsUrl, { onOpen: setup, onEvent, onFrame, onState: setState, token });
 
 async function describe(effect) {
   if (!schemas.has(effect)) schemas.set(effect, await conn.request('describe', { effect }));
