@@ -9,16 +9,9 @@ set -u
 cd "$(dirname "$0")/../.."
 
 FXCTL=build/fxctl
-DAEMON=build/fxstreamd
 T=30 # seconds any one fxctl call may take
-passed=0
-failed=0
-tmp=$(mktemp -d)
-dpid=
-trap 'test -n "$dpid" && kill "$dpid" 2>/dev/null; rm -rf "$tmp"' EXIT INT TERM
-
-pass() { passed=$((passed + 1)); echo "ok   $1"; }
-fail() { failed=$((failed + 1)); echo "FAIL $1"; sed 's/^/     | /' "$tmp/out" "$tmp/err" 2>/dev/null | head -n 8; }
+SUITE=test_fxctl
+. tests/integration/cli_lib.sh
 
 # fx ARGS...: runs fxctl, stdout in $tmp/out, stderr in $tmp/err, exit status in $rc.
 fx() {
@@ -26,50 +19,12 @@ fx() {
     rc=$?
 }
 
-# check NAME WANT_RC [STDOUT_PATTERN [STDERR_PATTERN]]: judges the last fx call.
-check() {
-    name=$1 want=$2 outpat=${3:-} errpat=${4:-}
-    if [ "$rc" -ne "$want" ]; then fail "$name (exit $rc, want $want)"; return; fi
-    if [ -n "$outpat" ] && ! grep -q -- "$outpat" "$tmp/out"; then fail "$name (stdout lacks $outpat)"; return; fi
-    if [ -n "$errpat" ] && ! grep -q -- "$errpat" "$tmp/err"; then fail "$name (stderr lacks $errpat)"; return; fi
-    pass "$name"
-}
-
 rev_of() { grep -o '"rev":[0-9]*' "$tmp/out" | head -n 1 | cut -d: -f2; }
 
-# wait_for FILE PATTERN TENTHS: polls until FILE contains PATTERN; 0 when it does.
-wait_for() {
-    i=0
-    while [ "$i" -lt "$3" ]; do
-        grep -q -- "$2" "$1" 2>/dev/null && return 0
-        sleep 0.1
-        i=$((i + 1))
-    done
-    return 1
-}
-
-summary() {
-    echo "test_fxctl: $passed passed, $failed failed"
-    [ "$failed" -eq 0 ]
-    exit $?
-}
-
-start_daemon() {
-    if [ ! -x "$DAEMON" ] || [ ! -x "$FXCTL" ]; then
-        fail "build/fxstreamd and build/fxctl exist (run make)"
-        summary
-    fi
-    "$DAEMON" --port 0 >"$tmp/daemon.out" 2>"$tmp/daemon.err" &
-    dpid=$!
-    if ! wait_for "$tmp/daemon.out" "listening on http://" 150; then
-        fail "fxstreamd starts within 15 s"
-        sed 's/^/     | /' "$tmp/daemon.err" | tail -n 5
-        summary
-    fi
-    port=$(sed -n 's|.*listening on http://[^:]*:\([0-9][0-9]*\)/.*|\1|p' "$tmp/daemon.out" | head -n 1)
+start_fxctl_daemon() {
+    start_daemon "$FXCTL"
     FXCTL_URL="ws://127.0.0.1:$port"
     export FXCTL_URL
-    pass "fxstreamd listening on port $port"
 }
 
 check_usage() {
@@ -155,7 +110,7 @@ check_server_close() {
     check "subscriber fails when the server stops" 1 "" "server closed\|connection .* lost"
 }
 
-start_daemon
+start_fxctl_daemon
 check_usage
 check_params
 check_streams

@@ -13,30 +13,14 @@ cd "$(dirname "$0")/../.."
 
 FXLOAD=build/fxload
 FXCTL=build/fxctl
-DAEMON=build/fxstreamd
 T=30 # seconds any one fxload call may take
-passed=0
-failed=0
-tmp=$(mktemp -d)
-dpid=
-trap 'test -n "$dpid" && kill "$dpid" 2>/dev/null; rm -rf "$tmp"' EXIT INT TERM
-
-pass() { passed=$((passed + 1)); echo "ok   $1"; }
-fail() { failed=$((failed + 1)); echo "FAIL $1"; sed 's/^/     | /' "$tmp/out" "$tmp/err" 2>/dev/null | tail -n 12; }
+SUITE=test_fxload
+. tests/integration/cli_lib.sh
 
 # ld ARGS...: runs fxload, stdout in $tmp/out, stderr in $tmp/err, exit status in $rc.
 ld() {
     timeout "$T" "$FXLOAD" "$@" >"$tmp/out" 2>"$tmp/err"
     rc=$?
-}
-
-# check NAME WANT_RC [STDOUT_PATTERN [STDERR_PATTERN]]: judges the last ld call.
-check() {
-    name=$1 want=$2 outpat=${3:-} errpat=${4:-}
-    if [ "$rc" -ne "$want" ]; then fail "$name (exit $rc, want $want)"; return; fi
-    if [ -n "$outpat" ] && ! grep -q -- "$outpat" "$tmp/out"; then fail "$name (stdout lacks $outpat)"; return; fi
-    if [ -n "$errpat" ] && ! grep -q -- "$errpat" "$tmp/err"; then fail "$name (stderr lacks $errpat)"; return; fi
-    pass "$name"
 }
 
 # jcheck NAME FILE EXPR: EXPR is a python3 expression over d, the JSON document in FILE.
@@ -55,38 +39,9 @@ EOF
     else fail "$1"; sed 's/^/     | /' "$tmp/jc" | head -n 6; fi
 }
 
-# wait_for FILE PATTERN TENTHS: polls until FILE contains PATTERN; 0 when it does.
-wait_for() {
-    i=0
-    while [ "$i" -lt "$3" ]; do
-        grep -q -- "$2" "$1" 2>/dev/null && return 0
-        sleep 0.1
-        i=$((i + 1))
-    done
-    return 1
-}
-
-summary() {
-    echo "test_fxload: $passed passed, $failed failed"
-    [ "$failed" -eq 0 ]
-    exit $?
-}
-
-start_daemon() {
-    if [ ! -x "$DAEMON" ] || [ ! -x "$FXLOAD" ] || [ ! -x "$FXCTL" ]; then
-        fail "build/fxstreamd, build/fxctl and build/fxload exist (run make)"
-        summary
-    fi
-    "$DAEMON" --port 0 >"$tmp/daemon.out" 2>"$tmp/daemon.err" &
-    dpid=$!
-    if ! wait_for "$tmp/daemon.out" "listening on http://" 150; then
-        fail "fxstreamd starts within 15 s"
-        sed 's/^/     | /' "$tmp/daemon.err" | tail -n 5
-        summary
-    fi
-    port=$(sed -n 's|.*listening on http://[^:]*:\([0-9][0-9]*\)/.*|\1|p' "$tmp/daemon.out" | head -n 1)
+start_fxload_daemon() {
+    start_daemon "$FXCTL" "$FXLOAD"
     URL="ws://127.0.0.1:$port"
-    pass "fxstreamd listening on port $port"
 }
 
 check_usage() {
@@ -224,7 +179,7 @@ check_daemon_killed() {
         'd["connections"]["disconnects"] == 10 and d["end"] == "every connection closed" and d["elapsed_s"] < 20'
 }
 
-start_daemon
+start_fxload_daemon
 check_usage
 check_subscribe
 check_set
