@@ -323,14 +323,7 @@ static int fxc_start(struct fxc_client *c, const char *ca_file, char *eb, size_t
         fxws_set_err(eb, el, "cannot create a libwebsockets context");
         return -1;
     }
-    memset(&ci, 0, sizeof ci);
-    ci.context = c->ctx;
-    ci.address = c->url.host;
-    ci.port = c->url.port;
-    ci.path = c->url.path;
-    ci.host = c->url.host_header;
-    ci.ssl_connection = fxws_ssl_flags(&c->url);
-    ci.protocol = FXC_SUBPROTOCOL; /* no Origin: this is not a browser (PROTOCOL.md §1) */
+    fxws_connect_info(&ci, c->ctx, &c->url);
     ci.pwsi = &c->wsi;
     if (!lws_client_connect_via_info(&ci)) {
         if (!c->err[0]) fxc_on_connect_error(c, "connect failed");

@@ -383,14 +383,7 @@ int fxp_connect(struct fxp_pool *p, const char *url, void *user, struct fxp_conn
     p->conns = c;
     p->live++;
     p->stats.connects++;
-    memset(&ci, 0, sizeof ci);
-    ci.context = p->ctx;
-    ci.address = t->u.host;
-    ci.port = t->u.port;
-    ci.path = t->u.path;
-    ci.host = t->u.host_header;
-    ci.ssl_connection = fxws_ssl_flags(&t->u);
-    ci.protocol = FXWS_SUBPROTOCOL; /* no Origin: not a browser (PROTOCOL.md §1) */
+    fxws_connect_info(&ci, p->ctx, &t->u);
     ci.userdata = c;
     ci.opaque_user_data = c;
     ci.pwsi = &c->wsi;

@@ -228,6 +228,18 @@ void fxws_tls_context(struct lws_context_creation_info *info, const char *ca_fil
 
 int fxws_ssl_flags(const struct fxws_url *u) { return u->tls ? LCCSCF_USE_SSL : 0; }
 
+void fxws_connect_info(struct lws_client_connect_info *ci, struct lws_context *ctx, const struct fxws_url *u)
+{
+    memset(ci, 0, sizeof *ci);
+    ci->context = ctx;
+    ci->address = u->host;
+    ci->port = u->port;
+    ci->path = u->path;
+    ci->host = u->host_header;
+    ci->ssl_connection = fxws_ssl_flags(u);
+    ci->protocol = FXWS_SUBPROTOCOL;
+}
+
 const char *fxws_scheme(const struct fxws_url *u) { return u->tls ? "wss" : "ws"; }
 
 int fxws_append_auth(struct lws *wsi, void *in, size_t len, const char *token)

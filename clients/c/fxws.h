@@ -75,6 +75,12 @@ void fxws_tls_context(struct lws_context_creation_info *info, const char *ca_fil
 /* The lws client connection flags for u (LCCSCF_USE_SSL for wss://). */
 int fxws_ssl_flags(const struct fxws_url *u);
 
+/* Fills ci (zeroed first) to connect to u on ctx: address, port, path, Host, TLS flags and
+ * subprotocol fxstream.v1, and no Origin (this is not a browser, PROTOCOL.md §1). */
+struct lws_client_connect_info;
+struct lws_context;
+void fxws_connect_info(struct lws_client_connect_info *ci, struct lws_context *ctx, const struct fxws_url *u);
+
 /* "ws" or "wss". */
 const char *fxws_scheme(const struct fxws_url *u);
 
