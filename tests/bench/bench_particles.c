@@ -278,30 +278,6 @@ static void bp_frame(const char *name, const struct fxs_particles *p)
     printf("\n");
 }
 
-/* Reads a PLY written by fxctl (x y z temperature fuel flags, binary little endian). */
-static int bp_read_ply(const char *path, struct fxs_particles *p)
-{
-    FILE *f = fopen(path, "rb");
-    char line[256];
-    unsigned n = 0;
-    int ok = 0;
-    if (!f) return -1;
-    while (fgets(line, sizeof line, f)) {
-        if (sscanf(line, "element vertex %u", &n) == 1) continue;
-        if (!strcmp(line, "end_header\n")) { ok = 1; break; }
-    }
-    if (ok && n && !pgen_alloc(p, n)) {
-        for (uint32_t i = 0; i < n && ok; i++) {
-            uint8_t rec[21];
-            ok = fread(rec, 1, 21, f) == 21;
-            memcpy(p->xyz + 3 * i, rec, 12), memcpy(p->temp + i, rec + 12, 4), memcpy(p->fuel + i, rec + 16, 4);
-            p->flags[i] = rec[20];
-        }
-    }
-    fclose(f);
-    return ok && n ? 0 : -1;
-}
-
 static void bp_real_frames(const char *dir)
 {
     DIR *d = opendir(dir);
@@ -317,7 +293,10 @@ static void bp_real_frames(const char *dir)
         size_t l = strlen(e->d_name);
         if (l < 5 || strcmp(e->d_name + l - 4, ".ply")) continue;
         snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
-        if (bp_read_ply(path, &p)) continue;
+        if (pgen_read_ply(path, &p) || !p.n) {
+            fxs_particles_free(&p);
+            continue;
+        }
         snprintf(name, sizeof name, "real:%.17s", e->d_name);
         bp_frame(name, &p);
         fxs_particles_free(&p);

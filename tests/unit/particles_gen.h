@@ -10,6 +10,7 @@
 #define PARTICLES_GEN_H
 
 #include <math.h>
+#include <stdio.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -129,6 +130,33 @@ static inline int pgen_flame(struct fxs_particles *p, uint32_t n)
                 m += (size_t)pgen_site(i, j, k, H, p->xyz + 3 * m, p->temp + m, p->fuel + m, p->flags + m);
     p->n = (uint32_t)m;
     return pgen_sort_cells(p);
+}
+
+/* Reads a binary PLY as fxctl writes it (x y z temperature fuel flags, little endian) into p
+ * (allocated; free with fxs_particles_free). 0, or -1 when it cannot be read. */
+static inline int pgen_read_ply(const char *path, struct fxs_particles *p)
+{
+    FILE *f = fopen(path, "rb");
+    char line[256];
+    unsigned n = 0;
+    int ok = 0;
+    if (!f) return -1;
+    while (fgets(line, sizeof line, f)) {
+        if (sscanf(line, "element vertex %u", &n) == 1) continue;
+        if (!strcmp(line, "end_header\n")) {
+            ok = 1;
+            break;
+        }
+    }
+    if (ok) ok = !pgen_alloc(p, n);
+    for (uint32_t i = 0; i < n && ok; i++) {
+        uint8_t rec[21];
+        ok = fread(rec, 1, 21, f) == 21;
+        memcpy(p->xyz + 3 * i, rec, 12), memcpy(p->temp + i, rec + 12, 4), memcpy(p->fuel + i, rec + 16, 4);
+        p->flags[i] = rec[20];
+    }
+    fclose(f);
+    return ok ? 0 : -1;
 }
 
 #endif

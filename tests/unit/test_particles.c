@@ -80,32 +80,6 @@ static uint32_t *spec_order(const struct fxs_particles *p, const uint8_t *enc)
     return idx;
 }
 
-/* Reads a binary PLY as fxctl writes it (x y z temperature fuel flags). */
-static int read_ply(const char *path, struct fxs_particles *p)
-{
-    FILE *f = fopen(path, "rb");
-    char line[256];
-    unsigned n = 0;
-    int ok = 0;
-    if (!f) return -1;
-    while (fgets(line, sizeof line, f)) {
-        if (sscanf(line, "element vertex %u", &n) == 1) continue;
-        if (!strcmp(line, "end_header\n")) {
-            ok = 1;
-            break;
-        }
-    }
-    if (ok && !pgen_alloc(p, n))
-        for (uint32_t i = 0; i < n && ok; i++) {
-            uint8_t rec[21];
-            ok = fread(rec, 1, 21, f) == 21;
-            memcpy(p->xyz + 3 * i, rec, 12), memcpy(p->temp + i, rec + 12, 4), memcpy(p->fuel + i, rec + 16, 4);
-            p->flags[i] = rec[20];
-        }
-    fclose(f);
-    return ok ? 0 : -1;
-}
-
 /* 600 particles of a real flame frame (fxctl subscribe flame --out, the first 600 in the
  * file), the input of the real_flame600 vectors. */
 #define REAL_PLY VEC_DIR "/real_flame600.ply"
@@ -249,7 +223,7 @@ static void test_degenerate(void)
 static void test_real_frame(void)
 {
     struct fxs_particles p = { 0 };
-    if (read_ply(REAL_PLY, &p)) {
+    if (pgen_read_ply(REAL_PLY, &p)) {
         CHECK(0, "read %s", REAL_PLY);
         return;
     }
@@ -431,7 +405,7 @@ static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts 
         for (int i = 0; i < 5; i++) p->xyz[3 * i + 1] = 2.5f; /* flat in y */
     }
     if (v == 6 || v == 7) {
-        CHECK(read_ply(REAL_PLY, p) == 0, "read %s", REAL_PLY);
+        CHECK(pgen_read_ply(REAL_PLY, p) == 0, "read %s", REAL_PLY);
         if (v == 7) *o = (struct fxs_particles_opts){ 12, 8, 8 };
     }
     if (v == 8) { /* all identical */
