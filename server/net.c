@@ -133,7 +133,9 @@ static bool net_pick_frame(struct session *ss)
                 frame_unref(f);
                 continue;
             }
-            double ready = sub->last_sent + sub->min_interval;
+            /* max_fps counts steps: the other kinds of a step already started (same sim_time,
+             * e.g. a texture's light rig) go with it */
+            double ready = f->hdr.sim_time == sub->step_time ? now : sub->last_sent + sub->min_interval;
             if (now < ready) {
                 frame_unref(f);
                 if (wait < 0 || ready - now < wait) wait = ready - now;
@@ -145,7 +147,10 @@ static bool net_pick_frame(struct session *ss)
                 atomic_fetch_add(&ss->srv->counters.frames_skipped, skipped);
             }
             sub->last_seq[k] = f->hdr.seq;
-            sub->last_sent = now;
+            if (f->hdr.sim_time != sub->step_time) {
+                sub->step_time = f->hdr.sim_time;
+                sub->last_sent = now;
+            }
             ss->rr = i + 1;
             ss->cur = f;
             ss->cur_off = 0;

@@ -30,6 +30,7 @@ struct fxctl_opts {
     struct fxc_options conn; /* token, CA file */
     long frames;       /* subscribe --frames, 0 when not given */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
+    int kind;          /* subscribe --kind, 0 = every kind */
     const char *out_dir;
     const char *cmd;
     char **args;       /* positional arguments after the command */
@@ -49,8 +50,9 @@ static const char fxctl_help[] =
     "  get NAME                      complete parameters of NAME with their rev\n"
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
-    "  subscribe NAME --frames N [--max-fps F] [--out DIR]\n"
-    "                                receive N frames of NAME; prints the subscribed\n"
+    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]\n"
+    "                                receive N frames of NAME (only of kind K, 1..4,\n"
+    "                                with --kind); prints the subscribed\n"
     "                                reply, then one JSON line per frame (stream,\n"
     "                                channel, kind, seq, param_rev, sim_time,\n"
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
@@ -61,7 +63,9 @@ static const char fxctl_help[] =
     "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 1:\n"
     "                                binary PLY, x y z temperature fuel flags) or the\n"
     "                                payload to .bin (others), and the line to\n"
-    "                                DIR/NAME-SEQ.json. Fails when the stream is\n"
+    "                                DIR/NAME-SEQ.json; a light-rig frame (kind 3),\n"
+    "                                which shares its texture's SEQ, goes to\n"
+    "                                DIR/NAME-SEQ-rig.bin and .json. Fails when the stream is\n"
     "                                destroyed or the server goes away.\n"
     "\n"
     "K=V: K is a top-level parameter name; V is JSON (wind=[1,0,0], n=3, on=true,\n"
@@ -125,6 +129,9 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
         o->max_fps = strtod(val, &end);
         if (end == val || *end || !(o->max_fps > 0) || !isfinite(o->max_fps))
             return fxctl_usage("--max-fps needs a positive number", val);
+    } else if (!strcmp(name, "--kind")) {
+        if (fxctl_parse_long(val, 1, &n) || n > FXS_KIND_MAX) return fxctl_usage("--kind needs a frame kind, 1..4", val);
+        o->kind = (int)n;
     } else if (!strcmp(name, "--out")) {
         o->out_dir = val;
     } else {
@@ -210,7 +217,7 @@ static const struct fxctl_cmd fxctl_cmds[] = {
     { "get", 1, 1, "stream", "get NAME" },
     { "set", 2, -1, "stream", "set NAME K=V [K=V ...]" },
     { "reset", 1, 1, "stream", "reset NAME" },
-    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--out DIR]" },
+    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]" },
 };
 
 static const struct fxctl_cmd *fxctl_find_cmd(const char *name)
@@ -228,8 +235,8 @@ static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cm
         fprintf(stderr, "fxctl: wrong number of arguments; usage: fxctl %s\nTry 'fxctl --help'.\n", cmd->synopsis);
         return FXCTL_USAGE;
     }
-    if (!sub && (o->frames || o->max_fps >= 0 || o->out_dir))
-        return fxctl_usage("--frames, --max-fps and --out go with subscribe only", NULL);
+    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->out_dir))
+        return fxctl_usage("--frames, --max-fps, --kind and --out go with subscribe only", NULL);
     if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
     return 0;
 }
@@ -379,7 +386,8 @@ static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const s
     return p ? fxctl_write_ply(path, p) : fxctl_write_file(path, m->payload, h->payload_bytes);
 }
 
-/* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json. */
+/* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json; a light-rig frame (kind 3) is
+ * sent with its texture under the same seq, so it goes to DIR/STREAM-SEQ-rig.{bin,json}. */
 static int fxctl_save_frame(const char *dir, const char *stream, const struct fxc_msg *m, const char *line,
                             const struct fxs_particles *p)
 {
@@ -389,7 +397,7 @@ static int fxctl_save_frame(const char *dir, const char *stream, const struct fx
     if (!safe) return -1;
     for (char *c = safe; *c; c++)
         if (*c == '/') *c = '_';
-    snprintf(path, sizeof path, "%s/%s-%" PRIu64, dir, safe, h->seq);
+    snprintf(path, sizeof path, "%s/%s-%" PRIu64 "%s", dir, safe, h->seq, h->kind == FXS_KIND_LIGHT_RIG ? "-rig" : "");
     free(safe);
     r = fxctl_save_payload(path, m, p);
     strncat(path, ".json", sizeof path - strlen(path) - 1);
@@ -419,7 +427,7 @@ static int fxctl_on_frame(struct fxctl_sub *s, const struct fxc_msg *m)
     char line[1024];
     struct fxs_particles p = { 0 };
     int particles = s->o->out_dir && fxctl_is_particles(&m->header), r = 0;
-    if (m->header.channel != s->channel) return 0;
+    if (m->header.channel != s->channel || (s->o->kind && m->header.kind != s->o->kind)) return 0;
     if (particles && fxctl_decode_particles(m, &p)) return FXCTL_FAIL;
     fxctl_frame_line(line, sizeof line, s->stream, m);
     printf("%s\n", line);

@@ -147,9 +147,9 @@ const struct param_def energy_wave_params[] = {
      .doc = "multiply each curve's W by the eq. (5.1) travelling pulse"},
     {.name = "anim_rate", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
      .doc = "eq. (5.1) animation frames per second of stream time (the sweep loops)"},
-    /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7). Off by default until the
-     * suites that expect only textures from energy_wave streams know kind 3 (see README). */
-    {.name = "light_rig", .type = PARAM_BOOL, .def = "false", .unit = "",
+    /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7): on by default, since the
+     * issue asks every energy_wave stream to light its surroundings; ~1 kB a frame. */
+    {.name = "light_rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "also send a light-rig frame (kind 3: centre-line segments, toon ramp, outline, shadow) with "
             "every texture, for clients that light their own scene with the wave"},
     {.name = "curve_segments", .type = PARAM_INT, .def = "8", .min = 1, .max = 32, .unit = "",

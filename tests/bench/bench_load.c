@@ -1,7 +1,7 @@
 /* bench_load.c — fan-out capacity of fxstreamd, measured with libfxclient's pool (fxload's engine).
  *
  * Owns: starting build/fxstreamd on a free loopback port with a config that defines two
- * dedicated streams (a ~20k-particle flame and a 256x256 texture, both at 30 fps) and
+ * dedicated streams (a ~20k-particle flame and a 256x256 texture without its light rig, both at 30 fps) and
  * lifts max_connections; a raw loopback TCP throughput measurement in the same run
  * (one sender thread, one receiver); and, per stream, an upward search for the largest
  * number of subscribers that still receive >= 95% of the frames the stream produced
@@ -449,6 +449,7 @@ int main(void)
     fprintf(f, "{\"limits\":{\"max_connections\":%d},\"pause_idle\":true,\"streams\":["
                "{\"stream\":\"bench_flame\",\"effect\":\"flame\",\"params\":{\"sources\":[{\"radius\":0.08}],\"fps\":30}},"
                "{\"stream\":\"bench_tex\",\"effect\":\"energy_wave\",\"params\":{\"width\":256,\"height\":256,\"fps\":30,"
+               "\"light_rig\":false,"
                "\"curves\":[],\"tori\":[{\"center\":[0,0,18],\"axis\":[0,0,1],\"R\":6,\"coef\":5}]}}]}\n",
             BL_MAX_N + 100);
     fclose(f);

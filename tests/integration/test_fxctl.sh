@@ -68,9 +68,11 @@ check_streams() {
 
 check_subscribe() {
     out=$tmp/frames
-    fx subscribe energy --frames 3 --out "$out"; check "subscribe energy --frames 3" 0 '"seq":'
+    fx subscribe energy --frames 3 --kind 2 --out "$out"; check "subscribe energy --frames 3 --kind 2" 0 '"seq":'
     n=$(grep -c '"payload_bytes"' "$tmp/out")
     if [ "$n" -eq 3 ]; then pass "3 frame lines printed"; else fail "3 frame lines printed ($n)"; fi
+    n=$(grep -c '"kind":2' "$tmp/out")
+    if [ "$n" -eq 3 ]; then pass "--kind 2: only textures"; else fail "--kind 2: only textures ($n of 3)"; fi
     nexr=$(ls "$out"/energy-*.exr 2>/dev/null | wc -l)
     njson=$(ls "$out"/energy-*.json 2>/dev/null | wc -l)
     if [ "$nexr" -eq 3 ] && [ "$njson" -eq 3 ]; then pass "3 .exr + 3 .json written"
@@ -83,6 +85,19 @@ check_subscribe() {
     else
         fail "exrheader reads the .exr"
     fi
+}
+
+# Without --kind, energy's light-rig frames (kind 3, same seq as their texture) are saved
+# beside the textures under their own names: one .json per frame, nothing overwritten.
+check_subscribe_rig() {
+    out=$tmp/mixed
+    fx subscribe energy --frames 6 --out "$out"; check "subscribe energy --frames 6 (textures and rigs)" 0 '"kind":3'
+    nrig=$(ls "$out"/energy-*-rig.bin 2>/dev/null | wc -l)
+    njson=$(ls "$out"/energy-*.json 2>/dev/null | wc -l)
+    nexr=$(ls "$out"/energy-*.exr 2>/dev/null | wc -l)
+    if [ "$nrig" -ge 2 ] && [ "$njson" -eq 6 ] && [ $((nrig + nexr)) -eq 6 ]; then pass "rig frames to NAME-SEQ-rig.bin, 6 .json"
+    else fail "rig frames to NAME-SEQ-rig.bin, 6 .json ($nrig rig, $nexr exr, $njson json)"; fi
+    fx subscribe energy --frames 1 --kind 5; check "--kind 5 is a usage error" 2 "" "--kind needs a frame kind"
 }
 
 # A subscriber prints its stream's params broadcasts and fails clearly when the
@@ -115,6 +130,7 @@ check_usage
 check_params
 check_streams
 check_subscribe
+check_subscribe_rig
 check_destroyed
 check_server_close
 summary

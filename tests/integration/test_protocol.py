@@ -81,13 +81,28 @@ async def test_spec_current(t):
     await c.close()
 
 
+async def texture_frame(c):
+    """The next kind 2 frame: energy_wave streams also send their light rig (kind 3)."""
+    while True:
+        f = await c.frame()
+        if f["kind"] == 2:
+            return f
+
+
 async def test_frames(t):
     c = await Client.connect(D)
     r = await c.request("create", effect="energy_wave", stream="frames", params=SMALL)
     t.check(r["op"] == "created" and r["rev"] == 1, "create small stream")
     r = await c.request("subscribe", stream="frames")
     t.check(r["op"] == "subscribed" and r["channel"] > 0, "subscribed with a channel")
-    frames = [await c.frame() for _ in range(3)]
+    mixed = [await c.frame() for _ in range(6)]
+    rigs = [x for x in mixed if x["kind"] == 3]
+    t.check(len(rigs) >= 2 and all(x["codec"] == 1 and x["payload"][:4] == b"FXR1" for x in rigs),
+            "light-rig frames (kind 3, FXR1) come with the textures by default (%d of 6)" % len(rigs))
+    t.check(any(x["sim_time"] == y["sim_time"] for x in rigs for y in mixed if y["kind"] == 2),
+            "a rig frame has its texture's sim_time")
+    frames = [x for x in mixed if x["kind"] == 2]
+    frames += [await texture_frame(c) for _ in range(3 - len(frames))]
     f = frames[0]
     t.check(f["magic"] == b"FXS1" and f["header_bytes"] == 64, "header magic and size")
     t.check(f["kind"] == 2 and f["codec"] == 1, "texture frame, EXR codec")
@@ -114,7 +129,7 @@ async def test_set_reaches_frames(t):
     t.check(ev["op"] == "params" and ev["rev"] == r["rev"] and "id" not in ev, "broadcast to other subscriber")
     deadline, seen = time.monotonic() + 15, None
     while time.monotonic() < deadline:
-        f = await a.frame()
+        f = await texture_frame(a)
         if f["param_rev"] == r["rev"]:
             seen = f
             break
@@ -169,14 +184,15 @@ async def test_destroy_and_max_fps(t):
     await c.request("create", effect="energy_wave", stream="slow", params=SMALL)
     r = await sub.request("subscribe", stream="slow", max_fps=2)
     t.check(r["op"] == "subscribed", "subscribe with max_fps")
-    start, n = time.monotonic(), 0
+    start, n = time.monotonic(), {2: 0, 3: 0}
     while time.monotonic() - start < 2.0:
         try:
-            await sub.frame(timeout=max(0.05, 2.0 - (time.monotonic() - start)))
-            n += 1
+            f = await sub.frame(timeout=max(0.05, 2.0 - (time.monotonic() - start)))
+            n[f["kind"]] += 1
         except asyncio.TimeoutError:
             break
-    t.check(1 <= n <= 6, "max_fps=2 caps the rate (%d frames in 2 s)" % n)
+    t.check(1 <= n[2] <= 6, "max_fps=2 caps the rate (%d textures in 2 s)" % n[2])
+    t.check(abs(n[3] - n[2]) <= 1, "max_fps counts steps: each texture's light rig comes with it (%d rigs)" % n[3])
     r = await c.request("destroy", stream="slow")
     t.check(r["op"] == "destroyed", "destroy")
     ev = await sub.text()
