@@ -1,8 +1,10 @@
 #!/bin/sh
 # test_web_decoders.sh — the browser client's decoders under node against what the C side
 # produced: light-rig frames written by the real encoder (build/tests/test_light_rig --dump,
-# with the values they must decode to), and kind 3 payloads captured by fxctl from a real
-# daemon on a random loopback port. Runs web_decoders_check.mjs; its last line is
+# with the values they must decode to), kind 3 payloads captured by fxctl from a real
+# daemon on a random loopback port, and kind 4 look-up tables of compound_eye streams
+# (square and hex) with the PNGs fxctl wrote from them through the C decoder
+# (clients/c/lutpack.c). Runs web_decoders_check.mjs; its last line is
 # "test_web_decoders: N passed, M failed". Run from the repo root.
 cd "$(dirname "$0")/../.." || exit 1
 summary_fail() { echo "test_web_decoders: $1"; echo "test_web_decoders: 0 passed, 1 failed"; exit 1; }
@@ -12,7 +14,7 @@ tmp=$(mktemp -d)
 pid=""
 cleanup() { [ -n "$pid" ] && kill "$pid" 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
-mkdir -p "$tmp/vec" "$tmp/real"
+mkdir -p "$tmp/vec" "$tmp/real" "$tmp/eye"
 build/tests/test_light_rig --dump "$tmp/vec" >/dev/null || summary_fail "dump failed"
 
 # A real daemon: energy with the light rig on, 6 frames (3 of each kind) captured by fxctl.
@@ -26,4 +28,11 @@ url="ws://127.0.0.1:$port"
 timeout 20 build/fxctl --url "$url" set energy light_rig=true 'ramp=[{"m_min":-1,"color":[0.1,0.2,0.3]},{"m_min":0.25,"color":[1,0.5,0]}]' >/dev/null \
     || summary_fail "set light_rig failed"
 timeout 30 build/fxctl --url "$url" subscribe energy --frames 6 --out "$tmp/real" >"$tmp/real/lines.txt" 2>"$tmp/real/err.txt"
-node tests/integration/web_decoders_check.mjs "$tmp/vec" "$tmp/real"
+# Two compound eyes in mode lut (small tables): one kind 4 frame each, payload + C-decoded PNGs.
+for spec in "eyesq lut_cells=12 lut_dirs=10" "eyehex lattice=hex lut_cells=8 lut_dirs=12 lens_radius=1.2"; do
+    set -- $spec
+    timeout 20 build/fxctl --url "$url" create compound_eye "$@" >/dev/null || summary_fail "create $1 failed"
+    timeout 30 build/fxctl --url "$url" subscribe "$1" --frames 1 --out "$tmp/eye" >>"$tmp/eye/lines.txt" 2>>"$tmp/eye/err.txt" \
+        || summary_fail "subscribe $1 failed: $(cat "$tmp/eye/err.txt")"
+done
+node tests/integration/web_decoders_check.mjs "$tmp/vec" "$tmp/real" "$tmp/eye"

@@ -5,8 +5,10 @@
 // drawn (canvas read back: the flame region bright and warm, the wave billboard lit, the
 // toon scene lit with its shadows); a panel slider changes the server's rev and the
 // picture; a change made in a second page appears in the first; a server error shows next
-// to its field; the page reconnects after a daemon restart. Screenshots go to
-// build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
+// to its field; compound eyes (created here, mode lut and bake) show a lattice of facets
+// with pigment, the look-up-table view agrees with the server's bake from the same eye, and
+// the lattice follows the client-side density; the page reconnects after a daemon restart.
+// Screenshots go to build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
 import { chromium } from 'playwright-core';
 import { spawn, execFileSync } from 'node:child_process';
 import { mkdtempSync, mkdirSync, rmSync } from 'node:fs';
@@ -89,6 +91,133 @@ async function setNumber(page, stream, path, value) {
   await sleep(600);
   await input.fill(String(value));
   await input.press('Enter');
+}
+
+// ---- compound eye (PROTOCOL.md §11.3) ----------------------------------------------------
+
+// Luminance (0-255) of the view of `stream` read back from the canvas (drawn with
+// preserveDrawingBuffer), row 0 at the top.
+async function grabView(page, stream) {
+  return page.evaluate((name) => {
+    const s = window.fxs.sample('eye', name), c = document.getElementById('view'), pr = c.width / c.clientWidth;
+    const x = Math.round(s.css.left * pr), y = Math.round(s.css.top * pr), w = Math.round(s.css.w * pr), h = Math.round(s.css.h * pr);
+    const g = document.createElement('canvas');
+    g.width = w; g.height = h;
+    const ctx2 = g.getContext('2d');
+    ctx2.drawImage(c, x, y, w, h, 0, 0, w, h);
+    const px = ctx2.getImageData(0, 0, w, h).data, lum = new Array(w * h);
+    for (let i = 0; i < w * h; i++) lum[i] = Math.round(0.2126 * px[4 * i] + 0.7152 * px[4 * i + 1] + 0.0722 * px[4 * i + 2]);
+    return { w, h, lum };
+  }, stream);
+}
+// The eye's disc (pixels brighter than the dark background) and a box of half size 0.45 r
+// inside it around its centre.
+function eyeBox(img) {
+  let x0 = img.w, x1 = -1, y0 = img.h, y1 = -1;
+  for (let y = 0; y < img.h; y++)
+    for (let x = 0; x < img.w; x++)
+      if (img.lum[y * img.w + x] > 40) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+  const r = Math.max(0, Math.min(x1 - x0, y1 - y0) / 2), half = Math.floor(0.45 * r);
+  return { cx: Math.round((x0 + x1) / 2), cy: Math.round((y0 + y1) / 2), r, half };
+}
+function boxPixels(img, b) {
+  const out = [];
+  for (let y = b.cy - b.half; y < b.cy + b.half; y++) for (let x = b.cx - b.half; x < b.cx + b.half; x++) out.push(img.lum[y * img.w + x] ?? 0);
+  return out;
+}
+function boxStats(v) {
+  const n = Math.max(1, v.length), mean = v.reduce((a, x) => a + x, 0) / n;
+  const std = Math.sqrt(v.reduce((a, x) => a + (x - mean) ** 2, 0) / n);
+  return { mean: +mean.toFixed(1), std: +std.toFixed(1), dark: +(v.filter((x) => x < 70).length / n).toFixed(3), pale: +(v.filter((x) => x > 150).length / n).toFixed(3) };
+}
+// Lattice period: the highest autocorrelation of the derivative (edges: lens borders and
+// highlights, without the slow shading and the pupils) past its first zero, along x or y
+// (whichever has the clearer peak).
+function period(v, side) {
+  const along = (at) => { // at(i, j): pixel j of line i
+    const d = [];
+    for (let i = 0; i < side; i++) for (let j = 0; j + 1 < side; j++) d.push(at(i, j + 1) - at(i, j));
+    const n = side - 1, ac = (lag) => {
+      let s = 0, s0 = 0;
+      for (let i = 0; i < side; i++) for (let j = 0; j + lag < n; j++) { s += d[i * n + j] * d[i * n + j + lag]; s0 += d[i * n + j] ** 2; }
+      return s / Math.max(s0, 1e-9);
+    };
+    let lag = 1;
+    while (lag < side / 2 && ac(lag) > 0) lag++;
+    let best = { lag: 0, c: -1 };
+    for (; lag < side / 2; lag++) { const c = ac(lag); if (c > best.c) best = { lag, c: +c.toFixed(3) }; }
+    return best;
+  };
+  const x = along((i, j) => v[i * side + j]), y = along((i, j) => v[j * side + i]);
+  return x.c >= y.c ? { ...x, axis: 'x' } : { ...y, axis: 'y' };
+}
+function correlation(a, b) {
+  const n = a.length, ma = a.reduce((s, x) => s + x, 0) / n, mb = b.reduce((s, x) => s + x, 0) / n;
+  let sab = 0, saa = 0, sbb = 0;
+  for (let i = 0; i < n; i++) { sab += (a[i] - ma) * (b[i] - mb); saa += (a[i] - ma) ** 2; sbb += (b[i] - mb) ** 2; }
+  return +(sab / Math.sqrt(saa * sbb + 1e-9)).toFixed(3);
+}
+// Both views of the page, the lut view's box applied to both (same camera, same rect size).
+async function eyeImages(page) {
+  const lut = await grabView(page, 'eyelut'), bake = await grabView(page, 'eyebake'), b = eyeBox(lut);
+  const lv = boxPixels(lut, b), bv = boxPixels(bake, b);
+  return { box: b, bakeBox: eyeBox(bake), lut: boxStats(lv), bake: boxStats(bv), period: period(lv, 2 * b.half), corr: correlation(lv, bv) };
+}
+
+async function eyeChecks(ctx, port, fxctl, url) {
+  const same = ['density=40', 'eye=[0.4,0.3,3]', 'light=[0.4,0.6,1]'];
+  fxctl('create', 'compound_eye', 'eyelut', ...same);
+  fxctl('create', 'compound_eye', 'eyebake', 'mode=bake', 'bake_size=512', ...same);
+  const page = await ctx.newPage();
+  await page.setViewportSize({ width: 1300, height: 560 });
+  await page.goto(url.replace('drawfps=1', 'drawfps=2&grid=2x1&streams=eyelut,eyebake'), { timeout: 20000 });
+  const sub = await until(() => page.evaluate(() => document.body.dataset.subscribed), 20000);
+  check(sub === 'eyelut,eyebake', 'eye page (?streams=) subscribes to the two compound eyes only', String(sub));
+  const ready = await until(async () => {
+    const s = await page.evaluate(() => [window.fxs.stats(), window.fxs.eye('eyelut'), window.fxs.eye('eyebake')]);
+    return s[0].eyelut?.drawn > 0 && s[0].eyebake?.drawn > 0 ? s : null;
+  }, 20000, 300);
+  const [, li, bi] = ready || [];
+  check(li && li.mode === 'lut' && li.lutRev === 1 && li.cells === 32 && li.dirs === 32 && li.atlas === 1088 && li.lattice === 0,
+        'a lens table (kind 4) arrives, decodes and is drawn', JSON.stringify(ready));
+  check(bi && bi.mode === 'bake' && bi.bake === 512, 'a bake texture (kind 2 EXR) arrives and is drawn', JSON.stringify(bi));
+  await sleep(1200);
+  const sq = await eyeImages(page);
+  await page.screenshot({ path: join(ART, 'web-eye.png') });
+  console.log('eye square', JSON.stringify(sq));
+  check(sq.box.r > 60 && sq.lut.mean > 80, 'lut view: the eye is drawn (a lit disc)', JSON.stringify(sq.box));
+  check(sq.lut.std > 15 && sq.lut.dark > 0.02 && sq.lut.pale > 0.2, 'lut view: facets with pigment (dark pupils among pale lenses)', JSON.stringify(sq.lut));
+  check(sq.period.c > 0.2 && sq.period.lag >= 6 && sq.period.lag <= 60, 'lut view: a lattice (autocorrelation peak at the lens pitch)', JSON.stringify(sq.period));
+  check(sq.bake.mean > 80 && sq.bake.std > 15 && Math.abs(sq.bakeBox.r - sq.box.r) < 0.1 * sq.box.r, 'bake view: the baked texture is on the same model', JSON.stringify({ bake: sq.bake, r: sq.bakeBox.r }));
+  check(sq.corr > 0.75, 'lut and bake views agree (same eye, same density): pupils in the same places', `correlation ${sq.corr}`);
+
+  // density is a client uniform in mode lut: no new table, and the lattice pitch halves.
+  const framesBefore = (await page.evaluate(() => window.fxs.stats())).eyelut.frames;
+  fxctl('set', 'eyelut', 'density=80');
+  await until(() => page.evaluate(() => window.fxs.streams.get('eyelut').params.density === 80), 5000);
+  await sleep(1200);
+  const dense = await eyeImages(page), after = await page.evaluate(() => [window.fxs.stats().eyelut.frames, window.fxs.eye('eyelut').lutRev]);
+  const ratio = sq.period.lag / Math.max(1, dense.period.lag);
+  check(after[0] === framesBefore && after[1] === 1, 'a density change sends no new table', JSON.stringify(after));
+  check(dense.period.c > 0.2 && ratio > 1.6 && ratio < 2.5, 'twice the density halves the lattice pitch on screen', `${sq.period.lag} px -> ${dense.period.lag} px (${JSON.stringify(dense.period)})`);
+
+  // The hexagonal lattice: a new table (new rev), and the views agree again.
+  fxctl('set', 'eyelut', 'density=40', 'lattice=hex');
+  fxctl('set', 'eyebake', 'lattice=hex');
+  const hexReady = await until(async () => {
+    const [l, b] = await page.evaluate(() => [window.fxs.eye('eyelut'), window.fxs.eye('eyebake')]);
+    return l.lattice === 1 && l.lutRev === 3 && b.bakeRev >= 2 ? [l, b] : null;
+  }, 15000, 300);
+  check(!!hexReady, 'lattice=hex: a new table with the new param_rev replaces the old one', JSON.stringify(hexReady));
+  await sleep(1500);
+  const hex = await eyeImages(page);
+  await page.screenshot({ path: join(ART, 'web-eye-hex.png') });
+  console.log('eye hex', JSON.stringify(hex));
+  check(hex.lut.std > 15 && hex.lut.dark > 0.02 && hex.period.c > 0.1, 'hex lut view: facets with pigment', JSON.stringify({ lut: hex.lut, period: hex.period }));
+  check(hex.corr > 0.75, 'hex: lut and bake views agree', `correlation ${hex.corr}`);
+  await page.close();
+  fxctl('destroy', 'eyelut');
+  fxctl('destroy', 'eyebake');
 }
 
 try {
@@ -185,6 +314,8 @@ try {
   check(err && err.includes('curves[0].W') && err.includes('bad_param'), 'a server error shows next to its field', String(err));
   await page2.screenshot({ path: join(ART, 'web-panel-error.png') });
   await page2.close();
+
+  await eyeChecks(ctx, port, fxctl, url);
 
   // Restart the daemon on the same port: the page reconnects and frames flow again.
   await stopDaemon(daemon);

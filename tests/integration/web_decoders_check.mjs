@@ -1,13 +1,18 @@
 // web_decoders_check.mjs — checks clients/web/src/rig.js (kind 3 decoder, point light,
-// shadow direction) and the frame header parser of clients/web/fxs_particles.js against
-// the C encoder's output. argv: VECDIR (rig-N.bin whole frames + rig-N.json expected values
-// from test_light_rig --dump) and REALDIR (fxctl --out of a real daemon: energy-SEQ.bin
-// payloads of kind 3 and lines.txt). Prints "test_web_decoders: N passed, M failed".
+// shadow direction), clients/web/src/eye.js (kind 4 FXL1 container and its zstd tables, the
+// view's stale-table rule) and the frame header parser of clients/web/fxs_particles.js
+// against the C side's output. argv: VECDIR (rig-N.bin whole frames + rig-N.json expected
+// values from test_light_rig --dump), REALDIR (fxctl --out of a real daemon: energy-SEQ-rig.bin
+// payloads of kind 3 and lines.txt) and EYEDIR (fxctl --out of compound_eye streams eyesq
+// and eyehex: NAME-SEQ.bin kind 4 payloads, NAME-SEQ-PROD.png decoded by clients/c/lutpack.c,
+// lines.txt). Prints "test_web_decoders: N passed, M failed".
 import { readFileSync, existsSync } from 'node:fs';
+import { inflateSync } from 'node:zlib';
 import { parseHeader, payloadOf } from '../../clients/web/fxs_particles.js';
 import { decodeRig, RigState, pointLight, shadeM, rampColor, shadowDir, SEG_FLOATS } from '../../clients/web/src/rig.js';
+import { decodeLutPack, EyeView } from '../../clients/web/src/eye.js';
 
-const [vecDir, realDir] = process.argv.slice(2);
+const [vecDir, realDir, eyeDir] = process.argv.slice(2);
 let passed = 0, failed = 0;
 function check(ok, name, detail = '') {
   if (ok) { passed++; console.log('ok   ' + name); } else { failed++; console.log('FAIL ' + name + (detail ? ': ' + detail : '')); }
@@ -103,7 +108,7 @@ for (let n = 0; n < 3; n++) {
   check(lines.length === 6 && rigs.length >= 2, 'real daemon: texture and light-rig frames interleaved', `${lines.length} lines, ${rigs.length} rig`);
   let okAll = rigs.length > 0;
   for (const l of rigs) {
-    const path = `${realDir}/energy-${l.seq}.bin`;
+    const path = `${realDir}/energy-${l.seq}-rig.bin`;
     if (!existsSync(path)) { okAll = false; continue; }
     const rig = decodeRig(new Uint8Array(readFileSync(path)));
     const c = rig.constants;
@@ -112,6 +117,133 @@ for (let n = 0; n < 3; n++) {
       rig.seg[0] === Math.fround(-13.2) && rig.seg[1] === Math.fround(-4.2) && rig.source[0] === 4 && rig.index[8] === 1;
   }
   check(okAll, 'real daemon: kind 3 payloads decode (16 curve chords from p0, the ramp just set, theta 60 deg)');
+}
+
+// 4. kind 4 look-up tables of a real daemon against the C decoder (fxctl's PNGs)
+// fxctl's PNG (png.c): 8-bit RGBA, filter 0 on every row, no interlace.
+function readPng(path) {
+  const d = readFileSync(path), w = d.readUInt32BE(16), h = d.readUInt32BE(20), idat = [];
+  for (let i = 8; i < d.length;) {
+    const n = d.readUInt32BE(i);
+    if (d.toString('latin1', i + 4, i + 8) === 'IDAT') idat.push(d.subarray(i + 8, i + 8 + n));
+    i += 12 + n;
+  }
+  const rows = inflateSync(Buffer.concat(idat)), px = new Uint8Array(w * h * 4);
+  for (let y = 0; y < h; y++) {
+    if (rows[y * (4 * w + 1)] !== 0) throw new Error(`${path}: row ${y} filter ${rows[y * (4 * w + 1)]}`);
+    px.set(rows.subarray(y * (4 * w + 1) + 1, (y + 1) * (4 * w + 1)), 4 * w * y);
+  }
+  return { w, h, px };
+}
+const eyeLines = existsSync(`${eyeDir}/lines.txt`) ? readFileSync(`${eyeDir}/lines.txt`, 'utf8').split('\n').filter((l) => l.startsWith('{"stream"')).map((l) => JSON.parse(l)) : [];
+const eyeWant = { eyesq: { lattice: 0, cells: 12, dirs: 10, r: 1, tileH: 1, pigm: [128, 128] }, eyehex: { lattice: 1, cells: 8, dirs: 12, r: 1.2, tileH: Math.sqrt(3), pigm: [128, 222] } };
+check(eyeLines.length === 2 && eyeLines.every((l) => l.kind === 4 && l.codec === 1), 'real daemon: one kind 4 codec 1 frame per compound eye', JSON.stringify(eyeLines));
+const eyePayload = {};
+for (const l of eyeLines) {
+  const want = eyeWant[l.stream], base = `${eyeDir}/${l.stream}-${l.seq}`, bytes = new Uint8Array(readFileSync(`${base}.bin`));
+  eyePayload[l.stream] = { bytes, line: l };
+  let p;
+  try { p = decodeLutPack(bytes); } catch (e) { check(false, `${l.stream}: decodes`, e.message); continue; }
+  check(p.lattice === want.lattice && p.cells === want.cells && p.dirs === want.dirs && p.gutter === 1 &&
+        p.lensRadius === Math.fround(want.r) && Math.abs(p.tileH - want.tileH) < 1e-6 && p.refractiveIndex === Math.fround(1.491) &&
+        p.maxPasses === 8 && p.supersample === 1, `${l.stream}: container constants are the stream's parameters`, JSON.stringify({ ...p, tables: undefined }));
+  const side = want.dirs * (want.cells + 2), L = p.tables.LLUT, M = p.tables.LMAC, G = p.tables.PIGM;
+  check(L.width === side && L.height === side && l.width === side && l.height === side && L.tile === want.cells + 2 && L.inner === want.cells &&
+        M.width === want.dirs && G.width === want.pigm[0] && G.height === want.pigm[1], `${l.stream}: table sizes (LLUT ${side}², LMAC ${want.dirs}², PIGM ${want.pigm})`);
+  for (const name of ['PIGM', 'LLUT', 'LMAC']) {
+    const png = readPng(`${base}-${name}.png`), t = p.tables[name];
+    const same = png.w === t.width && png.h === t.height && Buffer.compare(Buffer.from(png.px), Buffer.from(t.texels)) === 0;
+    check(same, `${l.stream}: ${name} texels identical to the C decoder's`);
+  }
+  // §7.6 gutter: texel (0, 1+t) of a tile repeats (C, 1+t), (C+1, 1+t) repeats (1, 1+t).
+  const C = p.cells, tex = (x, y) => L.texels.subarray(4 * (y * L.width + x), 4 * (y * L.width + x) + 4).join();
+  let gutterOk = true;
+  for (let t = 0; t < C; t++) {
+    const x0 = 3 * (C + 2), y = 2 * (C + 2) + 1 + t;
+    gutterOk &&= tex(x0, y) === tex(x0 + C, y) && tex(x0 + C + 1, y) === tex(x0 + 1, y);
+  }
+  check(gutterOk, `${l.stream}: LLUT tiles carry the periodic 1-texel gutter`);
+  const dark = G.texels.filter((v, i) => i % 4 === 0 && v < 40).length, pale = G.texels.filter((v, i) => i % 4 === 0 && v > 180).length;
+  check(dark > 0.05 * G.width * G.height && pale > 0.5 * G.width * G.height && G.texels.every((v, i) => i % 4 !== 3 || v === 255),
+        `${l.stream}: PIGM is dark dots on the pale base colour, A = 255`, `${dark} dark, ${pale} pale`);
+}
+
+// Malformed containers: each must throw a clear error (never decode to something).
+function expectError(bytes, what, pattern) {
+  try {
+    decodeLutPack(bytes);
+    check(false, `malformed: ${what}`, 'decoded without an error');
+  } catch (e) {
+    check(pattern.test(e.message), `malformed: ${what} -> "${e.message}"`);
+  }
+}
+const sq = eyePayload.eyesq?.bytes ?? new Uint8Array(0);
+const dirEntry = (bytes, name) => { // byte offset of the directory entry called name
+  const dv = new DataView(bytes.buffer, bytes.byteOffset), hb = dv.getUint16(6, true), eb = dv.getUint16(10, true);
+  for (let i = 0; i < dv.getUint16(8, true); i++) if (String.fromCharCode(...bytes.subarray(hb + i * eb, hb + i * eb + 4)) === name) return hb + i * eb;
+  return -1;
+};
+const patched = (fn) => { const b = sq.slice(); fn(new DataView(b.buffer), b); return b; };
+if (sq.length) {
+  expectError(sq.slice(0, 40), 'shorter than the header', /shorter than the 64-byte header/);
+  expectError(sq.slice(0, 200), 'truncated inside the directory', /directory .* past the/);
+  expectError(sq.slice(0, sq.length - 16), 'truncated inside the last table', /outside the data area/);
+  expectError(patched((dv, b) => { b[3] = 0x32; }), 'bad magic', /bad magic/);
+  expectError(patched((dv) => dv.setUint32(dirEntry(sq, 'LLUT') + 20, sq.length + 8, true)), 'LLUT offset out of range', /LLUT: stored bytes .* outside/);
+  expectError(patched((dv) => dv.setUint32(dirEntry(sq, 'LMAC') + 20, 8, true)), 'LMAC offset inside the directory', /LMAC: stored bytes .* outside/);
+  expectError(patched((dv) => dv.setUint16(8, 2000, true)), 'entry count past the payload', /directory of 2000 entries/);
+  expectError(patched((dv) => dv.setUint16(10, 16, true)), 'entry_bytes too small', /entry_bytes 16 too small/);
+  expectError(patched((dv) => dv.setUint32(dirEntry(sq, 'LLUT') + 28, 1234, true)), 'raw_bytes not width × height × 4', /LLUT: raw_bytes 1234/);
+  expectError(patched((dv) => dv.setUint32(dirEntry(sq, 'LLUT') + 8, 7, true)), 'unknown codec', /LLUT: unsupported codec 7/);
+  expectError(patched((dv, b) => { b[dv.getUint32(dirEntry(sq, 'LMAC') + 20, true)] ^= 0xff; }), 'LMAC not a zstd frame', /LMAC: zstd/);
+  expectError(patched((dv, b) => { b.set([88, 88, 88, 88], dirEntry(sq, 'LMAC')); }), 'LMAC missing', /missing LMAC/);
+  expectError(patched((dv) => dv.setUint32(40, 11, true)), 'LLUT does not hold dirs² tiles', /LLUT: .* does not hold 11²/);
+  // An unknown product is skipped; a larger header and larger entries are honoured (§7.6).
+  const renamed = patched((dv, b) => { b.set([81, 81, 81, 81], dirEntry(sq, 'PIGM')); });
+  let ok;
+  try { const p = decodeLutPack(renamed); ok = !p.tables.PIGM && p.tables.LLUT && !p.tables.QQQQ; } catch (e) { ok = false; }
+  check(ok, 'an unknown product name is skipped');
+  check(JSON.stringify(tablesOf(decodeLutPack(widen(sq)))) === JSON.stringify(tablesOf(decodeLutPack(sq))),
+        'header_bytes 96 and entry_bytes 80 (later versions) decode to the same tables');
+}
+// The container re-laid with a 96-byte header and 80-byte entries (offsets moved by 80).
+function widen(b) {
+  const dv = new DataView(b.buffer, b.byteOffset), count = dv.getUint16(8, true), oldEnd = 64 + 64 * count, newEnd = 96 + 80 * count;
+  const out = new Uint8Array(b.length + newEnd - oldEnd), ov = new DataView(out.buffer);
+  out.set(b.subarray(0, 64));
+  ov.setUint16(6, 96, true);
+  ov.setUint16(10, 80, true);
+  for (let i = 0; i < count; i++) {
+    out.set(b.subarray(64 + 64 * i, 128 + 64 * i), 96 + 80 * i);
+    out.fill(0xee, 96 + 80 * i + 64, 96 + 80 * (i + 1)); // an unknown tail
+    ov.setUint32(96 + 80 * i + 20, dv.getUint32(64 + 64 * i + 20, true) + newEnd - oldEnd, true);
+  }
+  out.set(b.subarray(oldEnd), newEnd);
+  return out;
+}
+function tablesOf(p) { return Object.fromEntries(Object.entries(p.tables).map(([k, t]) => [k, [t.width, t.height, Buffer.from(t.texels).toString('base64')]])); }
+
+// The view: a whole kind 4 frame goes to the GPU textures; an older param_rev is dropped.
+if (eyePayload.eyesq) {
+  const { bytes, line } = eyePayload.eyesq;
+  const frame = (rev, width = line.width) => {
+    const buf = new Uint8Array(64 + bytes.length), dv = new DataView(buf.buffer);
+    buf.set([70, 88, 83, 49]);
+    dv.setUint16(4, 64, true); dv.setUint16(6, 4, true); dv.setUint32(8, 9, true); dv.setUint32(12, rev, true);
+    dv.setBigUint64(16, 1n, true); dv.setUint32(40, 1, true); dv.setUint32(44, bytes.length, true);
+    dv.setUint32(48, width, true); dv.setUint32(52, line.height, true);
+    buf.set(bytes, 64);
+    return buf.buffer;
+  };
+  const v = new EyeView('eyesq'), feed = (buf) => v.onFrame(parseHeader(buf), buf);
+  const a = feed(frame(5)), tex = v.textures.LLUT;
+  const b = feed(frame(3)), c = feed(frame(5)), d = feed(frame(6));
+  check(a && v.info().lutRev === 6 && !b && c && d && tex.image.width === line.width && tex.flipY === false &&
+        tex.generateMipmaps === false && tex.minFilter === 1006 && tex.magFilter === 1006, 'EyeView: tables uploaded (LINEAR, no mipmaps, no flipY); an older param_rev is dropped',
+        JSON.stringify({ a, b, c, d, info: v.info() }));
+  let threw = '';
+  try { feed(frame(7, line.width + 2)); } catch (e) { threw = e.message; }
+  check(/frame says/.test(threw) && v.info().lutRev === 6, 'EyeView: a table whose size differs from the frame header is refused', threw);
 }
 
 console.log(`test_web_decoders: ${passed} passed, ${failed} failed`);

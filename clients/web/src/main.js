@@ -5,7 +5,8 @@
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
 // Query options: url=, rig=0 (do not switch on energy_wave's light rig), rl=N (flame
 // repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
-// drawfps=N (draw at most N frames a second, e.g. under software WebGL).
+// drawfps=N (draw at most N frames a second, e.g. under software WebGL),
+// streams=A,B (show only these streams).
 import * as THREE from 'three';
 import GUI from 'lil-gui';
 import { parseHeader } from '../fxs_particles.js';
@@ -21,6 +22,7 @@ const q = new URLSearchParams(location.search);
 const wsUrl = q.get('url') || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/v1/ws`;
 const httpBase = wsUrl.replace(/^ws/, 'http').replace(/\/v1\/ws.*$/, '');
 const autoRig = q.get('rig') !== '0';
+const only = q.get('streams')?.split(',');
 // Access token (PROTOCOL.md §3.11): ?token= once, then kept for the tab and removed from the
 // address bar so it does not stay in the history.
 const token = q.get('token') || sessionStorage.getItem('fxstream-token') || '';
@@ -142,6 +144,7 @@ async function setup(hello) {
   byChannel.clear();
   try {
     const list = await conn.request('list');
+    if (only) list.streams = list.streams.filter((s) => only.includes(s.stream));
     const names = new Set(list.streams.map((s) => s.stream));
     for (const st of [...streams.values()]) if (!names.has(st.name)) detach(st);
     const max = hello.limits?.max_subscriptions ?? 16;
@@ -336,4 +339,5 @@ window.fxs = {
   stats: () => Object.fromEntries([...streams.values()].map((s) => [s.name, { rev: s.rev, channel: s.channel, maxFps: s.maxFps, latency: s.stats.rate.latency, frames: s.stats.totalFrames, drawn: s.stats.totalDrawn, kinds: [...s.stats.kindsSeen], skipped: s.stats.skipped, error: s.error }])),
   flame: () => { const v = views.find((x) => x.kind === 'flame'); return v ? { center: v.center, extent: v.extent, count: v.count, cam: v.camera.position.toArray() } : null; },
   scene: () => { const v = views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
+  eye: (stream) => views.find((x) => x.kind === 'eye' && x.stream === stream)?.info() ?? null,
 };
