@@ -60,7 +60,7 @@ $(WEB_OUT): $(WEB_SRC) $(NPM_STAMP)
 run: deps all
 	$(BUILD)/fxstreamd $(RUN_ARGS)
 
-test: deps all $(UNIT_BIN) $(FUZZ_BIN)
+test: deps all $(UNIT_BIN) $(FUZZ_BIN) $(BUILD)/lib/libclfault.so
 	@tests/run.sh
 
 # Longer fuzzing than make test's bounded run; new inputs are merged into tests/fuzz/corpus.
@@ -147,6 +147,11 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a 
 $(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
 	@mkdir -p $(@D)
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
+
+# OpenCL fault injection for tests/integration/test_cl_faults.py (LD_PRELOAD, FXS_CLFAULT).
+$(BUILD)/lib/libclfault.so: tests/faults/clfault.c
+	@mkdir -p $(@D)
+	$(CC) $(FX_CFLAGS) $(CFLAGS) -fPIC -shared $< -o $@ -ldl
 
 fuzz-libs:
 	@$(MAKE) --no-print-directory BUILD=$(BUILD)/fz CC=$(FUZZ_CC) CFLAGS="$(FUZZ_FLAGS) -fsanitize=fuzzer-no-link" \

@@ -1,11 +1,22 @@
-/* engine.c — see engine.h. */
+/* engine.c — see engine.h.
+ *
+ * Failures stay inside their stream: a failed creation waits for the next parameter
+ * change; a failed step resets the effect (re-creating it when the reset fails too) and
+ * the stream pauses ENGINE_BACKOFF_MIN_S before its next step, doubling up to
+ * ENGINE_BACKOFF_MAX_S while the failures repeat, so a broken kernel or a lost device
+ * costs a few error events and log lines, not a busy loop. A `set` or `reset` retries at
+ * once. Each failure reaches the stream's subscribers, the log and /metrics. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "engine.h"
 #include "log.h"
+
+#define ENGINE_BACKOFF_MIN_S 0.5
+#define ENGINE_BACKOFF_MAX_S 30.0
 
 struct engine_slot {
     struct stream *s;
@@ -16,6 +27,9 @@ struct engine_slot {
     uint64_t reset_gen;
     uint64_t seq[FXS_KIND_MAX + 1];
     bool running;
+    int fails;           /* consecutive failures (steps, creations): the pause after the last */
+    uint32_t fail_rev;   /* revision and reset request seen by the last failure: */
+    uint64_t fail_reset; /* a change of either ends the pause */
     double next_due, last_wall, sim_time;
     double rt_wall, rt_sim; /* start of the current real-time factor window */
 };
@@ -42,14 +56,25 @@ static void engine_drop_fx(struct engine_slot *sl)
     sl->params = NULL;
 }
 
-/* Reports a stream-level failure to its subscribers and the log. */
-static void engine_fail(struct engine *eng, struct engine_slot *sl, const struct fx_err *err)
+/* Reports a stream-level failure to its subscribers and the log, with what happens next
+ * (then: NULL, or e.g. "waiting for a parameter change"; kept when the message is cut). */
+static void engine_fail(struct engine *eng, struct engine_slot *sl, const struct fx_err *err, const char *then)
 {
-    log_error("stream %s: %s", sl->s->name, err->message);
-    hub_stream_error(eng->hub, sl->s, err->message);
+    char msg[sizeof err->message];
+    int room = (int)sizeof msg - (then ? (int)strlen(then) + 3 : 1);
+    snprintf(msg, sizeof msg, "%.*s%s%s", room > 0 ? room : 0, err->message, then ? "; " : "", then ? then : "");
+    log_error("stream %s: %s", sl->s->name, msg);
+    hub_stream_error(eng->hub, sl->s, msg);
 }
 
-/* Brings the effect up to the hub's parameter revision. Returns 0 when fx is usable. */
+/* The pause after the n-th consecutive failure. */
+static double engine_backoff(int n)
+{
+    return fmin(ENGINE_BACKOFF_MIN_S * pow(2.0, n > 1 ? n - 1 : 0), ENGINE_BACKOFF_MAX_S);
+}
+
+/* Brings the effect up to the hub's parameter revision: 0 when fx is usable, -1 when its
+ * (re)creation failed just now (reported), 1 while waiting for a change after that. */
 static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
 {
     struct stream *s = sl->s;
@@ -58,7 +83,7 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
     rev = s->rev;
     pthread_mutex_unlock(&eng->hub->mu);
     if (sl->fx && rev == sl->rev) return 0;
-    if (!sl->fx && rev == sl->failed_rev) return -1;
+    if (!sl->fx && rev == sl->failed_rev) return 1;
 
     cJSON *doc = hub_get_params(eng->hub, s, &rev);
     struct fx_err err = {0};
@@ -66,13 +91,13 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
     if (!restart && s->effect->apply(sl->fx, doc, &err) == 0) {
         cJSON_Delete(sl->params);
     } else {
-        if (!restart) engine_fail(eng, sl, &err);
+        if (!restart) engine_fail(eng, sl, &err, "re-creating the effect");
         engine_drop_fx(sl);
         memset(&err, 0, sizeof err);
         sl->fx = s->effect->create(eng->ocl, doc, &err);
         sl->sim_time = 0;
         if (!sl->fx) {
-            engine_fail(eng, sl, &err);
+            engine_fail(eng, sl, &err, "waiting for a parameter change");
             cJSON_Delete(doc);
             sl->failed_rev = rev;
             return -1;
@@ -131,11 +156,32 @@ static void engine_realtime(struct engine *eng, struct engine_slot *sl, double n
     sl->rt_sim = sim;
 }
 
-static void engine_step(struct engine *eng, struct engine_slot *sl, double now)
+/* After a failed step: starts the effect over (a blown-up state, NaN or runaway, must not
+ * fail forever), re-creating it at the next step when even the reset fails, and pauses
+ * the stream. */
+static void engine_step_failed(struct engine *eng, struct engine_slot *sl, const struct fx_err *err)
+{
+    struct fx_err reset_err = {0};
+    char then[200];
+    double pause = engine_backoff(++sl->fails);
+    if (sl->s->effect->reset(sl->fx, &reset_err) == 0) {
+        snprintf(then, sizeof then, "state reset, next step in %.1f s", pause);
+    } else {
+        snprintf(then, sizeof then, "reset failed too, re-creating in %.1f s (%.120s)", pause, reset_err.message);
+        engine_drop_fx(sl);
+    }
+    engine_fail(eng, sl, err, then);
+    sl->sim_time = 0;
+}
+
+/* Steps the stream once; -1 when it failed just now (reported; the stream is to pause). */
+static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
 {
     struct stream *s = sl->s;
     struct fx_err err = {0};
-    if (engine_sync_params(eng, sl)) return;
+    int sync = engine_sync_params(eng, sl);
+    if (sync < 0) sl->fails++;
+    if (sync) return sync < 0 ? -1 : 0;
 
     pthread_mutex_lock(&eng->hub->mu);
     uint64_t reset_gen = s->reset_gen;
@@ -143,7 +189,7 @@ static void engine_step(struct engine *eng, struct engine_slot *sl, double now)
     if (reset_gen != sl->reset_gen) {
         sl->reset_gen = reset_gen;
         sl->sim_time = 0;
-        if (s->effect->reset(sl->fx, &err)) engine_fail(eng, sl, &err);
+        if (s->effect->reset(sl->fx, &err)) engine_fail(eng, sl, &err, NULL);
     }
 
     double dt = fmin(fmax(now - sl->last_wall, 0.0), 0.25); /* a long stall does not jump time */
@@ -151,17 +197,19 @@ static void engine_step(struct engine *eng, struct engine_slot *sl, double now)
     sl->sim_time += dt;
     struct engine_emit_ctx ctx = {eng, sl, 0};
     double t0 = engine_now();
-    if (s->effect->step(sl->fx, sl->sim_time, dt, engine_emit, &ctx, &err)) {
-        engine_fail(eng, sl, &err);
-        /* A blown-up state (NaN, runaway) starts over rather than failing forever. */
-        if (s->effect->reset(sl->fx, &err)) engine_drop_fx(sl);
-        sl->sim_time = 0;
-    }
+    int rc = s->effect->step(sl->fx, sl->sim_time, dt, engine_emit, &ctx, &err);
     double ms = (engine_now() - t0) * 1e3;
+    if (rc) {
+        engine_step_failed(eng, sl, &err);
+    } else if (sl->fails) {
+        log_info("stream %s: stepping again after %d failed steps", s->name, sl->fails);
+        sl->fails = 0;
+    }
     engine_realtime(eng, sl, now);
     atomic_fetch_add(&s->steps, 1);
     atomic_fetch_add(&s->step_us, (uint64_t)(ms * 1e3));
     atomic_fetch_add(&s->encode_us, (uint64_t)(ctx.encode_ms * 1e3));
+    return rc ? -1 : 0;
 }
 
 /* Matches slots to the hub's live streams: drops destroyed ones, adds new ones. */
@@ -194,6 +242,14 @@ static void engine_sync_slots(struct engine *eng)
     hub_release_all(live, n);
 }
 
+/* Pauses a stream after a failure; a later change of rev or reset_gen ends the pause. */
+static void engine_pause(struct engine_slot *sl, uint32_t rev, uint64_t reset_gen, double now)
+{
+    sl->fail_rev = rev;
+    sl->fail_reset = reset_gen;
+    sl->next_due = fmax(sl->next_due, now + engine_backoff(sl->fails));
+}
+
 /* Steps what is due; returns the time of the next deadline. */
 static double engine_run_due(struct engine *eng)
 {
@@ -203,6 +259,8 @@ static double engine_run_due(struct engine *eng)
         pthread_mutex_lock(&eng->hub->mu);
         int subs = sl->s->subscribers;
         double fps = params_num(sl->s->params, "fps");
+        uint32_t rev = sl->s->rev;
+        uint64_t reset_gen = sl->s->reset_gen;
         pthread_mutex_unlock(&eng->hub->mu);
         if (eng->pause_idle && subs == 0) {
             sl->running = false;
@@ -213,12 +271,15 @@ static double engine_run_due(struct engine *eng)
             sl->running = true;
             sl->next_due = sl->last_wall = now;
         }
+        if (sl->fails && (rev != sl->fail_rev || reset_gen != sl->fail_reset))
+            sl->next_due = now; /* a set or reset retries at once */
         if (now >= sl->next_due) {
-            engine_step(eng, sl, now);
+            bool failed = engine_step(eng, sl, now) != 0;
             double period = 1.0 / (fps > 0 ? fps : 1.0);
             sl->next_due += period;
             now = engine_now();
             if (sl->next_due < now) sl->next_due = now; /* overrun: no catch-up burst */
+            if (failed) engine_pause(sl, rev, reset_gen, now);
         }
         if (sl->next_due < next) next = sl->next_due;
     }

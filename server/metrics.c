@@ -107,7 +107,7 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     pthread_mutex_lock(&srv->hub.mu); /* subscribers, rev and error_gen are guarded */
     metrics_per_stream(out, all, n, "fxs_stream_subscribers", "gauge", "Subscribers per stream.", m_subs);
     metrics_per_stream(out, all, n, "fxs_stream_param_rev", "gauge", "Parameter revision.", m_rev);
-    metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream errors (kernel, NaN).", m_errors);
+    metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream failures (OpenCL build, kernel or device error, NaN), one per error event.", m_errors);
     metrics_per_stream(out, all, n, "fxs_stream_realtime_factor", "gauge",
                        "Simulated seconds per wall second over the last second of stepping.", m_realtime);
     pthread_mutex_unlock(&srv->hub.mu);

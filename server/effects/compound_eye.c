@@ -251,6 +251,21 @@ static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
+/* Sets a kernel's arguments from (size, pointer) pairs; fails with the first error's code. */
+struct eye_arg {
+    size_t size;
+    const void *ptr;
+};
+
+static int eye_set_args(cl_kernel k, const char *name, const struct eye_arg *a, int n, struct fx_err *err)
+{
+    for (int i = 0; i < n; i++) {
+        cl_int rc = clSetKernelArg(k, (cl_uint)i, a[i].size, a[i].ptr);
+        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s, %d): %s", name, i, ocl_errstr(rc));
+    }
+    return 0;
+}
+
 /* Work-items for n rays: each traces EYE_LANES of them (kernels/compound_eye.cl). */
 static size_t eye_groups(size_t n) { return (n + EYE_LANES - 1) / EYE_LANES; }
 
@@ -283,21 +298,13 @@ static int eye_lut_samples(struct compound_eye *ce, int cells, int dirs, int ss,
         ce->d_lut_bytes = bytes;
     }
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    cl_int rc = 0, i = 0;
-    cl_kernel k = ce->k_lut;
-    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_lut);
-    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_pig);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->pw);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->ph);
-    rc |= clSetKernelArg(k, i++, sizeof ce->optics, &ce->optics);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &cells);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &dirs);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &ss);
-    rc |= clSetKernelArg(k, i++, sizeof dot, &dot);
-    rc |= clSetKernelArg(k, i++, sizeof base, &base);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(eye_lut) failed");
+    const struct eye_arg a[] = {
+        {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
+        {sizeof ce->optics, &ce->optics}, {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss},
+        {sizeof dot, &dot}, {sizeof base, &base}};
+    if (eye_set_args(ce->k_lut, "eye_lut", a, 10, err)) return -1;
     size_t global = eye_groups(n);
-    return eye_run(ce, k, "eye_lut", &global, ce->d_lut, bytes, ce->samples, err);
+    return eye_run(ce, ce->k_lut, "eye_lut", &global, ce->d_lut, bytes, ce->samples, err);
 }
 
 int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, struct fx_err *err)
@@ -382,20 +389,13 @@ int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
         .lens_normal = eye_enum(eye_normal_names, params_str(p, "shading_normal")),
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    cl_int rc = 0, i = 0;
-    cl_kernel k = ce->k_bake;
-    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_out);
-    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_geo);
-    rc |= clSetKernelArg(k, i++, sizeof(cl_mem), &ce->d_pig);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->pw);
-    rc |= clSetKernelArg(k, i++, sizeof(int), &ce->ph);
-    rc |= clSetKernelArg(k, i++, sizeof ce->optics, &ce->optics);
-    rc |= clSetKernelArg(k, i++, sizeof s, &s);
-    rc |= clSetKernelArg(k, i++, sizeof dot, &dot);
-    rc |= clSetKernelArg(k, i++, sizeof base, &base);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(eye_bake) failed");
+    const struct eye_arg a[] = {
+        {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_pig},
+        {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
+        {sizeof dot, &dot}, {sizeof base, &base}};
+    if (eye_set_args(ce->k_bake, "eye_bake", a, 9, err)) return -1;
     size_t texels = (size_t)ce->size * ce->size, global = eye_groups(texels);
-    return eye_run(ce, k, "eye_bake", &global, ce->d_out, texels * 4 * sizeof(float), rgba, err);
+    return eye_run(ce, ce->k_bake, "eye_bake", &global, ce->d_out, texels * 4 * sizeof(float), rgba, err);
 }
 
 /* ---- life cycle -------------------------------------------------------------------- */

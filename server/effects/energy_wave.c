@@ -432,6 +432,7 @@ static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
     size_t texels = (size_t)ew->width * (size_t)ew->height;
     if (texels <= ew->out_texels) return 0;
     if (ew->d_out) clReleaseMemObject(ew->d_out);
+    ew->d_out = NULL;
     free(ew->img);
     free(ew->rgba);
     ew->out_texels = 0;
@@ -488,6 +489,7 @@ struct energy_wave *energy_wave_new(struct ocl *ocl, const cJSON *params, struct
 void energy_wave_free(struct energy_wave *ew)
 {
     if (!ew) return;
+    if (ew->ocl) clFinish(ocl_queue(ew->ocl)); /* a failed step may leave uploads from ew's arrays queued */
     cl_mem mems[] = {ew->d_out, ew->d_cam, ew->d_pts, ew->d_lns, ew->d_tor, ew->d_cur, ew->d_wts};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
@@ -520,23 +522,18 @@ static int ew_upload(struct energy_wave *ew, int nc, struct fx_err *err)
     return 0;
 }
 
+/* The first failing clSetKernelArg's code, or CL_SUCCESS. */
 static cl_int ew_set_args(struct energy_wave *ew, cl_kernel k, int nc)
 {
-    cl_int rc = 0, idx = 0;
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_out);
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_cam);
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_pts);
-    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->np);
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_lns);
-    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->nl);
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_tor);
-    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->nt);
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_cur);
-    rc |= clSetKernelArg(k, idx++, sizeof(int), &nc);
-    rc |= clSetKernelArg(k, idx++, sizeof(cl_mem), &ew->d_wts);
-    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->width);
-    rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->height);
-    if (k == ew->k_simpson) rc |= clSetKernelArg(k, idx++, sizeof(int), &ew->divisions);
+    struct { size_t size; const void *ptr; } a[] = {
+        {sizeof(cl_mem), &ew->d_out}, {sizeof(cl_mem), &ew->d_cam}, {sizeof(cl_mem), &ew->d_pts},
+        {sizeof(int), &ew->np},       {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->nl},
+        {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->nt},       {sizeof(cl_mem), &ew->d_cur},
+        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_wts}, {sizeof(int), &ew->width},
+        {sizeof(int), &ew->height},   {sizeof(int), &ew->divisions}};
+    cl_uint n = k == ew->k_simpson ? 14 : 13;
+    cl_int rc = CL_SUCCESS;
+    for (cl_uint i = 0; i < n && rc == CL_SUCCESS; i++) rc = clSetKernelArg(k, i, a[i].size, a[i].ptr);
     return rc;
 }
 
@@ -547,7 +544,7 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
     cl_kernel k = ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
     const char *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
     cl_int rc = ew_set_args(ew, k, nc);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s) failed", name);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s): %s", name, ocl_errstr(rc));
     size_t global[2] = {(size_t)(ew->width + EW_LANES - 1) / EW_LANES, (size_t)ew->height};
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);

@@ -583,13 +583,17 @@ static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_er
 }
 
 /* Reads the totals (survivors, insertions, new n) and the error flag: the only host sync
- * inside a run. */
+ * inside a run. The queue is finished even when an enqueue failed: no read into the
+ * caller's variables may outlive the call. */
 static int fl_read_totals(struct flame *fl, cl_uint tot[3], cl_int *errflag, struct fx_err *err)
 {
     cl_command_queue q = ocl_queue(fl->ocl);
     cl_int rc = clEnqueueReadBuffer(q, fl->errflag, CL_FALSE, 0, sizeof *errflag, errflag, 0, NULL, NULL);
     if (rc == CL_SUCCESS && tot) rc = clEnqueueReadBuffer(q, fl->tot, CL_FALSE, 0, 3 * sizeof *tot, tot, 0, NULL, NULL);
-    if (rc != CL_SUCCESS) return fl_clfail(err, "reading totals", rc);
+    if (rc != CL_SUCCESS) {
+        fl_finish(fl, NULL);
+        return fl_clfail(err, "reading totals", rc);
+    }
     return fl_finish(fl, err);
 }
 
@@ -839,7 +843,8 @@ int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err
     for (int i = 0; i < 8 && rc == CL_SUCCESS && n > 0; i++)
         rc = clEnqueueReadBuffer(ocl_queue(fl->ocl), *fl_set_mem(S, i), CL_FALSE, 0, fl_sizes[i] * n, dst[i], 0, NULL,
                                  NULL);
-    if (rc == CL_SUCCESS) rc = clFinish(ocl_queue(fl->ocl));
+    cl_int fin = clFinish(ocl_queue(fl->ocl)); /* also after a failed enqueue: the reads target rho_p, dtdf, cnt */
+    if (rc == CL_SUCCESS) rc = fin;
     for (int i = 0; i < n && rc == CL_SUCCESS; i++) {
         out->rho[i] = rho_p[2 * i];
         out->pressure[i] = rho_p[2 * i + 1];
@@ -895,7 +900,10 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
     for (int i = 0; i < 3 && rc == CL_SUCCESS && n > 0; i++)
         rc = clEnqueueReadBuffer(ocl_queue(fl->ocl), *fl_set_mem(S, i), CL_FALSE, 0, fl_sizes[i] * n, dst[i], 0, NULL,
                                  NULL);
-    if (rc != CL_SUCCESS) return fl_clfail(err, "reading the frame", rc);
+    if (rc != CL_SUCCESS) {
+        fl_finish(fl, NULL); /* the reads already queued complete before the buffers may change */
+        return fl_clfail(err, "reading the frame", rc);
+    }
     if (fl_read_totals(fl, NULL, &ef, err) || fl_check(fl, ef, err)) return -1;
     double t0 = fl_now_ms();
     float s = (float)fl->space_scale;
