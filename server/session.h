@@ -48,6 +48,9 @@ struct session {
     bool rx_overflow;
     double tokens, last_refill;
     double last_write;    /* CLOCK_MONOTONIC seconds of the last write to the socket (net.c) */
+    struct session *retry_next, *retry_prev; /* net.c's list of sessions to wake at retry_at */
+    double retry_at;
+    bool retry_queued;
     const char *kill;     /* set: the network layer closes the connection (1008) with this reason */
     bool hold;            /* replies wait until the change they acknowledge is on disk (store.h) */
     enum access_role role;

@@ -3,7 +3,7 @@
 // canvas split into views: flame particles, the energy-wave billboard, a toon scene lit by
 // the wave's light rig, and the compound eye. A lil-gui panel per stream is generated from
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
-// Query options: url=, rig=0 (do not switch on energy_wave's light rig), rl=N (flame
+// Query options: url=, rl=N (flame
 // repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
 // drawfps=N (draw at most N frames a second, e.g. under software WebGL),
 // streams=A,B (show only these streams).
@@ -21,7 +21,6 @@ import { EyeView } from './eye.js';
 const q = new URLSearchParams(location.search);
 const wsUrl = q.get('url') || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/v1/ws`;
 const httpBase = wsUrl.replace(/^ws/, 'http').replace(/\/v1\/ws.*$/, '');
-const autoRig = q.get('rig') !== '0';
 const only = q.get('streams')?.split(',');
 // Access token (PROTOCOL.md §3.11): ?token= once, then kept for the tab and removed from the
 // address bar so it does not stay in the history.
@@ -113,17 +112,13 @@ async function attach(info) {
     rebuildViewList();
   }
   applyParams(st, got.params, got.rev);
-  if (info.effect === 'energy_wave' && autoRig && !got.params.light_rig) {
-    const r = await conn.request('set', { stream: st.name, params: { light_rig: true } }).catch(() => null);
-    if (r) applyParams(st, r.params, r.rev);
-  }
   const send = (partial) => conn.request('set', { stream: st.name, params: partial }).then((m) => { applyParams(st, m.params, m.rev); return m; });
   if (st.panel) st.panel.update(st.params, st.rev);
   else {
     st.panel = new StreamPanel(gui, st.name, st.effect, schema, st.params, st.rev, send);
     st.panel.folder.close();
   }
-  st.maxFps = START_FPS * (info.effect === 'energy_wave' ? 2 : 1);
+  st.maxFps = START_FPS;
   st.minLat = undefined;
   const sub = await conn.request('subscribe', { stream: st.name, max_fps: st.maxFps });
   st.channel = sub.channel;
@@ -214,29 +209,27 @@ function layout() {
 // subscription therefore carries max_fps (re-subscribing only replaces it, PROTOCOL.md
 // §3.5), adjusted every 2 s: halved while frames arrive later than the stream's best
 // latency + 250 ms, doubled (within 50 ms) or raised by 30% (within 100 ms) up to the
-// stream's fps while they are on time; subscriptions start at 2 frames/s per kind. The
-// comparison is with the best latency seen, so unsynchronised clocks do not matter.
-// A page drawing under 20 frames/s runs about one message task per frame, so there the
-// caps also share the draw rate among the subscribed kinds.
+// stream's fps while they are on time; subscriptions start at 2 steps/s. max_fps counts
+// stream steps, so an energy wave's light rig comes with its texture. The comparison is
+// with the best latency seen, so unsynchronised clocks do not matter. A page drawing under
+// 20 frames/s runs about one message task per frame, so there the caps also share the draw
+// rate among the messages of all subscribed streams' steps.
 const START_FPS = 2;
 let rafCount = 0;
 setInterval(() => {
   const drawFps = rafCount / 2;
   rafCount = 0;
   if (conn.state !== 'connected') return;
-  const kindStreams = [...streams.values()].reduce((a, s) => a + (s.effect === 'energy_wave' && s.params?.light_rig ? 2 : 1), 0);
+  const messages = [...streams.values()].reduce((a, s) => a + (s.effect === 'energy_wave' && s.params?.light_rig ? 2 : 1), 0);
   for (const st of streams.values()) {
     if (!st.channel || !st.maxFps) continue;
-    const lat = st.stats.rate.latency, kinds = st.effect === 'energy_wave' && st.params?.light_rig ? 2 : 1;
+    const lat = st.stats.rate.latency;
     if (!Number.isNaN(lat)) st.minLat = Math.min(st.minLat ?? Infinity, lat);
-    const excess = Number.isNaN(lat) ? 0 : lat - st.minLat, top = kinds * (st.params?.fps ?? 30);
+    const excess = Number.isNaN(lat) ? 0 : lat - st.minLat, top = st.params?.fps ?? 30;
     let cap = st.maxFps;
-    if (excess > 250) cap = Math.max(0.5 * kinds, cap * 0.5);
+    if (excess > 250) cap = Math.max(0.5, cap * 0.5);
     else if (excess < 100) cap = Math.min(top, cap * (excess < 50 ? 2 : 1.3));
-    if (drawFps < 20) cap = Math.min(cap, Math.max(0.5, (drawFps * kinds) / Math.max(1, kindStreams)));
-    // Below its step rate a cap holds back later kinds (the texture is always the newest
-    // frame), so a stream with several kinds is never capped under kinds x fps.
-    if (kinds > 1) cap = top;
+    if (drawFps < 20) cap = Math.min(cap, Math.max(0.5, drawFps / Math.max(1, messages)));
     if (Math.abs(cap - st.maxFps) < 0.1 * st.maxFps) continue;
     st.maxFps = Math.round(cap * 10) / 10;
     conn.request('subscribe', { stream: st.name, max_fps: st.maxFps }).catch(() => {});
