@@ -204,6 +204,7 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     } else if (sl->fails) {
         log_info("stream %s: stepping again after %d failed steps", s->name, sl->fails);
         sl->fails = 0;
+        hub_stream_recovered(eng->hub, s);
     }
     engine_realtime(eng, sl, now);
     atomic_fetch_add(&s->steps, 1);

@@ -200,8 +200,16 @@ void hub_stream_error(struct hub *hub, struct stream *s, const char *message)
     pthread_mutex_lock(&hub->mu);
     snprintf(s->error, sizeof s->error, "%s", message);
     s->error_gen++;
+    s->failing = true;
     pthread_mutex_unlock(&hub->mu);
     if (hub->notify) hub->notify(hub->notify_ctx);
+}
+
+void hub_stream_recovered(struct hub *hub, struct stream *s)
+{
+    pthread_mutex_lock(&hub->mu);
+    s->failing = false;
+    pthread_mutex_unlock(&hub->mu);
 }
 
 struct frame *hub_latest(struct hub *hub, struct stream *s, int kind)

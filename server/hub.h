@@ -37,6 +37,7 @@ struct stream {
     struct frame *latest[FXS_KIND_MAX + 1];
     char error[320];  /* last stream-level error, for subscribers and /healthz */
     uint64_t error_gen;
+    bool failing;     /* since that error the stream has not stepped successfully */
     double realtime;  /* effect-simulated seconds per wall second, recent steps */
 
     /* Counters for /metrics. */
@@ -85,6 +86,8 @@ void hub_add_subscriber(struct hub *hub, struct stream *s, int delta);
 /* Engine side: publish a frame (takes the reference), report a stream error. */
 void hub_publish(struct hub *hub, struct stream *s, struct frame *f);
 void hub_stream_error(struct hub *hub, struct stream *s, const char *message);
+/* The stream stepped successfully after errors (clears `failing`; the error text stays). */
+void hub_stream_recovered(struct hub *hub, struct stream *s);
 /* Network side: a reference to the newest frame of a kind (NULL if none). */
 struct frame *hub_latest(struct hub *hub, struct stream *s, int kind);
 

@@ -55,6 +55,7 @@ static double m_encode_s(struct stream *s) { return atomic_load(&s->encode_us) *
 static double m_errors(struct stream *s) { return (double)s->error_gen; }
 static double m_rev(struct stream *s) { return s->rev; }
 static double m_realtime(struct stream *s) { return s->realtime; }
+static double m_failing(struct stream *s) { return s->failing; }
 
 static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
 {
@@ -110,6 +111,9 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream failures (OpenCL build, kernel or device error, NaN), one per error event.", m_errors);
     metrics_per_stream(out, all, n, "fxs_stream_realtime_factor", "gauge",
                        "Simulated seconds per wall second over the last second of stepping.", m_realtime);
+    metrics_per_stream(out, all, n, "fxs_stream_failing", "gauge",
+                       "1 while the stream is failing (its last error, in /healthz, not yet followed by a good step).",
+                       m_failing);
     pthread_mutex_unlock(&srv->hub.mu);
     metrics_per_stream(out, all, n, "fxs_stream_frames_produced_total", "counter", "Frames encoded.", m_produced);
     metrics_per_stream(out, all, n, "fxs_stream_frames_sent_total", "counter", "Frames sent, all subscribers.", m_sent);
@@ -145,6 +149,7 @@ int metrics_health(struct server *srv, struct fx_buf *out)
         cJSON_AddNumberToObject(o, "subscribers", all[i]->subscribers);
         cJSON_AddNumberToObject(o, "rev", all[i]->rev);
         if (all[i]->error[0]) cJSON_AddStringToObject(o, "last_error", all[i]->error);
+        cJSON_AddBoolToObject(o, "failing", all[i]->failing);
         cJSON_AddItemToArray(arr, o);
     }
     pthread_mutex_unlock(&srv->hub.mu);

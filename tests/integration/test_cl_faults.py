@@ -37,6 +37,10 @@ def stream_errors(d, stream, effect):
     return metric(d, 'fxs_stream_errors_total{stream="%s",effect="%s"}' % (stream, effect))
 
 
+def failing(d, stream, effect):
+    return metric(d, 'fxs_stream_failing{stream="%s",effect="%s"}' % (stream, effect))
+
+
 def healthz(d):
     """(HTTP status, document) of GET /healthz."""
     try:
@@ -145,6 +149,9 @@ async def test_build_failure(t):
                 "build failure: /healthz 200 ok with flame's last_error (%d)" % status)
         n = stream_errors(d, "flame", "flame")
         t.check(n == 1, "build failure: fxs_stream_errors_total of flame is 1 (%s)" % n)
+        f, e = failing(d, "flame", "flame"), failing(d, "energy", "energy_wave")
+        t.check(f == 1 and e == 0, "build failure: fxs_stream_failing is 1 for flame, 0 for energy (%s, %s)" % (f, e))
+        t.check(any(x["stream"] == "flame" and x["failing"] for x in h["streams"]), "build failure: /healthz says flame is failing")
         c = await Client.connect(d)
         r = await c.request("set", stream="flame", params={"fps": 20})
         t.check(r["op"] == "params" and r["rev"] == 2, "build failure: a later set on flame is accepted (%s)" % r["op"])
@@ -183,6 +190,8 @@ async def test_kernel_error_once(t):
         t.check(not w.errors_of("energy"), "kernel error: no error on the energy stream")
         n = stream_errors(d, "flame", "flame")
         t.check(n == 1, "kernel error: fxs_stream_errors_total of flame is 1 (%s)" % n)
+        f = failing(d, "flame", "flame")
+        t.check(f == 0, "kernel error: fxs_stream_failing of flame back to 0 after the reset (%s)" % f)
         status, h = healthz(d)
         t.check(status == 200 and "fl_forces" in last_error(h, "flame"), "kernel error: /healthz last_error names it")
         await w.c.close()
