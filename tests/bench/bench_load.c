@@ -371,7 +371,7 @@ static void bl_search(const char *url, pid_t dpid, const char *stream, struct bl
     memset(fail, 0, sizeof *fail);
     while (n <= BL_MAX_N && bl_now() < t_end) {
         if (bl_trial(url, dpid, stream, n, &r)) break;
-        if (r.mbps > fastest->mbps) *fastest = r;
+        if (r.ok && r.mbps > fastest->mbps) *fastest = r;
         if (r.ok) {
             if (!first->n) *first = r;
             *best = r;
@@ -388,7 +388,7 @@ static void bl_search(const char *url, pid_t dpid, const char *stream, struct bl
         n = lo ? (lo + hi) / 2 : hi / 2;
         if (n < 1 || n == lo) break;
         if (bl_trial(url, dpid, stream, n, &r)) break;
-        if (r.mbps > fastest->mbps) *fastest = r;
+        if (r.ok && r.mbps > fastest->mbps) *fastest = r;
         if (r.ok) {
             if (!first->n || r.n < first->n) *first = r;
             *best = r;
