@@ -27,7 +27,7 @@
 
 #define FL_KERNEL_FILE "flame.cl"
 #ifndef FL_NL
-#define FL_NL 64 /* neighbour-list slots per particle (lists of up to FL_NL - 1 neighbours) */
+#define FL_NL 64 /* neighbour-list slots per particle (lists of up to FL_NL - 8 neighbours, flame.cl) */
 #endif
 #define FL_STR2(x) #x
 #define FL_STR(x) FL_STR2(x)
