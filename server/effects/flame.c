@@ -89,13 +89,13 @@ static const struct param_def fl_obstacle_fields[] = {
     {0},
 };
 
-/* Default scene: one 11 cm disc at F_init 100, dt 3 ms: about 10k particles (4k burning) that rise
- * 6.4 cm on average, every group D behaviour (test_flame_behaviour). The thesis's dt of 1 ms would
+/* Default scene: one 11.4 cm disc at F_init 100, dt 3 ms: about 10.3-10.5k particles (4.3k burning) whose
+ * flame rises 5 cm on average (tip ~30 cm), every group D behaviour (test_flame_behaviour). The thesis's dt of 1 ms would
  * need 10 M particle-steps/s for 10k particles in real time; at 3 ms the stabilised diffusion mixes
  * less per simulated second (its weights are capped per step, §9 #4), so a given source holds fewer
  * particles (the 6 cm disc: 16k at 1 ms, 4.4k at 3 ms) and the default disc is larger instead. */
 const struct param_def flame_params[] = {
-    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.055}]", .max_len = 16,
+    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.057}]", .max_len = 16,
      .fields = fl_source_fields, .unit = "", .doc = "burning solids (§2.13)"},
     {.name = "obstacles", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = 16, .fields = fl_obstacle_fields,
      .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (§9 #16)"},

@@ -1,9 +1,9 @@
 /* test_flame_behaviour.c — digest 002 §8 group D: qualitative and statistical behaviour of
  * the flame effect (server/effects/flame.h) on whole scenes, on the OpenCL CPU device.
  *
- * D1-D4 run on the effect's untouched defaults (one 11 cm disc at dt 3 ms, ~10k particles, ~4 ms
+ * D1-D4 run on the effect's untouched defaults (one 11.4 cm disc at dt 3 ms, ~10.4k particles, ~2 ms
  * a step on 2 cores): the digest's plateau window 2000-5000 is shortened to 1000-2500 because N
- * levels off within ~100 steps (measured: N(100-200) = 10.1k, plateau 9.8k), which halves the
+ * levels off within ~100 steps (measured: N(100-200) = 10.9k, plateau 10.5k), which halves the
  * cost. D5-D8 compare scenes and run on the digest's 3 cm disc (§9 #17, the size D8's
  * "3 cm discs 4-5 cm apart" needs; ~1.7k particles, ~1 ms a step) with the digest's step
  * counts (3 times the thesis's simulated time at the default dt). The binary takes ~30 s of the
