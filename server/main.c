@@ -20,7 +20,8 @@
 /* The embedded default: one stream per implemented effect, so `make run` shows something. */
 static const char *const main_default_streams =
     "[{\"stream\":\"energy\",\"effect\":\"energy_wave\",\"params\":{}},"
-    " {\"stream\":\"flame\",\"effect\":\"flame\",\"params\":{}}]";
+    " {\"stream\":\"flame\",\"effect\":\"flame\",\"params\":{}},"
+    " {\"stream\":\"eye\",\"effect\":\"compound_eye\",\"params\":{}}]";
 
 static struct net *main_net;
 

@@ -122,7 +122,7 @@ async def control_works(t, d, what):
     r1 = await c.request("list")
     r2 = await c.request("get", stream="energy")
     r3 = await c.request("set", stream="energy", params={"fps": ENERGY_FPS})
-    t.check(r1["op"] == "list" and len(r1["streams"]) == 2 and r2["op"] == "params" and r3["op"] == "params",
+    t.check(r1["op"] == "list" and len(r1["streams"]) == 3 and r2["op"] == "params" and r3["op"] == "params",
             "%s: list, get and set answer (%s, %s, %s)" % (what, r1["op"], r2["op"], r3["op"]))
     await c.close()
 

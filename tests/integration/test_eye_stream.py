@@ -48,9 +48,9 @@ async def next_kind(c, kind, timeout=30):
 async def test_lut_frames(t):
     c = await Client.connect(D)
     t.check("compound_eye" in c.hello["effects"], "hello lists compound_eye")
-    r = await c.request("create", effect="compound_eye", stream="eye", params=SMALL)
+    r = await c.request("create", effect="compound_eye", stream="lut", params=SMALL)
     t.check(r["op"] == "created", "create compound_eye stream")
-    await c.request("subscribe", stream="eye")
+    await c.request("subscribe", stream="lut")
     f = await next_kind(c, 4)
     t.check(f["codec"] == 1 and f["width"] == f["height"] == 8 * 10, "kind 4 codec 1, atlas 80x80")
     head, prods = decode(f["payload"])
@@ -68,25 +68,25 @@ async def test_lut_frames(t):
     me, _ = prods["LMAC"]
     t.check(me["w"] == me["h"] == 8, "LMAC D x D")
     rev0 = f["param_rev"]
-    s = await c.request("set", stream="eye", params={"ka": 0.5, "density": 80})
+    s = await c.request("set", stream="lut", params={"ka": 0.5, "density": 80})
     t.check(s["op"] == "params", "set shading-only parameters")
     try:
         g = await next_kind(c, 4, timeout=2)
         t.check(False, "no new table after a shading-only change (got rev %d)" % g["param_rev"])
     except asyncio.TimeoutError:
         t.check(True, "no new table after a shading-only change")
-    s = await c.request("set", stream="eye", params={"lattice": "hex", "lens_radius": 0.9})
+    s = await c.request("set", stream="lut", params={"lattice": "hex", "lens_radius": 0.9})
     g = await next_kind(c, 4)
     head2, prods2 = decode(g["payload"])
     t.check(g["param_rev"] == s["rev"] and g["param_rev"] > rev0, "a table change sends a table with the new rev")
     t.check(head2["lattice"] == 1 and abs(head2["tile_h"] - 3 ** 0.5) < 1e-6 and
             prods2["PIGM"][0]["h"] == round(128 * 3 ** 0.5), "hex table: tile_h sqrt 3, PIGM 128 x 222")
-    bad = await c.request("set", stream="eye", params={"lattice": "triangle"})
+    bad = await c.request("set", stream="lut", params={"lattice": "triangle"})
     t.check(bad["op"] == "error" and bad["param"] == "lattice", "bad enum refused")
-    bad = await c.request("set", stream="eye", params={"lattice": "square", "lens_radius": 0.6})
+    bad = await c.request("set", stream="lut", params={"lattice": "square", "lens_radius": 0.6})
     t.check(bad["op"] == "error" and bad["param"] == "lens_radius", "gappy lens radius refused")
     for name in ("../etc/passwd", "/etc/passwd", "a b"):
-        bad = await c.request("set", stream="eye", params={"model": name})
+        bad = await c.request("set", stream="lut", params={"model": name})
         t.check(bad["op"] == "error" and bad["param"] == "model", "model name %r refused" % name)
     await c.close()
 
@@ -124,7 +124,7 @@ def png_ok(path):
 
 async def test_fxctl_out(t):
     out = tempfile.mkdtemp(prefix="fxs-eye-")
-    p = subprocess.run([FXCTL, "--url", D.url, "subscribe", "eye", "--frames", "1", "--out", out],
+    p = subprocess.run([FXCTL, "--url", D.url, "subscribe", "lut", "--frames", "1", "--out", out],
                        capture_output=True, text=True, timeout=60)
     t.check(p.returncode == 0, "fxctl subscribe --out: %s" % p.stderr)
     pngs = sorted(f for f in os.listdir(out) if f.endswith(".png"))

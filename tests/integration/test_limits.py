@@ -9,7 +9,7 @@ import websockets
 
 from fxtest import Client, Daemon, Suite, config_file
 
-LIMITS = {"max_connections": 3, "max_streams": 3, "max_subscriptions": 2, "max_control_per_sec": 20,
+LIMITS = {"max_connections": 3, "max_streams": 4, "max_subscriptions": 2, "max_control_per_sec": 20,
           "max_message_bytes": 2048}
 
 
@@ -39,10 +39,10 @@ async def test_streams_and_subscriptions(t):
     with small_daemon() as d:
         c = await Client.connect(d)
         t.check((await c.request("create", effect="energy_wave", stream="third"))["op"] == "created",
-                "the 3rd stream is created")
+                "the 4th stream (3 defaults) is created")
         r = await c.request("create", effect="energy_wave", stream="fourth")
-        t.check(r["op"] == "error" and r["code"] == "limit" and r.get("param") == "stream", "a 4th stream: limit")
-        t.check(len((await c.request("list"))["streams"]) == 3, "nothing half-created")
+        t.check(r["op"] == "error" and r["code"] == "limit" and r.get("param") == "stream", "a 5th stream: limit")
+        t.check(len((await c.request("list"))["streams"]) == 4, "nothing half-created")
         for s in ("energy", "flame"):
             await c.request("subscribe", stream=s)
         r = await c.request("subscribe", stream="third")

@@ -243,7 +243,7 @@ try {
   const connected = await until(() => page.evaluate(() => document.body.dataset.conn === 'connected'), 20000);
   check(connected, 'connects (state shown: connected)');
   const subscribed = await until(() => page.evaluate(() => document.body.dataset.subscribed), 30000);
-  check(subscribed === 'energy,flame', 'subscribes to every default stream', String(subscribed));
+  check(subscribed === 'energy,flame,eye', 'subscribes to every default stream', String(subscribed));
   const drawn = await until(async () => {
     const s = await page.evaluate(() => window.fxs.stats());
     return s.energy?.drawn > 2 && s.flame?.drawn > 1 && s.energy.kinds.includes(3) ? s : null;
