@@ -273,6 +273,23 @@ static inline void fxs_pt_bits_put(struct fxs_pt_ew *w, uint32_t v, int nbits)
     }
 }
 
+/* Raw bits without a branch, for the kd-tree's leaves (fxs_pt_bits_put's flush every 32
+ * bits is taken about once per leaf, irregularly: a misprediction; real 10k flame frames:
+ * tree walk 29.0 -> 24.5 ns per particle, whole encoder 115.6 -> 111.6 ms/M). Needs
+ * w->cnt + nbits <= 63; leaves w->cnt < 8, which fxs_pt_bits_put takes as is. Stores 8
+ * bytes at w->bp (within FXS_PT_SLACK); those past the whole bytes are written again
+ * later. */
+static inline void fxs_pt_bits_put64(struct fxs_pt_ew *w, uint64_t v, int nbits)
+{
+    w->acc |= (v & ((1ull << nbits) - 1u)) << w->cnt;
+    w->cnt += nbits;
+    fxs_pt_put32(w->bp, (uint32_t)w->acc);
+    fxs_pt_put32(w->bp + 4, (uint32_t)(w->acc >> 32));
+    w->bp += w->cnt >> 3;
+    w->acc >>= w->cnt & ~7;
+    w->cnt &= 7;
+}
+
 /* LZMA's byte output with carry propagation. */
 static inline void fxs_pt_rc_shift(struct fxs_pt_ew *w)
 {
@@ -533,7 +550,10 @@ static int fxs_pt_enc_sorted(struct fxs_pt_enc *e, const uint64_t *key, const ui
         }
         if (c == 1) {
             if (fxs_pt_room(&e->rb, &e->bb, &w)) return -1;
-            for (int a = 0; a < 3; a++) fxs_pt_bits_put(&w, q[3 * (size_t)at + a], f->left[d][a]);
+            const uint32_t *qa = q + 3 * (size_t)at; /* x, then y and z together (<= 42 bits) */
+            int l1 = f->left[d][1];
+            fxs_pt_bits_put64(&w, qa[0], f->left[d][0]);
+            fxs_pt_bits_put64(&w, (qa[1] & ((1u << l1) - 1u)) | (uint64_t)qa[2] << l1, l1 + f->left[d][2]);
         }
         if (!sp) break;
         sp--;
