@@ -806,9 +806,15 @@ static int fxs_pt_enc_attrs1(struct fxs_pt_enc *e, const uint32_t *qt, const uin
 static int fxs_pt_choose(const struct fxs_pt_frame *f, const uint32_t *qt, const uint32_t *qf, const uint8_t *fl,
                          const int32_t *nbs)
 {
-    enum { C = 18 };
-    uint32_t n = f->n, rc[2][C] = { { 0 } }, *h = calloc(8 * 256 * 2 + 8 * 2, sizeof *h);
-    double res = 0, dir = 0;
+    enum { C = 18, H = 2 * 2048 };
+    /* Counts in two copies, by j's parity, and the raw-bit sum as an integer: neighbours
+     * mostly land in the same bucket, and one copy made every increment wait on the one
+     * before (and the double sum on its add); F = 0 by flags follows from the totals of
+     * the two histograms. All exact integers, so the choice is unchanged; real 10k flame
+     * frames 109.2-109.4 -> 107.5-108.3 ms/M. */
+    uint32_t n = f->n, rc[2][2][C] = { { { 0 } } }, tot[2][8], *h = calloc(2 * H, sizeof *h);
+    uint64_t raw = 0;
+    double res, dir;
     int low = f->temp_bits > 8 ? f->temp_bits - 8 : 0, lowf = f->fuel_bits > 8 ? f->fuel_bits - 8 : 0;
     if (!h) return 0;
     for (uint32_t j = 0; j < n; j++) {
@@ -816,27 +822,30 @@ static int fxs_pt_choose(const struct fxs_pt_frame *f, const uint32_t *qt, const
         uint32_t zt = fxs_pt_zigzag((int32_t)qt[j] - (int32_t)(nb < 0 ? 0 : qt[nb]));
         uint32_t zf = fxs_pt_zigzag((int32_t)qf[j] - (int32_t)(nb < 0 ? 0 : qf[nb]));
         int ct = zt ? 32 - __builtin_clz(zt) : 0, cf = zf ? 32 - __builtin_clz(zf) : 0;
-        rc[0][ct]++, rc[1][cf]++;
-        res += (ct > 1 ? ct - 1 : 0) + (cf > 1 ? cf - 1 : 0);
+        uint32_t *hj = h + (j & 1u) * H;
         unsigned c = fl[j] & 7u;
-        h[c * 256 + (qt[j] >> low)]++;
-        h[2048 + 16 + c * 256 + (qf[j] ? (qf[j] - 1) >> lowf : 0)] += qf[j] != 0;
-        h[2048 + c * 2 + (qf[j] != 0)]++;
+        rc[j & 1u][0][ct]++, rc[j & 1u][1][cf]++;
+        raw += (uint64_t)((ct > 1 ? ct - 1 : 0) + (cf > 1 ? cf - 1 : 0));
+        hj[c * 256 + (qt[j] >> low)]++;
+        hj[2048 + c * 256 + (qf[j] ? (qf[j] - 1) >> lowf : 0)] += qf[j] != 0;
     }
+    res = (double)raw;
     for (int a = 0; a < 2; a++)
-        for (int k = 0; k < C; k++)
-            if (rc[a][k]) res += rc[a][k] * log2((double)n / rc[a][k]);
+        for (int k = 0; k < C; k++) {
+            uint32_t r = rc[0][a][k] + rc[1][a][k];
+            if (r) res += r * log2((double)n / r);
+        }
     dir = (double)n * (low + lowf);
     for (int g = 0; g < 2; g++) /* T by flags, F - 1 by flags */
         for (unsigned c = 0; c < 8; c++) {
-            const uint32_t *hh = h + (g ? 2048 + 16 : 0) + c * 256;
-            uint32_t tot = 0;
-            for (int k = 0; k < 256; k++) tot += hh[k];
+            uint32_t *hh = h + g * 2048 + c * 256;
+            tot[g][c] = 0;
+            for (int k = 0; k < 256; k++) tot[g][c] += hh[k] += hh[H + k];
             for (int k = 0; k < 256; k++)
-                if (hh[k]) dir += hh[k] * log2((double)tot / hh[k]) + 6; /* + learning */
+                if (hh[k]) dir += hh[k] * log2((double)tot[g][c] / hh[k]) + 6; /* + learning */
         }
     for (unsigned c = 0; c < 8; c++) { /* F = 0 by flags */
-        uint32_t a = h[2048 + 2 * c], b = h[2048 + 2 * c + 1];
+        uint32_t a = tot[0][c] - tot[1][c], b = tot[1][c];
         if (a && b) dir += a * log2((double)(a + b) / a) + b * log2((double)(a + b) / b);
     }
     free(h);
