@@ -46,23 +46,27 @@ def start_daemon(args, env=None, wrap=()):
     """Starts fxstreamd (optionally under a wrapper); returns (proc, port) or (proc, None)."""
     e = {k: v for k, v in os.environ.items() if k != "FXSTREAMD_TOKENS"}
     e.update(env or {})
+    # Its own process group, so that stop() reaches the daemon under a wrapper too (strace
+    # detaches on SIGTERM and the daemon would live on).
     proc = subprocess.Popen([*wrap, DAEMON, "--listen", "127.0.0.1", "--port", "0", "--log-level", "warn", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=e)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=e, start_new_session=True)
     line = proc.stdout.readline()
     if "listening on" not in line:
-        proc.kill()
+        os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         return proc, None
     return proc, int(line.split("127.0.0.1:")[1].split("/")[0])
 
 
 def stop(proc):
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
+    """SIGTERM to the daemon and its wrapper (the whole group), SIGKILL after 15 s."""
     try:
+        os.killpg(proc.pid, signal.SIGTERM)
         proc.wait(timeout=15)
     except subprocess.TimeoutExpired:
-        proc.kill()
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    except ProcessLookupError:
         proc.wait()
 
 
