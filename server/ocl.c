@@ -343,3 +343,12 @@ int ocl_stats(const struct ocl *ocl, struct ocl_kernel_stat *out, int max)
     pthread_mutex_unlock(&m->stats_lock);
     return n;
 }
+
+int ocl_set_args(cl_kernel k, const char *name, const struct ocl_arg *a, int n, struct fx_err *err)
+{
+    for (int i = 0; i < n; i++) {
+        cl_int rc = clSetKernelArg(k, (cl_uint)i, a[i].size, a[i].ptr);
+        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s, %d): %s", name, i, ocl_errstr(rc));
+    }
+    return 0;
+}

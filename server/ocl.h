@@ -43,6 +43,15 @@ struct ocl_kernel_stat {
 /* Copies up to max kernel stats into out; returns how many. */
 int ocl_stats(const struct ocl *ocl, struct ocl_kernel_stat *out, int max);
 
+/* One kernel argument: its size and a pointer to its value. */
+struct ocl_arg {
+    size_t size;
+    const void *ptr;
+};
+/* Sets arguments 0 .. n-1 of kernel k (called `name` in messages); fails with the first
+ * error's code, naming the argument. */
+int ocl_set_args(cl_kernel k, const char *name, const struct ocl_arg *a, int n, struct fx_err *err);
+
 /* Human-readable name of an OpenCL error code ("CL_OUT_OF_RESOURCES"). */
 const char *ocl_errstr(cl_int code);
 

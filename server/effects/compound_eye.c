@@ -251,21 +251,6 @@ static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
-/* Sets a kernel's arguments from (size, pointer) pairs; fails with the first error's code. */
-struct eye_arg {
-    size_t size;
-    const void *ptr;
-};
-
-static int eye_set_args(cl_kernel k, const char *name, const struct eye_arg *a, int n, struct fx_err *err)
-{
-    for (int i = 0; i < n; i++) {
-        cl_int rc = clSetKernelArg(k, (cl_uint)i, a[i].size, a[i].ptr);
-        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s, %d): %s", name, i, ocl_errstr(rc));
-    }
-    return 0;
-}
-
 /* Work-items for n rays: each traces EYE_LANES of them (kernels/compound_eye.cl). */
 static size_t eye_groups(size_t n) { return (n + EYE_LANES - 1) / EYE_LANES; }
 
@@ -298,11 +283,11 @@ static int eye_lut_samples(struct compound_eye *ce, int cells, int dirs, int ss,
         ce->d_lut_bytes = bytes;
     }
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    const struct eye_arg a[] = {
+    const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
         {sizeof ce->optics, &ce->optics}, {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss},
         {sizeof dot, &dot}, {sizeof base, &base}};
-    if (eye_set_args(ce->k_lut, "eye_lut", a, 10, err)) return -1;
+    if (ocl_set_args(ce->k_lut, "eye_lut", a, 10, err)) return -1;
     size_t global = eye_groups(n);
     return eye_run(ce, ce->k_lut, "eye_lut", &global, ce->d_lut, bytes, ce->samples, err);
 }
@@ -389,11 +374,11 @@ int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
         .lens_normal = eye_enum(eye_normal_names, params_str(p, "shading_normal")),
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    const struct eye_arg a[] = {
+    const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_pig},
         {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
         {sizeof dot, &dot}, {sizeof base, &base}};
-    if (eye_set_args(ce->k_bake, "eye_bake", a, 9, err)) return -1;
+    if (ocl_set_args(ce->k_bake, "eye_bake", a, 9, err)) return -1;
     size_t texels = (size_t)ce->size * ce->size, global = eye_groups(texels);
     return eye_run(ce, ce->k_bake, "eye_bake", &global, ce->d_out, texels * 4 * sizeof(float), rgba, err);
 }

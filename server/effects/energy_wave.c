@@ -522,19 +522,16 @@ static int ew_upload(struct energy_wave *ew, int nc, struct fx_err *err)
     return 0;
 }
 
-/* The first failing clSetKernelArg's code, or CL_SUCCESS. */
-static cl_int ew_set_args(struct energy_wave *ew, cl_kernel k, int nc)
+/* The render kernel's arguments (the Simpson kernel takes `divisions` as a 14th). */
+static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, int nc, struct fx_err *err)
 {
-    struct { size_t size; const void *ptr; } a[] = {
+    const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ew->d_out}, {sizeof(cl_mem), &ew->d_cam}, {sizeof(cl_mem), &ew->d_pts},
         {sizeof(int), &ew->np},       {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->nl},
         {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->nt},       {sizeof(cl_mem), &ew->d_cur},
         {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_wts}, {sizeof(int), &ew->width},
         {sizeof(int), &ew->height},   {sizeof(int), &ew->divisions}};
-    cl_uint n = k == ew->k_simpson ? 14 : 13;
-    cl_int rc = CL_SUCCESS;
-    for (cl_uint i = 0; i < n && rc == CL_SUCCESS; i++) rc = clSetKernelArg(k, i, a[i].size, a[i].ptr);
-    return rc;
+    return ocl_set_args(k, name, a, k == ew->k_simpson ? 14 : 13, err);
 }
 
 int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err)
@@ -543,12 +540,11 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
     if (ew_upload(ew, nc, err)) return -1;
     cl_kernel k = ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
     const char *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
-    cl_int rc = ew_set_args(ew, k, nc);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clSetKernelArg(%s): %s", name, ocl_errstr(rc));
+    if (ew_set_args(ew, k, name, nc, err)) return -1;
     size_t global[2] = {(size_t)(ew->width + EW_LANES - 1) / EW_LANES, (size_t)ew->height};
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);
-    rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, NULL, 0, NULL, &ev);
+    cl_int rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, NULL, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
     rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, 0, (size_t)ew->width * ew->height * sizeof(float), out, 0, NULL, NULL);
     if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);

@@ -256,22 +256,13 @@ static int fl_launch(struct flame *fl, enum fl_kernel k, size_t global, size_t l
     return 0;
 }
 
-/* Sets kernel arguments from a list of (size, pointer) pairs. */
-struct fl_arg {
-    size_t size;
-    const void *ptr;
-};
+/* Kernel arguments as (size, pointer) pairs (ocl_set_args). */
 #define FL_MEM(m) {sizeof(cl_mem), &(m)}
 #define FL_INT(v) {sizeof(cl_int), &(v)}
 
-static int fl_args(struct flame *fl, enum fl_kernel k, const struct fl_arg *a, int na, struct fx_err *err)
+static int fl_args(struct flame *fl, enum fl_kernel k, const struct ocl_arg *a, int na, struct fx_err *err)
 {
-    for (int i = 0; i < na; i++) {
-        cl_int rc = clSetKernelArg(fl->k[k], (cl_uint)i, a[i].size, a[i].ptr);
-        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "flame: %s arg %d: %s", fl_kernel_names[k], i,
-                                             ocl_errstr(rc));
-    }
-    return 0;
+    return ocl_set_args(fl->k[k], fl_kernel_names[k], a, na, err);
 }
 
 /* ---- buffers ------------------------------------------------------------------------- */
@@ -538,15 +529,15 @@ static int fl_sort(struct flame *fl, struct fx_err *err)
     struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
     cl_int n = fl->n, nhist = 256 * FL_BLOCKS, m = (cl_int)fl->mask + 1;
     cl_uint mask = fl->mask;
-    struct fl_arg ha[] = {FL_MEM(A->pos), FL_MEM(fl->key[0]), FL_MEM(fl->val[0]), FL_INT(n), FL_INT(mask),
+    struct ocl_arg ha[] = {FL_MEM(A->pos), FL_MEM(fl->key[0]), FL_MEM(fl->val[0]), FL_INT(n), FL_INT(mask),
                           FL_MEM(fl->prm)};
     if (fl_args(fl, K_HASH, ha, 6, err) || fl_launch(fl, K_HASH, (size_t)n, 0, err)) return -1;
     int s = 0;
     for (int p = 0; p < fl->passes; p++, s ^= 1) {
         cl_int shift = 8 * p;
-        struct fl_arg hh[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(shift), FL_MEM(fl->hist)};
-        struct fl_arg sc[] = {FL_MEM(fl->hist), FL_INT(nhist)};
-        struct fl_arg sa[] = {FL_MEM(fl->key[s]), FL_MEM(fl->val[s]), FL_MEM(fl->key[s ^ 1]), FL_MEM(fl->val[s ^ 1]),
+        struct ocl_arg hh[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(shift), FL_MEM(fl->hist)};
+        struct ocl_arg sc[] = {FL_MEM(fl->hist), FL_INT(nhist)};
+        struct ocl_arg sa[] = {FL_MEM(fl->key[s]), FL_MEM(fl->val[s]), FL_MEM(fl->key[s ^ 1]), FL_MEM(fl->val[s ^ 1]),
                               FL_INT(n), FL_INT(shift), FL_MEM(fl->hist)};
         if (fl_args(fl, K_HIST, hh, 4, err) || fl_launch(fl, K_HIST, FL_BLOCKS, 1, err) ||
             fl_args(fl, K_SCAN, sc, 2, err) || fl_launch(fl, K_SCAN, 1, 1, err) ||
@@ -554,10 +545,10 @@ static int fl_sort(struct flame *fl, struct fx_err *err)
             return -1;
     }
     cl_int stride = fl->cap + FL_PAD;
-    struct fl_arg ra[] = {FL_MEM(fl->val[s]), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
+    struct ocl_arg ra[] = {FL_MEM(fl->val[s]), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
                           FL_MEM(A->id), FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id),
                           FL_MEM(fl->sxyz), FL_INT(stride)};
-    struct fl_arg ca[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(m), FL_MEM(fl->cs)};
+    struct ocl_arg ca[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(m), FL_MEM(fl->cs)};
     if (fl_args(fl, K_REORDER, ra, 12, err) || fl_launch(fl, K_REORDER, (size_t)n, 0, err) ||
         fl_args(fl, K_CSTART, ca, 4, err) || fl_launch(fl, K_CSTART, (size_t)n + 1, 0, err))
         return -1;
@@ -571,9 +562,9 @@ static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_er
     struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
     cl_int n = fl->n, stride = fl->cap + FL_PAD;
     cl_uint mask = fl->mask;
-    struct fl_arg da[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(fl->cs), FL_INT(mask), FL_INT(n), FL_MEM(fl->prm),
+    struct ocl_arg da[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(fl->cs), FL_INT(mask), FL_INT(n), FL_MEM(fl->prm),
                           FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(fl->nl), FL_MEM(fl->sxyz), FL_INT(stride)};
-    struct fl_arg fa[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->cs),
+    struct ocl_arg fa[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->cs),
                           FL_INT(mask), FL_INT(n), FL_MEM(fl->prm), FL_MEM(A->rho_p), FL_MEM(A->counts),
                           FL_MEM(fl->nl), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id), FL_MEM(A->force),
                           FL_MEM(A->dTdF), FL_INT(integrate), FL_INT(resample), FL_MEM(fl->keep_ins),
@@ -616,9 +607,9 @@ static int fl_resample(struct flame *fl, struct fx_err *err)
     struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
     cl_int n = fl->n, nb = FL_BLOCKS;
     cl_uint cap = (cl_uint)(fl->cap < fl->max_particles ? fl->cap : fl->max_particles), idb = fl->next_id;
-    struct fl_arg ca[] = {FL_MEM(fl->keep_ins), FL_INT(n), FL_MEM(fl->bsum)};
-    struct fl_arg sa[] = {FL_MEM(fl->bsum), FL_INT(nb), FL_INT(cap), FL_MEM(fl->tot)};
-    struct fl_arg xa[] = {FL_MEM(fl->keep_ins), FL_INT(n), FL_MEM(fl->bsum), FL_MEM(fl->tot), FL_INT(idb),
+    struct ocl_arg ca[] = {FL_MEM(fl->keep_ins), FL_INT(n), FL_MEM(fl->bsum)};
+    struct ocl_arg sa[] = {FL_MEM(fl->bsum), FL_INT(nb), FL_INT(cap), FL_MEM(fl->tot)};
+    struct ocl_arg xa[] = {FL_MEM(fl->keep_ins), FL_INT(n), FL_MEM(fl->bsum), FL_MEM(fl->tot), FL_INT(idb),
                           FL_MEM(fl->prm), FL_MEM(fl->nrm), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
                           FL_MEM(A->id), FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(A->force), FL_MEM(A->dTdF),
                           FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(B->rho_p),
@@ -930,9 +921,10 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         .count_or_width = (uint32_t)n,
         .payload = payload,
         .payload_bytes = len,
-        .encode_ms = fl_now_ms() - t0,
     };
-    fl->emit_ms = fl_now_ms() - t_read;
+    double t1 = fl_now_ms();
+    fr.encode_ms = t1 - t0;
+    fl->emit_ms = t1 - t_read;
     int ret = emit(ctx, &fr);
     free(payload);
     return ret;
@@ -961,8 +953,9 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
      * 5-step interval, left a quarter of each frame's period idle (real-time factor 0.73
      * instead of about 0.9 on the default scene). A frame still stops once it is over budget. */
     double t0 = fl_now_ms(), budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
-    if (fl->step_ms > 0 && n > (int)(budget / fl->step_ms)) {
-        n = (int)fmax(1.0, floor(budget / fl->step_ms));
+    int fit = fl->step_ms > 0 ? (int)(budget / fl->step_ms) : n;
+    if (n > fit) {
+        n = fit > 1 ? fit : 1;
         fl->carry = 0;
     }
     int done = 0;
