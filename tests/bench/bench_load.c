@@ -1,8 +1,8 @@
 /* bench_load.c — fan-out capacity of fxstreamd, measured with libfxclient's pool (fxload's engine).
  *
  * Owns: starting build/fxstreamd on a free loopback port with a config that defines two
- * dedicated streams (a ~20k-particle flame and a 256x256 texture without its light rig, both at 30 fps) and
- * lifts max_connections; a raw loopback TCP throughput measurement in the same run
+ * dedicated streams (a ~20k-particle flame and a 256x256 texture without its light rig,
+ * both at 30 fps) and lifts max_connections; a raw loopback TCP throughput measurement in the same run
  * (one sender thread, one receiver); and, per stream, an upward search for the largest
  * number of subscribers that still receive >= 95% of the frames the stream produced
  * with p99 latency <= 100 ms. A trial opens N connections (ramped), waits until all are

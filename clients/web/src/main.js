@@ -3,10 +3,9 @@
 // canvas split into views: flame particles, the energy-wave billboard, a toon scene lit by
 // the wave's light rig, and the compound eye. A lil-gui panel per stream is generated from
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
-// Query options: url=, rl=N (flame
-// repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
-// drawfps=N (draw at most N frames a second, e.g. under software WebGL),
-// streams=A,B (show only these streams).
+// Query options: url=, rl=N (flame repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
+// drawfps=N (draw at most N frames a second, e.g. under software WebGL), streams=A,B (show
+// only these streams).
 import * as THREE from 'three';
 import GUI from 'lil-gui';
 import { parseHeader } from '../fxs_particles.js';
