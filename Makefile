@@ -2,6 +2,10 @@
 #
 # Sources are picked up by wildcard so adding a module, a unit test (tests/unit/test_*.c)
 # or a benchmark (tests/bench/bench_*.c) needs no edit here. Everything lands in build/.
+#
+# run, test, bench and fuzz first install what is missing (deps), then build in a second
+# make: the pkg-config flags below are read when a makefile is parsed, so only a make started
+# after the install sees the packages it installed (a fresh machine needs one command).
 
 CC      ?= cc
 BUILD   := build
@@ -39,7 +43,7 @@ WEB_SRC     := $(wildcard clients/web/src/*.js) clients/web/fxs_particles.js cli
 WEB_OUT     := clients/web/dist/app.js
 NPM_STAMP   := node_modules/.package-lock.json
 
-.PHONY: all deps run test bench clean unit web fuzz fuzz-libs install uninstall
+.PHONY: all deps run test bench clean unit web fuzz fuzz-libs install uninstall pkgs-present
 .SECONDARY: # keep object files of tests and benches between runs
 all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(WEB_OUT)
 
@@ -57,17 +61,24 @@ $(NPM_STAMP): package.json package-lock.json
 $(WEB_OUT): $(WEB_SRC) $(NPM_STAMP)
 	node clients/web/build.mjs
 
-run: deps all
+# The second make builds on every core unless the command line chose -j.
+SUBMAKE = $(MAKE) --no-print-directory $(if $(findstring -j,$(MAKEFLAGS)),,-j$(shell nproc))
+
+run: deps
+	@$(SUBMAKE) all
 	$(BUILD)/fxstreamd $(RUN_ARGS)
 
-test: deps all $(UNIT_BIN) $(FUZZ_BIN) $(BUILD)/lib/libclfault.so
+test: deps
+	@$(SUBMAKE) all $(UNIT_BIN) $(FUZZ_BIN) $(BUILD)/lib/libclfault.so
 	@tests/run.sh
 
 # Longer fuzzing than make test's bounded run; new inputs are merged into tests/fuzz/corpus.
-fuzz: deps $(FUZZ_BIN)
+fuzz: deps
+	@$(SUBMAKE) $(FUZZ_BIN)
 	@tests/fuzz/run.sh $(FUZZ_SECONDS) merge
 
-bench: deps all $(BENCH_BIN)
+bench: deps
+	@$(SUBMAKE) all $(BENCH_BIN)
 	@tests/bench/run.sh
 
 unit: $(UNIT_BIN)
@@ -119,9 +130,13 @@ $(BUILD)/obj/gen/%.o: $(BUILD)/gen/%.c
 	@mkdir -p $(@D)
 	$(CC_ALL) -c $< -o $@
 
-$(BUILD)/obj/%.o: %.c
+$(BUILD)/obj/%.o: %.c | pkgs-present
 	@mkdir -p $(@D)
 	$(CC_ALL) -c $< -o $@
+
+# make all (or a single target) does not install: name what is missing instead of a compiler error.
+pkgs-present:
+	@pkg-config --exists $(PKGS) OpenEXR || { deploy/install-deps.sh --check; exit 1; }
 
 $(BUILD)/libfxserver.a: $(SERVER_OBJ)
 	@rm -f $@

@@ -2,7 +2,8 @@
 # install-deps.sh — installs the Debian 12 packages fxstream needs, and only those missing.
 #
 # Idempotent and quick when everything is present (no apt-get update then). Runs apt-get
-# as root, or through sudo when available. Set FXS_NO_INSTALL=1 to only check.
+# as root, or through sudo when available. With --check (or FXS_NO_INSTALL=1) it only names
+# what is missing and exits 1 if anything is.
 set -eu
 
 PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo gnuplot-nox
@@ -17,11 +18,11 @@ for p in $PKGS; do
 done
 [ -z "$missing" ] && exit 0
 
-echo "install-deps: installing:$missing"
-if [ "${FXS_NO_INSTALL:-0}" = 1 ]; then
-    echo "install-deps: FXS_NO_INSTALL=1, not installing" >&2
+if [ "${1:-}" = --check ] || [ "${FXS_NO_INSTALL:-0}" = 1 ]; then
+    echo "install-deps: missing packages:$missing (make deps, or make run / make test, installs them)" >&2
     exit 1
 fi
+echo "install-deps: installing:$missing"
 SUDO=""
 if [ "$(id -u)" -ne 0 ]; then
     if command -v sudo >/dev/null 2>&1; then SUDO=sudo; else

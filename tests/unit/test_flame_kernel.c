@@ -18,6 +18,7 @@
 #include "../ref/flame_ref.h"
 #include "check.h"
 #include "effects/flame.h"
+#include "kernels.h"
 #include "ocl.h"
 #include "params.h"
 
@@ -295,25 +296,54 @@ static void test_eval_mixed(void) { tfk_eval_case("2000 mixed, 3 clusters", NULL
 
 static void test_eval_far_apart(void) { tfk_eval_case("1200 in 6 clusters ±1e3 h", NULL, 1200, 6, 1); }
 
-/* Forced hash collisions: no parameter sets the table size (flame.c uses 2^k >= 2n keys,
- * k >= 10, so 8192 here). 4000 particles in 1000 groups of 4 spread over h³ each, scattered
- * over a 120 h box, occupy ~1000 x 8-27 cells of h/2: more occupied cells than keys, so by
- * pigeonhole many rows share keys and must be told apart by the cell test. */
+/* The row hash's multiplier of cy or cz, read from the embedded kernel source so the test
+ * follows the kernel: "#define NAME 0x...u". 0 if absent. */
+static uint32_t tfk_kernel_hex(const char *name)
+{
+    const char *src = kernels_source("flame.cl"), *at = src ? strstr(src, name) : NULL;
+    return at ? (uint32_t)strtoul(at + strlen(name), NULL, 16) : 0;
+}
+
+/* Forced hash collisions for every table the code can choose (M = 2^k, k <= 22): cells of
+ * edge h along y and z (h/4 along x) hash to (cx + HP1 cy + HP2 cz) mod M, so the rows
+ * (cy, cz) and (cy + dy, cz + dz) share every key when dy HP1 + dz HP2 = 0 mod 2^22. The
+ * smallest such (dy, dz) (~2^11 cells) is found from the kernel's own multipliers; 500 groups
+ * of 4 particles near the origin get exact twins shifted by (dy, dz) cells, so each occupied
+ * cell's key run holds a far twin the neighbour search must reject by its row test. */
 static void test_eval_hash_collisions(void)
 {
+    uint32_t hp1 = tfk_kernel_hex("#define FL_HP1"), hp2 = tfk_kernel_hex("#define FL_HP2");
+    const uint32_t m22 = (1u << 22) - 1u;
+    CHECK((hp2 & 1u) && hp1, "row hash multipliers found in flame.cl (%#x, %#x), the second odd", hp1, hp2);
+    if (!(hp2 & 1u) || !hp1) return;
+    uint32_t inv = hp2; /* hp2^-1 mod 2^32 by Newton's iteration */
+    for (int i = 0; i < 5; i++) inv *= 2u - hp2 * inv;
+    int dy = 0, dz = 0, best = 1 << 30;
+    for (int y = 1; y <= 4096; y++) {
+        int z = (int)((0u - (uint32_t)y * hp1) * inv & m22);
+        if (z > (1 << 21)) z -= 1 << 22;
+        if ((y > abs(z) ? y : abs(z)) < best) best = y > abs(z) ? y : abs(z), dy = y, dz = z;
+    }
+    CHECK((((uint32_t)dy * hp1 + (uint32_t)dz * hp2) & m22) == 0 && best <= 4096,
+          "rows (0,0) and (%d,%d) share every key of a table of up to 2^22", dy, dz);
     struct flame_ref_params rp;
     struct flame *fl = tfk_new(NULL, &rp);
     if (!fl) return;
-    const int n = 4000;
+    const int n = 4000, half = n / 2;
     struct flame_ref_particle *ps = tfk_random_set(&rp, n, 1, 0);
-    for (int i = 0; i < n; i += 4) {
-        double c[3] = {tfk_rand(-60, 60) * rp.h, tfk_rand(-60, 60) * rp.h, tfk_rand(-60, 60) * rp.h};
+    for (int i = 0; i < half; i += 4) { /* groups inside one y/z cell each, cells spread over 12 h */
+        double c[3] = {tfk_rand(-6, 6) * rp.h, (floor(tfk_rand(-6, 6)) + 0.5) * rp.h,
+                       (floor(tfk_rand(-6, 6)) + 0.5) * rp.h};
         for (int j = i; j < i + 4; j++) {
-            for (int k = 0; k < 3; k++) ps[j].r[k] = c[k] + tfk_rand(-0.5, 0.5) * rp.h;
+            for (int k = 0; k < 3; k++) ps[j].r[k] = c[k] + tfk_rand(-0.35, 0.35) * rp.h;
             tfk_round(&ps[j]);
+            ps[j + half] = ps[j];
+            ps[j + half].r[1] += dy * rp.h;
+            ps[j + half].r[2] += dz * rp.h;
+            tfk_round(&ps[j + half]);
         }
     }
-    tfk_eval_compare("4000 in 1000 scattered groups", fl, &rp, ps, n);
+    tfk_eval_compare("2000 particles and their twins in colliding rows", fl, &rp, ps, n);
     free(ps);
     flame_free(fl);
 }
