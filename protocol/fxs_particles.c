@@ -2,7 +2,7 @@
  *
  * Owns quantisation, ordering and entropy coding of particle frames, shared by the
  * daemon (encode) and libfxclient (decode). Shape, chosen by measurement
- * (tests/bench/bench_particles.c, table in §7.5.7):
+ * (tests/bench/bench_particles.c, table in PROTOCOL.md §7.5.6):
  *   - positions quantised with one step for all axes (largest extent / (2^B - 1), as
  *     Draco's -qp), T and F to temp_bits / fuel_bits relative to their [min, max];
  *   - positions as a kd-tree of point counts (split x, y, z alternately, top bit first):

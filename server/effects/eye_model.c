@@ -371,7 +371,7 @@ int eye_uv_frame(const float P[9], const float T[6], double Pc[3], double Du[3],
 static void eye_atlas_triangle(const float *P, const float *T, int size, float *geo)
 {
     double Pc[3], Du[3], Dv[3];
-    if (eye_uv_frame(P, T, Pc, Du, Dv)) return; /* degenerate UVs: skipped (§2.3) */
+    if (eye_uv_frame(P, T, Pc, Du, Dv)) return; /* degenerate UVs: skipped (digest 004 §2.3) */
     double e1[3], e2[3], N[3];
     for (int c = 0; c < 3; c++) e1[c] = P[3 + c] - P[c], e2[c] = P[6 + c] - P[c];
     N[0] = e1[1] * e2[2] - e1[2] * e2[1];

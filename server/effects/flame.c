@@ -70,7 +70,7 @@ static const char *const fl_diff_names[] = {"stabilized", "literal", NULL};
 static const struct param_def fl_source_fields[] = {
     {.name = "center", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -100, .max = 100, .unit = "m",
      .doc = "centre of the source disc (top layer)"},
-    FL_F("radius", "0.015", 0.001, 1, "m", "disc radius; solids at spacing d in 2 layers normal to `up` (§9 #17)", 0),
+    FL_F("radius", "0.015", 0.001, 1, "m", "disc radius; solids at spacing d in 2 layers normal to `up` (digest §9 #17)", 0),
     FL_F("T_init", "2000", 1000, 3000, "K", "temperature held by the burning solid (Table 3.1)", 0),
     FL_F("F_init", "100", 0, 300, "", "fuel held by the burning solid; the thesis's main knob, 80-120", 0),
     {.name = "enabled", .type = PARAM_BOOL, .def = "true", .unit = "", .doc = "source present"},
@@ -85,7 +85,7 @@ static const struct param_def fl_obstacle_fields[] = {
     {.name = "pos", .type = PARAM_VEC3, .def = "[0,0.05,0.03]", .min = -100, .max = 100, .unit = "m",
      .doc = "centre at time 0 (after a reset)"},
     {.name = "velocity", .type = PARAM_VEC3, .def = "[0,-0.2,0]", .min = -20, .max = 20, .unit = "m/s",
-     .doc = "prescribed velocity: r(t) = pos + velocity t (§9 #16)"},
+     .doc = "prescribed velocity: r(t) = pos + velocity t (digest §9 #16)"},
     {0},
 };
 
@@ -96,17 +96,17 @@ static const struct param_def fl_obstacle_fields[] = {
  * particles (the 6 cm disc: 16k at 1 ms, 4.4k at 3 ms) and the default disc is larger instead. */
 const struct param_def flame_params[] = {
     {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.057}]", .max_len = 16,
-     .fields = fl_source_fields, .unit = "", .doc = "burning solids (§2.13)"},
+     .fields = fl_source_fields, .unit = "", .doc = "burning solids (digest §2.13)"},
     {.name = "obstacles", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = 16, .fields = fl_obstacle_fields,
-     .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (§9 #16)"},
+     .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (digest §9 #16)"},
     {.name = "wind_accel", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
-     .doc = "uniform acceleration of gas particles (§2.14, §9 #15)"},
-    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, §9 #5)", 0),
+     .doc = "uniform acceleration of gas particles (digest §2.14, §9 #15)"},
+    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, digest §9 #5)", 0),
     {.name = "up", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
-     .doc = "upward unit vector (normalised; §9 #20)", .flags = PARAM_NONZERO},
+     .doc = "upward unit vector (normalised; digest §9 #20)", .flags = PARAM_NONZERO},
     FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure constant p = k (rho - rho_rest) (eq 3.11)", 0),
     FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity (eq 3.13)", 0),
-    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density (no effect with the difference form, §2.5)", 0),
+    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density (no effect with the difference form, digest §2.5)", 0),
     /* Default symmetric, not the thesis's difference form: with (p_j - p_i) the gas expands from its
      * free boundary (digest §2.5) faster than buoyancy lifts it (measured on the default scene: about
      * 154 m/s^2 of pressure and viscosity against 19 of buoyancy), so the flame becomes a shell
@@ -114,7 +114,7 @@ const struct param_def flame_params[] = {
      * rising flame with a 1.5 m/s tip speed, the calibration target of §3, and passes every group D
      * behaviour. */
     {.name = "pressure_form", .type = PARAM_ENUM, .def = "\"symmetric\"", .choices = fl_pform_names, .unit = "",
-     .doc = "difference: eq 3.12 with the sign fixed; symmetric: Mueller's -(p_i+p_j)/2 form, p >= 0 (§9 #3)"},
+     .doc = "difference: eq 3.12 with the sign fixed; symmetric: Mueller's -(p_i+p_j)/2 form, p >= 0 (digest §9 #3)"},
     FL_F("T_amb", "300", 250, 400, "K", "ambient temperature, also of inserted particles", 0),
     FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature", 0),
     FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F (eq 3.17)", 0),
@@ -123,17 +123,17 @@ const struct param_def flame_params[] = {
     FL_F("k_h", "0.02", 0, 0.1, "m^2/s", "heat diffusion (eq 3.20)", 0),
     FL_F("k_f", "0.001", 0, 0.01, "m^2/(s K)", "fuel diffusion, weighted by temperature (eq 3.21)", 0),
     {.name = "diffusion_mode", .type = PARAM_ENUM, .def = "\"stabilized\"", .choices = fl_diff_names, .unit = "",
-     .doc = "stabilized: per-particle weights capped at omega_max, a convex update (§9 #4; viscosity too); "
+     .doc = "stabilized: per-particle weights capped at omega_max, a convex update (digest §9 #4; viscosity too); "
             "literal: eqs 3.13/3.20/3.21 as printed (unstable at the thesis's k_f)"},
-    FL_F("omega_max", "0.5", 0.05, 1, "", "cap of the summed explicit diffusion weights per step (§9 #4)", 0),
-    FL_F("k_cool", "0", 0, 50, "1/s", "Newtonian cooling toward T_amb, not in the thesis (§9 #13)", 0),
-    FL_F("fuel_eps", "0.001", 0, 1, "", "flame test F > fuel_eps (§9 #12)", 0),
-    FL_I("resample_interval", "5", 1, 20, "steps", "steps between particle birth/death passes (§2.12)", 0),
-    FL_I("insert_nbr_threshold", "24", 4, 60, "", "flame particles with fewer neighbours get one new particle (§9 #8)",
+    FL_F("omega_max", "0.5", 0.05, 1, "", "cap of the summed explicit diffusion weights per step (digest §9 #4)", 0),
+    FL_F("k_cool", "0", 0, 50, "1/s", "Newtonian cooling toward T_amb, not in the thesis (digest §9 #13)", 0),
+    FL_F("fuel_eps", "0.001", 0, 1, "", "flame test F > fuel_eps (digest §9 #12)", 0),
+    FL_I("resample_interval", "5", 1, 20, "steps", "steps between particle birth/death passes (digest §2.12)", 0),
+    FL_I("insert_nbr_threshold", "24", 4, 60, "", "flame particles with fewer neighbours get one new particle (digest §9 #8)",
          0),
     FL_F("h", "0.01125", 0.004, 0.05, "m", "kernel support radius (Table 3.1)", PARAM_RESTART),
-    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (§9 #7)", PARAM_RESTART),
-    FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so a lattice at spacing d has rho_rest (§9 #6)",
+    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (digest §9 #7)", PARAM_RESTART),
+    FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so a lattice at spacing d has rho_rest (digest §9 #6)",
          PARAM_RESTART),
     FL_F("dt", "0.003", 0.0001, 0.004, "s", "time step of the simulation", 0),
     FL_I("max_substeps", "24", 1, 256, "steps", "most steps per frame; beyond it the stream runs slower than real "

@@ -10,13 +10,14 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 import websockets
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 DAEMON = os.path.join(ROOT, "build", "fxstreamd")
-HEADER = struct.Struct("<4sHHIIQdQIIIIII")  # the 64-byte v1 header, ARCHITECTURE.md
+HEADER = struct.Struct("<4sHHIIQdQIIIIII")  # the 64-byte v1 header, PROTOCOL.md §2
 
 
 def parse_frame(data):
@@ -49,9 +50,28 @@ class Daemon:
         if "listening on" not in line:
             self.proc.kill()
             raise RuntimeError("daemon did not start: %r %s" % (line, self.proc.stderr.read()))
+        # Drain both pipes from now on: a daemon whose log fills an unread 64 KiB pipe blocks
+        # in write() (its event loop with it), which looks like a hung daemon to every check.
+        self._err = []
+        self._readers = [threading.Thread(target=self._drain, args=(self.proc.stderr, self._err), daemon=True),
+                         threading.Thread(target=self._drain, args=(self.proc.stdout, []), daemon=True)]
+        for r in self._readers:
+            r.start()
         self.port = int(line.split("127.0.0.1:")[1].split("/")[0])
         self.url = "ws://127.0.0.1:%d/v1/ws" % self.port
         self.http = "http://127.0.0.1:%d" % self.port
+
+    @staticmethod
+    def _drain(pipe, into):
+        for line in pipe:
+            into.append(line)
+
+    def log(self):
+        """The daemon's stderr so far; all of it once the daemon has exited."""
+        if self.proc.poll() is not None:
+            for r in self._readers:
+                r.join(10)
+        return "".join(self._err)
 
     def __enter__(self):
         return self
@@ -70,6 +90,30 @@ class Daemon:
             return None
 
 
+async def refusal(daemon, url=None, read=False, **kw):
+    """How the daemon refused a WebSocket: "http N" (handshake answered with status N),
+    "closed" (the connection was dropped during the handshake, or, with read=True, closed
+    before the first message) or None (accepted). A daemon that no longer runs or does not
+    listen is no refusal: that raises, so a dead daemon cannot pass a "refused" check."""
+    kw.setdefault("subprotocols", ["fxstream.v1"])
+    try:
+        ws = await asyncio.wait_for(websockets.connect(url or daemon.url, **kw), 10)
+        try:
+            if read:
+                await asyncio.wait_for(ws.recv(), 5)
+        finally:
+            await ws.close()
+        result = None
+    except websockets.exceptions.InvalidStatusCode as e:
+        result = "http %d" % e.status_code
+    except (websockets.exceptions.InvalidHandshake, websockets.exceptions.ConnectionClosed,
+            ConnectionResetError, asyncio.IncompleteReadError):
+        result = "closed"
+    if daemon.proc.poll() is not None:
+        raise RuntimeError("the daemon exited (%s) during a refusal check" % daemon.proc.returncode)
+    return result
+
+
 class Client:
     """One WebSocket connection speaking fxstream.v1; keeps events and frames apart."""
 
@@ -78,12 +122,12 @@ class Client:
         self.next_id = 1
 
     @classmethod
-    async def connect(cls, daemon, path="/v1/ws"):
+    async def connect(cls, daemon, path="/v1/ws", timeout=10):
         ws = await asyncio.wait_for(websockets.connect(
             "ws://127.0.0.1:%d%s" % (daemon.port, path), subprotocols=["fxstream.v1"],
-            max_size=64 << 20), 10)
+            max_size=64 << 20), timeout)
         c = cls(ws)
-        c.hello = await c.text()
+        c.hello = await c.text(timeout)
         return c
 
     async def recv(self, timeout=10):

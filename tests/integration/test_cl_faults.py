@@ -113,7 +113,7 @@ class Watch:
 
 def log_lines(d, needle):
     """The daemon's stderr lines containing needle (after it has exited)."""
-    return [line for line in d.proc.stderr.read().splitlines() if needle in line]
+    return [line for line in d.log().splitlines() if needle in line]
 
 
 async def control_works(t, d, what):

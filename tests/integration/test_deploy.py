@@ -27,7 +27,6 @@ import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 
 import yaml
 
@@ -49,7 +48,8 @@ def start_daemon(args, env=None, wrap=()):
     # Its own process group, so that stop() reaches the daemon under a wrapper too (strace
     # detaches on SIGTERM and the daemon would live on).
     proc = subprocess.Popen([*wrap, DAEMON, "--listen", "127.0.0.1", "--port", "0", "--log-level", "warn", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=e, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=tempfile.TemporaryFile(), text=True, env=e,
+                            start_new_session=True)
     line = proc.stdout.readline()
     if "listening on" not in line:
         os.killpg(proc.pid, signal.SIGKILL)

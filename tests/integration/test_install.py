@@ -112,7 +112,7 @@ def test_prefix_runs(t):
         # As installed (web root from the config), with a token, kept on loopback for the test.
         proc = subprocess.Popen([p + "/bin/fxstreamd", "--config", conf, "--listen", "127.0.0.1", "--port", "0",
                                  "--state-dir", p + "/state", "--log-level", "warn"], stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True, env=dict(env, FXSTREAMD_TOKENS=TOKENS))
+                                stderr=tempfile.TemporaryFile(), text=True, env=dict(env, FXSTREAMD_TOKENS=TOKENS))
         line = proc.stdout.readline()
         if not t.check("listening on" in line, "the installed daemon starts with its installed config"):
             return

@@ -92,7 +92,7 @@ static void eye_ref_entry_visit(const double c[2], void *ctx)
 }
 
 /* Exact: the smallest first root over every lens near the ray's path down to depth r;
- * a lens is entered only above depth r (§2.4: the search ends there). */
+ * a lens is entered only above depth r (digest 004 §2.4: the search ends there). */
 static int eye_ref_enter_exact(const struct eye_ref_optics *o, const double p[3], const double d[3], double c[3],
                                double *t)
 {
