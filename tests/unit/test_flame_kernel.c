@@ -308,8 +308,10 @@ static uint32_t tfk_kernel_hex(const char *name)
  * edge h along y and z (h/4 along x) hash to (cx + HP1 cy + HP2 cz) mod M, so the rows
  * (cy, cz) and (cy + dy, cz + dz) share every key when dy HP1 + dz HP2 = 0 mod 2^22. The
  * smallest such (dy, dz) (~2^11 cells) is found from the kernel's own multipliers; 500 groups
- * of 4 particles near the origin get exact twins shifted by (dy, dz) cells, so each occupied
- * cell's key run holds a far twin the neighbour search must reject by its row test. */
+ * of 4 particles near the origin get exact twins shifted by (dy, dz) cells, so every occupied
+ * cell's key run after the sort holds the particles of two places ~2000 h apart, and each
+ * place's densities, forces and neighbour counts must still match the reference's (a key run
+ * taken for a cell without the position and row tests would count the twins). */
 static void test_eval_hash_collisions(void)
 {
     uint32_t hp1 = tfk_kernel_hex("#define FL_HP1"), hp2 = tfk_kernel_hex("#define FL_HP2");
