@@ -1,6 +1,6 @@
 // gl.js — small shared pieces of the renderers: the linear → sRGB encoding every
 // ShaderMaterial applies itself (they bypass three's colour management), and a
-// full-screen quad for composite passes.
+// full-screen quad for composite passes, and ACES filmic tone mapping.
 import * as THREE from 'three';
 
 export const SRGB_GLSL = /* glsl */ `
@@ -20,3 +20,15 @@ export function fullscreenQuad(fragmentShader, uniforms, extra = {}) {
   scene.add(mesh);
   return { scene, camera: new THREE.Camera(), material };
 }
+
+// three.js's ACES filmic tone mapping (ShaderChunk tonemapping_pars_fragment, the same
+// matrices and RRT/ODT fit), with the exposure applied by the caller.
+export const ACES_GLSL = /* glsl */ `
+vec3 acesFilmic(vec3 color) {
+  const mat3 inMat = mat3(vec3(0.59719, 0.07600, 0.02840), vec3(0.35458, 0.90834, 0.13383), vec3(0.04823, 0.01566, 0.83777));
+  const mat3 outMat = mat3(vec3(1.60475, -0.10208, -0.00327), vec3(-0.53108, 1.10813, -0.07276), vec3(-0.07367, -0.00605, 1.07602));
+  color = inMat * (color / 0.6);
+  vec3 a = color * (color + 0.0245786) - 0.000090537;
+  vec3 b = color * (0.983729 * color + 0.4329510) + 0.238081;
+  return clamp(outMat * (a / b), 0.0, 1.0);
+}`;

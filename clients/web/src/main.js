@@ -3,7 +3,7 @@
 // canvas split into views: flame particles, the energy-wave billboard, a toon scene lit by
 // the wave's light rig, and the compound eye. A lil-gui panel per stream is generated from
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
-// Query options: url=, rl=N (flame repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
+// Query options: url=, flame=hdr (the flame's mode; pbvr by default), rl=N (flame repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
 // drawfps=N (draw at most N frames a second, e.g. under software WebGL), streams=A,B (show
 // only these streams).
 import * as THREE from 'three';
@@ -12,7 +12,7 @@ import { parseHeader } from '../fxs_particles.js';
 import { Conn } from './conn.js';
 import { StreamPanel } from './panel.js';
 import { StreamStats } from './stats.js';
-import { FlameView } from './flame.js';
+import { FLAME_DEFAULTS, FlameView } from './flame.js';
 import { WaveView } from './wave.js';
 import { SceneView } from './scene.js';
 import { EyeView } from './eye.js';
@@ -37,12 +37,20 @@ renderer.autoClear = false;
 renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
 
 const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
-const viewSettings = { flameRL: Number(q.get('rl')) || 15, flameThreshold: 0.35, flameGain: 0.22, flameExposure: 1.0, waveGlow: 0.6, waveBlack: 0.55, waveGain: 1.6 };
+// The flame's look (FlameView.settings, shared by every flame view): ?flame=hdr picks the mode.
+const flameSettings = { ...FLAME_DEFAULTS, mode: q.get('flame') === 'hdr' ? 'hdr' : 'pbvr', rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
+const viewSettings = { waveGlow: 0.6, waveBlack: 0.55, waveGain: 1.6 };
 const vf = gui.addFolder('view (this page only)');
-vf.add(viewSettings, 'flameRL', 1, 32, 1).name('flame repeat passes RL');
-vf.add(viewSettings, 'flameThreshold', 0.05, 0.95, 0.01).name('flame alpha test');
-vf.add(viewSettings, 'flameGain', 0.1, 5, 0.01).name('flame intensity');
-vf.add(viewSettings, 'flameExposure', 0.1, 5, 0.01).name('flame exposure');
+const ff = vf.addFolder('flame');
+ff.add(flameSettings, 'mode', ['pbvr', 'hdr']).name('mode');
+ff.add(flameSettings, 'rl', 1, 32, 1).name('pbvr: repeat passes RL');
+ff.add(flameSettings, 'threshold', 0.05, 0.95, 0.01).name('pbvr: alpha test');
+ff.add(flameSettings, 'intensity', 0.2, 4, 0.01).name('pbvr: intensity scale');
+ff.add(flameSettings, 'smoke').name('pbvr: smoke');
+ff.add(flameSettings, 'smokeT', 300, 3000, 10).name('pbvr: smoke below T (K)');
+ff.addColor(flameSettings, 'smokeColor').name('pbvr: smoke colour');
+ff.add(flameSettings, 'whiteT', 1500, 8000, 50).name('white point T_max (K)');
+ff.add(flameSettings, 'exposure', 0.05, 8, 0.01).name('hdr: exposure');
 vf.add(viewSettings, 'waveGlow', 0, 3, 0.01).name('wave glow');
 vf.add(viewSettings, 'waveBlack', 0, 2, 0.01).name('wave black level (B)');
 vf.add(viewSettings, 'waveGain', 0.1, 5, 0.01).name('wave level gain');
@@ -70,7 +78,12 @@ async function describe(effect) {
 
 function makeViews(st) {
   switch (st.effect) {
-    case 'flame': return [new FlameView(st.name)];
+    case 'flame': {
+      const v = new FlameView(st.name);
+      v.settings = flameSettings;
+      v.attachControls(canvas, () => lastLayout.find((e) => e.view === v)?.css ?? null);
+      return [v];
+    }
     case 'energy_wave': {
       const w = new WaveView(st.name);
       return [w, new SceneView(st.name, w.wt)];
@@ -252,7 +265,6 @@ function frame(t) {
   const drawnStreams = new Set();
   for (const { view, rect, css } of lastLayout) {
     const v = view;
-    if (v.settings) Object.assign(v.settings, { rl: viewSettings.flameRL, threshold: viewSettings.flameThreshold, gain: viewSettings.flameGain, exposure: viewSettings.flameExposure });
     for (const m of [v.kind === 'wave' ? v.material : null, v.billboardMat]) {
       if (!m) continue;
       Object.assign(m.uniforms.glowGain, { value: viewSettings.waveGlow });
@@ -326,10 +338,52 @@ function sample(kind, stream) {
   return { w, h, mean: [sr / n, sg / n, sb / n], lit: lit / n, bright: bright / n, warm: warm / n, max, hash, css: entry.css };
 }
 
+// The flame view's look, for issue 13's checks: of the flame's pixels brighter than 10%, the
+// share with every channel >= 0.98 (blown out), and the mean colour of the lower and upper
+// thirds of their rows (hotter = a larger G/R, towards yellow and white), and a hash. Flame
+// pixels are warm (R > B) or near white; the stage's bluish grid and grey smoke are not.
+function flameLook() {
+  const entry = lastLayout.find((e) => e.view.kind === 'flame');
+  if (!entry) return null;
+  const pr = renderer.getPixelRatio(), r = entry.rect;
+  const x = Math.round(r.x * pr), y = Math.round(r.y * pr), w = Math.round(r.w * pr), h = Math.round(r.h * pr);
+  const gl = renderer.getContext(), px = new Uint8Array(w * h * 4);
+  gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  gl.readPixels(x, y, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  const lit = (R, G, B) => 0.2126 * R + 0.7152 * G + 0.0722 * B > 25.5 && (R > B + 8 || Math.min(R, G, B) >= 200);
+  const rows = [];
+  let bright = 0, white = 0, hash = 0;
+  for (let i = 0; i < w * h; i++) {
+    const R = px[4 * i], G = px[4 * i + 1], B = px[4 * i + 2];
+    if (!lit(R, G, B)) continue;
+    bright++;
+    if (R >= 250 && G >= 250 && B >= 250) white++;
+    rows.push(Math.floor(i / w));
+  }
+  for (let i = 0; i < px.length; i += 97) hash = (hash * 31 + px[i]) >>> 0;
+  if (!bright) return { bright: 0, white: 0, hash };
+  rows.sort((a, b) => a - b); // rows counted from the bottom (readPixels)
+  const lo = rows[Math.floor(0.02 * (rows.length - 1))], hi = rows[Math.ceil(0.98 * (rows.length - 1))];
+  const third = (a, b) => {
+    const m = [0, 0, 0, 0];
+    for (let row = a; row < b; row++)
+      for (let c = 0; c < w; c++) {
+        const i = 4 * (row * w + c), R = px[i], G = px[i + 1], B = px[i + 2];
+        if (!lit(R, G, B)) continue;
+        m[0] += R; m[1] += G; m[2] += B; m[3]++;
+      }
+    return m[3] ? { rgb: m.slice(0, 3).map((v) => v / m[3]), gr: m[1] / Math.max(1, m[0]), n: m[3] } : null;
+  };
+  const t = (hi - lo) / 3;
+  return { bright: bright / (w * h), white: white / bright, lower: third(lo, Math.round(lo + t)), upper: third(Math.round(hi - t), hi + 1), hash, rows: [lo, hi, h] };
+}
+
 window.fxs = {
   conn, streams, get views() { return views.map((v) => `${v.stream}:${v.kind}`); }, sample,
   stats: () => Object.fromEntries([...streams.values()].map((s) => [s.name, { rev: s.rev, channel: s.channel, maxFps: s.maxFps, latency: s.stats.rate.latency, frames: s.stats.totalFrames, drawn: s.stats.totalDrawn, kinds: [...s.stats.kindsSeen], skipped: s.stats.skipped, error: s.error }])),
-  flame: () => { const v = views.find((x) => x.kind === 'flame'); return v ? { center: v.center, extent: v.extent, count: v.count, cam: v.camera.position.toArray() } : null; },
+  flame: () => views.find((x) => x.kind === 'flame')?.info() ?? null,
+  flameLook,
+  flameSettings,
   scene: () => { const v = views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
   eye: (stream) => views.find((x) => x.kind === 'eye' && x.stream === stream)?.info() ?? null,
 };

@@ -1,0 +1,94 @@
+/* bench_flame_shape.c — the flame's shape figures (issue 13) on the default scene, its
+ * difference-form variant and a sideways wind, as a client measures them on the stream:
+ * 5 s of warm-up, then one state every 1/30 s of simulated time for 10 s (tests/ref/
+ * flame_shape.c: H90, W90, share below the source plane, flicker, centroid). Simulated time,
+ * not wall time: the figures do not depend on the machine (real time is bench_flame's).
+ * BENCH_FLAME_SCENE adds JSON overrides to every case, for experiments; BENCH_SHAPE_ONLY
+ * names one case (default, difference, wind). One line per figure. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../ref/flame_shape.h"
+#include "effects/flame.h"
+#include "ocl.h"
+#include "params.h"
+
+static void bs_die(const char *what, const struct fx_err *err)
+{
+    fprintf(stderr, "bench_flame_shape: %s: %s\n", what, err->message);
+    exit(1);
+}
+
+/* The default document with two layers of JSON overrides (either may be NULL). */
+static cJSON *bs_doc(const char *a, const char *b)
+{
+    struct fx_err err;
+    cJSON *doc = params_defaults(flame_params);
+    for (const char *ov = a; ov; ov = ov == a ? b : NULL) {
+        cJSON *o = cJSON_Parse(ov), *out = NULL;
+        if (!o || params_merge(flame_params, doc, o, &out, &err)) bs_die("bad overrides", &err);
+        cJSON_Delete(o);
+        cJSON_Delete(doc);
+        doc = out;
+    }
+    return doc;
+}
+
+static void bs_vec(const cJSON *v, double out[3])
+{
+    for (int k = 0; k < 3; k++) out[k] = cJSON_GetArrayItem(v, k)->valuedouble;
+}
+
+/* Runs one case: warm-up warm_s, then `seconds` of frames at 30 per simulated second. */
+static void bs_case(struct ocl *ocl, const char *name, const char *ov, double warm_s, double seconds,
+                    struct flame_shape *out)
+{
+    struct fx_err err;
+    cJSON *doc = bs_doc(getenv("BENCH_FLAME_SCENE"), ov);
+    struct flame *fl = flame_new(ocl, doc, &err);
+    if (!fl) bs_die("flame_new", &err);
+    double dt = params_num(doc, "dt"), c[3], up[3];
+    bs_vec(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "sources"), 0), "center"), c);
+    bs_vec(cJSON_GetObjectItem(doc, "up"), up);
+    int per_frame = (int)lround(1.0 / 30 / dt);
+    if (per_frame < 1) per_frame = 1;
+    if (flame_run(fl, (int)lround(warm_s / dt), &err)) bs_die("warm-up", &err);
+    struct flame_shape_acc acc;
+    flame_shape_init(&acc, c, up, params_num(doc, "T_ign"));
+    for (int f = 0; f < (int)lround(seconds * 30); f++) {
+        struct flame_particles p;
+        if (flame_run(fl, per_frame, &err) || flame_read(fl, &p, &err)) bs_die("run", &err);
+        flame_shape_add(&acc, &p);
+        flame_particles_free(&p);
+    }
+    flame_shape_result(&acc, out);
+    printf("flame shape %s: H90 %.1f cm, W90 %.1f cm, H90/W90 %.2f, below the source %.1f%%, flicker %.1f%%, "
+           "centroid %.1f cm up %+.1f cm x, particles %.0f (burning %.0f)\n",
+           name, out->H90 * 100, out->W90 * 100, out->W90 > 0 ? out->H90 / out->W90 : 0, out->below * 100,
+           out->flicker * 100, out->centroid_h * 100, out->centroid_lat[0] * 100, out->particles, out->burning);
+    flame_shape_free(&acc);
+    flame_free(fl);
+    cJSON_Delete(doc);
+}
+
+int main(int argc, char **argv)
+{
+    struct fx_err err;
+    struct ocl *ocl;
+    if (ocl_open(&ocl, argc > 1 ? argv[1] : NULL, &err)) bs_die("ocl_open", &err);
+    const char *only = getenv("BENCH_SHAPE_ONLY");
+    struct flame_shape calm = {0}, windy, diff;
+    if (!only || !strcmp(only, "default") || !strcmp(only, "wind")) bs_case(ocl, "default", NULL, 5, 10, &calm);
+    if (!only || !strcmp(only, "wind")) {
+        bs_case(ocl, "wind 10 m/s^2 along x", "{\"wind_accel\":[10,0,0]}", 5, 10, &windy);
+        printf("flame shape wind: centroid moved %.1f cm sideways = %.2f x H90 (target >= 0.30)\n",
+               (windy.centroid_lat[0] - calm.centroid_lat[0]) * 100,
+               calm.H90 > 0 ? (windy.centroid_lat[0] - calm.centroid_lat[0]) / calm.H90 : 0);
+    }
+    if (!only || !strcmp(only, "difference"))
+        bs_case(ocl, "difference form at 2.5-3 s", "{\"pressure_form\":\"difference\"}", 2.5, 0.5, &diff);
+    ocl_close(ocl);
+    return 0;
+}

@@ -1,0 +1,37 @@
+/* flame_shape.h — the default flame's shape figures of issue 13, measured on particle states
+ * the way a client measures them on the stream's frames (tests and benches only).
+ *
+ * "Burning" = a gas particle with T >= T_ign. Heights run along `up` from the source's top
+ * plane (the first source's centre), lateral distances from the vertical line through that
+ * centre. Frames are added one at a time; the figures pool every added frame. */
+#ifndef FX_FLAME_SHAPE_H
+#define FX_FLAME_SHAPE_H
+
+#include "effects/flame.h"
+
+struct flame_shape_acc {
+    double c[3], up[3], T_ign;
+    double *h, *w;    /* heights and lateral distances of every burning particle added */
+    size_t n, cap;
+    double *p99;      /* per frame: 99th percentile height of its burning particles */
+    double lat[3];    /* sum of the burning particles' lateral offsets (centroid) */
+    double height_sum;
+    int frames;
+    double particles; /* sum over frames of all particles */
+};
+
+struct flame_shape {
+    double H90, W90;      /* 90th percentiles of height and lateral distance, m */
+    double below;         /* share of burning particles below the source plane */
+    double flicker;       /* standard deviation / mean of the per-frame 99th percentile height */
+    double centroid_h;    /* mean height of burning particles, m */
+    double centroid_lat[3]; /* mean lateral offset of burning particles (a vector normal to up), m */
+    double burning, particles; /* mean per frame */
+};
+
+void flame_shape_init(struct flame_shape_acc *a, const double c[3], const double up[3], double T_ign);
+void flame_shape_add(struct flame_shape_acc *a, const struct flame_particles *p);
+void flame_shape_result(struct flame_shape_acc *a, struct flame_shape *out);
+void flame_shape_free(struct flame_shape_acc *a);
+
+#endif
