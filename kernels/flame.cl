@@ -220,9 +220,10 @@ __constant uint fl_pack8[256] = {FL_P64(0), FL_P64(64), FL_P64(128), FL_P64(192)
 
 #define FL_LIST (FL_NL - 8) /* longest list: fl_density stores 8 slots from slot nb <= FL_LIST */
 
-/* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11; clamped at 0 for the symmetric
- * form, §9 #3), neighbour counts j != i (nbr | flame_nbr << 16, §2.12), and the neighbour
- * list: nl[i * FL_NL + k] for the nbr neighbours j != i in gather order when nbr <= FL_LIST
+/* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11 clamped at 0 in both forms: in the
+ * difference form a negative p at the free boundary of a gas with no air around it pushes the
+ * boundary outward until the flame burns out; PROTOCOL.md §11.2), neighbour counts j != i
+ * (nbr | flame_nbr << 16, digest §2.12), and the neighbour list: nl[i * FL_NL + k] for the nbr neighbours j != i in gather order when nbr <= FL_LIST
  * (slots FL_LIST.. take the overflow writes). fl_forces walks the list instead of the grid; a
  * particle with more neighbours keeps no valid list and both passes gather it from the grid
  * again, so no neighbour is ever dropped. The candidate scan runs 8 candidates at a time as
@@ -298,7 +299,7 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     float w = (w4.x + w4.y) + (w4.z + w4.w);
     float rho = w * P[FP_POLY6];
     float p = P[FP_KSTIFF] * (rho - P[FP_RHO0]);
-    if (P[FP_SYMMETRIC] != 0.0f) p = fmax(p, 0.0f);
+    p = fmax(p, 0.0f);
     rho_p[i] = (float2)(rho, p);
     counts[i] = min(nb, 65535u) | (min(fnb, 65535u) << 16); /* fnb completed by fl_forces for a list */
 }

@@ -89,15 +89,21 @@ static const struct param_def fl_obstacle_fields[] = {
     {0},
 };
 
-/* Default scene: one 11.4 cm disc at F_init 100, dt 3 ms: about 10.3-10.5k particles (4.3k burning) whose
- * flame rises 5 cm on average (tip ~30 cm), every group D behaviour (test_flame_behaviour). The thesis's dt of 1 ms would
- * need 10 M particle-steps/s for 10k particles in real time; at 3 ms the stabilised diffusion mixes
- * less per simulated second (its weights are capped per step, §9 #4), so a given source holds fewer
- * particles (the 6 cm disc: 16k at 1 ms, 4.4k at 3 ms) and the default disc is larger instead. */
+/* Default scene (issue 13): the thesis's 3 cm disc (digest §2.13, ch.7's real flame) on a 3.6 cm
+ * non-burning base plate 4 mm under it, with h = 3.5 mm (a third of Table 3.1's, so ~10k particles
+ * resolve the thesis-size flame) at dt 3 ms. Measured (tests/bench/bench_flame_shape.c): a flame
+ * 3.6 times as tall as wide (H90 12.7 cm, W90 3.5 cm), 1.1% of the burning gas below the source
+ * plane, flicker 10.7%, 10.3k particles. Without the plate, gas heated by the disc's lower layer
+ * stays under it (12% of the burning gas below the source plane, as the thesis's free-floating
+ * source has no ground); the plate is an obstacle (digest §2.13), so no new physics. The earlier
+ * default (an 11.4 cm disc at h = 11.25 mm) held as many particles but burned as a wide dome
+ * (H90/W90 1.3, 20% below the source). The thesis's dt of 1 ms would need 10 M particle-steps/s
+ * for 10k particles in real time. */
 const struct param_def flame_params[] = {
-    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.057}]", .max_len = 16,
+    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.015}]", .max_len = 16,
      .fields = fl_source_fields, .unit = "", .doc = "burning solids (digest §2.13)"},
-    {.name = "obstacles", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = 16, .fields = fl_obstacle_fields,
+    {.name = "obstacles", .type = PARAM_OBJECT_LIST, .max_len = 16,
+     .def = "[{\"shape\":\"plate\",\"size\":[0.036,0.036,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]", .fields = fl_obstacle_fields,
      .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (digest §9 #16)"},
     {.name = "wind_accel", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
      .doc = "uniform acceleration of gas particles (digest §2.14, §9 #15)"},
@@ -106,15 +112,16 @@ const struct param_def flame_params[] = {
      .doc = "upward unit vector (normalised; digest §9 #20)", .flags = PARAM_NONZERO},
     FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure constant p = k (rho - rho_rest) (eq 3.11)", 0),
     FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity (eq 3.13)", 0),
-    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density (no effect with the difference form, digest §2.5)", 0),
-    /* Default symmetric, not the thesis's difference form: with (p_j - p_i) the gas expands from its
-     * free boundary (digest §2.5) faster than buoyancy lifts it (measured on the default scene: about
-     * 154 m/s^2 of pressure and viscosity against 19 of buoyancy), so the flame becomes a shell
-     * around the source and never rises (test_flame_behaviour D3). The symmetric form of §9 #3 gives a
-     * rising flame with a 1.5 m/s tip speed, the calibration target of §3, and passes every group D
-     * behaviour. */
+    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density; pressure p = k (rho - rho_rest), clamped at 0", 0),
+    /* Both forms clamp eq 3.11's p at 0. Unclamped, the difference form (p_j - p_i) pushes the
+     * density-deficient free boundary of a gas with no air around it outward (digest §2.5) far
+     * faster than buoyancy lifts it: on the default scene no burning gas is left after 2.5 s
+     * (1.2k particles), against a flame rising 7.6 cm (centroid at 2.5-3 s) with the clamp
+     * (PROTOCOL.md §11.2). Default symmetric (Mueller's form, digest §9 #3): every figure of the
+     * default scene and every group D behaviour is measured with it. */
     {.name = "pressure_form", .type = PARAM_ENUM, .def = "\"symmetric\"", .choices = fl_pform_names, .unit = "",
-     .doc = "difference: eq 3.12 with the sign fixed; symmetric: Mueller's -(p_i+p_j)/2 form, p >= 0 (digest §9 #3)"},
+     .doc = "difference: eq 3.12 with the sign fixed; symmetric: Mueller's -(p_i+p_j)/2 form (digest §9 #3); "
+            "both with p >= 0"},
     FL_F("T_amb", "300", 250, 400, "K", "ambient temperature, also of inserted particles", 0),
     FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature", 0),
     FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F (eq 3.17)", 0),
@@ -131,7 +138,8 @@ const struct param_def flame_params[] = {
     FL_I("resample_interval", "5", 1, 20, "steps", "steps between particle birth/death passes (digest §2.12)", 0),
     FL_I("insert_nbr_threshold", "24", 4, 60, "", "flame particles with fewer neighbours get one new particle (digest §9 #8)",
          0),
-    FL_F("h", "0.01125", 0.004, 0.05, "m", "kernel support radius (Table 3.1)", PARAM_RESTART),
+    FL_F("h", "0.0035", 0.002, 0.05, "m", "kernel support radius (Table 3.1: 0.01125; finer by default)",
+         PARAM_RESTART),
     FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (digest §9 #7)", PARAM_RESTART),
     FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so a lattice at spacing d has rho_rest (digest §9 #6)",
          PARAM_RESTART),

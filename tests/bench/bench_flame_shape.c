@@ -11,9 +11,7 @@
 #include <string.h>
 
 #include "../ref/flame_shape.h"
-#include "effects/flame.h"
 #include "ocl.h"
-#include "params.h"
 
 static void bs_die(const char *what, const struct fx_err *err)
 {
@@ -26,8 +24,10 @@ static cJSON *bs_doc(const char *a, const char *b)
 {
     struct fx_err err;
     cJSON *doc = params_defaults(flame_params);
-    for (const char *ov = a; ov; ov = ov == a ? b : NULL) {
-        cJSON *o = cJSON_Parse(ov), *out = NULL;
+    const char *layers[2] = {a, b};
+    for (int i = 0; i < 2; i++) {
+        if (!layers[i]) continue;
+        cJSON *o = cJSON_Parse(layers[i]), *out = NULL;
         if (!o || params_merge(flame_params, doc, o, &out, &err)) bs_die("bad overrides", &err);
         cJSON_Delete(o);
         cJSON_Delete(doc);
@@ -36,40 +36,17 @@ static cJSON *bs_doc(const char *a, const char *b)
     return doc;
 }
 
-static void bs_vec(const cJSON *v, double out[3])
-{
-    for (int k = 0; k < 3; k++) out[k] = cJSON_GetArrayItem(v, k)->valuedouble;
-}
-
-/* Runs one case: warm-up warm_s, then `seconds` of frames at 30 per simulated second. */
+/* Runs one case and prints its figures. */
 static void bs_case(struct ocl *ocl, const char *name, const char *ov, double warm_s, double seconds,
                     struct flame_shape *out)
 {
     struct fx_err err;
     cJSON *doc = bs_doc(getenv("BENCH_FLAME_SCENE"), ov);
-    struct flame *fl = flame_new(ocl, doc, &err);
-    if (!fl) bs_die("flame_new", &err);
-    double dt = params_num(doc, "dt"), c[3], up[3];
-    bs_vec(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "sources"), 0), "center"), c);
-    bs_vec(cJSON_GetObjectItem(doc, "up"), up);
-    int per_frame = (int)lround(1.0 / 30 / dt);
-    if (per_frame < 1) per_frame = 1;
-    if (flame_run(fl, (int)lround(warm_s / dt), &err)) bs_die("warm-up", &err);
-    struct flame_shape_acc acc;
-    flame_shape_init(&acc, c, up, params_num(doc, "T_ign"));
-    for (int f = 0; f < (int)lround(seconds * 30); f++) {
-        struct flame_particles p;
-        if (flame_run(fl, per_frame, &err) || flame_read(fl, &p, &err)) bs_die("run", &err);
-        flame_shape_add(&acc, &p);
-        flame_particles_free(&p);
-    }
-    flame_shape_result(&acc, out);
+    if (flame_shape_run(ocl, doc, warm_s, seconds, out, &err)) bs_die(name, &err);
     printf("flame shape %s: H90 %.1f cm, W90 %.1f cm, H90/W90 %.2f, below the source %.1f%%, flicker %.1f%%, "
            "centroid %.1f cm up %+.1f cm x, particles %.0f (burning %.0f)\n",
            name, out->H90 * 100, out->W90 * 100, out->W90 > 0 ? out->H90 / out->W90 : 0, out->below * 100,
            out->flicker * 100, out->centroid_h * 100, out->centroid_lat[0] * 100, out->particles, out->burning);
-    flame_shape_free(&acc);
-    flame_free(fl);
     cJSON_Delete(doc);
 }
 

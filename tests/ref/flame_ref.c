@@ -240,10 +240,10 @@ void flame_ref_buoyancy(const struct flame_ref_params *p, double T, double f[3])
 
 /* ---------------------------------------------------------------- evaluation */
 
+/* Eq 3.11 clamped at 0 in both pressure forms (no tension at the gas's free boundary). */
 static double flame_ref_pressure(const struct flame_ref_params *p, double rho)
 {
-    double pr = p->k_stiff * (rho - p->rho_rest);
-    return (p->symmetric_pressure && pr < 0) ? 0 : pr;
+    return fmax(0, p->k_stiff * (rho - p->rho_rest));
 }
 
 /* Pressure force of pair (i, j) on i: the sign-fixed difference form (3.12) or Müller's. */

@@ -91,3 +91,32 @@ void flame_shape_free(struct flame_shape_acc *a)
     free(a->p99);
     memset(a, 0, sizeof *a);
 }
+
+static void fs_vec(const cJSON *v, double out[3])
+{
+    for (int k = 0; k < 3; k++) out[k] = cJSON_GetArrayItem(v, k)->valuedouble;
+}
+
+int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, struct flame_shape *out,
+                    struct fx_err *err)
+{
+    struct flame *fl = flame_new(ocl, doc, err);
+    if (!fl) return -1;
+    double dt = params_num(doc, "dt"), c[3], up[3];
+    fs_vec(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "sources"), 0), "center"), c);
+    fs_vec(cJSON_GetObjectItem(doc, "up"), up);
+    int per_frame = (int)lround(1.0 / 30 / dt), rc = flame_run(fl, (int)lround(warm_s / dt), err);
+    struct flame_shape_acc acc;
+    flame_shape_init(&acc, c, up, params_num(doc, "T_ign"));
+    for (int f = 0; !rc && f < (int)lround(seconds * 30); f++) {
+        struct flame_particles p;
+        rc = flame_run(fl, per_frame > 0 ? per_frame : 1, err) || flame_read(fl, &p, err);
+        if (rc) break;
+        flame_shape_add(&acc, &p);
+        flame_particles_free(&p);
+    }
+    flame_shape_result(&acc, out);
+    flame_shape_free(&acc);
+    flame_free(fl);
+    return rc ? -1 : 0;
+}

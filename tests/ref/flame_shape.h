@@ -3,11 +3,13 @@
  *
  * "Burning" = a gas particle with T >= T_ign. Heights run along `up` from the source's top
  * plane (the first source's centre), lateral distances from the vertical line through that
- * centre. Frames are added one at a time; the figures pool every added frame. */
+ * centre. Frames are added one at a time; the figures pool every added frame. Simulated time,
+ * not wall time: the stream's frames are these states whenever it keeps real time. */
 #ifndef FX_FLAME_SHAPE_H
 #define FX_FLAME_SHAPE_H
 
 #include "effects/flame.h"
+#include "params.h"
 
 struct flame_shape_acc {
     double c[3], up[3], T_ign;
@@ -28,6 +30,11 @@ struct flame_shape {
     double centroid_lat[3]; /* mean lateral offset of burning particles (a vector normal to up), m */
     double burning, particles; /* mean per frame */
 };
+
+/* Runs the scene of the complete document doc: warm_s simulated seconds, then one state every
+ * 1/30 s of simulated time for `seconds`, measured from the first source's centre. 0 or -1 (err). */
+int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, struct flame_shape *out,
+                    struct fx_err *err);
 
 void flame_shape_init(struct flame_shape_acc *a, const double c[3], const double up[3], double T_ign);
 void flame_shape_add(struct flame_shape_acc *a, const struct flame_particles *p);

@@ -628,8 +628,10 @@ static void test_run_no_ignition(void)
 
 /* ---------------------------------------------------------------- group C through flame_run */
 
-/* The digest's 3 cm disc (§9 #17); the effect's default disc is 6 cm (~12k particles). */
-#define TFK_SCENE "\"sources\":[{\"radius\":0.015}]"
+/* The digest's 3 cm disc (digest §9 #17) at the thesis's scale (Table 3.1's h, ~1.7k particles)
+ * with no base plate: the effect's default scene has 10k particles on a plate. */
+#define TFK_THESIS "\"obstacles\":[],\"h\":0.01125"
+#define TFK_SCENE "\"sources\":[{\"radius\":0.015}]," TFK_THESIS
 
 static int tfk_run(struct flame *fl, int steps)
 {
@@ -810,8 +812,8 @@ static void test_run_count_changes(void)
 /* C6: no source, no fuel, or too cold: nothing is ever inserted. */
 static void test_run_no_source(void)
 {
-    const char *docs[3] = {"{\"sources\":[]}", "{\"sources\":[{\"radius\":0.015,\"F_init\":0}]}",
-                           "{\"T_ign\":1500,\"sources\":[{\"radius\":0.015,\"T_init\":1200}]}"};
+    const char *docs[3] = {"{\"sources\":[],\"obstacles\":[]}", "{" TFK_THESIS ",\"sources\":[{\"radius\":0.015,\"F_init\":0}]}",
+                           "{" TFK_THESIS ",\"T_ign\":1500,\"sources\":[{\"radius\":0.015,\"T_init\":1200}]}"};
     for (int c = 0; c < 3; c++) {
         struct flame *fl = tfk_new(docs[c], NULL);
         if (!fl) continue;
