@@ -146,7 +146,7 @@ const struct param_def energy_wave_params[] = {
     {.name = "animate", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "multiply each curve's W by the eq. (5.1) travelling pulse"},
     {.name = "anim_rate", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
-     .doc = "eq. (5.1) animation frames per second of stream time (the sweep loops)"},
+     .doc = "eq. (5.1) animation frames per second of stream time (a pulse enters every 7n + 10 frames)"},
     /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7): on by default, since the
      * issue asks every energy_wave stream to light its surroundings; ~1 kB a frame. */
     {.name = "light_rig", .type = PARAM_BOOL, .def = "true", .unit = "",
@@ -368,6 +368,20 @@ void energy_wave_anim_weights(double frame, int n, double *w)
     }
 }
 
+double energy_wave_anim_period(int n) { return 7.0 * n + 10.0; }
+
+void energy_wave_loop_weights(double frame, int n, double *w)
+{
+    double period = energy_wave_anim_period(n), f = fmod(frame, period), one[EW_MAX_W];
+    if (f < 0) f += period;
+    for (int i = 0; i < n; i++) w[i] = 0;
+    /* the pulses started 0, 1, ... periods ago that have not yet left the curve (7(n-1) + 50) */
+    for (double age = f; age <= 7.0 * (n - 1) + 50.0; age += period) {
+        energy_wave_anim_weights(age, n, one);
+        for (int i = 0; i < n; i++) w[i] = fmin(1.0, w[i] + one[i]);
+    }
+}
+
 /* Packs the curves with their (animated) weights; curves whose strength is zero
  * everywhere are left out, so the pulse costs nothing where it is not. Returns count. */
 static int ew_pack_curves(struct energy_wave *ew, double sim_time)
@@ -377,10 +391,7 @@ static int ew_pack_curves(struct energy_wave *ew, double sim_time)
         const struct ew_curve_src *c = &ew->curves[i];
         double anim[EW_MAX_W];
         int first = -1, last = -1;
-        if (ew->animate) {
-            double sweep = 7.0 * (c->nw - 1) + 50.0; /* digest §4: the pulse ends at 7(n−1)+50 */
-            energy_wave_anim_weights(fmod(sim_time * ew->anim_rate, sweep), c->nw, anim);
-        }
+        if (ew->animate) energy_wave_loop_weights(sim_time * ew->anim_rate, c->nw, anim);
         float *w = ew->wts + nc * EW_MAX_W;
         for (int k = 0; k < c->nw; k++) {
             w[k] = (float)(c->w[k] * (ew->animate ? anim[k] : 1.0));

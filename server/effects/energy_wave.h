@@ -41,7 +41,13 @@ int energy_wave_dev_bspline(struct ocl *ocl, int nw, const float *w, int n, cons
 int energy_wave_dev_curve_nearest(struct ocl *ocl, const float b[9], int n, const float *p, float *dist,
                                   float *tparam, struct fx_err *err);
 
-/* Weights of eq. (5.1) at animation frame `frame` for n weights (digest §4). */
+/* Weights of eq. (5.1) at animation frame `frame` for n weights (digest §4): one pulse. */
 void energy_wave_anim_weights(double frame, int n, double *w);
+/* The stream's animation: eq. (5.1)'s pulse started again every energy_wave_anim_period(n)
+ * = 7n + 10 frames, overlapping pulses summed and clamped at 1, so the curve is never dark
+ * between two sweeps (a single looped sweep of 7(n-1) + 50 frames left every weight 0 for
+ * ~10 frames: the blank textures of issue 14). */
+double energy_wave_anim_period(int n);
+void energy_wave_loop_weights(double frame, int n, double *w);
 
 #endif

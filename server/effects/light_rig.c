@@ -147,9 +147,8 @@ static void lr_segments(const cJSON *p, double sim_time, struct light_rig *rig)
         for (int k = 0; k < 3; k++) params_vec3(it, names[k], b[k]);
         const cJSON *x;
         cJSON_ArrayForEach(x, cJSON_GetObjectItemCaseSensitive(it, "W")) if (nw < LR_MAX_W) w[nw++] = x->valuedouble;
-        if (animate && nw > 0) { /* the same pulse as the texture (energy_wave.c ew_pack_curves) */
-            double sweep = 7.0 * (nw - 1) + 50.0;
-            energy_wave_anim_weights(fmod(sim_time * rate, sweep), nw, anim);
+        if (animate && nw > 0) { /* the same pulses as the texture (energy_wave.c ew_pack_curves) */
+            energy_wave_loop_weights(sim_time * rate, nw, anim);
             for (int k = 0; k < nw; k++) w[k] *= anim[k];
         }
         for (int j = 0; j < ncs; j++) {

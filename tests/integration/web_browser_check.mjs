@@ -7,7 +7,9 @@
 // picture; a change made in a second page appears in the first; a server error shows next
 // to its field; compound eyes (created here, mode lut and bake) show a lattice of facets
 // with pigment, the look-up-table view agrees with the server's bake from the same eye, and
-// the lattice follows the client-side density; the page reconnects after a daemon restart.
+// the lattice follows the client-side density; the flame view alone (PBVR by default, not
+// blown out, hotter at the base, moving; orbit drag and double-click home; the hdr mode);
+// the page reconnects after a daemon restart.
 // Screenshots go to build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
 import { chromium } from 'playwright-core';
 import { spawn, execFileSync } from 'node:child_process';
@@ -33,7 +35,7 @@ async function until(fn, ms, step = 200) { // bounded polling; returns the last 
   while (Date.now() < end) { try { v = await fn(); if (v) return v; } catch { /* retry */ } await sleep(step); }
   return v;
 }
-const hardStop = setTimeout(() => { console.log('FAIL overall time limit (105 s)'); finish(1); }, 105000);
+const hardStop = setTimeout(() => { console.log('FAIL overall time limit (150 s)'); finish(1); }, 150000);
 
 const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
@@ -220,6 +222,48 @@ async function eyeChecks(ctx, port, fxctl, url) {
   fxctl('destroy', 'eyebake');
 }
 
+// The flame view alone (issue 13): PBVR by default, not blown out (of the flame's pixels
+// brighter than 10%, at most 15% have every channel >= 0.98), hotter at the base than at the
+// top, moving; the orbit camera turns with a mouse drag and a double-click brings it home;
+// the hdr mode keeps the hot core under white too. Screenshots of both modes.
+async function flameChecks(ctx, port) {
+  const page = await ctx.newPage();
+  await page.setViewportSize({ width: 600, height: 400 });
+  await page.goto(`http://127.0.0.1:${port}/?streams=flame&grid=1x1&aa=0&drawfps=2&rl=2`, { timeout: 20000 });
+  const drawn = () => page.evaluate(() => window.fxs.stats().flame?.drawn ?? 0);
+  const nextDraw = async () => { const d = await drawn(); return until(async () => (await drawn()) > d, 8000, 100); };
+  check(await until(async () => (await drawn()) > 2, 30000, 500), 'flame view: frames drawn');
+  const a = await page.evaluate(() => window.fxs.flameLook());
+  await sleep(500);
+  await nextDraw();
+  const b = await page.evaluate(() => window.fxs.flameLook());
+  await page.screenshot({ path: join(ART, 'web-flame-pbvr.png') });
+  const info = await page.evaluate(() => window.fxs.flame());
+  check(info?.mode === 'pbvr', 'the flame view defaults to PBVR', JSON.stringify(info));
+  check(a && a.bright > 0.01 && a.white <= 0.15, 'PBVR: at most 15% of the bright flame pixels are white', JSON.stringify(a));
+  check(a?.lower && a?.upper && a.lower.gr > a.upper.gr, 'PBVR: the lower third is hotter (yellower) than the upper third',
+    JSON.stringify([a?.lower, a?.upper]));
+  check(a && b && a.hash !== b.hash, 'PBVR: two looks 0.5 s apart differ');
+  // Orbit: drag across the view turns the camera; a double-click brings it home.
+  const home = info?.cam;
+  await page.mouse.move(130, 200);
+  await page.mouse.down();
+  await page.mouse.move(230, 190, { steps: 2 });
+  await page.mouse.up();
+  const turned = (await page.evaluate(() => window.fxs.flame()))?.cam;
+  const dist = (p, q) => Math.hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+  check(home && turned && dist(home, turned) > 0.05, 'a mouse drag turns the flame camera', JSON.stringify([home, turned]));
+  await page.mouse.dblclick(130, 200);
+  const back = (await page.evaluate(() => window.fxs.flame()))?.cam;
+  check(home && back && dist(home, back) < 1e-6, 'a double-click brings it home', JSON.stringify([home, back]));
+  await page.evaluate(() => { window.fxs.flameSettings.mode = 'hdr'; });
+  await sleep(1500); // redrawn every display frame (drawfps=2), new stream frame or not
+  const h = await page.evaluate(() => window.fxs.flameLook());
+  await page.screenshot({ path: join(ART, 'web-flame-hdr.png') });
+  check(h && h.bright > 0.005 && h.white <= 0.15, 'hdr: lit, and at most 15% of the bright flame pixels are white', JSON.stringify(h));
+  await page.close();
+}
+
 try {
   daemon = await startDaemon(0);
   const port = daemon.port;
@@ -315,6 +359,7 @@ try {
   await page2.screenshot({ path: join(ART, 'web-panel-error.png') });
   await page2.close();
 
+  await flameChecks(ctx, port);
   await eyeChecks(ctx, port, fxctl, url);
 
   // Restart the daemon on the same port: the page reconnects and frames flow again.

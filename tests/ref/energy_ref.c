@@ -119,7 +119,7 @@ static int ref_parse_curves(const cJSON *doc, double frame, int animate, struct 
             return -1;
         }
         double anim[ENERGY_REF_MAX_W];
-        energy_ref_anim_weights(frame, c->nw, anim);
+        energy_ref_loop_weights(frame, c->nw, anim);
         for (int k = 0; k < c->nw; k++)
             c->w[k] = cJSON_GetArrayItem(w, k)->valuedouble * (animate ? anim[k] : 1.0);
     }
@@ -414,6 +414,17 @@ void energy_ref_anim_weights(double frame, int n, double *w)
         double v = (-cos(th) + 0.8) / 1.5;
         w[i] = v < 0 ? 0 : (v > 1 ? 1 : v);
     }
+}
+
+void energy_ref_loop_weights(double frame, int n, double *w)
+{
+    double P = 7.0 * n + 10, life = 7.0 * (n - 1) + 50, one[ENERGY_REF_MAX_W];
+    for (int i = 0; i < n; i++) w[i] = 0;
+    for (double m = ceil((frame - life) / P); m * P <= frame; m++) {
+        energy_ref_anim_weights(frame - m * P, n, one);
+        for (int i = 0; i < n; i++) w[i] += one[i];
+    }
+    for (int i = 0; i < n; i++) w[i] = w[i] > 1 ? 1 : w[i];
 }
 
 /* ---------------------------------------------------------------- integrators */

@@ -47,8 +47,8 @@ struct energy_ref_scene {
 /* ---- scene ---- */
 /* Reads a parameter document (names of energy_wave_params). Missing scalars take the
  * thesis values (alpha = beta = 1, nu = 2, divisions = 200). Directions are normalised.
- * When "animate" is true each curve's W is multiplied by the eq. (5.1) weights at frame
- * sim_time * anim_rate. Returns 0, or -1 with a message. */
+ * When "animate" is true each curve's W is multiplied by the looping eq. (5.1) weights
+ * (energy_ref_loop_weights) at frame sim_time * anim_rate. Returns 0, or -1 with a message. */
 int energy_ref_scene_from_json(const cJSON *doc, double sim_time, struct energy_ref_scene *sc, char *msg,
                                size_t msg_len);
 /* Texel (i, j), column i left to right, row j top to bottom: ray start S and end E. */
@@ -79,6 +79,9 @@ double energy_ref_bspline_basis(int nw, int i, double t); /* N_i^2(t), end span 
 double energy_ref_bspline(int nw, const double *w, double t);
 /* Eq. (5.1) weights at animation frame `frame` (digest §4). */
 void energy_ref_anim_weights(double frame, int n, double *w);
+/* The stream's looping animation: pulses started at every multiple m of P = 7n + 10 frames
+ * (m <= frame), summed per weight and clamped at 1. */
+void energy_ref_loop_weights(double frame, int n, double *w);
 
 /* ---- integrals ---- */
 typedef double (*energy_ref_fn)(double s, void *ctx);

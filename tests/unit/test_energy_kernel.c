@@ -410,6 +410,62 @@ static void test_dev_anim_weights(void)
         energy_ref_anim_weights(f, 9, b);
         for (int i = 0; i < 9; i++) CHECK(fabs(a[i] - b[i]) <= 1e-12, "frame %g w%d: %.12g vs %.12g", f, i, a[i], b[i]);
     }
+    for (int n = 3; n <= 32; n += 5) /* the looping pulses (fmod + ages) against the reference's sum over starts */
+        for (double f = -20; f <= 400; f += 1.25) {
+            double a[32], b[32];
+            energy_wave_loop_weights(f, n, a);
+            energy_ref_loop_weights(f, n, b);
+            for (int i = 0; i < n; i++)
+                CHECK(fabs(a[i] - b[i]) <= 1e-9, "n %d frame %g w%d: %.12g vs %.12g", n, f, i, a[i], b[i]);
+        }
+}
+
+static int tek_cmp(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Issue 14: with the default parameters (animated) no frame of two loops of the longest curve
+ * carries less than half the median total energy (sum of B over a 64 x 32 texture): the pulse
+ * must not leave every weight near zero at once. Each frame is also lit somewhere. */
+static void test_loop_energy(void)
+{
+    cJSON *partial = cJSON_CreateObject();
+    cJSON_AddNumberToObject(partial, "width", 64);
+    cJSON_AddNumberToObject(partial, "height", 32);
+    cJSON *doc = tek_doc(partial);
+    struct fx_err err = {0};
+    struct energy_wave *ew = doc ? energy_wave_new(tek_ocl, doc, &err) : NULL;
+    CHECK(ew != NULL, "energy_wave_new: %s", err.message);
+    if (!ew) {
+        cJSON_Delete(doc);
+        return;
+    }
+    int longest = 3;
+    const cJSON *c;
+    cJSON_ArrayForEach(c, cJSON_GetObjectItemCaseSensitive(doc, "curves")) {
+        int nw = cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(c, "W"));
+        if (nw > longest) longest = nw;
+    }
+    int frames = (int)(2 * energy_wave_anim_period(longest));
+    double rate = params_num(doc, "anim_rate"), *sum = calloc((size_t)frames, sizeof *sum);
+    static float tex[64 * 32];
+    for (int f = 0; f < frames && !energy_wave_render(ew, f / rate, tex, &err); f++)
+        for (int k = 0; k < 64 * 32; k++) sum[f] += tex[k];
+    double *sorted = malloc(sizeof(double) * (size_t)frames);
+    memcpy(sorted, sum, sizeof(double) * (size_t)frames);
+    qsort(sorted, (size_t)frames, sizeof *sorted, tek_cmp);
+    double median = sorted[frames / 2], least = sorted[0];
+    int worst = 0;
+    for (int f = 0; f < frames; f++) if (sum[f] == least) worst = f;
+    printf("  info: %d frames: total B min %.4g (frame %d), median %.4g, max %.4g\n", frames, least, worst, median,
+           sorted[frames - 1]);
+    CHECK(median > 0 && least >= 0.5 * median, "frame %d carries %.3g of the median %.3g", worst, least, median);
+    free(sorted);
+    free(sum);
+    energy_wave_free(ew);
+    cJSON_Delete(doc);
 }
 
 /* ---------------------------------------------------------------- full renders */
@@ -777,6 +833,7 @@ int main(void)
     RUN(test_dev_curve_nearest_vectors);
     RUN(test_dev_curve_nearest_random);
     RUN(test_dev_anim_weights);
+    RUN(test_loop_energy);
     RUN(test_render_simpson_random);
     RUN(test_render_modes_converged);
     RUN(test_torus_symmetry);

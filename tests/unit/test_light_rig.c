@@ -222,7 +222,7 @@ static void test_segments_curves(void)
             int nw = 0;
             const cJSON *x;
             cJSON_ArrayForEach(x, cJSON_GetObjectItemCaseSensitive(it, "W")) w[nw++] = x->valuedouble;
-            energy_ref_anim_weights(fmod(t * 30.0, 7.0 * (nw - 1) + 50.0), nw, anim);
+            energy_ref_loop_weights(t * 30.0, nw, anim);
             for (int k = 0; k < nw; k++) w[k] *= anim[k];
             for (int j = 0; j < 8; j++) {
                 const struct light_seg *s = &rig.seg[ci * 8 + j];
