@@ -217,6 +217,29 @@ async function eyeChecks(ctx, port, fxctl, url) {
   console.log('eye hex', JSON.stringify(hex));
   check(hex.lut.std > 15 && hex.lut.dark > 0.02 && hex.period.c > 0.1, 'hex lut view: facets with pigment', JSON.stringify({ lut: hex.lut, period: hex.period }));
   check(hex.corr > 0.75, 'hex: lut and bake views agree', `correlation ${hex.corr}`);
+
+  // Orbit the lut view with the mouse: the pseudopupils move with the camera and nothing is
+  // sent to the server (the look-up table is the point): same rev, no new frame.
+  const still = await page.evaluate(() => [window.fxs.stats().eyelut, window.fxs.eye('eyelut').lutRev]);
+  const before = await grabView(page, 'eyelut');
+  const r = await page.evaluate(() => {
+    const s = window.fxs.sample('eye', 'eyelut'), b = document.getElementById('view').getBoundingClientRect();
+    return { x: b.left + s.css.left + s.css.w / 2, y: b.top + s.css.top + s.css.h / 2 };
+  });
+  await page.mouse.move(r.x, r.y);
+  await page.mouse.down();
+  await page.mouse.move(r.x + 70, r.y + 25, { steps: 2 });
+  await page.mouse.up();
+  await sleep(1200);
+  const turned = await grabView(page, 'eyelut');
+  const after2 = await page.evaluate(() => [window.fxs.stats().eyelut, window.fxs.eye('eyelut').lutRev]);
+  let diff = 0;
+  for (let i = 0; i < before.lum.length; i++) diff += Math.abs(before.lum[i] - turned.lum[i]);
+  diff /= before.lum.length;
+  check(diff > 4 && after2[0].rev === still[0].rev && after2[0].frames === still[0].frames && after2[1] === still[1],
+    'dragging the lut view turns the eye and moves the pseudopupils with no message to the server',
+    `mean |change| ${diff.toFixed(1)}, rev ${still[0].rev} -> ${after2[0].rev}, frames ${still[0].frames} -> ${after2[0].frames}`);
+  await page.screenshot({ path: join(ART, 'web-eye-orbit.png') });
   await page.close();
   fxctl('destroy', 'eyelut');
   fxctl('destroy', 'eyebake');

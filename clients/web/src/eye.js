@@ -11,6 +11,7 @@
 // so density·uv is the lattice coordinate of eq. 5.1. An OBJ model (not sent to clients)
 // falls back to the hemisphere in mode lut and to the uv square in mode bake.
 import * as THREE from 'three';
+import { ViewOrbit } from './orbit.js';
 import { decompress } from 'fzstd';
 import { SRGB_GLSL } from './gl.js';
 import { WaveTexture } from './wave.js';
@@ -301,7 +302,10 @@ export class EyeView {
     this.modelKey = key;
   }
 
-  // The stream's `eye` looking at the model's centre, the model's bounding sphere in view.
+  // Home: the stream's `eye` looking at the model's centre, the model's bounding sphere in
+  // view. The orbit camera (orbit.js) starts there and goes back there when `eye` or the model
+  // changes; in mode lut the shader shades from wherever the camera is, so the pseudopupils
+  // follow the mouse with no message to the server (mode bake shows the texture baked for `eye`).
   placeCamera(aspect) {
     const eye = new THREE.Vector3(...this.params.eye);
     const bs = this.mesh.geometry.boundingSphere, dist = Math.max(eye.distanceTo(bs.center), 1.05 * bs.radius);
@@ -311,12 +315,21 @@ export class EyeView {
     cam.aspect = aspect;
     cam.near = dist / 100;
     cam.far = dist * 10;
-    cam.position.copy(eye);
-    cam.up.set(0, 1, 0);
-    if (Math.abs(eye.clone().sub(bs.center).normalize().y) > 0.99) cam.up.set(0, 0, 1);
-    cam.lookAt(bs.center);
     cam.updateProjectionMatrix();
+    const key = `${this.params.eye}|${this.modelKey}`;
+    if (key === this.homeKey) { this.orbit?.update(); return; }
+    this.homeKey = key;
+    const up = Math.abs(eye.clone().sub(bs.center).normalize().y) > 0.99 ? new THREE.Vector3(0, 0, 1) : new THREE.Vector3(0, 1, 0);
+    if (this.orbit) this.orbit.setHome(eye, bs.center, up);
+    else {
+      cam.position.copy(eye);
+      cam.up.copy(up);
+      cam.lookAt(bs.center);
+    }
   }
+
+  // Mouse control on the shared canvas; css() gives this view's rectangle.
+  attachControls(canvas, css) { this.orbit = new ViewOrbit(this.camera, canvas, css); this.homeKey = null; }
 
   lutUniforms() {
     const l = this.lut, p = this.params, u = this.lutMat.uniforms;
@@ -355,5 +368,6 @@ export class EyeView {
     this.mesh.geometry.dispose();
     this.lutMat.dispose();
     this.bakeMat.dispose();
+    this.orbit?.dispose();
   }
 }

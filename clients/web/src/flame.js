@@ -208,11 +208,10 @@ export class FlameView {
         gl_FragColor = vec4(linearToSRGB(aces == 1 ? acesFilmic(c) : c), 1.0);
       }`, { src: { value: null }, scale: { value: 1 }, aces: { value: 0 } });
     this.orbit = null;
-    this.controlsAt = null; // {canvas, css} once the page gives the view mouse control
   }
 
   // Mouse control on the shared canvas; css() gives this view's rectangle.
-  attachControls(canvas, css) { this.controlsAt = { canvas, css }; this.frameStage(); }
+  attachControls(canvas, css) { this.orbit = new ViewOrbit(this.camera, canvas, css); this.frameStage(); }
 
   setParams(params) {
     this.params = params;
@@ -251,15 +250,10 @@ export class FlameView {
 
   // The camera's home: level with the lower flame, 42 cm away, looking at 7 cm above the source.
   frameStage() {
-    if (!this.controlsAt) return;
+    if (!this.orbit) return;
     const { scale, up, side, base } = this.frameOf();
     const target = base.clone().addScaledVector(up, 0.07 * scale);
-    if (!this.orbit || !this.camera.up.equals(up)) { // OrbitControls takes the camera's up when created
-      this.orbit?.dispose();
-      this.camera.up.copy(up);
-      this.orbit = new ViewOrbit(this.camera, this.controlsAt.canvas, this.controlsAt.css);
-    }
-    this.orbit.setHome(target.clone().addScaledVector(side, 0.42 * scale).addScaledVector(up, 0.03 * scale), target);
+    this.orbit.setHome(target.clone().addScaledVector(side, 0.42 * scale).addScaledVector(up, 0.03 * scale), target, up);
   }
 
   // An instanced geometry over the shared per-particle attributes, `slots` sprites per particle.
@@ -373,7 +367,7 @@ export class FlameView {
   }
 
   info() {
-    return { mode: this.settings.mode, count: this.count, cam: this.camera.position.toArray(), target: this.orbit?.controls.target.toArray() };
+    return { mode: this.settings.mode, count: this.count, cam: this.camera.position.toArray(), target: this.orbit?.target?.toArray() };
   }
 
   dispose() {

@@ -77,20 +77,25 @@ async function describe(effect) {
 }
 
 function makeViews(st) {
+  let vs = [];
   switch (st.effect) {
     case 'flame': {
       const v = new FlameView(st.name);
       v.settings = flameSettings;
-      v.attachControls(canvas, () => lastLayout.find((e) => e.view === v)?.css ?? null);
-      return [v];
+      vs = [v];
+      break;
     }
     case 'energy_wave': {
       const w = new WaveView(st.name);
-      return [w, new SceneView(st.name, w.wt)];
+      vs = [w, new SceneView(st.name, w.wt)];
+      break;
     }
-    case 'compound_eye': return [new EyeView(st.name)];
-    default: return [];
+    case 'compound_eye': vs = [new EyeView(st.name)]; break;
+    default: break;
   }
+  // Every 3D view turns, zooms and pans with the mouse over it (orbit.js); the wave is a texture.
+  for (const v of vs) v.attachControls?.(canvas, () => lastLayout.find((e) => e.view === v)?.css ?? null);
+  return vs;
 }
 
 function rebuildViewList() {

@@ -7,6 +7,7 @@
 // shadow (direction from rig.js shadowDir, with the sign fix), t < 0 discarded, each pixel
 // darkened once (stencil). The wave itself is the stream's billboard, facing this camera.
 import * as THREE from 'three';
+import { ViewOrbit } from './orbit.js';
 import { SRGB_GLSL } from './gl.js';
 import { decodeRig, RigState, pointLight, shadowDir, SEG_FLOATS } from './rig.js';
 import { waveMaterial, applyWaveUniforms } from './wave.js';
@@ -144,6 +145,7 @@ export class SceneView {
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.5, 500);
     this.camera.position.set(26, 10, 44);
     this.camera.lookAt(0, -4, 0);
+    this.orbit = null;
     this.segData = new Float32Array(3 * MAX_SEG * 4);
     this.segTex = new THREE.DataTexture(this.segData, 3, MAX_SEG, THREE.RGBAFormat, THREE.FloatType);
     this.toonUniforms = {
@@ -303,8 +305,15 @@ export class SceneView {
     for (const m of this.models) if (m !== this.ground) m.group.position.y = (m.baseY ??= m.group.position.y) + base;
   }
 
+  // Mouse control on the shared canvas (orbit.js); home is the scene's default view.
+  attachControls(canvas, css) {
+    this.orbit = new ViewOrbit(this.camera, canvas, css);
+    this.orbit.setHome(new THREE.Vector3(26, 10, 44), new THREE.Vector3(0, -4, 0), new THREE.Vector3(0, 1, 0));
+  }
+
   render(renderer, rect, t) {
     if (!this.params) return false;
+    this.orbit?.update();
     this.placeOnPlane();
     this.updateShadows();
     this.camera.aspect = rect.w / rect.h;
@@ -337,5 +346,5 @@ export class SceneView {
     return drew;
   }
 
-  dispose() { this.segTex.dispose(); }
+  dispose() { this.segTex.dispose(); this.orbit?.dispose(); }
 }
