@@ -99,9 +99,9 @@ async function setNumber(page, stream, path, value) {
 
 // Luminance (0-255) of the view of `stream` read back from the canvas (drawn with
 // preserveDrawingBuffer), row 0 at the top.
-async function grabView(page, stream) {
-  return page.evaluate((name) => {
-    const s = window.fxs.sample('eye', name), c = document.getElementById('view'), pr = c.width / c.clientWidth;
+async function grabView(page, stream, kind = 'eye') {
+  return page.evaluate(([name, kind]) => {
+    const s = window.fxs.sample(kind, name), c = document.getElementById('view'), pr = c.width / c.clientWidth;
     const x = Math.round(s.css.left * pr), y = Math.round(s.css.top * pr), w = Math.round(s.css.w * pr), h = Math.round(s.css.h * pr);
     const g = document.createElement('canvas');
     g.width = w; g.height = h;
@@ -110,7 +110,7 @@ async function grabView(page, stream) {
     const px = ctx2.getImageData(0, 0, w, h).data, lum = new Array(w * h);
     for (let i = 0; i < w * h; i++) lum[i] = Math.round(0.2126 * px[4 * i] + 0.7152 * px[4 * i + 1] + 0.0722 * px[4 * i + 2]);
     return { w, h, lum };
-  }, stream);
+  }, [stream, kind]);
 }
 // The eye's disc (pixels brighter than the dark background) and a box of half size 0.45 r
 // inside it around its centre.
@@ -243,6 +243,40 @@ async function eyeChecks(ctx, port, fxctl, url) {
   await page.close();
   fxctl('destroy', 'eyelut');
   fxctl('destroy', 'eyebake');
+}
+
+// The energy wave's glow is a bloom (issue 14): an isolated torus seen face-on, its radial
+// brightness profile outside the ring falls monotonically (no ghost rings: the old 24-tap glow
+// drew copies of the ring around it). Also the screenshot of the wave view.
+async function waveChecks(ctx, port, fxctl) {
+  fxctl('create', 'energy_wave', 'ring', 'tori=[{"center":[0,0,0],"axis":[0,0,1],"R":3,"coef":5.1}]', 'curves=[]',
+    'animate=false', 'light_rig=false', 'fps=3');
+  const page = await ctx.newPage();
+  await page.setViewportSize({ width: 700, height: 420 });
+  await page.goto(`http://127.0.0.1:${port}/?streams=ring&grid=1x1&aa=0&drawfps=2`, { timeout: 20000 });
+  check(await until(() => page.evaluate(() => (window.fxs.stats().ring?.drawn ?? 0) > 1), 20000, 300), 'torus stream drawn');
+  await sleep(800);
+  const img = await grabView(page, 'ring', 'wave');
+  await page.screenshot({ path: join(ART, 'web-wave-torus.png') });
+  const cx = img.w / 2, cy = img.h / 2, rmax = Math.floor(Math.min(img.w, img.h) * 0.45), prof = new Array(rmax).fill(0), cnt = new Array(rmax).fill(0);
+  for (let y = 0; y < img.h; y++)
+    for (let x = 0; x < img.w; x++) {
+      const r = Math.floor(Math.hypot(x + 0.5 - cx, y + 0.5 - cy));
+      if (r < rmax) { prof[r] += img.lum[y * img.w + x]; cnt[r]++; }
+    }
+  for (let r = 0; r < rmax; r++) prof[r] /= Math.max(1, cnt[r]);
+  let peak = 0;
+  for (let r = 0; r < rmax; r++) if (prof[r] > prof[peak]) peak = r;
+  let low = prof[peak], bump = 0, at = -1;
+  for (let r = peak + 1; r < rmax; r++) {
+    if (prof[r] - low > bump) { bump = prof[r] - low; at = r; }
+    low = Math.min(low, prof[r]);
+  }
+  const profile = prof.filter((_, r) => r % 8 === 0).map((v) => Math.round(v));
+  check(prof[peak] > 60 && bump <= 2, 'the torus glow falls off monotonically outside the ring (a bloom, no ghost rings)',
+    `ring at ${peak} px (${prof[peak].toFixed(0)}), largest rise outside ${bump.toFixed(1)} at ${at} px; profile every 8 px ${JSON.stringify(profile)}`);
+  await page.close();
+  fxctl('destroy', 'ring');
 }
 
 // The flame view alone (issue 13): PBVR by default, not blown out (of the flame's pixels
@@ -383,6 +417,7 @@ try {
   await page2.close();
 
   await flameChecks(ctx, port);
+  await waveChecks(ctx, port, fxctl);
   await eyeChecks(ctx, port, fxctl, url);
 
   // Restart the daemon on the same port: the page reconnects and frames flow again.

@@ -39,7 +39,7 @@ renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
 const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
 // The flame's look (FlameView.settings, shared by every flame view): ?flame=hdr picks the mode.
 const flameSettings = { ...FLAME_DEFAULTS, mode: q.get('flame') === 'hdr' ? 'hdr' : 'pbvr', rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
-const viewSettings = { waveGlow: 0.6, waveBlack: 0.55, waveGain: 1.6 };
+const viewSettings = { waveBloom: 0.6, waveExposure: 0.8, waveBlack: 0.55, waveGain: 1.6 };
 const vf = gui.addFolder('view (this page only)');
 const ff = vf.addFolder('flame');
 ff.add(flameSettings, 'mode', ['pbvr', 'hdr']).name('mode');
@@ -51,7 +51,8 @@ ff.add(flameSettings, 'smokeT', 300, 3000, 10).name('pbvr: smoke below T (K)');
 ff.addColor(flameSettings, 'smokeColor').name('pbvr: smoke colour');
 ff.add(flameSettings, 'whiteT', 1500, 8000, 50).name('white point T_max (K)');
 ff.add(flameSettings, 'exposure', 0.05, 8, 0.01).name('hdr: exposure');
-vf.add(viewSettings, 'waveGlow', 0, 3, 0.01).name('wave glow');
+vf.add(viewSettings, 'waveBloom', 0, 3, 0.01).name('wave bloom');
+vf.add(viewSettings, 'waveExposure', 0.1, 8, 0.01).name('wave exposure');
 vf.add(viewSettings, 'waveBlack', 0, 2, 0.01).name('wave black level (B)');
 vf.add(viewSettings, 'waveGain', 0.1, 5, 0.01).name('wave level gain');
 vf.close();
@@ -270,9 +271,9 @@ function frame(t) {
   const drawnStreams = new Set();
   for (const { view, rect, css } of lastLayout) {
     const v = view;
+    if (v.kind === 'wave') Object.assign(v.settings, { bloom: viewSettings.waveBloom, exposure: viewSettings.waveExposure });
     for (const m of [v.kind === 'wave' ? v.material : null, v.billboardMat]) {
       if (!m) continue;
-      Object.assign(m.uniforms.glowGain, { value: viewSettings.waveGlow });
       m.uniforms.blackLevel.value = viewSettings.waveBlack;
       m.uniforms.levelGain.value = viewSettings.waveGain;
     }
