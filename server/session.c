@@ -239,6 +239,17 @@ static int session_op_describe(struct session *ss, const cJSON *req, const cJSON
     return 0;
 }
 
+/* Sends a copy of the reply r, without its id, as an event to every connection but ss that may
+ * list streams, so their stream lists follow creates and destroys made elsewhere (PROTOCOL.md §4). */
+static void session_announce(struct session *ss, const cJSON *r)
+{
+    cJSON *ev = cJSON_Duplicate(r, 1);
+    cJSON_DeleteItemFromObjectCaseSensitive(ev, "id");
+    for (struct session *o = ss->srv->sessions; o; o = o->next)
+        if (o != ss && o->role >= ACCESS_VIEW) session_send(o, cJSON_Duplicate(ev, 1));
+    cJSON_Delete(ev);
+}
+
 static int session_op_create(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
     static const char *const allowed[] = {"effect", "stream", "params", NULL};
@@ -258,6 +269,7 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
     cJSON_AddStringToObject(r, "stream", name);
     cJSON_AddStringToObject(r, "effect", fx->name);
     cJSON_AddNumberToObject(r, "rev", 1);
+    session_announce(ss, r);
     session_send(ss, r);
     return 0;
 }
@@ -276,6 +288,7 @@ static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON 
     log_info("stream %s destroyed", name);
     cJSON *r = session_reply("destroyed", id);
     cJSON_AddStringToObject(r, "stream", name);
+    session_announce(ss, r);
     session_send(ss, r);
     return 0;
 }

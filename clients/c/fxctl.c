@@ -29,6 +29,7 @@ struct fxctl_opts {
     int timeout_ms;
     struct fxc_options conn; /* token, CA file */
     long frames;       /* subscribe --frames, 0 when not given */
+    long count;        /* watch --count, 0 = until interrupted */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
     const char *out_dir;
@@ -67,6 +68,11 @@ static const char fxctl_help[] =
     "                                which shares its texture's SEQ, goes to\n"
     "                                DIR/NAME-SEQ-rig.bin and .json. Fails when the stream is\n"
     "                                destroyed or the server goes away.\n"
+    "  watch [--count N]             prints the list reply, then every created and\n"
+    "                                destroyed event (streams made or removed by\n"
+    "                                anyone) as a JSON line; stops after N events\n"
+    "                                (each within --timeout), else runs until\n"
+    "                                interrupted or the server goes away\n"
     "\n"
     "K=V: K is a top-level parameter name; V is JSON (wind=[1,0,0], n=3, on=true,\n"
     "mode=\"simpson\"); a V that is not valid JSON is taken as a string (mode=simpson).\n"
@@ -78,7 +84,7 @@ static const char fxctl_help[] =
     "  --ca-file F    PEM bundle that signs a wss:// server's certificate\n"
     "                 (default $FXSTREAM_CA_FILE, else the system's)\n"
     "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
-    "                 each frame (default 10000)\n"
+    "                 each frame (with watch --count, each event; default 10000)\n"
     "  --help, -h     this text\n"
     "\n"
     "output: each reply is printed on stdout as one line of JSON (the server's reply\n"
@@ -132,6 +138,8 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
     } else if (!strcmp(name, "--kind")) {
         if (fxctl_parse_long(val, 1, &n) || n > FXS_KIND_MAX) return fxctl_usage("--kind needs a frame kind, 1..4", val);
         o->kind = (int)n;
+    } else if (!strcmp(name, "--count")) {
+        if (fxctl_parse_long(val, 1, &o->count)) return fxctl_usage("--count needs a positive integer", val);
     } else if (!strcmp(name, "--out")) {
         o->out_dir = val;
     } else {
@@ -218,6 +226,7 @@ static const struct fxctl_cmd fxctl_cmds[] = {
     { "set", 2, -1, "stream", "set NAME K=V [K=V ...]" },
     { "reset", 1, 1, "stream", "reset NAME" },
     { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]" },
+    { "watch", 0, 0, NULL, "watch [--count N]" },
 };
 
 static const struct fxctl_cmd *fxctl_find_cmd(const char *name)
@@ -238,6 +247,7 @@ static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cm
     if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->out_dir))
         return fxctl_usage("--frames, --max-fps, --kind and --out go with subscribe only", NULL);
     if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
+    if (o->count && strcmp(cmd->name, "watch")) return fxctl_usage("--count goes with watch only", NULL);
     return 0;
 }
 
@@ -248,7 +258,7 @@ static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, 
     int i = 1, r = 0;
     *out = req;
     if (!req) return FXCTL_FAIL;
-    cJSON_AddStringToObject(req, "op", cmd->name);
+    cJSON_AddStringToObject(req, "op", strcmp(cmd->name, "watch") ? cmd->name : "list");
     if (cmd->first_field) cJSON_AddStringToObject(req, cmd->first_field, o->args[0]);
     if (!strcmp(cmd->name, "create")) cJSON_AddStringToObject(req, "stream", o->args[i++]);
     if (o->max_fps >= 0) cJSON_AddNumberToObject(req, "max_fps", o->max_fps);
@@ -495,6 +505,33 @@ static int fxctl_subscribe(struct fxc_client *c, const struct fxctl_opts *o, con
     return r;
 }
 
+/* After the list reply: prints created/destroyed events until o->count of them (each within
+ * the timeout) or, without --count, until the connection ends. */
+static int fxctl_watch(struct fxc_client *c, const struct fxctl_opts *o)
+{
+    char err[512];
+    for (long seen = 0; !o->count || seen < o->count;) {
+        struct fxc_msg m;
+        int n = fxc_next(c, &m, o->count ? o->timeout_ms : 1000, err, sizeof err);
+        if (n == 0 && !o->count) continue;
+        if (n <= 0) {
+            if (n == 0) fprintf(stderr, "fxctl: timeout after %d ms waiting for event %ld of %ld\n", o->timeout_ms, seen + 1, o->count);
+            else fprintf(stderr, "fxctl: %s\n", err);
+            return FXCTL_FAIL;
+        }
+        if (m.type == FXC_MSG_EVENT) {
+            const char *op = cJSON_GetObjectItemCaseSensitive(m.event, "op")->valuestring;
+            if (!strcmp(op, "created") || !strcmp(op, "destroyed")) {
+                fxctl_print_json(stdout, m.event);
+                fflush(stdout);
+                seen++;
+            }
+        }
+        fxc_msg_free(&m);
+    }
+    return 0;
+}
+
 /* ---- main ------------------------------------------------------------------------------------ */
 
 static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req)
@@ -517,6 +554,7 @@ static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, co
         fxctl_print_json(stdout, reply);
         fflush(stdout);
         if (!strcmp(cmd->name, "subscribe")) r = fxctl_subscribe(c, o, reply);
+        if (!strcmp(cmd->name, "watch")) r = fxctl_watch(c, o);
     }
     cJSON_Delete(reply);
     fxc_close(c);

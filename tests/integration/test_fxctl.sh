@@ -114,6 +114,21 @@ check_destroyed() {
     check "subscriber of destroyed stream fails" 1 '"op":"params","stream":"fxctl_t2"' "destroyed"
 }
 
+# watch prints the list, then streams created and destroyed by other connections.
+check_watch() {
+    timeout "$T" "$FXCTL" watch --count 2 >"$tmp/watch.out" 2>"$tmp/watch.err" &
+    wpid=$!
+    wait_for "$tmp/watch.out" '"op":"list"' 100
+    fx create energy_wave fxctl_w width=32 height=32; check "create while watching" 0
+    fx destroy fxctl_w; check "destroy while watching" 0
+    wait "$wpid"; rc=$?
+    cp "$tmp/watch.out" "$tmp/out"; cp "$tmp/watch.err" "$tmp/err"
+    check "watch: the created event" 0 '^{"op":"created","stream":"fxctl_w","effect":"energy_wave","rev":1}$'
+    check "watch: the destroyed event, then stops at --count" 0 '^{"op":"destroyed","stream":"fxctl_w"}$'
+    fx watch --count 1 --timeout 300; check "watch --count with no event: timeout, exit 1" 1 '"op":"list"' "timeout after 300 ms"
+    fx get energy --count 1; check "--count goes with watch only" 2 "" "watch only"
+}
+
 # A subscriber must fail clearly when the server goes away.
 check_server_close() {
     timeout "$T" "$FXCTL" subscribe energy --frames 100000 >"$tmp/close.out" 2>"$tmp/close.err" &
@@ -132,5 +147,6 @@ check_streams
 check_subscribe
 check_subscribe_rig
 check_destroyed
+check_watch
 check_server_close
 summary

@@ -212,6 +212,25 @@ async def test_persistence(t):
     await c.close()
 
 
+async def test_stream_events(t):
+    """A stream created or destroyed by one connection is announced to the others as an event
+    (no id); the requester gets only its reply."""
+    a, b = await Client.connect(D), await Client.connect(D)
+    r = await a.request("create", effect="energy_wave", stream="evt", params={"width": 32, "height": 32})
+    ev = await b.text()
+    t.check(r["op"] == "created" and ev == {"op": "created", "stream": "evt", "effect": "energy_wave", "rev": 1},
+            "another connection gets the created event, without id (%s)" % ev)
+    r = await a.request("destroy", stream="evt")
+    ev = await b.text()
+    t.check(r["op"] == "destroyed" and ev == {"op": "destroyed", "stream": "evt"},
+            "and the destroyed event (%s)" % ev)
+    nxt = await a.raw(json.dumps({"op": "list", "id": "after"}))
+    t.check(nxt.get("op") == "list" and nxt.get("id") == "after",
+            "the requester gets no event of its own change (next message: %s)" % nxt.get("op"))
+    await a.close()
+    await b.close()
+
+
 async def test_shutdown_closes_1001(t):
     c = await Client.connect(D)
     D.proc.send_signal(signal.SIGINT)
@@ -255,7 +274,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_nothing_half_applied, test_destroy_and_max_fps, test_persistence,
+               test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)

@@ -82,8 +82,8 @@ def server_schema(m):
         return "event.error.json" if "stream" in m else "reply.error.json"
     if op == "unsubscribed":
         return "event.unsubscribed.json" if "reason" in m else "reply.unsubscribed.json"
-    if op == "params":  # this suite always sends ids: a params message without one is a broadcast
-        return "reply.params.json" if "id" in m else "event.params.json"
+    if op in ("params", "created", "destroyed"):  # this suite always sends ids: without one it is an event
+        return ("reply.%s.json" if "id" in m else "event.%s.json") % op
     return "reply.%s.json" % op
 
 

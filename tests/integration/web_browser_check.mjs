@@ -248,9 +248,12 @@ async function eyeChecks(ctx, port, fxctl, url) {
 // The energy wave's glow is a bloom (issue 14): an isolated torus seen face-on, its radial
 // brightness profile outside the ring falls monotonically (no ghost rings: the old 24-tap glow
 // drew copies of the ring around it). Also the screenshot of the wave view.
-async function waveChecks(ctx, port, fxctl) {
+async function waveChecks(ctx, port, fxctl, main) {
   fxctl('create', 'energy_wave', 'ring', 'tori=[{"center":[0,0,0],"axis":[0,0,1],"R":3,"coef":5.1}]', 'curves=[]',
     'animate=false', 'light_rig=false', 'fps=3');
+  // The open page learns of the new stream from the created event (no reload) and shows it.
+  const shown = await until(() => main.evaluate(() => window.fxs.views.includes('ring:wave') && document.body.dataset.subscribed.includes('ring')), 10000);
+  check(shown, 'a stream created elsewhere appears in an open page', String(await main.evaluate(() => window.fxs.views)));
   const page = await ctx.newPage();
   await page.setViewportSize({ width: 700, height: 420 });
   await page.goto(`http://127.0.0.1:${port}/?streams=ring&grid=1x1&aa=0&drawfps=2`, { timeout: 20000 });
@@ -277,6 +280,8 @@ async function waveChecks(ctx, port, fxctl) {
     `ring at ${peak} px (${prof[peak].toFixed(0)}), largest rise outside ${bump.toFixed(1)} at ${at} px; profile every 8 px ${JSON.stringify(profile)}`);
   await page.close();
   fxctl('destroy', 'ring');
+  const gone = await until(() => main.evaluate(() => !window.fxs.views.some((v) => v.startsWith('ring:'))), 10000);
+  check(gone, 'and disappears when it is destroyed', String(await main.evaluate(() => window.fxs.views)));
 }
 
 // The flame view alone (issue 13): PBVR by default, not blown out (of the flame's pixels
@@ -417,7 +422,7 @@ try {
   await page2.close();
 
   await flameChecks(ctx, port);
-  await waveChecks(ctx, port, fxctl);
+  await waveChecks(ctx, port, fxctl, page);
   await eyeChecks(ctx, port, fxctl, url);
 
   // Restart the daemon on the same port: the page reconnects and frames flow again.

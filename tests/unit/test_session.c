@@ -197,9 +197,19 @@ static void test_set_all_or_nothing(void)
 static void test_broadcast(void)
 {
     t_server_init();
-    struct session *a = t_open(), *b = t_open(), *c = t_open();
-    t_drain(a), t_drain(b), t_drain(c);
+    struct session *a = t_open(), *b = t_open(), *c = t_open(), *none = malloc(sizeof *none);
+    session_open(none, &t_srv, NULL, ACCESS_NONE); /* not authenticated: may not list, hears nothing */
+    t_drain(a), t_drain(b), t_drain(c), t_drain(none);
     cJSON_Delete(t_req(a, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"x\"}"));
+    for (int k = 0; k < 2; k++) { /* the other connections hear of the new stream */
+        cJSON *cr = t_next(k ? c : b);
+        CHECK(!strcmp(t_op(cr), "created") && cr && !cJSON_GetObjectItem(cr, "id") &&
+                  !strcmp(cJSON_GetObjectItem(cr, "stream")->valuestring, "x"),
+              "created event to connection %d", k);
+        cJSON_Delete(cr);
+    }
+    CHECK(t_next(a) == NULL, "the creator gets no event of its own create");
+    CHECK(t_next(none) == NULL, "a connection that may not list gets no created event");
     cJSON *r = t_req(b, "{\"op\":\"subscribe\",\"stream\":\"x\",\"max_fps\":5}");
     CHECK(!strcmp(t_op(r), "subscribed") && cJSON_GetObjectItem(r, "channel")->valueint > 0, "subscribed");
     cJSON_Delete(r);
@@ -215,6 +225,11 @@ static void test_broadcast(void)
     CHECK(!strcmp(t_op(ev), "unsubscribed") && !strcmp(cJSON_GetObjectItem(ev, "reason")->valuestring, "destroyed"),
           "destroy tells subscribers");
     cJSON_Delete(ev);
+    for (int k = 0; k < 2; k++) {
+        ev = t_next(k ? c : b);
+        CHECK(!strcmp(t_op(ev), "destroyed") && ev && !cJSON_GetObjectItem(ev, "id"), "destroyed event to %d", k);
+        cJSON_Delete(ev);
+    }
     CHECK(b->nsubs == 0, "subscription dropped");
     t_server_free();
 }
@@ -226,6 +241,7 @@ static void test_stream_error_event(void)
     t_drain(a), t_drain(b);
     cJSON_Delete(t_req(a, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"x\"}"));
     cJSON_Delete(t_req(a, "{\"op\":\"subscribe\",\"stream\":\"x\"}"));
+    t_drain(b); /* the created event */
     struct stream *s = hub_find(&t_srv.hub, "x");
     hub_stream_error(&t_srv.hub, s, "kernel failed: CL_OUT_OF_RESOURCES");
     session_poll_errors(a);

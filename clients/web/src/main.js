@@ -151,6 +151,11 @@ function detach(st) {
   rebuildViewList();
 }
 
+let maxSubscriptions = 16;
+function markSubscribed() {
+  document.body.dataset.subscribed = [...streams.values()].filter((s) => s.channel).map((s) => s.name).join(',');
+}
+
 async function setup(hello) {
   $('device').textContent = hello.device;
   $('server').textContent = hello.server;
@@ -160,16 +165,22 @@ async function setup(hello) {
     if (only) list.streams = list.streams.filter((s) => only.includes(s.stream));
     const names = new Set(list.streams.map((s) => s.stream));
     for (const st of [...streams.values()]) if (!names.has(st.name)) detach(st);
-    const max = hello.limits?.max_subscriptions ?? 16;
-    for (const s of list.streams.slice(0, max)) await attach(s);
-    document.body.dataset.subscribed = [...streams.values()].filter((s) => s.channel).map((s) => s.name).join(',');
+    maxSubscriptions = hello.limits?.max_subscriptions ?? 16;
+    for (const s of list.streams.slice(0, maxSubscriptions)) await attach(s);
+    markSubscribed();
   } catch (e) {
     console.warn('setup failed', e);
   }
 }
 
 function onEvent(m) {
-  if (m.op === 'params') {
+  if (m.op === 'created' && !m.id) { // made by another connection (PROTOCOL.md §4)
+    if ((!only || only.includes(m.stream)) && !streams.has(m.stream) && streams.size < maxSubscriptions)
+      attach(m).then(markSubscribed).catch((e) => console.warn('attach failed', e));
+  } else if (m.op === 'destroyed' && !m.id) {
+    const st = streams.get(m.stream);
+    if (st) { detach(st); markSubscribed(); }
+  } else if (m.op === 'params') {
     const st = streams.get(m.stream);
     if (!st) return;
     applyParams(st, m.params, m.rev);
