@@ -183,6 +183,8 @@ async function eyeChecks(ctx, port, fxctl, url) {
   check(li && li.mode === 'lut' && li.lutRev === 1 && li.cells === 32 && li.dirs === 32 && li.atlas === 1088 && li.lattice === 0,
         'a lens table (kind 4) arrives, decodes and is drawn', JSON.stringify(ready));
   check(bi && bi.mode === 'bake' && bi.bake === 512, 'a bake texture (kind 2 EXR) arrives and is drawn', JSON.stringify(bi));
+  const eyeLabel = await until(() => page.evaluate(() => document.querySelector('.label[data-view="eyelut:eye"]')?.textContent), 3000);
+  check(/lens table rev 1 · received \d+ s ago/.test(eyeLabel || ''), 'the lut eye shows its table rev and age, not a dead 0 fps', String(eyeLabel));
   await sleep(1200);
   const sq = await eyeImages(page);
   await page.screenshot({ path: join(ART, 'web-eye.png') });
@@ -369,6 +371,10 @@ try {
   check(rig && rig.shadows.length === 4 && rig.shadows.every((s) => s.k[1] < 0), 'every model casts a shadow downwards', JSON.stringify(rig?.shadows));
   check(scene && scene.lit > 0.3, 'toon scene is lit', JSON.stringify(scene));
   check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
+  // The overlay: skipped frames by who skipped them and per kind, every figure defined in a tooltip.
+  const label = await page.evaluate(() => { const el = document.querySelector('.label[data-view="energy:wave"]'); return { text: el?.textContent, title: el?.title }; });
+  check(/skipped by server: .*· replaced \d+/.test(label.text || '') && /ms: age of the frames/.test(label.title || ''),
+    'stats overlay: server skips per kind apart from frames replaced here, figures defined in a tooltip', JSON.stringify(label));
 
   // A panel toggle and slider: the feature texture off, then the attenuation gain up.
   await openFolder(page, 'energy');

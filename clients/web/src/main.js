@@ -11,7 +11,7 @@ import GUI from 'lil-gui';
 import { parseHeader } from '../fxs_particles.js';
 import { Conn } from './conn.js';
 import { StreamPanel } from './panel.js';
-import { StreamStats } from './stats.js';
+import { STATS_HELP, StreamStats } from './stats.js';
 import { FLAME_DEFAULTS, FlameView } from './flame.js';
 import { WaveView } from './wave.js';
 import { SceneView } from './scene.js';
@@ -203,7 +203,7 @@ function onFrame(buf) {
   const st = byChannel.get(h.channel);
   if (!st) return;
   st.stats.frame(h, buf.byteLength);
-  if (st.pending.has(h.kind)) st.stats.skipped++;
+  if (st.pending.has(h.kind)) st.stats.replace();
   st.pending.set(h.kind, { h, buf });
 }
 
@@ -308,7 +308,10 @@ setInterval(() => {
   for (const [v, el] of labels) {
     const st = streams.get(v.stream);
     if (!st) continue;
-    el.textContent = `${v.stream} · ${VIEW_TITLES[v.kind]} · rev ${st.rev}\n${st.stats.text()}${st.error ? '\n⚠ ' + st.error : ''}`;
+    const lut = v.kind === 'eye' && st.params?.mode === 'lut';
+    el.textContent = `${v.stream} · ${VIEW_TITLES[v.kind]} · rev ${st.rev}\n` +
+      `${lut ? st.stats.tableText(v.info().lutRev) : st.stats.text()}${st.error ? '\n⚠ ' + st.error : ''}`;
+    el.title = STATS_HELP;
   }
   const tot = [...streams.values()].reduce((a, s) => ({ fps: a.fps + s.stats.rate.fps, kB: a.kB + s.stats.rate.kBps }), { fps: 0, kB: 0 });
   $('totals').textContent = `${streams.size} streams · ${tot.fps.toFixed(1)} frames/s · ${tot.kB.toFixed(1)} kB/s`;
