@@ -46,9 +46,9 @@ const struct param_def compound_eye_params[] = {
     {.name = "mode", .type = PARAM_ENUM, .def = "\"lut\"", .choices = eye_mode_names, .unit = "", .flags = PARAM_RESTART,
      .doc = "lut: send the lens look-up table (kind 4) on each change that affects it, the client shades; "
             "bake: send the model's shaded view texture (kind 2 EXR) on each change"},
-    {.name = "lattice", .type = PARAM_ENUM, .def = "\"square\"", .choices = eye_lattice_names, .unit = "",
+    {.name = "lattice", .type = PARAM_ENUM, .def = "\"hex\"", .choices = eye_lattice_names, .unit = "",
      .doc = EYE_LUT_DOC("lens lattice: square (thesis, 4 side pupils) or hex (real eyes, 6 side pupils)")},
-    {.name = "density", .type = PARAM_FLOAT, .def = "40", .min = 1, .max = 1000, .unit = "cells per UV unit",
+    {.name = "density", .type = PARAM_FLOAT, .def = "60", .min = 1, .max = 1000, .unit = "cells per UV unit",
      .doc = "ommatidium density R_t (eq. 5.1); a client uniform in mode lut (thesis: 300 on its own UV layout)"},
     EYE_FRAC("lens_radius", "1.0", 0.5, 3.0,
              "lens sphere radius r / pitch; gap-free coverage needs >= 0.7071 (square) or >= 0.5774 (hex)"),

@@ -166,8 +166,63 @@ async function eyeImages(page) {
   return { box: b, bakeBox: eyeBox(bake), lut: boxStats(lv), bake: boxStats(bv), period: period(lv, 2 * b.half), corr: correlation(lv, bv) };
 }
 
+// The dark pseudopupils on an eye view: the disc's pixels darker than 55% of its median,
+// counted per block of r/15, blocks at least 30% dark joined 8-connected; groups of >= 3
+// blocks are pupils, each with its distance from the disc's centre in radii.
+function pupils(img) {
+  let x0 = img.w, x1 = -1, y0 = img.h, y1 = -1;
+  for (let y = 0; y < img.h; y++) for (let x = 0; x < img.w; x++)
+    if (img.lum[y * img.w + x] > 40) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+  const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2, r = Math.min(x1 - x0, y1 - y0) / 2;
+  const B = Math.max(3, Math.round(r / 15)), gw = Math.ceil(img.w / B), gh = Math.ceil(img.h / B);
+  const inside = [];
+  for (let y = 0; y < img.h; y++) for (let x = 0; x < img.w; x++) if (Math.hypot(x - cx, y - cy) < 0.92 * r) inside.push(img.lum[y * img.w + x]);
+  inside.sort((a, b) => a - b);
+  const med = inside[inside.length >> 1], dark = 0.55 * med;
+  const frac = new Float32Array(gw * gh), n = new Float32Array(gw * gh);
+  for (let y = 0; y < img.h; y++) for (let x = 0; x < img.w; x++) {
+    if (Math.hypot(x - cx, y - cy) >= 0.92 * r) continue;
+    const k = Math.floor(y / B) * gw + Math.floor(x / B);
+    n[k]++; if (img.lum[y * img.w + x] < dark) frac[k]++;
+  }
+  for (let k = 0; k < frac.length; k++) frac[k] = n[k] > B * B / 2 ? frac[k] / n[k] : 0;
+  const seen = new Int32Array(gw * gh).fill(-1), comps = [];
+  for (let k = 0; k < frac.length; k++) {
+    if (frac[k] < 0.3 || seen[k] >= 0) continue;
+    const stack = [k], c = { n: 0, x: 0, y: 0 }; seen[k] = comps.length;
+    while (stack.length) {
+      const q = stack.pop(), qx = q % gw, qy = Math.floor(q / gw);
+      c.n++; c.x += qx; c.y += qy;
+      for (let dy = -1; dy <= 1; dy++) for (let dx = -1; dx <= 1; dx++) {
+        const nx = qx + dx, ny = qy + dy, m = ny * gw + nx;
+        if (nx < 0 || ny < 0 || nx >= gw || ny >= gh || seen[m] >= 0 || frac[m] < 0.3) continue;
+        seen[m] = comps.length; stack.push(m);
+      }
+    }
+    comps.push(c);
+  }
+  const big = comps.filter((c) => c.n >= 3).map((c) => ({ n: c.n, d: +(Math.hypot((c.x / c.n + 0.5) * B - cx, (c.y / c.n + 0.5) * B - cy) / r).toFixed(2) }));
+  return { r: Math.round(r), B, med, all: comps.length, pupils: big };
+}
+
+// The default compound eye from the default camera shows the phenomenon (issue 14): one
+// central pseudopupil and the six side pupils of the hexagonal lattice.
+async function defaultEyeCheck(ctx, port) {
+  const page = await ctx.newPage();
+  await page.setViewportSize({ width: 800, height: 560 });
+  await page.goto(`http://127.0.0.1:${port}/?streams=eye&grid=1x1&aa=0&drawfps=2`, { timeout: 20000 });
+  await until(() => page.evaluate(() => (window.fxs.stats().eye?.drawn ?? 0) > 0), 20000, 300);
+  await sleep(1000);
+  const p = pupils(await grabView(page, 'eye'));
+  await page.screenshot({ path: join(ART, 'web-eye-default.png') });
+  const central = p.pupils.filter((q) => q.d < 0.15).length, side = p.pupils.filter((q) => q.d >= 0.4 && q.d < 0.9).length;
+  check(central === 1 && side === 6 && p.pupils.length === 7, 'the default eye shows 1 central and 6 side pupils', JSON.stringify(p));
+  await page.close();
+}
+
 async function eyeChecks(ctx, port, fxctl, url) {
-  const same = ['density=40', 'eye=[0.4,0.3,3]', 'light=[0.4,0.6,1]'];
+  await defaultEyeCheck(ctx, port);
+  const same = ['density=40', 'lattice=square', 'eye=[0.4,0.3,3]', 'light=[0.4,0.6,1]'];
   fxctl('create', 'compound_eye', 'eyelut', ...same);
   fxctl('create', 'compound_eye', 'eyebake', 'mode=bake', 'bake_size=512', ...same);
   const page = await ctx.newPage();
