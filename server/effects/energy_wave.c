@@ -174,9 +174,9 @@ const struct param_def energy_wave_params[] = {
     {.name = "shadow_theta", .type = PARAM_FLOAT, .def = "60", .min = 0, .max = 89, .unit = "degrees",
      .doc = "light rig: largest angle theta of the shadow direction from the plane's downward normal; "
             "a shadow is at most height x tan(theta) long (eq. 2.14)"},
-    {.name = "shadow_color", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
+    {.name = "shadow_color", .type = PARAM_COLOR, .def = "[0.02,0.03,0.06]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "light rig: shadow colour"},
-    {.name = "shadow_opacity", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
+    {.name = "shadow_opacity", .type = PARAM_FLOAT, .def = "0.65", .min = 0, .max = 1, .unit = "",
      .doc = "light rig: shadow opacity where t >= 0 (eq. 2.32; 0 elsewhere)"},
     EW_POS("shadow_plane_point", "[0,-9,0]", "light rig: a point I of the shadow-receiving plane"),
     EW_DIR("shadow_plane_normal", "[0,1,0]", "light rig: up normal Y of the shadow-receiving plane"),

@@ -425,6 +425,9 @@ try {
   check(rig && rig.rig && rig.nSeg === 16, 'toon scene has the light rig (16 segments, constants)', JSON.stringify(rig));
   check(rig && rig.shadows.length === 4 && rig.shadows.every((s) => s.k[1] < 0), 'every model casts a shadow downwards', JSON.stringify(rig?.shadows));
   check(scene && scene.lit > 0.3, 'toon scene is lit', JSON.stringify(scene));
+  const sceneLum = scene ? 0.2126 * scene.mean[0] + 0.7152 * scene.mean[1] + 0.0722 * scene.mean[2] : 0;
+  check(sceneLum > 50 && sceneLum < 145, 'toon scene exposure: a mid-grey ground, not a white sheet (mean luminance 50-145; was 158)',
+    sceneLum.toFixed(1));
   check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
   // The overlay: skipped frames by who skipped them and per kind, every figure defined in a tooltip.
   const label = await page.evaluate(() => { const el = document.querySelector('.label[data-view="energy:wave"]'); return { text: el?.textContent, title: el?.title }; });

@@ -332,7 +332,7 @@ static void test_encoding(void)
     const uint8_t *k = buf + 32 + 640;
     CHECK(fxs_get_u16(k) == 3 && fxs_get_u16(k + 2) == 7, "n_bands, flags");
     CHECK(le_f32(k + 4) == 1.0f && le_f32(k + 8) == 0.005f, "strength, outline_width");
-    CHECK(le_f32(k + 24) == (float)(M_PI / 3) && le_f32(k + 28) == 1.0f, "theta in radians, opacity");
+    CHECK(le_f32(k + 24) == (float)(M_PI / 3) && le_f32(k + 28) == 0.65f, "theta in radians, opacity");
     CHECK(le_f32(k + 48) == -9.0f && le_f32(k + 60) == 1.0f, "plane I, Y");
     CHECK(le_f32(k + 68) == 1.0f && le_f32(k + 88) == 1.0f, "plane X, Z");
     CHECK(le_f32(k + 96 + 16) == -0.3f && le_f32(k + 96 + 16 + 12) == 0.9f, "band 1");

@@ -35,6 +35,7 @@ uniform float strength;
 uniform bool useFeatures, haveRig;
 uniform sampler2D featureTex;
 uniform vec3 baseColor;
+uniform float albedo;    // how much of the ramp's light the surface returns (the ground: mid grey)
 varying vec3 vWorld;
 varying vec3 vNormal;
 varying vec2 vUv;
@@ -63,7 +64,7 @@ void main() {
     vec3 S = bands[0].rgb;
     for (int i = 1; i < ${MAX_BANDS}; i++) if (i < nBands && m >= bands[i].w) S = bands[i].rgb;  // eq. 2.5
     vec3 H = useFeatures ? S * feat : S;                     // eq. 2.6
-    col = mix(col, H, strength);
+    col = mix(col, H * albedo, strength);
   }
   gl_FragColor = vec4(linearToSRGB(col), 1.0);
 }`;
@@ -81,15 +82,19 @@ const OUTLINE_FRAG = `uniform vec3 color; ${SRGB_GLSL} void main() { gl_FragColo
 const SHADOW_VERT = /* glsl */ `
 uniform vec3 kdir, planeI, planeY;
 varying float vT;
+varying vec3 vOnGround;
 void main() {
   vec3 P = (modelMatrix * vec4(position, 1.0)).xyz;
   float t = dot(planeI - P, planeY) / dot(kdir, planeY);     // gap 2 closed form of eq. 2.28
   vT = t;
   vec3 G = P + t * kdir + planeY * 0.01;                     // eq. 2.31, lifted off the plane
+  vOnGround = G - planeI;
   gl_Position = projectionMatrix * viewMatrix * vec4(G, 1.0);
 }`;
-const SHADOW_FRAG = `uniform vec3 color; uniform float opacity; varying float vT; ${SRGB_GLSL}
-void main() { if (vT < 0.0) discard; gl_FragColor = vec4(linearToSRGB(color), opacity); }`;  // eq. 2.32
+// eq. 2.32, and only on the ground disc (centred at planeI): a long shadow ends at its edge.
+const SHADOW_FRAG = `uniform vec3 color; uniform float opacity, groundR; varying float vT; varying vec3 vOnGround; ${SRGB_GLSL}
+void main() { if (vT < 0.0 || length(vOnGround) > groundR) discard; gl_FragColor = vec4(linearToSRGB(color), opacity); }`;
+const GROUND_R = 26;
 
 function canvasTexture(w, h, draw) {
   const c = document.createElement('canvas');
@@ -166,10 +171,11 @@ export class SceneView {
     this.scene.add(this.billboard);
   }
 
-  toon(color, feature) {
+  toon(color, feature, albedo = 1) {
     return new THREE.ShaderMaterial({
       vertexShader: TOON_VERT, fragmentShader: TOON_FRAG,
-      uniforms: { ...this.toonUniforms, featureTex: { value: feature }, baseColor: { value: new THREE.Color(...color) } },
+      uniforms: { ...this.toonUniforms, featureTex: { value: feature }, baseColor: { value: new THREE.Color(...color) },
+        albedo: { value: albedo } },
     });
   }
 
@@ -177,7 +183,7 @@ export class SceneView {
   addModel(name, parts, castShadow = true) {
     const group = new THREE.Group();
     group.name = name;
-    const shadowUniforms = { kdir: { value: new THREE.Vector3(0, -1, 0) }, planeI: { value: new THREE.Vector3() }, planeY: { value: new THREE.Vector3(0, 1, 0) }, color: this.shadowColor, opacity: this.shadowOpacity };
+    const shadowUniforms = { kdir: { value: new THREE.Vector3(0, -1, 0) }, planeI: { value: new THREE.Vector3() }, planeY: { value: new THREE.Vector3(0, 1, 0) }, color: this.shadowColor, opacity: this.shadowOpacity, groundR: { value: GROUND_R } };
     const outlineMat = new THREE.ShaderMaterial({ vertexShader: OUTLINE_VERT, fragmentShader: OUTLINE_FRAG, uniforms: this.outlineUniforms, side: THREE.BackSide });
     const shadowMat = new THREE.ShaderMaterial({
       vertexShader: SHADOW_VERT, fragmentShader: SHADOW_FRAG, uniforms: shadowUniforms, transparent: true, depthWrite: false,
@@ -210,7 +216,9 @@ export class SceneView {
 
   buildScene() {
     const white = [0.85, 0.85, 0.85];
-    this.ground = this.addModel('ground', [{ geometry: new THREE.PlaneGeometry(90, 90), material: this.toon([0.5, 0.55, 0.5], groundTexture()), rotation: [-Math.PI / 2, 0, 0] }], false);
+    // A round ground of mid-grey albedo: the ramp's light is not a white sheet, and the
+    // shadows (clipped to it) end at its edge instead of running out of the frame.
+    this.ground = this.addModel('ground', [{ geometry: new THREE.CircleGeometry(GROUND_R, 96), material: this.toon([0.5, 0.55, 0.5], groundTexture(), 0.5), rotation: [-Math.PI / 2, 0, 0] }], false);
     this.ground.outlines.forEach((o) => (o.visible = false));
     const stripes = stripeTexture();
     this.addModel('box', [{ geometry: new THREE.BoxGeometry(4, 4, 4), material: this.toon([0.8, 0.3, 0.2], stripes) }]).group.position.set(-9, 2, 6);
