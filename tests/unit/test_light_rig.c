@@ -255,6 +255,36 @@ static void test_segments_curves(void)
     cJSON_Delete(p);
 }
 
+/* Issue 14: with the default (animated) parameters the rig never switches off: at every frame
+ * of several loops the total segment strength is at least 30% of its median (measured: 48%;
+ * the texture's total energy, test_energy_kernel, keeps 63%). It used to reach 0. */
+static int rig_cmp(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static void test_loop_never_dark(void)
+{
+    cJSON *p = rig_params("{}");
+    CHECK(p != NULL, "defaults");
+    if (!p) return;
+    static struct light_rig rig;
+    enum { FRAMES = 240 }; /* 8 s at 30 frames/s: several loops of every default curve */
+    double total[FRAMES], sorted[FRAMES];
+    for (int f = 0; f < FRAMES; f++) {
+        light_rig_from_params(p, f / params_num(p, "anim_rate"), &rig);
+        total[f] = 0;
+        for (int i = 0; i < rig.n_seg; i++) total[f] += rig.seg[i].strength;
+        sorted[f] = total[f];
+    }
+    qsort(sorted, FRAMES, sizeof *sorted, rig_cmp);
+    double median = sorted[FRAMES / 2];
+    printf("  info: rig strength over %d frames: min %.3g, median %.3g\n", FRAMES, sorted[0], median);
+    CHECK(median > 0 && sorted[0] >= 0.3 * median, "least total strength %.3g, median %.3g", sorted[0], median);
+    cJSON_Delete(p);
+}
+
 static void test_segments_other_sources(void)
 {
     cJSON *p = rig_params("{\"points\":[{\"pos\":[1,2,3],\"coef\":3}],\"lines\":[{\"pos\":[0,1,0],\"dir\":[0,0,2],"
@@ -487,6 +517,7 @@ int main(int argc, char **argv)
     RUN(test_degenerate);
     RUN(test_bspline);
     RUN(test_segments_curves);
+    RUN(test_loop_never_dark);
     RUN(test_segments_other_sources);
     RUN(test_encoding);
     RUN(test_params_rules);
