@@ -334,7 +334,9 @@ health();
 
 // ---- hooks for the browser tests (tests/integration/test_web_browser.*) -------------------
 
-function sample(kind, stream) {
+// The drawn pixels of the first view of `kind` (and `stream`, if given): {entry, w, h, px},
+// RGBA rows from the bottom (readPixels), or null when there is no such view.
+function viewPixels(kind, stream) {
   const entry = lastLayout.find((e) => e.view.kind === kind && (!stream || e.view.stream === stream));
   if (!entry) return null;
   const pr = renderer.getPixelRatio(), r = entry.rect;
@@ -342,6 +344,13 @@ function sample(kind, stream) {
   const gl = renderer.getContext(), px = new Uint8Array(w * h * 4);
   gl.bindFramebuffer(gl.FRAMEBUFFER, null);
   gl.readPixels(x, y, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  return { entry, w, h, px };
+}
+
+function sample(kind, stream) {
+  const v = viewPixels(kind, stream);
+  if (!v) return null;
+  const { entry, w, h, px } = v;
   let sr = 0, sg = 0, sb = 0, lit = 0, bright = 0, warm = 0, max = 0;
   const n = w * h;
   for (let i = 0; i < n; i++) {
@@ -363,13 +372,9 @@ function sample(kind, stream) {
 // thirds of their rows (hotter = a larger G/R, towards yellow and white), and a hash. Flame
 // pixels are warm (R > B) or near white; the stage's bluish grid and grey smoke are not.
 function flameLook() {
-  const entry = lastLayout.find((e) => e.view.kind === 'flame');
-  if (!entry) return null;
-  const pr = renderer.getPixelRatio(), r = entry.rect;
-  const x = Math.round(r.x * pr), y = Math.round(r.y * pr), w = Math.round(r.w * pr), h = Math.round(r.h * pr);
-  const gl = renderer.getContext(), px = new Uint8Array(w * h * 4);
-  gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-  gl.readPixels(x, y, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  const v = viewPixels('flame');
+  if (!v) return null;
+  const { w, h, px } = v;
   const lit = (R, G, B) => 0.2126 * R + 0.7152 * G + 0.0722 * B > 25.5 && (R > B + 8 || Math.min(R, G, B) >= 200);
   const rows = [];
   let bright = 0, white = 0, hash = 0;
