@@ -203,11 +203,12 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
 static int config_load_file(struct config *cfg, const char *path, struct fx_err *err)
 {
     cJSON *doc;
-    if (jsonfile_read(path, CONFIG_MAX_BYTES, &doc))
+    char why[128] = "";
+    if (jsonfile_read(path, CONFIG_MAX_BYTES, &doc, why, sizeof why))
         return fx_fail(err, "bad_request", "config", "cannot open config file %s", path);
     int rc = 0;
     if (!cJSON_IsObject(doc))
-        rc = fx_fail(err, "bad_json", "config", "%s: not a JSON object", path);
+        rc = fx_fail(err, "bad_json", "config", "%s: %s", path, why[0] ? why : "not a JSON object");
     for (const cJSON *e = doc ? doc->child : NULL; e && !rc; e = e->next) rc = config_file_key(cfg, e, err);
     cJSON_Delete(doc);
     return rc;

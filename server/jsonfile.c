@@ -2,10 +2,12 @@
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "jsonfile.h"
+#include "json_strict.h"
 
-int jsonfile_read(const char *path, long max_bytes, cJSON **out)
+int jsonfile_read(const char *path, long max_bytes, cJSON **out, char *why, size_t why_len)
 {
     *out = NULL;
     FILE *f = fopen(path, "rb");
@@ -15,7 +17,8 @@ int jsonfile_read(const char *path, long max_bytes, cJSON **out)
     if (size >= 0 && size <= max_bytes && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1)))
         text[fread(text, 1, (size_t)size, f)] = 0;
     fclose(f);
-    *out = text ? cJSON_Parse(text) : NULL;
+    if (!text) snprintf(why, why_len, "larger than %ld bytes", max_bytes);
+    *out = text ? json_strict_parse(text, strlen(text), why, why_len) : NULL;
     free(text);
     return 0;
 }

@@ -6,8 +6,9 @@
 
 #include <cjson/cJSON.h>
 
-/* Reads and parses path. Returns 0 with *out set, NULL when the text is not JSON or is
- * longer than max_bytes; or -1 with errno set when the file cannot be read. */
-int jsonfile_read(const char *path, long max_bytes, cJSON **out);
+/* Reads and parses path strictly (json_strict.h). Returns 0 with *out set, or NULL with the
+ * reason in why when the text is not exactly one JSON value or is longer than max_bytes; or
+ * -1 with errno set when the file cannot be read. */
+int jsonfile_read(const char *path, long max_bytes, cJSON **out, char *why, size_t why_len);
 
 #endif

@@ -9,6 +9,7 @@
 #include "log.h"
 #include "ocl.h"
 #include "session.h"
+#include "json_strict.h"
 #include "store.h"
 
 #define SESSION_MAX_AUTH_FAILURES 5 /* wrong tokens on one connection before it is closed */
@@ -530,14 +531,14 @@ void session_handle(struct session *ss, const char *text, size_t len)
     struct fx_err err = {0};
     const cJSON *id = NULL;
     cJSON *req = NULL;
+    char why[128];
     atomic_fetch_add(&ss->srv->counters.messages_in, 1);
     if (!session_rate_ok(ss))
         fx_fail(&err, "limit", NULL, "more than %d control messages per second", l->max_control_per_sec);
     else if (session_json_depth(text, len) > l->max_json_depth)
         fx_fail(&err, "bad_json", NULL, "JSON nested deeper than %d levels", l->max_json_depth);
-    else if (!(req = cJSON_ParseWithLength(text, len)))
-        fx_fail(&err, "bad_json", NULL, "malformed JSON near byte %ld",
-                cJSON_GetErrorPtr() ? (long)(cJSON_GetErrorPtr() - text) : 0L);
+    else if (!(req = json_strict_parse(text, len, why, sizeof why)))
+        fx_fail(&err, "bad_json", NULL, "%s", why);
     else
         session_dispatch(ss, req, &id, &err);
     if (err.code[0]) session_error(ss, id, &err);

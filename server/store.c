@@ -90,14 +90,15 @@ int store_load(const struct server *srv, cJSON **streams, struct fx_err *err)
     if (!srv->cfg.state_dir[0]) return 0;
     char path[PATH_MAX + 32];
     snprintf(path, sizeof path, "%s/streams.json", srv->cfg.state_dir);
-    if (jsonfile_read(path, STORE_MAX_BYTES, streams)) {
+    char why[128] = "";
+    if (jsonfile_read(path, STORE_MAX_BYTES, streams, why, sizeof why)) {
         if (errno == ENOENT) return 0;
         return fx_fail(err, "internal", NULL, "cannot read %s: %s", path, strerror(errno));
     }
     if (!cJSON_IsArray(*streams)) {
         cJSON_Delete(*streams);
         *streams = NULL;
-        return fx_fail(err, "internal", NULL, "%s is not a JSON array of streams", path);
+        return fx_fail(err, "internal", NULL, "%s: %s (left as it is)", path, why[0] ? why : "not a JSON array of streams");
     }
     return 0;
 }

@@ -156,6 +156,16 @@ async def test_error_codes(t):
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"fps":1000}}', "bad_param", "out of range")
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"eye":[1,2]}}', "bad_param", "wrong length")
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"colour":1}}', "bad_param", "unknown name")
+    # Only exactly one JSON value is acted on (issue 15 items 9-11): the first of two objects,
+    # the first of duplicate members and a string cut at U+0000 used to be run.
+    await expect_error(t, c, '{"op":"list"}{"op":"destroy","stream":"energy"}', "bad_json", "trailing data")
+    await expect_error(t, c, '{"op":"get","op":"destroy","stream":"energy"}', "bad_json", "duplicate member")
+    await expect_error(t, c, '{"op":"list\\u0000x"}', "bad_json", "U+0000")
+    await expect_error(t, c, '{"op":"create","effect":"energy_wave","stream":"ab\\u0000cd"}', "bad_json", "U+0000")
+    await expect_error(t, c, '{"op":"auth","token":"t\\u0000junk"}', "bad_json", "U+0000")
+    names = [x["stream"] for x in (await c.request("list"))["streams"]]
+    t.check("energy" in names and "ab" not in names and "abcd" not in names,
+            "none of them destroyed or created anything (%s)" % names)
     big = json.dumps({"op": "list", "pad": "x" * (c.hello["limits"]["max_message_bytes"] + 10)})
     await expect_error(t, c, big, "limit", "oversized message")
     r = await c.request("list")
@@ -259,7 +269,9 @@ async def test_flags(t):
     for text, word, what in (('{"port": 1,', "JSON", "malformed config file"),
                              ('{"bogus": 1}', "bogus", "unknown config key (non-string value)"),
                              ('{"listen": 5}', "listen", "config value of the wrong type"),
-                             ('{"limits": {"max_streams": 0}}', "max_streams", "config limit out of range")):
+                             ('{"limits": {"max_streams": 0}}', "max_streams", "config limit out of range"),
+                             ('{"port": 7000} {"port": 1}', "trailing data", "config file with trailing data"),
+                             ('{"port": 7000, "port": 1}', 'duplicate member "port"', "config file with a duplicate key")):
         with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
             f.write(text)
         code, out = run("--config", f.name)
@@ -267,6 +279,14 @@ async def test_flags(t):
         t.check(code == 2 and word in out, "%s is an error naming it (%s)" % (what, out.strip()))
     code, out = run("--config", "/nonexistent/fxs.json")
     t.check(code == 2 and "cannot open" in out, "missing config file is an error")
+    # A state file that is not exactly one JSON value: the daemon refuses to start and leaves it as it is.
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    text = '[{"stream":"a","effect":"energy_wave","effect":"flame","rev":1,"params":{}}]'
+    with open(os.path.join(state, "streams.json"), "w") as f:
+        f.write(text)
+    code, out = run("--port", "0", "--state-dir", state)
+    t.check(code != 0 and 'duplicate member "effect"' in out and open(os.path.join(state, "streams.json")).read() == text,
+            "a state file with a duplicate key stops the start, kept unchanged (%s)" % out.strip()[-120:])
 
 
 if __name__ == "__main__":
