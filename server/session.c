@@ -1,6 +1,7 @@
 /* session.c — see session.h. One function per op; each validates everything first,
  * then changes state in one step, then replies. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -59,11 +60,25 @@ struct outmsg *session_pop(struct session *ss)
 }
 
 /* A reply object with the request's id echoed. */
+/* The request's id as it goes back: strings as they came; numbers as the shortest text that
+ * reads back as the same double (cJSON's own printing keeps 15 digits when they are "close
+ * enough", so 9007199254740991 came back as 9.00719925474099e+15). */
+static cJSON *session_id_copy(const cJSON *id)
+{
+    if (!cJSON_IsNumber(id)) return cJSON_Duplicate(id, 1);
+    char text[32];
+    for (int digits = 15; digits <= 17; digits++) {
+        snprintf(text, sizeof text, "%.*g", digits, id->valuedouble);
+        if (strtod(text, NULL) == id->valuedouble) break;
+    }
+    return cJSON_CreateRaw(text);
+}
+
 static cJSON *session_reply(const char *op, const cJSON *id)
 {
     cJSON *r = cJSON_CreateObject();
     cJSON_AddStringToObject(r, "op", op);
-    if (id) cJSON_AddItemToObject(r, "id", cJSON_Duplicate(id, 1));
+    if (id) cJSON_AddItemToObject(r, "id", session_id_copy(id));
     return r;
 }
 
@@ -514,6 +529,9 @@ static int session_dispatch(struct session *ss, const cJSON *req, const cJSON **
     const cJSON *idv = cJSON_GetObjectItemCaseSensitive(req, "id");
     if (idv && !cJSON_IsNumber(idv) && !cJSON_IsString(idv))
         return fx_fail(err, "bad_request", "id", "id must be a number or a string");
+    if (idv && cJSON_IsNumber(idv) && !(fabs(idv->valuedouble) < 9007199254740992.0))
+        return fx_fail(err, "bad_request", "id", "a numeric id must be below 2^53 in magnitude, where every "
+                                                 "integer reads back exactly; use a string");
     *id = idv;
     const cJSON *op = cJSON_GetObjectItemCaseSensitive(req, "op");
     if (!op) return fx_fail(err, "bad_request", "op", "missing field \"op\"");

@@ -163,6 +163,14 @@ async def test_error_codes(t):
     await expect_error(t, c, '{"op":"list\\u0000x"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"create","effect":"energy_wave","stream":"ab\\u0000cd"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"auth","token":"t\\u0000junk"}', "bad_json", "U+0000")
+    # ids come back exactly (issue 15 item 12), or are refused when a double cannot hold them
+    for text in ("9007199254740991", "-9007199254740991", "0.1", "123456.789", "1e-300", '"x\\u00e9"'):
+        await c.ws.send('{"op":"list","id":%s}' % text)
+        got, want = json.loads(await c.ws.recv()).get("id"), json.loads(text)
+        t.check(got == want and type(got) is type(want), "id %s echoed exactly (got %r)" % (text, got))
+    for text in ("9007199254740992", "1e400", "-1e400"):
+        m = await expect_error(t, c, '{"op":"list","id":%s}' % text, "bad_request", "id %s refused" % text)
+        t.check(m.get("param") == "id" and "id" not in m, "id %s: refused naming id, no id echoed" % text)
     names = [x["stream"] for x in (await c.request("list"))["streams"]]
     t.check("energy" in names and "ab" not in names and "abcd" not in names,
             "none of them destroyed or created anything (%s)" % names)
