@@ -17,6 +17,32 @@ struct fx_err {
     char message[320];
 };
 
+/* Replaces every byte of s that does not belong to a well-formed UTF-8 sequence (RFC 3629: no
+ * overlong forms, surrogates or code points above U+10FFFF) with '?', in place. Messages quote
+ * client text with bounded widths (%.64s) and are bounded themselves: a cut can split a
+ * character, and a reply must still be valid UTF-8 (RFC 6455 text frames). */
+static inline void fx_utf8_sanitize(char *s)
+{
+    unsigned char *p = (unsigned char *)s;
+    while (*p) {
+        unsigned c = *p;
+        int n = c < 0x80 ? 0 : c >= 0xC2 && c <= 0xDF ? 1 : c >= 0xE0 && c <= 0xEF ? 2 : c >= 0xF0 && c <= 0xF4 ? 3 : -1;
+        unsigned lo = 0x80, hi = 0xBF; /* the allowed range of the second byte */
+        if (c == 0xE0) lo = 0xA0;
+        if (c == 0xED) hi = 0x9F;
+        if (c == 0xF0) lo = 0x90;
+        if (c == 0xF4) hi = 0x8F;
+        int ok = n >= 0;
+        for (int k = 1; ok && k <= n; k++)
+            ok = p[k] >= (k == 1 ? lo : 0x80) && p[k] <= (k == 1 ? hi : 0xBF);
+        if (!ok) {
+            *p++ = '?';
+            continue;
+        }
+        p += n + 1;
+    }
+}
+
 /* Fills err (if non-NULL) and returns -1, so callers can `return fx_fail(...)`. */
 static inline int fx_fail(struct fx_err *err, const char *code, const char *param, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
@@ -29,6 +55,8 @@ static inline int fx_fail(struct fx_err *err, const char *code, const char *para
     va_start(ap, fmt);
     vsnprintf(err->message, sizeof err->message, fmt, ap);
     va_end(ap);
+    fx_utf8_sanitize(err->param);
+    fx_utf8_sanitize(err->message);
     return -1;
 }
 

@@ -469,7 +469,8 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
 
     struct lws_context_creation_info info;
     memset(&info, 0, sizeof info);
-    info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS | LWS_SERVER_OPTION_DISABLE_IPV6;
+    /* VALIDATE_UTF8: a text frame that is not UTF-8 closes the connection with 1007 (RFC 6455 8.1) */
+    info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS | LWS_SERVER_OPTION_DISABLE_IPV6 | LWS_SERVER_OPTION_VALIDATE_UTF8;
     if (srv->cfg.tls_cert[0]) info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
     info.user = net;
     info.fd_limit_per_thread = (unsigned)srv->cfg.limits.max_connections + 64;

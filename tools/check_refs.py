@@ -13,7 +13,7 @@ import subprocess
 import sys
 
 SKIP = ("node_modules/", "tests/fuzz/corpus/", "tests/data/", "package-lock.json")
-DOC = re.compile(r"PROTOCOL(?:\.md)?|ARCHITECTURE\.md|README(?:\.md)?|[Dd]igest|[Tt]hesis|seed")
+DOC = re.compile(r"PROTOCOL(?:\.md)?|ARCHITECTURE\.md|README(?:\.md)?|[Dd]igest|[Tt]hesis|seed|RFC ?\d+")
 REF = re.compile(r"§\s?(\d+(?:\.\d+)*)")
 
 

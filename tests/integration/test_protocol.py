@@ -171,6 +171,13 @@ async def test_error_codes(t):
     for text in ("9007199254740992", "1e400", "-1e400"):
         m = await expect_error(t, c, '{"op":"list","id":%s}' % text, "bad_request", "id %s refused" % text)
         t.check(m.get("param") == "id" and "id" not in m, "id %s: refused naming id, no id echoed" % text)
+    # Replies are valid UTF-8 even where a quoted client string is cut (issue 15 item 8): the
+    # client would otherwise drop the connection (websockets raises on invalid UTF-8).
+    m = await expect_error(t, c, json.dumps({"op": "a" * 63 + "\u00e9"}, ensure_ascii=False), "unknown_op",
+                           "an op cut inside a character")
+    t.check(m["message"].endswith('a?"'), "the cut character is replaced, not split (%s)" % m["message"][-12:])
+    m = await expect_error(t, c, json.dumps({"op": "set", "stream": "energy", "params": {"\u00e9" * 300: 1}},
+                                            ensure_ascii=False), "bad_param", "a long unknown parameter name")
     names = [x["stream"] for x in (await c.request("list"))["streams"]]
     t.check("energy" in names and "ab" not in names and "abcd" not in names,
             "none of them destroyed or created anything (%s)" % names)
@@ -179,6 +186,18 @@ async def test_error_codes(t):
     r = await c.request("list")
     t.check(r["op"] == "list", "connection usable after every error")
     await c.close()
+
+
+async def test_invalid_utf8_closes_1007(t):
+    """A text frame that is not UTF-8 closes the connection with 1007 (RFC 6455 8.1)."""
+    c = await Client.connect(D)
+    await c.ws.write_frame(True, websockets.frames.OP_TEXT, b'{"op":"list","x":"\xff\xfe"}')
+    try:
+        await c.text(timeout=5)
+        t.check(False, "invalid UTF-8 in a text frame: closed with 1007")
+    except websockets.exceptions.ConnectionClosed as e:
+        t.check(e.rcvd is not None and e.rcvd.code == 1007, "invalid UTF-8 in a text frame: closed with 1007 (%s)" % e.rcvd)
+    t.check(await refusal(D, read=True) is None, "the daemon serves the next connection")
 
 
 async def test_nothing_half_applied(t):
@@ -302,7 +321,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_stream_events,
+               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)
