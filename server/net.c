@@ -14,7 +14,9 @@
  * libwebsockets keeps its timers in one sorted list, so a timer per connection costs O(n)
  * per insert: with 1536 backlogged subscribers that was 38% of the daemon's CPU. The
  * sessions waiting instead sit in one unsorted list here, walked by a single timer. */
+#include <limits.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -45,7 +47,8 @@ struct net {
     lws_sorted_usec_list_t retry_sul;
     double retry_sul_at;        /* when retry_sul fires; 0 = not scheduled */
     struct lws_protocols protocols[3];
-    struct lws_http_mount mounts[3];
+    struct lws_http_mount mount;
+    char web_root[PATH_MAX];    /* the web root's real path ("" when there is none) */
     volatile sig_atomic_t stop_requested;
     bool stopping;
 };
@@ -63,6 +66,31 @@ static double net_now(void)
 
 /* ---- HTTP: /healthz and /metrics ---- */
 
+/* The file under the web root that path names, when it is a regular file whose real path
+ * (symlinks resolved) lies inside the root; "/" and "/dir/" give index.html. 0 or -1. */
+static int net_static_path(const struct net *net, const char *path, char *real)
+{
+    char want[PATH_MAX + 300];
+    struct stat st;
+    size_t rl = strlen(net->web_root), pl = strlen(path);
+    if (!rl || path[0] != '/' || strstr(path, "/..")) return -1;
+    snprintf(want, sizeof want, "%s%s%s", net->web_root, path, path[pl - 1] == '/' ? "index.html" : "");
+    if (!realpath(want, real) || strncmp(real, net->web_root, rl) || real[rl] != '/') return -1;
+    return stat(real, &st) || !S_ISREG(st.st_mode) ? -1 : 0;
+}
+
+static const char *net_mime(const char *file)
+{
+    static const char *const types[][2] = {
+        {".html", "text/html; charset=utf-8"}, {".js", "text/javascript"}, {".mjs", "text/javascript"},
+        {".css", "text/css"}, {".json", "application/json"}, {".png", "image/png"}, {".svg", "image/svg+xml"},
+        {".ico", "image/x-icon"}, {".wasm", "application/wasm"}, {".txt", "text/plain; charset=utf-8"}};
+    const char *dot = strrchr(file, '.');
+    for (size_t i = 0; dot && i < sizeof types / sizeof types[0]; i++)
+        if (!strcmp(dot, types[i][0])) return types[i][1];
+    return "application/octet-stream";
+}
+
 static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h, const char *path)
 {
     uint8_t hdr[LWS_PRE + 1024], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
@@ -77,6 +105,11 @@ static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h
         type = "text/plain; version=0.0.4";
         metrics_render(net->srv, &h->body);
     } else {
+        char real[PATH_MAX];
+        if (!net_static_path(net, path, real)) {
+            int n = lws_serve_http_file(wsi, real, net_mime(real), NULL, 0);
+            return n < 0 || (n > 0 && lws_http_transaction_completed(wsi)) ? -1 : 0;
+        }
         status = HTTP_STATUS_NOT_FOUND;
         fx_buf_append(&h->body, "{\"error\":\"not found\"}", 21);
     }
@@ -87,6 +120,17 @@ static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h
         return 1;
     lws_callback_on_writable(wsi);
     return 0;
+}
+
+/* 405 with "Allow: GET" (RFC 9110 15.5.6) for any method but GET; the connection closes. */
+static int net_http_not_allowed(struct lws *wsi)
+{
+    uint8_t hdr[LWS_PRE + 256], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
+    if (!lws_add_http_header_status(wsi, HTTP_STATUS_METHOD_NOT_ALLOWED, &p, end) &&
+        !lws_add_http_header_by_name(wsi, (const uint8_t *)"allow:", (const uint8_t *)"GET", 3, &p, end) &&
+        !lws_add_http_header_content_length(wsi, 0, &p, end) && !lws_finalize_http_header(wsi, &p, end))
+        lws_write(wsi, start, (size_t)(p - start), LWS_WRITE_HTTP_HEADERS);
+    return -1;
 }
 
 static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
@@ -100,10 +144,7 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
         return 1;
     case LWS_CALLBACK_HTTP: {
         char path[256] = "";
-        if (lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) <= 0) {
-            lws_return_http_status(wsi, HTTP_STATUS_METHOD_NOT_ALLOWED, "only GET is supported");
-            return -1;
-        }
+        if (lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) <= 0) return net_http_not_allowed(wsi);
         lws_hdr_copy(wsi, path, sizeof path, WSI_TOKEN_GET_URI); /* too long: "" -> 404 */
         return net_http_request(wsi, net, h, path);
     }
@@ -437,23 +478,16 @@ static void net_notify(void *ctx)
     lws_cancel_service(net->ctx);
 }
 
+/* Every path goes to net_http_cb: /healthz, /metrics and the web root's files (served only
+ * when they resolve inside the root: net_static_path). */
 static void net_setup_mounts(struct net *net)
 {
-    static const char *const dyn[] = {"/healthz", "/metrics"};
-    for (int i = 0; i < 2; i++) {
-        struct lws_http_mount *m = &net->mounts[i];
-        m->mountpoint = dyn[i];
-        m->mountpoint_len = (unsigned char)strlen(dyn[i]);
-        m->origin = "http";
-        m->origin_protocol = LWSMPRO_CALLBACK;
-        m->mount_next = &net->mounts[i + 1];
-    }
-    struct lws_http_mount *root = &net->mounts[2];
-    root->mountpoint = "/";
-    root->mountpoint_len = 1;
-    root->origin = net->srv->cfg.web_root;
-    root->origin_protocol = LWSMPRO_FILE;
-    root->def = "index.html";
+    struct lws_http_mount *m = &net->mount;
+    m->mountpoint = "/";
+    m->mountpoint_len = 1;
+    m->origin = "http";
+    m->origin_protocol = LWSMPRO_CALLBACK;
+    if (!net->srv->cfg.web_root[0] || !realpath(net->srv->cfg.web_root, net->web_root)) net->web_root[0] = 0;
 }
 
 int net_open(struct net **out, struct server *srv, struct fx_err *err)
@@ -482,8 +516,7 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     info.port = srv->cfg.port; /* 0: the kernel picks a free port */
     info.iface = srv->cfg.listen;
     info.protocols = net->protocols;
-    info.mounts = &net->mounts[0];
-    if (!srv->cfg.web_root[0]) net->mounts[1].mount_next = NULL; /* no static files */
+    info.mounts = &net->mount;
     info.vhost_name = "default";
     if (srv->cfg.tls_cert[0]) { /* TLS only: a plain-text connection fails its handshake */
         info.ssl_cert_filepath = srv->cfg.tls_cert;

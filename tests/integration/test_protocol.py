@@ -45,6 +45,38 @@ async def test_http(t):
         t.check(name in body, "metrics has " + name)
 
 
+async def test_static_root(t):
+    """Only regular files that resolve inside the web root are served (issue 15 item 4): a
+    symlink to a file or a directory outside it is 404; other methods than GET get 405 with
+    Allow: GET (issue 15 item 13)."""
+    root, outside = tempfile.mkdtemp(prefix="fxs-web-"), tempfile.mkdtemp(prefix="fxs-out-")
+    with open(os.path.join(root, "index.html"), "w") as f:
+        f.write("<p>root</p>")
+    with open(os.path.join(outside, "secret.txt"), "w") as f:
+        f.write("secret")
+    os.symlink(os.path.join(outside, "secret.txt"), os.path.join(root, "link.txt"))
+    os.symlink(outside, os.path.join(root, "dir"))
+    os.mkdir(os.path.join(root, "sub"))
+    with Daemon("--web-root", root) as d:
+        def get(path, method="GET"):
+            req = urllib.request.Request(d.http + path, method=method)
+            try:
+                with urllib.request.urlopen(req, timeout=10) as r:
+                    return r.status, r.read().decode(), r.headers
+            except urllib.error.HTTPError as e:
+                return e.code, e.read().decode(), e.headers
+        t.check(get("/")[:2] == (200, "<p>root</p>"), "the root's index.html at /")
+        st, body, _ = get("/link.txt")
+        t.check(st == 404 and "secret" not in body, "a symlink to a file outside the root: 404 (%s)" % st)
+        st, body, _ = get("/dir/secret.txt")
+        t.check(st == 404 and "secret" not in body, "a file through a symlinked directory: 404 (%s)" % st)
+        t.check(get("/sub")[0] == 404 and get("/../../etc/passwd")[0] == 404, "a directory or a path out: 404")
+        for method in ("OPTIONS", "POST", "PUT", "DELETE"):
+            st, _, hd = get("/healthz", method)
+            t.check(st == 405 and hd.get("Allow") == "GET", "%s: 405 with Allow: GET (%s, %s)" % (method, st, hd.get("Allow")))
+        t.check(get("/healthz")[0] == 200, "GET still served")
+
+
 async def test_hello(t):
     c = await Client.connect(D)
     t.check(c.ws.subprotocol == "fxstream.v1", "subprotocol negotiated")
@@ -320,7 +352,7 @@ if __name__ == "__main__":
     D = Daemon()
     s = Suite("test_protocol")
     try:
-        s.run([test_http, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
+        s.run([test_http, test_static_root, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
                test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
