@@ -364,6 +364,18 @@ static bool net_accept(struct net *net, struct lws *wsi)
         log_info("refused WebSocket on \"%.64s\" (the endpoint is %s)", uri, NET_WS_PATH);
         return false;
     }
+    char version[8] = "";
+    if (lws_hdr_copy(wsi, version, sizeof version, WSI_TOKEN_VERSION) <= 0 || strcmp(version, "13") != 0) {
+        /* RFC 6455 4.4: only version 13 exists; say so with 426 and the version we speak */
+        uint8_t hdr[LWS_PRE + 256], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
+        log_info("refused WebSocket version \"%.7s\" (only 13)", version);
+        if (!lws_add_http_header_status(wsi, 426, &p, end) &&
+            !lws_add_http_header_by_name(wsi, (const uint8_t *)"sec-websocket-version:", (const uint8_t *)"13", 2, &p,
+                                         end) &&
+            !lws_add_http_header_content_length(wsi, 0, &p, end) && !lws_finalize_http_header(wsi, &p, end))
+            lws_write(wsi, start, (size_t)(p - start), LWS_WRITE_HTTP_HEADERS);
+        return false;
+    }
     bool has_origin = lws_hdr_total_length(wsi, WSI_TOKEN_ORIGIN) > 0;
     const char *o = net_header(wsi, WSI_TOKEN_ORIGIN, origin, sizeof origin);
     const char *h = net_header(wsi, WSI_TOKEN_HOST, host, sizeof host);

@@ -77,6 +77,27 @@ async def test_static_root(t):
         t.check(get("/healthz")[0] == 200, "GET still served")
 
 
+async def test_websocket_version(t):
+    """Only Sec-WebSocket-Version 13 is accepted; others get 426 naming 13 (RFC 6455 4.4)."""
+    import base64
+    import socket
+    for version, want in (("8", b" 426"), ("12", b" 426"), ("13", b" 101")):
+        s = socket.create_connection(("127.0.0.1", D.port), timeout=10)
+        s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                   "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: %s\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
+                   % (D.port, base64.b64encode(os.urandom(16)).decode(), version)).encode())
+        head = b""
+        while b"\r\n\r\n" not in head:
+            chunk = s.recv(4096)
+            if not chunk:
+                break
+            head += chunk
+        s.close()
+        status = head.split(b"\r\n")[0]
+        t.check(want in status and (version == "13" or b"sec-websocket-version: 13" in head.lower()),
+                "Sec-WebSocket-Version %s: %s" % (version, status.decode(errors="replace")))
+
+
 async def test_hello(t):
     c = await Client.connect(D)
     t.check(c.ws.subprotocol == "fxstream.v1", "subprotocol negotiated")
@@ -352,7 +373,7 @@ if __name__ == "__main__":
     D = Daemon()
     s = Suite("test_protocol")
     try:
-        s.run([test_http, test_static_root, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
+        s.run([test_http, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
                test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
