@@ -1,6 +1,8 @@
 /* access.c — see access.h. */
 #include "access.h"
 
+#include <arpa/inet.h>
+
 #include <stdio.h>
 #include <string.h>
 #include <strings.h>
@@ -75,6 +77,36 @@ int access_add_origin(struct access *a, const char *origin, struct fx_err *err)
         return fx_fail(err, "bad_request", "allowed_origins", "allowed_origins: more than %d", ACCESS_MAX_ORIGINS);
     snprintf(a->origins[a->norigins++], ACCESS_ORIGIN_MAX, "%s", origin);
     return 0;
+}
+
+int access_add_host(struct access *a, const char *host, struct fx_err *err)
+{
+    size_t n = strlen(host);
+    if (!n || n >= ACCESS_ORIGIN_MAX || strspn(host, "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789.-") != n)
+        return fx_fail(err, "bad_request", "allowed_hosts",
+                       "allowed_hosts: \"%.80s\" is not a host name (letters, digits, dots, dashes; no port)", host);
+    if (a->nhosts == ACCESS_MAX_ORIGINS)
+        return fx_fail(err, "bad_request", "allowed_hosts", "allowed_hosts: more than %d", ACCESS_MAX_ORIGINS);
+    snprintf(a->hosts[a->nhosts++], ACCESS_ORIGIN_MAX, "%s", host);
+    return 0;
+}
+
+bool access_host_ok(const struct access *a, const char *host)
+{
+    if (a->ntokens > 0) return true;
+    if (!host) return false;
+    char name[ACCESS_ORIGIN_MAX];
+    size_t n = host[0] == '[' ? strcspn(host, "]") + 1 : strcspn(host, ":");
+    const char *rest = host + n;
+    if (n >= sizeof name || (*rest && (rest[0] != ':' || strspn(rest + 1, "0123456789") != strlen(rest + 1))))
+        return false;
+    snprintf(name, sizeof name, "%.*s", (int)n, host);
+    struct in_addr v4;
+    if (!strcasecmp(name, "localhost") || !strcmp(name, "[::1]")) return true;
+    if (inet_pton(AF_INET, name, &v4) == 1 && (ntohl(v4.s_addr) >> 24) == 127) return true;
+    for (int i = 0; i < a->nhosts; i++)
+        if (!strcasecmp(a->hosts[i], name)) return true;
+    return false;
 }
 
 /* 0 when equal; the time depends on the lengths only, not on where the bytes differ. */

@@ -7,7 +7,8 @@
  * configured every connection is admin, and main.c then refuses to listen beyond
  * loopback. Origins: a browser's handshake carries `Origin`; it must be the daemon's own
  * origin (the page it serves) or be in `allowed_origins`, so a web page elsewhere cannot
- * drive a daemon on the user's machine. */
+ * drive a daemon on the user's machine; without tokens the Host header must also name this
+ * machine (access_host_ok), or a rebinding domain would count as the daemon's own origin. */
 #ifndef FX_ACCESS_H
 #define FX_ACCESS_H
 
@@ -34,6 +35,8 @@ struct access {
     int ntokens;
     char origins[ACCESS_MAX_ORIGINS][ACCESS_ORIGIN_MAX];
     int norigins;
+    char hosts[ACCESS_MAX_ORIGINS][ACCESS_ORIGIN_MAX]; /* allowed_hosts: names besides loopback */
+    int nhosts;
 };
 
 /* "view", "tune", "admin" (ACCESS_NONE: "none"). */
@@ -54,6 +57,15 @@ enum access_role access_lookup(const struct access *a, const char *token, size_t
 
 /* The role a connection starts with: admin when no token is configured, else none. */
 enum access_role access_default_role(const struct access *a);
+
+int access_add_host(struct access *a, const char *host, struct fx_err *err);
+
+/* Whether a WebSocket handshake's Host header (NULL: none) may connect. With tokens, any:
+ * the token is the protection. Without tokens every connection is admin, so only the names
+ * this machine answers to: localhost, 127.0.0.0/8, [::1], and `allowed_hosts`, any port. A
+ * page on a DNS-rebinding domain (attacker.example resolving to 127.0.0.1) sends its own name
+ * as Host and as Origin, so the Origin check alone let it in. */
+bool access_host_ok(const struct access *a, const char *host);
 
 /* Whether a handshake's Origin header (NULL: none, as from non-browser clients) may
  * connect; host is the handshake's Host header (NULL: none), tls whether it came over TLS. */

@@ -156,9 +156,20 @@ static int config_origins(const cJSON *arr, struct access *a, struct fx_err *err
     return 0;
 }
 
+static int config_hosts(const cJSON *arr, struct access *a, struct fx_err *err)
+{
+    if (!cJSON_IsArray(arr)) return fx_fail(err, "bad_request", "allowed_hosts", "allowed_hosts: expected an array");
+    for (const cJSON *h = arr->child; h; h = h->next) {
+        if (!cJSON_IsString(h)) return fx_fail(err, "bad_request", "allowed_hosts", "allowed_hosts: expected strings");
+        if (access_add_host(a, h->valuestring, err)) return -1;
+    }
+    return 0;
+}
+
 static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *err)
 {
     const char *k = e->string;
+    if (!strcmp(k, "allowed_hosts")) return config_hosts(e, &cfg->access, err);
     if (!strcmp(k, "limits")) return config_limits(e, &cfg->limits, err);
     if (!strcmp(k, "tokens")) return config_tokens(e, &cfg->access, err);
     if (!strcmp(k, "allowed_origins")) return config_origins(e, &cfg->access, err);

@@ -379,6 +379,11 @@ static bool net_accept(struct net *net, struct lws *wsi)
     bool has_origin = lws_hdr_total_length(wsi, WSI_TOKEN_ORIGIN) > 0;
     const char *o = net_header(wsi, WSI_TOKEN_ORIGIN, origin, sizeof origin);
     const char *h = net_header(wsi, WSI_TOKEN_HOST, host, sizeof host);
+    if (!access_host_ok(&net->srv->cfg.access, h)) {
+        log_warn("refused WebSocket for host \"%.80s\" (no tokens: only loopback names and allowed_hosts)",
+                 h ? h : "(none or too long)");
+        return false;
+    }
     if (has_origin && (!o || !access_origin_ok(&net->srv->cfg.access, o, h, lws_is_ssl(wsi)))) {
         log_warn("refused WebSocket from origin \"%.80s\" (not in allowed_origins)", o ? o : "(too long)");
         return false;

@@ -32,7 +32,11 @@ def tool(d, args, scheme="ws", env=None):
 VIEW, TUNE, ADMIN = "view-token-0123456789", "tune-token-0123456789", "admin-token-012345678"
 
 
-def token_daemon(extra=None):
+def token_daemon(extra=None, tokens=True):
+    """A daemon with view, tune and admin tokens (tokens=False: none at all) and extra config."""
+    if not tokens:
+        env = {k: v for k, v in os.environ.items() if k != "FXSTREAMD_TOKENS"}
+        return Daemon("--config", config_file(extra or {}), env=env)
     cfg = {"tokens": [{"role": "view", "token": VIEW}, {"role": "tune", "token": TUNE}], **(extra or {})}
     return Daemon("--config", config_file(cfg), env={"FXSTREAMD_TOKENS": "admin:" + ADMIN})
 
@@ -127,6 +131,50 @@ async def test_origin(t):
         d.stop()
 
 
+def handshake(port, host, origin=None):
+    """The status line of a raw WebSocket handshake with these Host and Origin headers."""
+    import base64
+    import socket
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: %s\r\n%sUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
+               % (host, "Origin: %s\r\n" % origin if origin else "", base64.b64encode(os.urandom(16)).decode())).encode())
+    try:
+        head = s.recv(4096)
+    except ConnectionResetError:
+        head = b""
+    s.close()
+    return head.split(b"\r\n")[0].decode(errors="replace") or "(closed)"
+
+
+async def test_dns_rebinding(t):
+    """Without tokens only this machine's names are accepted as Host (issue 15 item 1): a page on
+    a rebinding domain sends its own name as Host and Origin and used to get admin."""
+    d = token_daemon({"allowed_hosts": ["studio.local"]}, tokens=False)
+    try:
+        p = d.port
+        r = handshake(p, "attacker.example:%d" % p, "http://attacker.example:%d" % p)
+        t.check(" 101 " not in r, "no tokens: Host attacker.example refused (%s)" % r)
+        t.check(" 101 " not in handshake(p, "attacker.example:%d" % p), "also without an Origin")
+        for host in ("127.0.0.1:%d" % p, "localhost:%d" % p, "LOCALHOST", "127.1.2.3:%d" % p, "[::1]:%d" % p,
+                     "studio.local:%d" % p):
+            r = handshake(p, host, "http://%s" % host)
+            t.check(" 101 " in r, "no tokens: Host %s accepted (%s)" % (host, r))
+        t.check(" 101 " not in handshake(p, "127.0.0.1.attacker.example:%d" % p), "a name that only starts like 127.0.0.1 is refused")
+        t.check(d.proc.poll() is None, "the daemon runs on")
+    finally:
+        d.stop()
+    d = token_daemon({})
+    try:  # with tokens the token protects: any Host may connect, and gets no role without one
+        r = handshake(d.port, "attacker.example:%d" % d.port, "http://attacker.example:%d" % d.port)
+        t.check(" 101 " in r, "with tokens: any Host connects (%s)" % r)
+        c = await connect(d, origin="http://127.0.0.1:%d" % d.port)
+        t.check(c.hello["auth"]["role"] == "none", "and same origin grants no role without a token (%s)" % c.hello["auth"])
+        await c.close()
+    finally:
+        d.stop()
+
+
 async def test_loopback_only(t):
     p = subprocess.run([DAEMON, "--listen", "0.0.0.0", "--port", "0"], capture_output=True, text=True, timeout=30,
                        env={k: v for k, v in os.environ.items() if k != "FXSTREAMD_TOKENS"})
@@ -183,4 +231,4 @@ async def test_tls(t):
 
 
 if __name__ == "__main__":
-    Suite("test_access").run([test_roles, test_origin, test_loopback_only, test_tls])
+    Suite("test_access").run([test_roles, test_origin, test_dns_rebinding, test_loopback_only, test_tls])
