@@ -54,6 +54,7 @@ static void config_defaults(struct config *cfg)
         .max_json_depth = 32,
         .max_control_per_sec = 100,
         .max_queued_messages = 1024,
+        .max_queued_bytes = 262144,
         .stall_timeout_s = 10,
         .max_buffered_bytes = 256 * 1024,
     };
@@ -110,6 +111,7 @@ static const struct config_limit_key config_limit_keys[] = {
     {"max_json_depth", offsetof(struct limits, max_json_depth), 4, 1000},
     {"max_control_per_sec", offsetof(struct limits, max_control_per_sec), 1, 1000000},
     {"max_queued_messages", offsetof(struct limits, max_queued_messages), 16, 1000000},
+    {"max_queued_bytes", offsetof(struct limits, max_queued_bytes), 65536, 256 * 1024 * 1024},
     {"stall_timeout_s", offsetof(struct limits, stall_timeout_s), 1, 3600},
     {"max_buffered_bytes", offsetof(struct limits, max_buffered_bytes), 16 * 1024, 64 * 1024 * 1024},
 };

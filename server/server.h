@@ -24,6 +24,7 @@ struct limits {
     int max_json_depth;
     int max_control_per_sec; /* per connection, token bucket with a burst of this size */
     int max_queued_messages; /* text replies/events queued per connection before it is closed */
+    int max_queued_bytes;    /* ... and their bytes: a client that asks for large replies and does not read */
     int stall_timeout_s;     /* a connection whose socket stays full this long is closed */
     int max_buffered_bytes;  /* unread bytes per connection beyond which no new frame starts */
 };

@@ -27,14 +27,16 @@ void session_send(struct session *ss, cJSON *msg)
     char *text = cJSON_PrintUnformatted(msg);
     cJSON_Delete(msg);
     if (!text) return;
-    if (ss->q_count >= ss->srv->cfg.limits.max_queued_messages) {
-        /* The peer is not reading its replies: close rather than grow without bound. */
+    size_t len = strlen(text);
+    const struct limits *l = &ss->srv->cfg.limits;
+    if (ss->q_count >= l->max_queued_messages || ss->q_bytes + len > (size_t)l->max_queued_bytes) {
+        /* The peer is not reading its replies: close rather than grow without bound (in
+         * messages, and in bytes: 60 readers of ~11 kB describe replies held 9 MiB each). */
         ss->kill = "replies not read";
         free(text);
         if (ss->srv->wake) ss->srv->wake(ss);
         return;
     }
-    size_t len = strlen(text);
     struct outmsg *m = malloc(sizeof *m + FRAME_HEADROOM + len);
     if (m) {
         m->next = NULL;
@@ -44,6 +46,7 @@ void session_send(struct session *ss, cJSON *msg)
         else ss->q_head = m;
         ss->q_tail = m;
         ss->q_count++;
+        ss->q_bytes += len;
     }
     free(text);
     if (ss->srv->wake) ss->srv->wake(ss);
@@ -56,6 +59,7 @@ struct outmsg *session_pop(struct session *ss)
     ss->q_head = m->next;
     if (!ss->q_head) ss->q_tail = NULL;
     ss->q_count--;
+    ss->q_bytes -= m->len;
     return m;
 }
 
@@ -105,6 +109,7 @@ static cJSON *session_hello(struct server *srv)
     cJSON *lim = cJSON_AddObjectToObject(h, "limits");
     cJSON_AddNumberToObject(lim, "max_connections", l->max_connections);
     cJSON_AddNumberToObject(lim, "max_queued_messages", l->max_queued_messages);
+    cJSON_AddNumberToObject(lim, "max_queued_bytes", l->max_queued_bytes);
     cJSON_AddNumberToObject(lim, "max_message_bytes", l->max_message_bytes);
     cJSON_AddNumberToObject(lim, "max_json_depth", l->max_json_depth);
     cJSON_AddNumberToObject(lim, "max_streams", l->max_streams);

@@ -41,6 +41,7 @@ struct session {
     int nsubs, rr;        /* rr: round-robin start for frame sends */
     struct outmsg *q_head, *q_tail;
     int q_count;
+    size_t q_bytes; /* text bytes queued */
     struct frame *cur;    /* frame being sent, how far, and its stream (referenced) */
     size_t cur_off;
     struct stream *cur_stream;

@@ -3,7 +3,10 @@ small limits: the `limit` error (with the param the spec names) or the close cod
 says why, and the connection or daemon still usable afterwards.
 Run from the repository root: /usr/bin/python3 tests/integration/test_limits.py"""
 import asyncio
+import base64
 import json
+import os
+import socket
 import time
 
 import websockets
@@ -11,6 +14,7 @@ import websockets
 from fxtest import Client, Daemon, Suite, config_file
 
 N_BURST = 100
+N_READERS, ASKS = 100, 120
 LIMITS = {"max_connections": 3, "max_streams": 4, "max_subscriptions": 2, "max_control_per_sec": 20,
           "max_message_bytes": 2048}
 
@@ -77,5 +81,69 @@ async def test_rate_and_size(t):
         await c.close()
 
 
+def raw_ws(port, rcvbuf=4096):
+    """A WebSocket on a socket with a small receive buffer that this test never reads from."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+    s.settimeout(10)
+    s.connect(("127.0.0.1", port))
+    s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
+               % (port, base64.b64encode(os.urandom(16)).decode())).encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += s.recv(1)
+    return s
+
+
+def ws_text(s, text):
+    """Sends one masked text frame."""
+    data, mask = text.encode(), os.urandom(4)
+    n = len(data)
+    head = bytes([0x81, 0x80 | n]) if n < 126 else bytes([0x81, 0x80 | 126]) + n.to_bytes(2, "big")
+    s.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data)))
+
+
+def rss_kib(d):
+    with open("/proc/%d/status" % d.proc.pid) as f:
+        return int(f.read().split("VmRSS:")[1].split()[0])
+
+
+async def test_queued_bytes(t):
+    """Replies a client does not read are bounded in bytes (issue 15 item 2): describe replies
+    (~11 kB) asked for at the allowed rate by readers that never read."""
+    with Daemon("--config", config_file({"limits": {"max_queued_bytes": 65536, "max_control_per_sec": 1000}})) as d:
+        rss0 = rss_kib(d)
+        socks = [raw_ws(d.port) for _ in range(N_READERS)]
+        for _ in range(ASKS):
+            for s in socks:
+                try:
+                    ws_text(s, '{"op":"describe","effect":"energy_wave"}')
+                except OSError:  # closed by the daemon: what this test wants
+                    pass
+        await asyncio.sleep(1.0)
+        grown = rss_kib(d) - rss0
+        bound = N_READERS * (65536 + 512 * 1024) // 1024  # the queue limit plus socket buffers, per reader
+        t.check(grown < bound, "%d readers that never read asked for %d x 11 kB each: RSS +%d KiB (bound %d KiB)"
+                % (N_READERS, ASKS, grown, bound))
+        s = socks[0]
+        s.settimeout(10)
+        tail, deadline = b"", time.monotonic() + 20
+        while time.monotonic() < deadline:  # drain what was sent; the close frame comes last
+            try:
+                chunk = s.recv(65536)
+            except OSError:
+                break
+            if not chunk:
+                break
+            tail = (tail + chunk)[-64:]
+        i = tail.rfind(b"\x88")
+        code = int.from_bytes(tail[i + 2:i + 4], "big") if i >= 0 and len(tail) >= i + 4 else None
+        t.check(code == 1008 and b"replies not read" in tail, "the reader was closed with 1008 (%s, %r)" % (code, tail[-24:]))
+        for x in socks:
+            x.close()
+        t.check(d.proc.poll() is None, "the daemon runs on")
+
+
 if __name__ == "__main__":
-    Suite("test_limits").run([test_connections, test_streams_and_subscriptions, test_rate_and_size])
+    Suite("test_limits").run([test_connections, test_streams_and_subscriptions, test_rate_and_size, test_queued_bytes])
