@@ -4,12 +4,14 @@
 #include <ctype.h>
 #include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #define EYE_PI 3.14159265358979323846
 #define EYE_RINGS 32    /* built-in meshes: latitude rings of the front half */
@@ -57,6 +59,10 @@ int eye_models_set_dir(const char *dir, struct fx_err *err)
         if (n - 4 > EYE_MODEL_NAME_MAX) continue;
         memcpy(stem, e->d_name, n - 4);
         stem[n - 4] = 0;
+        char path[sizeof eye_assets_dir + 300];
+        struct stat st;
+        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        if (lstat(path, &st) || !S_ISREG(st.st_mode)) continue; /* links and the rest are not models */
         if (eye_model_name_ok(stem) && eye_is_builtin(stem) < 0) memcpy(eye_obj_names[no++], stem, n - 3);
     }
     closedir(d);
@@ -283,8 +289,11 @@ static int eye_obj_path(const char *name, char *path, size_t cap, struct stat *s
         return fx_fail(err, "bad_param", "model", "model name \"%.64s\" must match [A-Za-z0-9_-]{1,64}", name);
     if (!eye_assets_dir[0]) return fx_fail(err, "bad_param", "model", "model \"%s\": no assets_dir configured", name);
     snprintf(path, cap, "%s/%s.obj", eye_assets_dir, name);
-    if (stat(path, st) || !S_ISREG(st->st_mode))
-        return fx_fail(err, "bad_param", "model", "model \"%s\": no file %s.obj in the assets directory", name, name);
+    /* lstat: a symlink is refused, not followed, so a link to /etc/passwd cannot have its lines
+     * quoted in a parse error (issue 15 item 4) */
+    if (lstat(path, st) || !S_ISREG(st->st_mode))
+        return fx_fail(err, "bad_param", "model", "model \"%s\": no regular file %s.obj in the assets directory "
+                                                  "(symbolic links are not followed)", name, name);
     if (st->st_size > EYE_OBJ_MAX_BYTES)
         return fx_fail(err, "bad_param", "model", "model \"%s\": %lld bytes is over the %d-byte limit", name,
                        (long long)st->st_size, EYE_OBJ_MAX_BYTES);
@@ -296,7 +305,9 @@ static int eye_obj_load(const char *name, struct eye_mesh *m, struct fx_err *err
     char path[4200], what[96];
     struct stat st;
     if (eye_obj_path(name, path, sizeof path, &st, err)) return -1;
-    FILE *f = fopen(path, "rb");
+    int fd = open(path, O_RDONLY | O_NOFOLLOW | O_CLOEXEC); /* no link swapped in after the lstat */
+    FILE *f = fd >= 0 ? fdopen(fd, "rb") : NULL;
+    if (fd >= 0 && !f) close(fd);
     char *text = malloc((size_t)st.st_size + 1);
     size_t n = f && text ? fread(text, 1, (size_t)st.st_size, f) : 0;
     if (f) fclose(f);

@@ -107,6 +107,12 @@ async def test_bake_and_obj(t):
     bad = await c.request("create", effect="compound_eye", stream="b2", params={"model": "broken"})
     t.check(bad["op"] == "error" and bad["param"] == "model" and "line" in bad["message"],
             "malformed OBJ refused with its line: %s" % bad.get("message"))
+    # A model that is a symlink (here to a secret outside the assets) is not offered and never
+    # read, so no line of the target can be quoted in an error (issue 15 item 4).
+    bad = await c.request("create", effect="compound_eye", stream="b3", params={"model": "leak"})
+    t.check(bad["op"] == "error" and bad["param"] == "model" and "SECRET" not in bad["message"] and
+            '"leak"' not in bad["message"].split("expected one of")[-1],
+            "a symlinked OBJ is not a model choice, its content never quoted: %s" % bad.get("message"))
     await c.close()
 
 
@@ -140,6 +146,10 @@ def main():
         f.write("v -1 -1 0\nv 1 -1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0.5 1\nf 1/1 2/2 3/3\n")
     with open(os.path.join(assets, "broken.obj"), "w") as f:
         f.write("v 0 0 0\nf 1/1 2/2 3/3\n")
+    secret = os.path.join(tempfile.mkdtemp(prefix="fxs-secret-"), "secret.obj")
+    with open(secret, "w") as f:
+        f.write("v 0 0 0\nf SECRET-TOKEN/1 2 3\n")
+    os.symlink(secret, os.path.join(assets, "leak.obj"))
     D = Daemon("--assets-dir", assets)
     try:
         Suite("test_eye_stream").run([test_lut_frames, test_bake_and_obj, test_fxctl_out], timeout=120)
