@@ -22,7 +22,7 @@ struct engine_slot {
     struct stream *s;
     void *fx;            /* effect state, NULL until created (or after a failure) */
     cJSON *params;       /* the document fx was created/updated with */
-    uint32_t rev;        /* its revision */
+    uint64_t rev;        /* its revision */
     uint32_t failed_rev; /* creation failed at this revision: wait for a change */
     uint64_t reset_gen;
     uint64_t seq[FXS_KIND_MAX + 1];
@@ -78,7 +78,7 @@ static double engine_backoff(int n)
 static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
 {
     struct stream *s = sl->s;
-    uint32_t rev;
+    uint64_t rev;
     pthread_mutex_lock(&eng->hub->mu);
     rev = s->rev;
     pthread_mutex_unlock(&eng->hub->mu);
@@ -244,7 +244,7 @@ static void engine_sync_slots(struct engine *eng)
 }
 
 /* Pauses a stream after a failure; a later change of rev or reset_gen ends the pause. */
-static void engine_pause(struct engine_slot *sl, uint32_t rev, uint64_t reset_gen, double now)
+static void engine_pause(struct engine_slot *sl, uint64_t rev, uint64_t reset_gen, double now)
 {
     sl->fail_rev = rev;
     sl->fail_reset = reset_gen;
@@ -260,7 +260,7 @@ static double engine_run_due(struct engine *eng)
         pthread_mutex_lock(&eng->hub->mu);
         int subs = sl->s->subscribers;
         double fps = params_num(sl->s->params, "fps");
-        uint32_t rev = sl->s->rev;
+        uint64_t rev = sl->s->rev;
         uint64_t reset_gen = sl->s->reset_gen;
         pthread_mutex_unlock(&eng->hub->mu);
         if (eng->pause_idle && subs == 0) {

@@ -55,7 +55,7 @@ static int hub_index(const struct hub *hub, const char *name)
 }
 
 int hub_create(struct hub *hub, const struct effect_ops *effect, const char *name, cJSON *params,
-               uint32_t rev, struct fx_err *err)
+               uint64_t rev, struct fx_err *err)
 {
     if (!hub_valid_name(name))
         return fx_fail(err, "bad_request", "stream",
@@ -148,18 +148,18 @@ void stream_unref(struct stream *s)
     free(s);
 }
 
-uint32_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc)
+uint64_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc)
 {
     pthread_mutex_lock(&hub->mu);
     cJSON_Delete(s->params);
     s->params = doc;
-    uint32_t rev = ++s->rev;
+    uint64_t rev = ++s->rev;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
     return rev;
 }
 
-cJSON *hub_get_params(struct hub *hub, struct stream *s, uint32_t *rev)
+cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev)
 {
     pthread_mutex_lock(&hub->mu);
     cJSON *doc = cJSON_Duplicate(s->params, 1);

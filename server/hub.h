@@ -22,6 +22,11 @@
 
 #define STREAM_NAME_MAX 64
 
+/* Revisions stay below 10^15: every integer there is exact in a double and prints exactly with
+ * cJSON's 15 significant digits (2^32 and up used to wrap to 0). A stream that reaches it takes
+ * no more changes (at a change a millisecond, 31 700 years). */
+#define HUB_REV_MAX 1e15
+
 struct stream {
     atomic_int refs;
     char name[STREAM_NAME_MAX];
@@ -30,7 +35,7 @@ struct stream {
 
     /* Guarded by hub.mu. */
     cJSON *params;    /* complete, validated */
-    uint32_t rev;     /* +1 per accepted change, starts at 1 */
+    uint64_t rev;     /* +1 per accepted change, starts at 1; below HUB_REV_MAX */
     uint64_t reset_gen;
     bool destroyed;
     int subscribers;
@@ -64,7 +69,7 @@ void hub_free(struct hub *hub);
  * ownership of params on success. Errors: exists, limit, bad_request
  * (invalid name: 1-63 characters of [A-Za-z0-9_.-]). */
 int hub_create(struct hub *hub, const struct effect_ops *effect, const char *name, cJSON *params,
-               uint32_t rev, struct fx_err *err);
+               uint64_t rev, struct fx_err *err);
 /* Removes a stream by name; returns it with a reference so the caller can tell its
  * subscribers (unknown_stream when absent). */
 struct stream *hub_destroy(struct hub *hub, const char *name, struct fx_err *err);
@@ -77,9 +82,9 @@ void stream_ref(struct stream *s);
 void stream_unref(struct stream *s);
 
 /* Replaces the parameters (takes ownership of doc); returns the new revision. */
-uint32_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc);
+uint64_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc);
 /* A copy of the parameters and their revision. */
-cJSON *hub_get_params(struct hub *hub, struct stream *s, uint32_t *rev);
+cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev);
 void hub_request_reset(struct hub *hub, struct stream *s);
 void hub_add_subscriber(struct hub *hub, struct stream *s, int delta);
 

@@ -1,6 +1,7 @@
 /* main.c — fxstreamd: wires configuration, OpenCL, hub, engine and network together,
  * creates the start-up streams, serves until SIGINT/SIGTERM, then shuts down in order
  * (close WebSockets with 1001, stop the engine, free everything) and exits 0. */
+#include <math.h>
 #include <errno.h>
 #include <signal.h>
 #include <stdio.h>
@@ -45,7 +46,13 @@ static int main_create_stream(struct server *srv, const cJSON *def, struct fx_er
                             effect->valuestring);
     cJSON *doc = effect_params(fx, NULL, params, err);
     if (!doc) return -1;
-    uint32_t r = cJSON_IsNumber(rev) && rev->valuedouble >= 1 ? (uint32_t)rev->valuedouble : 1;
+    if (rev && !(cJSON_IsNumber(rev) && rev->valuedouble >= 1 && rev->valuedouble < HUB_REV_MAX &&
+                 rev->valuedouble == floor(rev->valuedouble))) {
+        cJSON_Delete(doc);
+        return fx_fail(err, "bad_request", "rev", "stream %s: rev must be an integer from 1 to 10^15 - 1",
+                       name->valuestring);
+    }
+    uint64_t r = rev ? (uint64_t)rev->valuedouble : 1;
     if (hub_create(&srv->hub, fx, name->valuestring, doc, r, err)) {
         cJSON_Delete(doc);
         return -1;

@@ -385,7 +385,7 @@ static int session_op_unsubscribe(struct session *ss, const cJSON *req, const cJ
     return 0;
 }
 
-static cJSON *session_params_msg(struct stream *s, const cJSON *id, uint32_t rev, cJSON *doc)
+static cJSON *session_params_msg(struct stream *s, const cJSON *id, uint64_t rev, cJSON *doc)
 {
     cJSON *r = session_reply("params", id);
     cJSON_AddStringToObject(r, "stream", s->name);
@@ -400,7 +400,7 @@ static int session_op_get(struct session *ss, const cJSON *req, const cJSON *id,
     if (session_only(req, "get", allowed, err)) return -1;
     struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
-    uint32_t rev;
+    uint64_t rev;
     cJSON *doc = hub_get_params(&ss->srv->hub, s, &rev);
     session_send(ss, session_params_msg(s, id, rev, doc));
     stream_unref(s);
@@ -415,9 +415,11 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     if (!partial) return fx_fail(err, "bad_request", "params", "missing field \"params\"");
     struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
-    uint32_t rev;
+    uint64_t rev;
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
-    cJSON *doc = effect_params(s->effect, cur, partial, err);
+    cJSON *doc = (double)rev + 1 >= HUB_REV_MAX ? NULL : effect_params(s->effect, cur, partial, err);
+    if ((double)rev + 1 >= HUB_REV_MAX)
+        fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
     cJSON_Delete(cur);
     if (!doc) {
         stream_unref(s);

@@ -16,7 +16,7 @@ static cJSON *store_snapshot(struct server *srv)
     int n;
     struct stream **all = hub_snapshot(&srv->hub, &n);
     for (int i = 0; i < n; i++) {
-        uint32_t rev;
+        uint64_t rev;
         cJSON *o = cJSON_CreateObject();
         cJSON_AddStringToObject(o, "stream", all[i]->name);
         cJSON_AddStringToObject(o, "effect", all[i]->effect->name);

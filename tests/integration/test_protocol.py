@@ -302,6 +302,24 @@ async def test_persistence(t):
     await c.close()
 
 
+async def test_rev_64bit(t):
+    """rev is 64-bit end to end (issue 15 item 7): a stored 4294967295 goes on to 4294967296, not 0."""
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    with open(os.path.join(state, "streams.json"), "w") as f:
+        json.dump([{"stream": "big", "effect": "energy_wave", "rev": 4294967295, "params": {"width": 32, "height": 32}}], f)
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        g = await c.request("get", stream="big")
+        s = await c.request("set", stream="big", params={"alpha": 2})
+        t.check(g.get("rev") == 4294967295 and s.get("rev") == 4294967296, "rev %s -> %s" % (g.get("rev"), s.get("rev")))
+        await c.close()
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        g = await c.request("get", stream="big")
+        t.check(g.get("rev") == 4294967296, "and it is stored as such (%s)" % g.get("rev"))
+        await c.close()
+
+
 async def test_stream_events(t):
     """A stream created or destroyed by one connection is announced to the others as an event
     (no id); the requester gets only its reply."""
@@ -374,7 +392,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_stream_events,
+               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)
