@@ -67,13 +67,25 @@ static int main_create_streams(struct server *srv, struct fx_err *err)
     const cJSON *list = stored ? stored : srv->cfg.streams;
     if (!list) list = builtin = cJSON_Parse(main_default_streams);
     int rc = 0;
+    cJSON *quarantine = cJSON_CreateArray();
     for (const cJSON *e = list->child; e && !rc; e = e->next) {
         rc = main_create_stream(srv, e, err);
-        if (rc && stored) { /* a stored stream that no longer validates is skipped, not fatal */
-            log_warn("stored stream skipped: %s", err->message);
+        if (rc && stored) { /* a stored stream that no longer validates (an upgrade?) is kept aside */
+            cJSON *q = cJSON_Duplicate(e, 1);
+            if (cJSON_IsObject(q)) cJSON_AddStringToObject(q, "reason", err->message);
+            cJSON_AddItemToArray(quarantine, q);
             rc = 0;
         }
     }
+    srv->quarantined = cJSON_GetArraySize(quarantine);
+    if (srv->quarantined && store_quarantine(srv, quarantine))
+        rc = fx_fail(err, "internal", NULL, "cannot write %s/streams.quarantine.json: %s", srv->cfg.state_dir,
+                     strerror(errno));
+    else if (srv->quarantined)
+        log_warn("%d stored stream(s) no longer valid, moved to %s/streams.quarantine.json (first: %s)",
+                 srv->quarantined, srv->cfg.state_dir, cJSON_GetObjectItemCaseSensitive(quarantine->child, "reason")
+                     ? cJSON_GetObjectItemCaseSensitive(quarantine->child, "reason")->valuestring : "?");
+    cJSON_Delete(quarantine);
     cJSON_Delete(stored);
     cJSON_Delete(builtin);
     return rc;

@@ -140,6 +140,7 @@ int metrics_health(struct server *srv, struct fx_buf *out)
     cJSON_AddStringToObject(h, "device", srv->ocl ? ocl_device_name(srv->ocl) : "none");
     cJSON_AddStringToObject(h, "platform", srv->ocl ? ocl_platform_name(srv->ocl) : "none");
     cJSON_AddNumberToObject(h, "connections", srv->nsessions);
+    cJSON_AddNumberToObject(h, "quarantined", srv->quarantined); /* stored streams set aside at start */
     cJSON *arr = cJSON_AddArrayToObject(h, "streams");
     pthread_mutex_lock(&srv->hub.mu);
     for (int i = 0; i < n; i++) {

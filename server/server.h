@@ -61,6 +61,7 @@ struct server {
     struct counters counters;
     struct session *sessions; /* network thread only */
     int nsessions;
+    int quarantined;          /* stored streams moved to streams.quarantine.json at start */
     bool store_dirty;         /* network thread only: accepted changes not yet on disk (store.h) */
     double start_time;        /* CLOCK_MONOTONIC seconds */
     /* Called by the session layer when a session has output queued (net.c asks the

@@ -41,11 +41,11 @@ static int store_write_all(int fd, const char *text, size_t len)
     return 0;
 }
 
-static int store_write_file(const char *dir, const char *text)
+static int store_write_file(const char *dir, const char *name, const char *text)
 {
-    char tmp[PATH_MAX + 32], path[PATH_MAX + 32];
-    snprintf(tmp, sizeof tmp, "%s/streams.json.tmp", dir);
-    snprintf(path, sizeof path, "%s/streams.json", dir);
+    char tmp[PATH_MAX + 64], path[PATH_MAX + 64];
+    snprintf(tmp, sizeof tmp, "%s/%s.tmp", dir, name);
+    snprintf(path, sizeof path, "%s/%s", dir, name);
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
     if (fd < 0) return -1;
     int rc = store_write_all(fd, text, strlen(text)) || fsync(fd);
@@ -76,7 +76,7 @@ void store_flush(struct server *srv)
     cJSON *doc = store_snapshot(srv);
     char *text = cJSON_Print(doc);
     cJSON_Delete(doc);
-    if (!text || store_write_file(srv->cfg.state_dir, text))
+    if (!text || store_write_file(srv->cfg.state_dir, "streams.json", text))
         log_error("cannot save state to %s/streams.json: %s", srv->cfg.state_dir, strerror(errno));
     free(text);
 }
@@ -101,4 +101,21 @@ int store_load(const struct server *srv, cJSON **streams, struct fx_err *err)
         return fx_fail(err, "internal", NULL, "%s: %s (left as it is)", path, why[0] ? why : "not a JSON array of streams");
     }
     return 0;
+}
+
+int store_quarantine(const struct server *srv, const cJSON *entries)
+{
+    char path[PATH_MAX + 64], why[128] = "";
+    snprintf(path, sizeof path, "%s/streams.quarantine.json", srv->cfg.state_dir);
+    cJSON *all = NULL;
+    if (jsonfile_read(path, STORE_MAX_BYTES, &all, why, sizeof why) || !cJSON_IsArray(all)) {
+        cJSON_Delete(all); /* none yet (or unreadable: a new file keeps at least these) */
+        all = cJSON_CreateArray();
+    }
+    for (const cJSON *e = entries->child; e; e = e->next) cJSON_AddItemToArray(all, cJSON_Duplicate(e, 1));
+    char *text = cJSON_Print(all);
+    cJSON_Delete(all);
+    int rc = text ? store_write_file(srv->cfg.state_dir, "streams.quarantine.json", text) : -1;
+    free(text);
+    return rc;
 }

@@ -24,5 +24,9 @@ void store_flush(struct server *srv);
 /* The stored stream list ([{stream, effect, rev, params}]) or NULL when there is none.
  * Fails (-1, err) when the file exists but cannot be read or parsed. */
 int store_load(const struct server *srv, cJSON **streams, struct fx_err *err);
+/* Adds entries (stored streams that no longer validate, each with its "reason") to
+ * <state-dir>/streams.quarantine.json, written like streams.json, so the next write of
+ * streams.json does not erase them with no copy. 0 or -1 (errno). */
+int store_quarantine(const struct server *srv, const cJSON *entries);
 
 #endif

@@ -320,6 +320,33 @@ async def test_rev_64bit(t):
         await c.close()
 
 
+async def test_quarantine(t):
+    """Stored streams that no longer validate are kept aside, not erased (issue 15 item 6)."""
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    stored = [{"stream": "ok", "effect": "energy_wave", "rev": 3, "params": {"width": 32, "height": 32}},
+              {"stream": "old", "effect": "smoke", "rev": 7, "params": {}},
+              {"stream": "wide", "effect": "energy_wave", "rev": 2, "params": {"width": 99999}}]
+    with open(os.path.join(state, "streams.json"), "w") as f:
+        json.dump(stored, f)
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        names = [s["stream"] for s in (await c.request("list"))["streams"]]
+        await c.request("set", stream="ok", params={"alpha": 2})  # rewrites streams.json
+        await c.close()
+        with urllib.request.urlopen(d.http + "/healthz", timeout=10) as r:
+            h = json.loads(r.read())
+    q = json.load(open(os.path.join(state, "streams.quarantine.json")))
+    now = [s["stream"] for s in json.load(open(os.path.join(state, "streams.json")))]
+    t.check(names == ["ok"] and h.get("quarantined") == 2, "the valid stream runs, 2 quarantined in /healthz (%s, %s)"
+            % (names, h.get("quarantined")))
+    t.check([s["stream"] for s in q] == ["old", "wide"] and all(s.get("reason") for s in q) and q[0]["rev"] == 7,
+            "streams.quarantine.json keeps them whole with the reason (%s)" % [s.get("reason") for s in q])
+    t.check(now == ["ok"], "streams.json then holds only the valid stream (%s)" % now)
+    with Daemon(state_dir=state) as d:  # a second start adds nothing new and loses nothing
+        pass
+    t.check(len(json.load(open(os.path.join(state, "streams.quarantine.json")))) == 2, "a restart keeps the quarantine")
+
+
 async def test_stream_events(t):
     """A stream created or destroyed by one connection is announced to the others as an event
     (no id); the requester gets only its reply."""
@@ -392,7 +419,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_stream_events,
+               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_quarantine, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)
