@@ -29,7 +29,7 @@ timeout 20 build/fxctl --url "$url" set energy light_rig=true 'ramp=[{"m_min":-1
     || summary_fail "set light_rig failed"
 timeout 30 build/fxctl --url "$url" subscribe energy --frames 6 --out "$tmp/real" >"$tmp/real/lines.txt" 2>"$tmp/real/err.txt"
 # Two compound eyes in mode lut (small tables): one kind 4 frame each, payload + C-decoded PNGs.
-for spec in "eyesq lut_cells=12 lut_dirs=10" "eyehex lattice=hex lut_cells=8 lut_dirs=12 lens_radius=1.2"; do
+for spec in "eyesq lattice=square lut_cells=12 lut_dirs=10" "eyehex lattice=hex lut_cells=8 lut_dirs=12 lens_radius=1.2"; do
     set -- $spec
     timeout 20 build/fxctl --url "$url" create compound_eye "$@" >/dev/null || summary_fail "create $1 failed"
     timeout 30 build/fxctl --url "$url" subscribe "$1" --frames 1 --out "$tmp/eye" >>"$tmp/eye/lines.txt" 2>>"$tmp/eye/err.txt" \

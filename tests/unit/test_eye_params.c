@@ -52,7 +52,7 @@ static void test_table(void)
 
 static void test_cross_rules(void)
 {
-    tep_reject("{\"lens_radius\":0.6}", "lens_radius"); /* gaps on the square lattice */
+    tep_reject("{\"lens_radius\":0.6,\"lattice\":\"square\"}", "lens_radius"); /* gaps on the square lattice */
     tep_accept("{\"lens_radius\":0.6,\"lattice\":\"hex\"}");
     tep_reject("{\"ring_inner\":0.3,\"ring_outer\":0.2}", "ring_inner");
 }
