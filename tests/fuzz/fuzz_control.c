@@ -29,7 +29,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&srv, 0, sizeof srv);
     srv.cfg.limits = (struct limits){.max_connections = 4, .max_streams = 4, .max_subscriptions = 4,
                                      .max_message_bytes = 1 << 16, .max_json_depth = 32,
-                                     .max_control_per_sec = 1 << 20, .max_queued_messages = 1 << 20,
+                                     .max_control_per_sec = 1 << 20, .max_queued_messages = 1 << 20, .max_queued_bytes = 1 << 30,
                                      .stall_timeout_s = 10};
     hub_init(&srv.hub, srv.cfg.limits.max_streams);
     session_open(&ss, &srv, NULL, ACCESS_ADMIN);

@@ -16,7 +16,8 @@ static void t_server_init(void)
     memset(&t_srv, 0, sizeof t_srv);
     t_srv.cfg.limits = (struct limits){.max_connections = 8, .max_streams = 4, .max_subscriptions = 2,
                                        .max_message_bytes = 4096, .max_json_depth = 8,
-                                       .max_control_per_sec = 1000, .max_queued_messages = 64};
+                                       .max_control_per_sec = 1000, .max_queued_messages = 64,
+                                       .max_queued_bytes = 1 << 20};
     hub_init(&t_srv.hub, t_srv.cfg.limits.max_streams);
 }
 
