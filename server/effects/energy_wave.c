@@ -86,10 +86,6 @@ static const struct param_def ew_band_fields[] = {
     {0},
 };
 
-static const char ew_default_ramp[] = "[{\"m_min\":-1,\"color\":[0.0,0.2,0.4]},"
-                                      "{\"m_min\":-0.3,\"color\":[0.5,0.7,0.9]},"
-                                      "{\"m_min\":0,\"color\":[0.9,0.9,1.0]}]";
-
 /* Default scene: two C1-joined Bezier curves (as thesis Figs 5.3-5.6), W of Fig 5.6
  * (right) and b = 8.0, with the eq. (5.1) pulse running along each. */
 static const char ew_default_curves[] =
@@ -158,9 +154,10 @@ const struct param_def energy_wave_params[] = {
      .doc = "light rig: chords per torus centre circle"},
     {.name = "light_strength", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
      .doc = "light rig: mix of the toon colour over the client's own shading (1: full replacement, the thesis)"},
-    {.name = "ramp", .type = PARAM_OBJECT_LIST, .def = ew_default_ramp, .min_len = 1, .max_len = LIGHT_RIG_MAX_BANDS,
+    {.name = "ramp", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = LIGHT_RIG_MAX_BANDS,
      .fields = ew_band_fields, .unit = "",
-     .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5 by default)"},
+     .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5); empty: three bands "
+            "that follow color_energy C_e (0.4 C_e from -1, 0.2 + 0.7 C_e from -0.3, 0.75 + 0.25 C_e from 0)"},
     {.name = "features", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "light rig: multiply the feature texture onto the toon colour (eq. 2.6)"},
     {.name = "outline", .type = PARAM_BOOL, .def = "true", .unit = "",

@@ -163,6 +163,20 @@ static void lr_segments(const cJSON *p, double sim_time, struct light_rig *rig)
     }
 }
 
+/* The default ramp (an empty `ramp`): three bands of eq. 2.5's shape tinted by the wave's own
+ * colour C_e, so changing color_energy changes the light the wave casts (issue 14). */
+static void lr_ramp_from_energy(const cJSON *p, struct light_consts *k)
+{
+    static const double m_min[3] = {-1, -0.3, 0}, base[3] = {0, 0.2, 0.75}, gain[3] = {0.4, 0.7, 0.25};
+    double ce[3];
+    params_vec3(p, "color_energy", ce);
+    for (int i = 0; i < 3; i++) {
+        k->bands[i].m_min = m_min[i];
+        for (int c = 0; c < 3; c++) k->bands[i].rgb[c] = fmin(1.0, base[i] + gain[i] * ce[c]);
+    }
+    k->n_bands = 3;
+}
+
 static void lr_constants(const cJSON *p, struct light_consts *k)
 {
     memset(k, 0, sizeof *k);
@@ -192,6 +206,7 @@ static void lr_constants(const cJSON *p, struct light_consts *k)
         b->m_min = params_num(it, "m_min");
         params_vec3(it, "color", b->rgb);
     }
+    if (!k->n_bands) lr_ramp_from_energy(p, k);
 }
 
 void light_rig_from_params(const cJSON *params, double sim_time, struct light_rig *rig)

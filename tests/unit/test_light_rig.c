@@ -285,6 +285,29 @@ static void test_loop_never_dark(void)
     cJSON_Delete(p);
 }
 
+/* Issue 14: the default ramp follows color_energy (the light the wave casts takes its colour);
+ * an explicit ramp is used as given. */
+static void test_ramp_follows_energy_colour(void)
+{
+    static struct light_rig a, b, c;
+    cJSON *pa = rig_params("{}"), *pb = rig_params("{\"color_energy\":[1,0.3,0.1]}");
+    cJSON *pc = rig_params("{\"color_energy\":[1,0.3,0.1],\"ramp\":[{\"m_min\":-1,\"color\":[0,1,0]}]}");
+    CHECK(pa && pb && pc, "documents");
+    if (!pa || !pb || !pc) return;
+    light_rig_from_params(pa, 0, &a);
+    light_rig_from_params(pb, 0, &b);
+    light_rig_from_params(pc, 0, &c);
+    CHECK(a.k.n_bands == 3 && b.k.n_bands == 3 && a.k.bands[1].m_min == -0.3, "three default bands");
+    CHECK(fabs(a.k.bands[1].rgb[2] - 0.9) < 1e-12 && fabs(b.k.bands[1].rgb[0] - 0.9) < 1e-12 &&
+              fabs(b.k.bands[1].rgb[2] - 0.27) < 1e-12,
+          "the lit band is 0.2 + 0.7 C_e: blue for the default C_e, orange for an orange one (%g %g %g)",
+          b.k.bands[1].rgb[0], b.k.bands[1].rgb[1], b.k.bands[1].rgb[2]);
+    CHECK(c.k.n_bands == 1 && c.k.bands[0].rgb[1] == 1.0, "an explicit ramp is used as given");
+    cJSON_Delete(pa);
+    cJSON_Delete(pb);
+    cJSON_Delete(pc);
+}
+
 static void test_segments_other_sources(void)
 {
     cJSON *p = rig_params("{\"points\":[{\"pos\":[1,2,3],\"coef\":3}],\"lines\":[{\"pos\":[0,1,0],\"dir\":[0,0,2],"
@@ -518,6 +541,7 @@ int main(int argc, char **argv)
     RUN(test_bspline);
     RUN(test_segments_curves);
     RUN(test_loop_never_dark);
+    RUN(test_ramp_follows_energy_colour);
     RUN(test_segments_other_sources);
     RUN(test_encoding);
     RUN(test_params_rules);
