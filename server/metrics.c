@@ -82,6 +82,9 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_head(out, "fxs_state_writes_total", "counter",
                  "State files written to the state directory (one per group of accepted changes).");
     metrics_printf(out, "fxs_state_writes_total %llu\n", (unsigned long long)atomic_load(&c->state_writes));
+    metrics_head(out, "fxs_handshakes_evicted_total", "counter",
+                 "Connections dropped before their first request to make room for newer ones.");
+    metrics_printf(out, "fxs_handshakes_evicted_total %llu\n", (unsigned long long)atomic_load(&c->handshakes_evicted));
     metrics_head(out, "fxs_bytes_sent_total", "counter", "Frame bytes sent, all streams.");
     metrics_printf(out, "fxs_bytes_sent_total %llu\n", (unsigned long long)atomic_load(&c->bytes_sent));
     metrics_head(out, "fxs_streams", "gauge", "Streams defined.");

@@ -39,6 +39,9 @@
 
 _Static_assert(LWS_PRE <= FRAME_HEADROOM, "frame headroom must hold the WebSocket framing");
 
+#define NET_PENDING_MAX 128     /* connections waiting for their first request */
+#define NET_PENDING_TIMEOUT_S 3 /* ... for at most this long */
+
 struct net {
     struct server *srv;
     struct lws_context *ctx;
@@ -48,10 +51,38 @@ struct net {
     double retry_sul_at;        /* when retry_sul fires; 0 = not scheduled */
     struct lws_protocols protocols[3];
     struct lws_http_mount mount;
+    struct lws *pending[NET_PENDING_MAX]; /* connections without a request yet, oldest first */
+    int npending;
     char web_root[PATH_MAX];    /* the web root's real path ("" when there is none) */
     volatile sig_atomic_t stop_requested;
     bool stopping;
 };
+
+/* Connections that have not yet sent a whole request (HTTP or WebSocket handshake): at most
+ * NET_PENDING_MAX at once, the oldest dropped to make room, each for at most
+ * NET_PENDING_TIMEOUT_S. A real client's request arrives within milliseconds, so a flood of
+ * half-open handshakes (sockets that send a partial GET and wait) can no longer hold every
+ * file descriptor and lock sessions and /healthz out (issue 15 item 3). */
+static void net_pending_drop(struct net *net, struct lws *wsi)
+{
+    for (int i = 0; i < net->npending; i++)
+        if (net->pending[i] == wsi) {
+            memmove(net->pending + i, net->pending + i + 1, sizeof wsi * (size_t)(net->npending - i - 1));
+            net->npending--;
+            return;
+        }
+}
+
+static void net_pending_add(struct net *net, struct lws *wsi)
+{
+    if (net->npending == NET_PENDING_MAX) {
+        lws_set_timeout(net->pending[0], PENDING_TIMEOUT_HTTP_KEEPALIVE_IDLE, LWS_TO_KILL_ASYNC);
+        net_pending_drop(net, net->pending[0]);
+        atomic_fetch_add(&net->srv->counters.handshakes_evicted, 1);
+    }
+    net->pending[net->npending++] = wsi;
+    lws_set_timeout(wsi, PENDING_TIMEOUT_HTTP_KEEPALIVE_IDLE, NET_PENDING_TIMEOUT_S);
+}
 
 struct net_http {
     struct fx_buf body; /* LWS_PRE bytes, then the response body */
@@ -138,12 +169,20 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
     struct net *net = lws_context_user(lws_get_context(wsi));
     struct net_http *h = user;
     switch (reason) {
+    case LWS_CALLBACK_SERVER_NEW_CLIENT_INSTANTIATED:
+        net_pending_add(net, wsi);
+        break;
+    case LWS_CALLBACK_WSI_DESTROY:
+        net_pending_drop(net, wsi);
+        break;
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
+        net_pending_drop(net, wsi);
         /* A WebSocket upgrade without subprotocol fxstream.v1 lands here: refuse it. */
         log_info("refused WebSocket without subprotocol fxstream.v1");
         return 1;
     case LWS_CALLBACK_HTTP: {
         char path[256] = "";
+        net_pending_drop(net, wsi);
         if (lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) <= 0) return net_http_not_allowed(wsi);
         lws_hdr_copy(wsi, path, sizeof path, WSI_TOKEN_GET_URI); /* too long: "" -> 404 */
         return net_http_request(wsi, net, h, path);
@@ -459,6 +498,7 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
         return net_accept(net, wsi) ? 0 : 1;
     case LWS_CALLBACK_ESTABLISHED:
+        net_pending_drop(net, wsi);
         return net_established(net, ss, wsi);
     case LWS_CALLBACK_RECEIVE:
         session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
@@ -524,7 +564,8 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     info.options = LWS_SERVER_OPTION_EXPLICIT_VHOSTS | LWS_SERVER_OPTION_DISABLE_IPV6 | LWS_SERVER_OPTION_VALIDATE_UTF8;
     if (srv->cfg.tls_cert[0]) info.options |= LWS_SERVER_OPTION_DO_SSL_GLOBAL_INIT;
     info.user = net;
-    info.fd_limit_per_thread = (unsigned)srv->cfg.limits.max_connections + 64;
+    /* fds: the sessions, the connections still before their first request, and a margin */
+    info.fd_limit_per_thread = (unsigned)srv->cfg.limits.max_connections + NET_PENDING_MAX + 64;
     net->ctx = lws_create_context(&info);
     if (!net->ctx) {
         free(net);

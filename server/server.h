@@ -48,6 +48,7 @@ struct counters {
     atomic_uint_fast64_t connections_total, messages_in, errors_out, frames_sent, frames_skipped, bytes_sent;
     atomic_uint_fast64_t stalled_closed; /* connections closed for not reading (stall_timeout_s) */
     atomic_uint_fast64_t state_writes;   /* state files written (one per group commit, store.h) */
+    atomic_uint_fast64_t handshakes_evicted; /* pending connections dropped for newer ones (net.c) */
 };
 
 struct session;

@@ -6,8 +6,10 @@ import asyncio
 import base64
 import json
 import os
+import resource
 import socket
 import time
+import urllib.request
 
 import websockets
 
@@ -15,6 +17,7 @@ from fxtest import Client, Daemon, Suite, config_file
 
 N_BURST = 100
 N_READERS, ASKS = 100, 120
+FLOOD = 1150
 LIMITS = {"max_connections": 3, "max_streams": 4, "max_subscriptions": 2, "max_control_per_sec": 20,
           "max_message_bytes": 2048}
 
@@ -145,5 +148,71 @@ async def test_queued_bytes(t):
         t.check(d.proc.poll() is None, "the daemon runs on")
 
 
+async def test_half_open_flood(t):
+    """A bounded flood of half-open handshakes (1150 sockets that send a partial GET and are
+    reopened when dropped, for 12 s) does not lock out new sessions or /healthz (issue 15 item
+    3): pending connections are capped at 128, the oldest dropped, each given 3 s at most."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, 4096), hard))
+    with Daemon() as d:
+        def opener():
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setblocking(False)
+            try:
+                s.connect(("127.0.0.1", d.port))
+            except BlockingIOError:
+                pass
+            return s
+        socks, sent = [opener() for _ in range(FLOOD)], set()
+        ok = hz = probes = 0
+        end, next_probe = time.monotonic() + 12, time.monotonic() + 1
+        while time.monotonic() < end:
+            for i, s in enumerate(socks):
+                try:
+                    if i not in sent:
+                        s.send(b"GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # and never the rest
+                        sent.add(i)
+                    elif s.recv(1, socket.MSG_PEEK) == b"":
+                        raise ConnectionResetError
+                except BlockingIOError:
+                    pass
+                except OSError:  # dropped by the daemon: the attacker reopens it
+                    s.close()
+                    socks[i] = opener()
+                    sent.discard(i)
+            if time.monotonic() >= next_probe:
+                next_probe += 1
+                probes += 1
+                try:
+                    c = await Client.connect(d, timeout=2)
+                    ok += (await c.request("list", timeout=2))["op"] == "list"
+                    await c.close()
+                except Exception:
+                    pass
+                try:
+                    with urllib.request.urlopen(d.http + "/healthz", timeout=2) as r:
+                        hz += r.status == 200
+                except Exception:
+                    pass
+            await asyncio.sleep(0.05)
+        for s in socks:
+            s.close()
+        evicted = metric(d, "fxs_handshakes_evicted_total")
+        t.check(probes >= 8 and ok >= 0.75 * probes and hz >= 0.75 * probes,
+                "under %d half-open handshakes: %d of %d new sessions and %d of %d /healthz served (%s evicted)"
+                % (FLOOD, ok, probes, hz, probes, evicted))
+        t.check(d.proc.poll() is None, "the daemon runs on")
+    resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+
+def metric(d, name):
+    with urllib.request.urlopen(d.http + "/metrics", timeout=10) as r:
+        for line in r.read().decode().splitlines():
+            if line.startswith(name + " "):
+                return float(line.split()[1])
+    return None
+
+
 if __name__ == "__main__":
-    Suite("test_limits").run([test_connections, test_streams_and_subscriptions, test_rate_and_size, test_queued_bytes])
+    Suite("test_limits").run([test_connections, test_streams_and_subscriptions, test_rate_and_size, test_queued_bytes,
+                              test_half_open_flood])
