@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "params.h"
+#include "suggest.h"
 
 static cJSON *params_check_value(const struct param_def *d, const cJSON *v, const char *path,
                                  struct fx_err *err);
@@ -231,9 +232,13 @@ int params_merge(const struct param_def *defs, const cJSON *current, const cJSON
     for (const cJSON *e = partial->child; e; e = e->next) {
         const struct param_def *d = params_find(defs, e->string);
         cJSON *val = NULL;
-        if (!d)
-            fx_fail(err, "bad_param", e->string, "%s: unknown parameter", e->string);
-        else
+        if (!d) {
+            struct suggest sg;
+            char hint[96];
+            suggest_init(&sg, e->string);
+            for (const struct param_def *k = defs; k->name; k++) suggest_offer(&sg, k->name);
+            fx_fail(err, "bad_param", e->string, "%s: unknown parameter%s", e->string, suggest_text(&sg, hint, sizeof hint));
+        } else
             val = params_check_value(d, e, e->string, err);
         if (!val) {
             cJSON_Delete(doc);

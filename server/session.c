@@ -12,6 +12,7 @@
 #include "session.h"
 #include "json_strict.h"
 #include "store.h"
+#include "suggest.h"
 
 #define SESSION_MAX_AUTH_FAILURES 5 /* wrong tokens on one connection before it is closed */
 
@@ -199,7 +200,16 @@ static struct stream *session_stream(struct session *ss, const cJSON *req, struc
     const char *name = session_str(req, "stream", err);
     if (!name) return NULL;
     struct stream *s = hub_find(&ss->srv->hub, name);
-    if (!s) fx_fail(err, "unknown_stream", "stream", "no stream named \"%s\"", name);
+    if (!s) {
+        struct suggest sg;
+        char hint[96];
+        int n;
+        struct stream **all = hub_snapshot(&ss->srv->hub, &n);
+        suggest_init(&sg, name);
+        for (int i = 0; i < n; i++) suggest_offer(&sg, all[i]->name);
+        fx_fail(err, "unknown_stream", "stream", "no stream named \"%s\"%s", name, suggest_text(&sg, hint, sizeof hint));
+        hub_release_all(all, n);
+    }
     return s;
 }
 
@@ -241,7 +251,13 @@ static const struct effect_ops *session_effect(const cJSON *req, struct fx_err *
     const char *name = session_str(req, "effect", err);
     if (!name) return NULL;
     const struct effect_ops *fx = effect_find(name);
-    if (!fx) fx_fail(err, "unknown_effect", "effect", "no effect named \"%s\"", name);
+    if (!fx) {
+        struct suggest sg;
+        char hint[96];
+        suggest_init(&sg, name);
+        for (const struct effect_ops *const *e = effect_all(); *e; e++) suggest_offer(&sg, (*e)->name);
+        fx_fail(err, "unknown_effect", "effect", "no effect named \"%s\"%s", name, suggest_text(&sg, hint, sizeof hint));
+    }
     return fx;
 }
 
@@ -547,7 +563,11 @@ static int session_dispatch(struct session *ss, const cJSON *req, const cJSON **
         if (!strcmp(session_ops[i].op, op->valuestring))
             return session_allowed(ss, session_ops[i].op, session_ops[i].role, err) ? -1
                                                                                   : session_ops[i].fn(ss, req, idv, err);
-    return fx_fail(err, "unknown_op", "op", "unknown op \"%.64s\"", op->valuestring);
+    struct suggest sg;
+    char hint[96];
+    suggest_init(&sg, op->valuestring);
+    for (size_t i = 0; i < sizeof session_ops / sizeof session_ops[0]; i++) suggest_offer(&sg, session_ops[i].op);
+    return fx_fail(err, "unknown_op", "op", "unknown op \"%.64s\"%s", op->valuestring, suggest_text(&sg, hint, sizeof hint));
 }
 
 void session_handle(struct session *ss, const char *text, size_t len)

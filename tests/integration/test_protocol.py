@@ -209,6 +209,16 @@ async def test_error_codes(t):
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"fps":1000}}', "bad_param", "out of range")
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"eye":[1,2]}}', "bad_param", "wrong length")
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"colour":1}}', "bad_param", "unknown name")
+    # A misspelt name gets the nearest known one (issue 16: "did you mean"), a far-off one none.
+    for text, code, hint in (('{"op":"set","stream":"energy","params":{"alpa":2}}', "bad_param", '"alpha"'),
+                             ('{"op":"lst"}', "unknown_op", '"list"'),
+                             ('{"op":"describe","effect":"flam"}', "unknown_effect", '"flame"'),
+                             ('{"op":"get","stream":"energi"}', "unknown_stream", '"energy"'),
+                             ('{"op":"get","stream":"zzzzzzzz"}', "unknown_stream", None)):
+        m = await expect_error(t, c, text, code, "misspelt name in %s" % text)
+        got = m["message"]
+        t.check(('did you mean %s?' % hint in got) if hint else ("did you mean" not in got),
+                "%s: %s" % ("suggests " + hint if hint else "no suggestion for a far-off name", got))
     # Only exactly one JSON value is acted on (issue 15 items 9-11): the first of two objects,
     # the first of duplicate members and a string cut at U+0000 used to be run.
     await expect_error(t, c, '{"op":"list"}{"op":"destroy","stream":"energy"}', "bad_json", "trailing data")

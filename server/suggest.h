@@ -1,0 +1,22 @@
+/* suggest.h — "did you mean": the known name nearest to a misspelt one (edit distance), for
+ * the error messages of unknown parameters, ops, effects and streams, so a client or a person
+ * at fxctl sees `alpa: unknown parameter (did you mean "alpha"?)`. */
+#ifndef FX_SUGGEST_H
+#define FX_SUGGEST_H
+
+#include <stddef.h>
+
+struct suggest {
+    const char *word; /* the unknown name */
+    const char *best; /* the nearest candidate so far, or NULL */
+    int dist;
+};
+
+void suggest_init(struct suggest *s, const char *word);
+/* Considers one known name. */
+void suggest_offer(struct suggest *s, const char *candidate);
+/* ` (did you mean "NAME"?)` when a candidate is within a third of the word's length (at least
+ * one edit), else "" (buf holds the text; returned). */
+const char *suggest_text(const struct suggest *s, char *buf, size_t len);
+
+#endif
