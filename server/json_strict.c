@@ -3,6 +3,7 @@
 
 #include <stdbool.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* Byte offset of the first \u0000 escape or raw NUL inside a string of text, or -1. */
@@ -23,17 +24,30 @@ static long js_find_nul(const char *t, size_t len)
     return -1;
 }
 
-/* The first member name that appears twice in one object anywhere in the tree, or NULL. */
+static int js_cmp(const void *a, const void *b) { return strcmp(*(const char *const *)a, *(const char *const *)b); }
+
+/* A member name that appears twice in object v, or NULL: its names sorted, neighbours compared
+ * (n log n: a 64 KiB request of ~6000 members compared pairwise took tens of ms). */
+static const char *js_duplicate_member(const cJSON *v)
+{
+    int n = cJSON_GetArraySize(v);
+    const char **names = n > 1 ? malloc(sizeof *names * (size_t)n) : NULL, *dup = NULL;
+    if (!names) return NULL; /* 0 or 1 member (or out of memory: cJSON's first-wins stays) */
+    int i = 0;
+    for (const cJSON *m = v->child; m; m = m->next) names[i++] = m->string;
+    qsort(names, (size_t)n, sizeof *names, js_cmp);
+    for (i = 1; i < n && !dup; i++)
+        if (!strcmp(names[i - 1], names[i])) dup = names[i];
+    free(names);
+    return dup;
+}
+
+/* The first duplicate member name in any object of the tree, or NULL. */
 static const char *js_duplicate(const cJSON *v)
 {
-    for (const cJSON *a = v ? v->child : NULL; a; a = a->next) {
-        if (cJSON_IsObject(v))
-            for (const cJSON *b = a->next; b; b = b->next)
-                if (!strcmp(a->string, b->string)) return a->string;
-        const char *d = js_duplicate(a);
-        if (d) return d;
-    }
-    return NULL;
+    const char *d = cJSON_IsObject(v) ? js_duplicate_member(v) : NULL;
+    for (const cJSON *a = v->child; a && !d; a = a->next) d = js_duplicate(a);
+    return d;
 }
 
 cJSON *json_strict_parse(const char *text, size_t len, char *why, size_t why_len)

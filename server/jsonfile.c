@@ -14,11 +14,12 @@ int jsonfile_read(const char *path, long max_bytes, cJSON **out, char *why, size
     if (!f) return -1;
     char *text = NULL;
     long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+    size_t n = 0;
     if (size >= 0 && size <= max_bytes && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1)))
-        text[fread(text, 1, (size_t)size, f)] = 0;
+        n = fread(text, 1, (size_t)size, f);
     fclose(f);
     if (!text) snprintf(why, why_len, "larger than %ld bytes", max_bytes);
-    *out = text ? json_strict_parse(text, strlen(text), why, why_len) : NULL;
+    *out = text ? json_strict_parse(text, n, why, why_len) : NULL; /* n, not strlen: a NUL byte is refused */
     free(text);
     return 0;
 }

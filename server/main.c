@@ -78,13 +78,13 @@ static int main_create_streams(struct server *srv, struct fx_err *err)
         }
     }
     srv->quarantined = cJSON_GetArraySize(quarantine);
+    const cJSON *why = srv->quarantined ? cJSON_GetObjectItemCaseSensitive(quarantine->child, "reason") : NULL;
     if (srv->quarantined && store_quarantine(srv, quarantine))
         rc = fx_fail(err, "internal", NULL, "cannot write %s/streams.quarantine.json: %s", srv->cfg.state_dir,
                      strerror(errno));
     else if (srv->quarantined)
         log_warn("%d stored stream(s) no longer valid, moved to %s/streams.quarantine.json (first: %s)",
-                 srv->quarantined, srv->cfg.state_dir, cJSON_GetObjectItemCaseSensitive(quarantine->child, "reason")
-                     ? cJSON_GetObjectItemCaseSensitive(quarantine->child, "reason")->valuestring : "?");
+                 srv->quarantined, srv->cfg.state_dir, cJSON_IsString(why) ? why->valuestring : "?");
     cJSON_Delete(quarantine);
     cJSON_Delete(stored);
     cJSON_Delete(builtin);

@@ -64,7 +64,6 @@ struct outmsg *session_pop(struct session *ss)
     return m;
 }
 
-/* A reply object with the request's id echoed. */
 /* The request's id as it goes back: strings as they came; numbers as the shortest text that
  * reads back as the same double (cJSON's own printing keeps 15 digits when they are "close
  * enough", so 9007199254740991 came back as 9.00719925474099e+15). */
@@ -79,6 +78,7 @@ static cJSON *session_id_copy(const cJSON *id)
     return cJSON_CreateRaw(text);
 }
 
+/* A reply object with the request's id echoed. */
 static cJSON *session_reply(const char *op, const cJSON *id)
 {
     cJSON *r = cJSON_CreateObject();
@@ -433,9 +433,11 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     if (!s) return -1;
     uint64_t rev;
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
-    cJSON *doc = (double)rev + 1 >= HUB_REV_MAX ? NULL : effect_params(s->effect, cur, partial, err);
+    cJSON *doc = NULL;
     if ((double)rev + 1 >= HUB_REV_MAX)
         fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
+    else
+        doc = effect_params(s->effect, cur, partial, err);
     cJSON_Delete(cur);
     if (!doc) {
         stream_unref(s);

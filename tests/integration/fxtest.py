@@ -17,7 +17,7 @@ import websockets
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 DAEMON = os.path.join(ROOT, "build", "fxstreamd")
-HEADER = struct.Struct("<4sHHIIQdQIIIIII")  # the 64-byte v1 header, PROTOCOL.md §2
+HEADER = struct.Struct("<4sHHIIQdQIIIIII")  # the 64-byte v1 header, PROTOCOL.md §7.1
 
 
 def parse_frame(data):
@@ -141,12 +141,13 @@ class Client:
             if isinstance(m, str):
                 return json.loads(m)
 
-    async def frame(self, timeout=20):
-        """The next binary frame, skipping text messages."""
+    async def frame(self, timeout=20, kind=None):
+        """The next binary frame (of `kind` when given: an energy_wave stream also sends its
+        light rig), skipping text messages, within timeout s."""
         deadline = time.monotonic() + timeout
         while True:
             m = await self.recv(max(0.01, deadline - time.monotonic()))
-            if isinstance(m, bytes):
+            if isinstance(m, bytes) and (kind is None or m[6] == kind):  # kind: header byte 6 (u16 LE)
                 return parse_frame(m)
 
     async def request(self, op, timeout=10, **fields):

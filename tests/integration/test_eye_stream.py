@@ -38,20 +38,13 @@ def decode(payload):
     return head, out
 
 
-async def next_kind(c, kind, timeout=30):
-    while True:
-        f = await c.frame(timeout=timeout)
-        if f["kind"] == kind:
-            return f
-
-
 async def test_lut_frames(t):
     c = await Client.connect(D)
     t.check("compound_eye" in c.hello["effects"], "hello lists compound_eye")
     r = await c.request("create", effect="compound_eye", stream="lut", params=SMALL)
     t.check(r["op"] == "created", "create compound_eye stream")
     await c.request("subscribe", stream="lut")
-    f = await next_kind(c, 4)
+    f = await c.frame(30, kind=4)
     t.check(f["codec"] == 1 and f["width"] == f["height"] == 8 * 10, "kind 4 codec 1, atlas 80x80")
     head, prods = decode(f["payload"])
     t.check(sorted(prods) == ["LLUT", "LMAC", "PIGM"], "three products in one frame")
@@ -71,11 +64,11 @@ async def test_lut_frames(t):
     s = await c.request("set", stream="lut", params={"ka": 0.5, "density": 80})
     t.check(s["op"] == "params", "set shading-only parameters")
     try:  # a table sent for the shading-only change would arrive within this wait
-        stray = await next_kind(c, 4, timeout=2)
+        stray = await c.frame(2, kind=4)
     except asyncio.TimeoutError:
         stray = None
     s2 = await c.request("set", stream="lut", params={"lattice": "hex", "lens_radius": 0.9})
-    g = stray or await next_kind(c, 4)  # a stream that sends nothing at all fails here
+    g = stray or await c.frame(30, kind=4)  # a stream that sends nothing at all fails here
     t.check(stray is None and g["param_rev"] == s2["rev"],
             "no new table after a shading-only change (rev %d): the next table is the table change's "
             "(got rev %d, want %d)" % (s["rev"], g["param_rev"], s2["rev"]))
@@ -99,10 +92,10 @@ async def test_bake_and_obj(t):
                         params={"mode": "bake", "bake_size": 128, "model": "tri"})
     t.check(r["op"] == "created", "create a bake stream on the assets OBJ: %s" % r)
     await c.request("subscribe", stream="bake")
-    f = await next_kind(c, 2)
+    f = await c.frame(30, kind=2)
     t.check(f["codec"] == 1 and f["width"] == 128 and f["payload"][:4] == b"\x76\x2f\x31\x01", "bake: EXR frames")
     s = await c.request("set", stream="bake", params={"eye": [0.2, 0.1, 2.0]})
-    g = await next_kind(c, 2)
+    g = await c.frame(30, kind=2)
     t.check(g["param_rev"] >= s["rev"] or g["seq"] > f["seq"], "a view change sends a new frame")
     bad = await c.request("create", effect="compound_eye", stream="b2", params={"model": "broken"})
     t.check(bad["op"] == "error" and bad["param"] == "model" and "line" in bad["message"],

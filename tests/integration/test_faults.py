@@ -63,14 +63,6 @@ def closed_by_peer(s, timeout=10):
         return False
 
 
-async def texture(c, timeout):
-    """The next kind 2 frame (skipping the light rig's kind 3)."""
-    while True:
-        f = await c.frame(timeout)
-        if f["kind"] == 2:
-            return f
-
-
 async def test_stalled_reader(t):
     d = Daemon("--config", config_file({"limits": {"stall_timeout_s": 2}, "streams": [
         {"stream": "big", "effect": "energy_wave", "params": {"width": 512, "height": 512, "output": "RGBA",
@@ -78,13 +70,13 @@ async def test_stalled_reader(t):
     try:
         good = await Client.connect(d)
         await good.request("subscribe", stream="big")
-        first = await texture(good, 30)  # the stream runs
+        first = await good.frame(30, kind=2)  # the stream runs
         s, head = stalled_reader(d.port, "big")
         t.check(b" 101 " in head.split(b"\r\n")[0], "the stalled client's handshake succeeded")
         rss0 = rss_kib(d)
         seqs, t0 = [first["seq"]], time.monotonic()
         while time.monotonic() - t0 < 6:  # textures only: each step also sends a light-rig frame
-            seqs.append((await texture(good, 10))["seq"])
+            seqs.append((await good.frame(10, kind=2))["seq"])
         span = seqs[-1] - seqs[0]
         t.check(span > 0 and (len(seqs) - 1) >= 0.9 * span,
                 "the other subscriber got %d of %d frames while one client stalled" % (len(seqs) - 1, span))

@@ -128,14 +128,6 @@ async def test_spec_current(t):
     await c.close()
 
 
-async def texture_frame(c):
-    """The next kind 2 frame: energy_wave streams also send their light rig (kind 3)."""
-    while True:
-        f = await c.frame()
-        if f["kind"] == 2:
-            return f
-
-
 async def test_frames(t):
     c = await Client.connect(D)
     r = await c.request("create", effect="energy_wave", stream="frames", params=SMALL)
@@ -149,7 +141,7 @@ async def test_frames(t):
     t.check(any(x["sim_time"] == y["sim_time"] for x in rigs for y in mixed if y["kind"] == 2),
             "a rig frame has its texture's sim_time")
     frames = [x for x in mixed if x["kind"] == 2]
-    frames += [await texture_frame(c) for _ in range(3 - len(frames))]
+    frames += [await c.frame(kind=2) for _ in range(3 - len(frames))]
     f = frames[0]
     t.check(f["magic"] == b"FXS1" and f["header_bytes"] == 64, "header magic and size")
     t.check(f["kind"] == 2 and f["codec"] == 1, "texture frame, EXR codec")
@@ -176,7 +168,7 @@ async def test_set_reaches_frames(t):
     t.check(ev["op"] == "params" and ev["rev"] == r["rev"] and "id" not in ev, "broadcast to other subscriber")
     deadline, seen = time.monotonic() + 15, None
     while time.monotonic() < deadline:
-        f = await texture_frame(a)
+        f = await a.frame(kind=2)
         if f["param_rev"] == r["rev"]:
             seen = f
             break

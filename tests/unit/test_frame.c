@@ -1,7 +1,7 @@
 /* test_frame.c — the 64-byte binary frame header of fxstream.v1 (protocol/fxs_frame.h).
  *
  * The header is the one thing every client parses, so the tests pin it to the
- * ARCHITECTURE.md / PROTOCOL.md table byte by byte (not only pack/unpack agreeing
+ * PROTOCOL.md §7.1 table byte by byte (not only pack/unpack agreeing
  * with each other), round-trip every field at its extremes (sim_time by its bits),
  * and check that malformed frames are rejected while a longer header from a future
  * version is accepted with the payload found after it. Buffers are allocated to
