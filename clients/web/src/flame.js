@@ -187,7 +187,7 @@ export class FlameView {
     });
     this.hdr = new THREE.ShaderMaterial({
       vertexShader: HDR_VERT, fragmentShader: HDR_FRAG,
-      uniforms: { ...common, alphaTex: { value: spriteTexture(false) }, gain: { value: 1 } },
+      uniforms: { ...common, alphaTex: { value: spriteTexture(false) }, gain: { value: 0.08 } },
       depthTest: true, depthWrite: false, blending: THREE.AdditiveBlending, transparent: true,
     });
     this.geoms = { pbvr: null, hdr: null };
@@ -219,19 +219,20 @@ export class FlameView {
     if (key !== this.stageKey) { this.stageKey = key; this.buildStage(); }
   }
 
-  // World units per metre, the up vector and a horizontal side vector of the stream.
+  // The stream in world units: units per metre, up, a horizontal side vector, the particle
+  // spacing d and the first burning source's centre (base).
   frameOf() {
     const pr = this.params || {}, scale = pr.space_scale ?? 1;
     const up = new THREE.Vector3(...(pr.up || [0, 0, 1])).normalize();
     const side = Math.abs(up.y) < 0.9 ? new THREE.Vector3(0, -1, 0) : new THREE.Vector3(1, 0, 0);
     side.addScaledVector(up, -side.dot(up)).normalize();
     const src = (pr.sources || []).find((s) => s.enabled !== false) || { center: [0, 0, 0], radius: 0.015 };
-    return { scale, up, side, base: new THREE.Vector3(...(src.center || [0, 0, 0])).multiplyScalar(scale) };
+    const d = (pr.particle_diameter ?? 0.5) * (pr.h ?? 0.01125) * scale; // particle spacing
+    return { scale, up, side, d, base: new THREE.Vector3(...(src.center || [0, 0, 0])).multiplyScalar(scale) };
   }
 
   buildStage() {
-    const { scale, up, base } = this.frameOf(), { axis, outlines } = this.stage.userData;
-    const h = (this.params?.h ?? 0.01125) * scale, d = (this.params?.particle_diameter ?? 0.5) * h;
+    const { scale, up, base, d } = this.frameOf(), { axis, outlines } = this.stage.userData;
     axis.quaternion.setFromUnitVectors(new THREE.Vector3(0, 1, 0), up);
     axis.position.copy(base).addScaledVector(up, -2.5 * d);
     axis.scale.setScalar(scale);
@@ -300,8 +301,7 @@ export class FlameView {
   }
 
   setUniforms(w, h) {
-    const pr = this.params || {}, s = this.settings, scale = pr.space_scale ?? 1;
-    const d = (pr.particle_diameter ?? 0.5) * (pr.h ?? 0.01125) * scale;
+    const pr = this.params || {}, s = this.settings, { scale, d } = this.frameOf();
     for (const m of [this.pbvr, this.hdr]) {
       m.uniforms.tAmb.value = pr.T_amb ?? 300;
       m.uniforms.tMax.value = s.whiteT;
@@ -313,7 +313,6 @@ export class FlameView {
     u.smokeOn.value = s.smoke ? 1 : 0;
     u.smokeT.value = s.smokeT;
     u.smokeColor.value.set(s.smokeColor).convertSRGBToLinear();
-    this.hdr.uniforms.gain.value = 0.08;
     this.camera.aspect = w / h;
     this.camera.near = 0.002 * scale;
     this.camera.far = 20 * scale;

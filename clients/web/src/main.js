@@ -3,9 +3,9 @@
 // canvas split into views: flame particles, the energy-wave billboard, a toon scene lit by
 // the wave's light rig, and the compound eye. A lil-gui panel per stream is generated from
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
-// Query options: url=, flame=hdr (the flame's mode; pbvr by default), rl=N (flame repeat passes), grid=COLSxROWS, aa=0 (no multisampling),
-// drawfps=N (draw at most N frames a second, e.g. under software WebGL), streams=A,B (show
-// only these streams).
+// Query options: url=, flame=hdr (the flame's mode; pbvr by default), rl=N (flame repeat
+// passes), grid=COLSxROWS, aa=0 (no multisampling), drawfps=N (draw at most N frames a
+// second, e.g. under software WebGL), streams=A,B (show only these streams).
 import * as THREE from 'three';
 import GUI from 'lil-gui';
 import { parseHeader } from '../fxs_particles.js';
@@ -13,7 +13,7 @@ import { Conn } from './conn.js';
 import { StreamPanel } from './panel.js';
 import { STATS_HELP, StreamStats } from './stats.js';
 import { FLAME_DEFAULTS, FlameView } from './flame.js';
-import { WaveView } from './wave.js';
+import { WAVE_DEFAULTS, WaveView } from './wave.js';
 import { SceneView } from './scene.js';
 import { EyeView } from './eye.js';
 
@@ -39,7 +39,8 @@ renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
 const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
 // The flame's look (FlameView.settings, shared by every flame view): ?flame=hdr picks the mode.
 const flameSettings = { ...FLAME_DEFAULTS, mode: q.get('flame') === 'hdr' ? 'hdr' : 'pbvr', rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
-const viewSettings = { waveBloom: 0.6, waveExposure: 0.8, waveBlack: 0.55, waveGain: 1.6 };
+const waveSettings = { ...WAVE_DEFAULTS }; // WaveView.settings, shared by every wave view
+const viewSettings = { waveBlack: 0.55, waveGain: 1.6 };
 const vf = gui.addFolder('view (this page only)');
 const ff = vf.addFolder('flame');
 ff.add(flameSettings, 'mode', ['pbvr', 'hdr']).name('mode');
@@ -51,8 +52,8 @@ ff.add(flameSettings, 'smokeT', 300, 3000, 10).name('pbvr: smoke below T (K)');
 ff.addColor(flameSettings, 'smokeColor').name('pbvr: smoke colour');
 ff.add(flameSettings, 'whiteT', 1500, 8000, 50).name('white point T_max (K)');
 ff.add(flameSettings, 'exposure', 0.05, 8, 0.01).name('hdr: exposure');
-vf.add(viewSettings, 'waveBloom', 0, 3, 0.01).name('wave bloom');
-vf.add(viewSettings, 'waveExposure', 0.1, 8, 0.01).name('wave exposure');
+vf.add(waveSettings, 'bloom', 0, 3, 0.01).name('wave bloom');
+vf.add(waveSettings, 'exposure', 0.1, 8, 0.01).name('wave exposure');
 vf.add(viewSettings, 'waveBlack', 0, 2, 0.01).name('wave black level (B)');
 vf.add(viewSettings, 'waveGain', 0.1, 5, 0.01).name('wave level gain');
 vf.close();
@@ -88,6 +89,7 @@ function makeViews(st) {
     }
     case 'energy_wave': {
       const w = new WaveView(st.name);
+      w.settings = waveSettings;
       vs = [w, new SceneView(st.name, w.wt)];
       break;
     }
@@ -282,7 +284,6 @@ function frame(t) {
   const drawnStreams = new Set();
   for (const { view, rect, css } of lastLayout) {
     const v = view;
-    if (v.kind === 'wave') Object.assign(v.settings, { bloom: viewSettings.waveBloom, exposure: viewSettings.waveExposure });
     for (const m of [v.kind === 'wave' ? v.material : null, v.billboardMat]) {
       if (!m) continue;
       m.uniforms.blackLevel.value = viewSettings.waveBlack;

@@ -12,6 +12,8 @@ import { EXRLoader } from 'three/examples/jsm/loaders/EXRLoader.js';
 import { UnrealBloomPass } from 'three/examples/jsm/postprocessing/UnrealBloomPass.js';
 import { ACES_GLSL, SRGB_GLSL, fullscreenQuad } from './gl.js';
 
+export const WAVE_DEFAULTS = { bloom: 0.6, exposure: 0.8 };
+
 const FRAG = /* glsl */ `
 uniform sampler2D tex;
 uniform bool isY, linearOut;
@@ -116,7 +118,7 @@ export class WaveView {
     this.material.uniforms.linearOut.value = true;
     this.params = null;
     this.newFrame = false;
-    this.settings = { bloom: 0.6, exposure: 0.8 }; // the page's view folder sets these
+    this.settings = { ...WAVE_DEFAULTS }; // main.js shares one object among the wave views
     this.target = null;
     this.bloom = new UnrealBloomPass(new THREE.Vector2(256, 256), 0.6, 0.4, 0.7);
     this.composite = fullscreenQuad(/* glsl */ `
