@@ -95,6 +95,7 @@ void main() {
 const SHADOW_FRAG = `uniform vec3 color; uniform float opacity, groundR; varying float vT; varying vec3 vOnGround; ${SRGB_GLSL}
 void main() { if (vT < 0.0 || length(vOnGround) > groundR) discard; gl_FragColor = vec4(linearToSRGB(color), opacity); }`;
 const GROUND_R = 26;
+const SCENE_HOME = { position: new THREE.Vector3(26, 10, 44), target: new THREE.Vector3(0, -4, 0) }; // the default view
 
 function canvasTexture(w, h, draw) {
   const c = document.createElement('canvas');
@@ -148,8 +149,8 @@ export class SceneView {
     this.newFrame = false;
     this.scene = new THREE.Scene();
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.5, 500);
-    this.camera.position.set(26, 10, 44);
-    this.camera.lookAt(0, -4, 0);
+    this.camera.position.copy(SCENE_HOME.position);
+    this.camera.lookAt(SCENE_HOME.target);
     this.orbit = null;
     this.segData = new Float32Array(3 * MAX_SEG * 4);
     this.segTex = new THREE.DataTexture(this.segData, 3, MAX_SEG, THREE.RGBAFormat, THREE.FloatType);
@@ -316,7 +317,7 @@ export class SceneView {
   // Mouse control on the shared canvas (orbit.js); home is the scene's default view.
   attachControls(canvas, css) {
     this.orbit = new ViewOrbit(this.camera, canvas, css);
-    this.orbit.setHome(new THREE.Vector3(26, 10, 44), new THREE.Vector3(0, -4, 0), new THREE.Vector3(0, 1, 0));
+    this.orbit.setHome(SCENE_HOME.position, SCENE_HOME.target, new THREE.Vector3(0, 1, 0));
   }
 
   render(renderer, rect, t) {
