@@ -66,6 +66,15 @@ int access_add_env(struct access *a, const char *spec, struct fx_err *err)
     return 0;
 }
 
+/* Appends v to one of the name tables (allowed_origins, allowed_hosts), named key in errors. */
+static int access_append(char (*table)[ACCESS_ORIGIN_MAX], int *n, const char *v, const char *key,
+                         struct fx_err *err)
+{
+    if (*n == ACCESS_MAX_ORIGINS) return fx_fail(err, "bad_request", key, "%s: more than %d", key, ACCESS_MAX_ORIGINS);
+    snprintf(table[(*n)++], ACCESS_ORIGIN_MAX, "%s", v);
+    return 0;
+}
+
 int access_add_origin(struct access *a, const char *origin, struct fx_err *err)
 {
     size_t n = strlen(origin);
@@ -73,10 +82,7 @@ int access_add_origin(struct access *a, const char *origin, struct fx_err *err)
     if (!scheme || n >= ACCESS_ORIGIN_MAX || origin[n - 1] == '/')
         return fx_fail(err, "bad_request", "allowed_origins",
                        "allowed_origins: \"%.80s\" is not an origin like https://host[:port]", origin);
-    if (a->norigins == ACCESS_MAX_ORIGINS)
-        return fx_fail(err, "bad_request", "allowed_origins", "allowed_origins: more than %d", ACCESS_MAX_ORIGINS);
-    snprintf(a->origins[a->norigins++], ACCESS_ORIGIN_MAX, "%s", origin);
-    return 0;
+    return access_append(a->origins, &a->norigins, origin, "allowed_origins", err);
 }
 
 int access_add_host(struct access *a, const char *host, struct fx_err *err)
@@ -85,10 +91,7 @@ int access_add_host(struct access *a, const char *host, struct fx_err *err)
     if (!n || n >= ACCESS_ORIGIN_MAX || strspn(host, "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789.-") != n)
         return fx_fail(err, "bad_request", "allowed_hosts",
                        "allowed_hosts: \"%.80s\" is not a host name (letters, digits, dots, dashes; no port)", host);
-    if (a->nhosts == ACCESS_MAX_ORIGINS)
-        return fx_fail(err, "bad_request", "allowed_hosts", "allowed_hosts: more than %d", ACCESS_MAX_ORIGINS);
-    snprintf(a->hosts[a->nhosts++], ACCESS_ORIGIN_MAX, "%s", host);
-    return 0;
+    return access_append(a->hosts, &a->nhosts, host, "allowed_hosts", err);
 }
 
 bool access_host_ok(const struct access *a, const char *host)

@@ -147,23 +147,15 @@ static int config_tokens(const cJSON *arr, struct access *a, struct fx_err *err)
     return 0;
 }
 
-static int config_origins(const cJSON *arr, struct access *a, struct fx_err *err)
+/* A config key holding an array of strings (allowed_origins, allowed_hosts), each added by add. */
+static int config_names(const cJSON *arr, struct access *a, int (*add)(struct access *, const char *, struct fx_err *),
+                        struct fx_err *err)
 {
-    if (!cJSON_IsArray(arr)) return fx_fail(err, "bad_request", "allowed_origins", "allowed_origins: expected an array");
+    const char *k = arr->string;
+    if (!cJSON_IsArray(arr)) return fx_fail(err, "bad_request", k, "%s: expected an array", k);
     for (const cJSON *o = arr->child; o; o = o->next) {
-        if (!cJSON_IsString(o))
-            return fx_fail(err, "bad_request", "allowed_origins", "allowed_origins: expected strings");
-        if (access_add_origin(a, o->valuestring, err)) return -1;
-    }
-    return 0;
-}
-
-static int config_hosts(const cJSON *arr, struct access *a, struct fx_err *err)
-{
-    if (!cJSON_IsArray(arr)) return fx_fail(err, "bad_request", "allowed_hosts", "allowed_hosts: expected an array");
-    for (const cJSON *h = arr->child; h; h = h->next) {
-        if (!cJSON_IsString(h)) return fx_fail(err, "bad_request", "allowed_hosts", "allowed_hosts: expected strings");
-        if (access_add_host(a, h->valuestring, err)) return -1;
+        if (!cJSON_IsString(o)) return fx_fail(err, "bad_request", k, "%s: expected strings", k);
+        if (add(a, o->valuestring, err)) return -1;
     }
     return 0;
 }
@@ -171,10 +163,10 @@ static int config_hosts(const cJSON *arr, struct access *a, struct fx_err *err)
 static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *err)
 {
     const char *k = e->string;
-    if (!strcmp(k, "allowed_hosts")) return config_hosts(e, &cfg->access, err);
+    if (!strcmp(k, "allowed_hosts")) return config_names(e, &cfg->access, access_add_host, err);
     if (!strcmp(k, "limits")) return config_limits(e, &cfg->limits, err);
     if (!strcmp(k, "tokens")) return config_tokens(e, &cfg->access, err);
-    if (!strcmp(k, "allowed_origins")) return config_origins(e, &cfg->access, err);
+    if (!strcmp(k, "allowed_origins")) return config_names(e, &cfg->access, access_add_origin, err);
     if (!strcmp(k, "streams")) {
         if (!cJSON_IsArray(e)) return fx_fail(err, "bad_request", k, "streams: expected an array");
         cfg->streams = cJSON_Duplicate(e, 1);

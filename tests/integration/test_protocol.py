@@ -398,7 +398,11 @@ async def test_flags(t):
                              ('{"listen": 5}', "listen", "config value of the wrong type"),
                              ('{"limits": {"max_streams": 0}}', "max_streams", "config limit out of range"),
                              ('{"port": 7000} {"port": 1}', "trailing data", "config file with trailing data"),
-                             ('{"port": 7000, "port": 1}', 'duplicate member "port"', "config file with a duplicate key")):
+                             ('{"port": 7000, "port": 1}', 'duplicate member "port"', "config file with a duplicate key"),
+                             ('{"allowed_hosts": ["studio.local:80"]}', "allowed_hosts", "allowed_hosts with a port"),
+                             ('{"allowed_hosts": "studio.local"}', "allowed_hosts: expected an array",
+                              "allowed_hosts not an array"),
+                             ('{"allowed_origins": [7]}', "allowed_origins: expected strings", "allowed_origins not strings")):
         with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
             f.write(text)
         code, out = run("--config", f.name)
