@@ -16,15 +16,22 @@
 
 static struct ocl *tfs_ocl;
 
-static void test_default_shape(void)
+/* The default scene with pressure_form (NULL: the default), measured over warm_s + seconds. */
+static int tfs_run(const char *pressure_form, double warm_s, double seconds, struct flame_shape *s)
 {
     struct fx_err err = {0};
     cJSON *doc = params_defaults(flame_params);
-    struct flame_shape s;
-    int rc = flame_shape_run(tfs_ocl, doc, 5, 10, &s, &err);
+    if (pressure_form) cJSON_ReplaceItemInObject(doc, "pressure_form", cJSON_CreateString(pressure_form));
+    int rc = flame_shape_run(tfs_ocl, doc, warm_s, seconds, s, &err);
     cJSON_Delete(doc);
     CHECK(rc == 0, "run: %s", err.message);
-    if (rc) return;
+    return rc;
+}
+
+static void test_default_shape(void)
+{
+    struct flame_shape s;
+    if (tfs_run(NULL, 5, 10, &s)) return;
     printf("  info: H90 %.1f cm, W90 %.1f cm, below %.1f%%, flicker %.1f%%, particles %.0f (burning %.0f)\n",
            100 * s.H90, 100 * s.W90, 100 * s.below, 100 * s.flicker, s.particles, s.burning);
     CHECK(s.H90 >= 2 * s.W90, "H90 %.4f m, W90 %.4f m: not twice as tall as wide", s.H90, s.W90);
@@ -35,14 +42,8 @@ static void test_default_shape(void)
 
 static void test_difference_form_rises(void)
 {
-    struct fx_err err = {0};
-    cJSON *doc = params_defaults(flame_params);
-    cJSON_ReplaceItemInObject(doc, "pressure_form", cJSON_CreateString("difference"));
     struct flame_shape s;
-    int rc = flame_shape_run(tfs_ocl, doc, 2.5, 0.5, &s, &err);
-    cJSON_Delete(doc);
-    CHECK(rc == 0, "run: %s", err.message);
-    if (rc) return;
+    if (tfs_run("difference", 2.5, 0.5, &s)) return;
     printf("  info: difference form at 2.5-3 s: centroid %.1f cm up, below %.1f%%, burning %.0f of %.0f\n",
            100 * s.centroid_h, 100 * s.below, s.burning, s.particles);
     CHECK(s.burning > 100, "only %.0f burning particles", s.burning);
