@@ -463,7 +463,9 @@ int main(void)
     snprintf(cfg, sizeof cfg, "%s/config.json", dir);
     if (!(f = fopen(cfg, "w"))) return 1;
     fprintf(f, "{\"limits\":{\"max_connections\":%d},\"pause_idle\":true,\"streams\":["
-               "{\"stream\":\"bench_flame\",\"effect\":\"flame\",\"params\":{\"sources\":[{\"radius\":0.08}],\"fps\":30}},"
+               /* Table 3.1's h and no base plate: the same ~20k-particle flame as before the finer default h */
+               "{\"stream\":\"bench_flame\",\"effect\":\"flame\",\"params\":{\"sources\":[{\"radius\":0.08}],"
+               "\"h\":0.01125,\"obstacles\":[],\"fps\":30}},"
                "{\"stream\":\"bench_tex\",\"effect\":\"energy_wave\",\"params\":{\"width\":256,\"height\":256,\"fps\":30,"
                "\"light_rig\":false,"
                "\"curves\":[],\"tori\":[{\"center\":[0,0,18],\"axis\":[0,0,1],\"R\":6,\"coef\":5}]}}]}\n",
