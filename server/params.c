@@ -284,6 +284,7 @@ static cJSON *params_describe_one(const struct param_def *d)
     cJSON_AddStringToObject(o, "unit", d->unit ? d->unit : "");
     cJSON_AddStringToObject(o, "update", (d->flags & PARAM_RESTART) ? "restart" : "live");
     cJSON_AddStringToObject(o, "doc", d->doc ? d->doc : "");
+    if (d->group) cJSON_AddStringToObject(o, "group", d->group);
     return o;
 }
 

@@ -40,6 +40,7 @@ struct param_def {
     const struct param_def *fields; /* PARAM_OBJECT_LIST: item fields, {0}-terminated */
     const char *unit;               /* "", "s", "1/s", "world units", ... */
     const char *doc;
+    const char *group;              /* top-level parameters: the panel folder ("sources", "forces", ...) */
     unsigned flags;
 };
 
@@ -61,7 +62,7 @@ int params_merge(const struct param_def *defs, const cJSON *current, const cJSON
 bool params_restart_changed(const struct param_def *defs, const cJSON *a, const cJSON *b);
 
 /* The schema as JSON for `describe`: [{"name","type","default","min","max","unit",
- * "live"|"restart","doc",...}]. */
+ * "live"|"restart","doc","group",...}] ("group" only where the table sets one). */
 cJSON *params_describe(const struct param_def *defs);
 
 /* Typed reads from a validated document (or list item). They do not fail: a missing or

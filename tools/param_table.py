@@ -52,12 +52,12 @@ def default(p):
 
 def render(effect, desc):
     out = ["<!-- generated: %s parameters -->" % effect,
-           "| name | type | range | default | unit | update | doc |",
-           "|---|---|---|---|---|---|---|"]
+           "| group | name | type | range | default | unit | update | doc |",
+           "|---|---|---|---|---|---|---|---|"]
     lists = []
     for p in desc["params"]:
-        out.append("| `%s` | %s | %s | %s | %s | %s | %s |" % (
-            p["name"], p["type"], rng(p), default(p), p["unit"], p["update"], esc(p["doc"])))
+        out.append("| %s | `%s` | %s | %s | %s | %s | %s | %s |" % (
+            p["group"], p["name"], p["type"], rng(p), default(p), p["unit"], p["update"], esc(p["doc"])))
         if p["type"] == "object_list":
             lists.append(p)
     if lists:

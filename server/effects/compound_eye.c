@@ -35,76 +35,76 @@ static const char *const eye_normal_names[] = {"object", "lens", NULL};
 /* ---- parameters -------------------------------------------------------------------- */
 
 #define EYE_LUT_DOC(text) text " (regenerates the lens table)"
-#define EYE_COLOR(nm, dflt, what) \
-    {.name = nm, .type = PARAM_COLOR, .def = dflt, .min = 0, .max = 1, .unit = "linear RGB", .doc = EYE_LUT_DOC(what)}
-#define EYE_FRAC(nm, dflt, lo, hi, what) \
-    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = "pitch", .doc = EYE_LUT_DOC(what)}
-#define EYE_COEF(nm, dflt, what) \
-    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = 0, .max = 1, .unit = "", .doc = what}
+#define EYE_COLOR(nm, dflt, what, ...) \
+    {.name = nm, .type = PARAM_COLOR, .def = dflt, .min = 0, .max = 1, .unit = "linear RGB", .doc = EYE_LUT_DOC(what), __VA_ARGS__}
+#define EYE_FRAC(nm, dflt, lo, hi, what, ...) \
+    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = "pitch", .doc = EYE_LUT_DOC(what), __VA_ARGS__}
+#define EYE_COEF(nm, dflt, what, ...) \
+    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = 0, .max = 1, .unit = "", .doc = what, __VA_ARGS__}
 
 const struct param_def compound_eye_params[] = {
-    {.name = "mode", .type = PARAM_ENUM, .def = "\"lut\"", .choices = eye_mode_names, .unit = "", .flags = PARAM_RESTART,
+    {.name = "mode", .group = "output", .type = PARAM_ENUM, .def = "\"lut\"", .choices = eye_mode_names, .unit = "", .flags = PARAM_RESTART,
      .doc = "lut: send the lens look-up table (kind 4) on each change that affects it, the client shades; "
             "bake: send the model's shaded view texture (kind 2 EXR) on each change"},
-    {.name = "lattice", .type = PARAM_ENUM, .def = "\"hex\"", .choices = eye_lattice_names, .unit = "",
+    {.name = "lattice", .group = "lenses", .type = PARAM_ENUM, .def = "\"hex\"", .choices = eye_lattice_names, .unit = "",
      .doc = EYE_LUT_DOC("lens lattice: square (thesis, 4 side pupils) or hex (real eyes, 6 side pupils)")},
-    {.name = "density", .type = PARAM_FLOAT, .def = "60", .min = 1, .max = 1000, .unit = "cells per UV unit",
+    {.name = "density", .group = "lenses", .type = PARAM_FLOAT, .def = "60", .min = 1, .max = 1000, .unit = "cells per UV unit",
      .doc = "ommatidium density R_t (eq. 5.1); a client uniform in mode lut (thesis: 300 on its own UV layout)"},
     EYE_FRAC("lens_radius", "1.0", 0.5, 3.0,
-             "lens sphere radius r / pitch; gap-free coverage needs >= 0.7071 (square) or >= 0.5774 (hex)"),
-    {.name = "refractive_index", .type = PARAM_FLOAT, .def = "1.491", .min = 1.05, .max = 1.95, .unit = "",
+             "lens sphere radius r / pitch; gap-free coverage needs >= 0.7071 (square) or >= 0.5774 (hex)", .group = "lenses"),
+    {.name = "refractive_index", .group = "lenses", .type = PARAM_FLOAT, .def = "1.491", .min = 1.05, .max = 1.95, .unit = "",
      .doc = EYE_LUT_DOC("lens refractive index n (thesis: 1.491, PMMA)")},
-    {.name = "pigment_depth", .type = PARAM_FLOAT, .def = "2.0", .min = 2.0, .max = 4.0, .unit = "lens radii",
+    {.name = "pigment_depth", .group = "lenses", .type = PARAM_FLOAT, .def = "2.0", .min = 2.0, .max = 4.0, .unit = "lens radii",
      .doc = EYE_LUT_DOC("depth of the pigment plane below the surface (thesis: 2r; below 2r it would cut the lenses)")},
-    {.name = "max_passes", .type = PARAM_INT, .def = "8", .min = 0, .max = 64, .unit = "",
+    {.name = "max_passes", .group = "rays", .type = PARAM_INT, .def = "8", .min = 0, .max = 64, .unit = "",
      .doc = EYE_LUT_DOC("l: neighbouring lenses a ray may pass through (0: exit the first lens; >= 3 converged)")},
-    {.name = "sphere_search", .type = PARAM_ENUM, .def = "\"exact\"", .choices = eye_search_names, .unit = "",
+    {.name = "sphere_search", .group = "rays", .type = PARAM_ENUM, .def = "\"exact\"", .choices = eye_search_names, .unit = "",
      .doc = EYE_LUT_DOC("entry lens: exact (walk the crossed cells) or slices (the thesis's slice planes)")},
-    {.name = "slice_steps", .type = PARAM_INT, .def = "16", .min = 4, .max = 64, .unit = "",
+    {.name = "slice_steps", .group = "rays", .type = PARAM_INT, .def = "16", .min = 4, .max = 64, .unit = "",
      .doc = EYE_LUT_DOC("slice planes down to depth r, with sphere_search slices")},
-    {.name = "neighbor_select", .type = PARAM_ENUM, .def = "\"all\"", .choices = eye_select_names, .unit = "",
+    {.name = "neighbor_select", .group = "rays", .type = PARAM_ENUM, .def = "\"all\"", .choices = eye_select_names, .unit = "",
      .doc = EYE_LUT_DOC("next lens: all (any overlapping lens, farthest exit wins) or thesis4 (3 lenses of the "
                         "region R_dir points into)")},
-    {.name = "tir_policy", .type = PARAM_ENUM, .def = "\"reflect\"", .choices = eye_tir_names, .unit = "",
+    {.name = "tir_policy", .group = "rays", .type = PARAM_ENUM, .def = "\"reflect\"", .choices = eye_tir_names, .unit = "",
      .doc = EYE_LUT_DOC("total internal reflection at exit: reflect (up to 4 times, then miss), miss (base "
                         "colour) or absorb (pigment colour)")},
-    EYE_FRAC("dot_radius", "0.2", 0.05, 0.5, "pigment dot radius"),
-    EYE_FRAC("dot_softness", "0.03", 0.0, 0.2, "width of the dot's smoothstep edge"),
-    EYE_COLOR("dot_color", "[0.02,0.02,0.02]", "pigment dot colour"),
-    EYE_COLOR("base_color", "[0.8,0.78,0.72]", "pigment-free (body fluid) colour, also what missed rays see"),
-    EYE_FRAC("ring_inner", "0", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)"),
-    EYE_FRAC("ring_outer", "0", 0.0, 0.5, "outer radius of the optional pigment ring"),
-    EYE_COLOR("ring_color", "[0.25,0.1,0.05]", "ring colour"),
-    EYE_FRAC("glow_radius", "0", 0.0, 0.5, "radius of an optional additive central glow (0: off)"),
-    EYE_COLOR("glow_color", "[0.6,0.15,0.05]", "central glow colour (added)"),
-    {.name = "pigment_res", .type = PARAM_INT, .def = "128", .min = 32, .max = 256, .unit = "texels",
+    EYE_FRAC("dot_radius", "0.2", 0.05, 0.5, "pigment dot radius", .group = "pigment"),
+    EYE_FRAC("dot_softness", "0.03", 0.0, 0.2, "width of the dot's smoothstep edge", .group = "pigment"),
+    EYE_COLOR("dot_color", "[0.02,0.02,0.02]", "pigment dot colour", .group = "pigment"),
+    EYE_COLOR("base_color", "[0.8,0.78,0.72]", "pigment-free (body fluid) colour, also what missed rays see", .group = "pigment"),
+    EYE_FRAC("ring_inner", "0", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)", .group = "pigment"),
+    EYE_FRAC("ring_outer", "0", 0.0, 0.5, "outer radius of the optional pigment ring", .group = "pigment"),
+    EYE_COLOR("ring_color", "[0.25,0.1,0.05]", "ring colour", .group = "pigment"),
+    EYE_FRAC("glow_radius", "0", 0.0, 0.5, "radius of an optional additive central glow (0: off)", .group = "pigment"),
+    EYE_COLOR("glow_color", "[0.6,0.15,0.05]", "central glow colour (added)", .group = "pigment"),
+    {.name = "pigment_res", .group = "pigment", .type = PARAM_INT, .def = "128", .min = 32, .max = 256, .unit = "texels",
      .doc = EYE_LUT_DOC("pigment tile width (height x sqrt 3 on the hex lattice)")},
-    {.name = "lut_cells", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "texels",
+    {.name = "lut_cells", .group = "table", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "texels",
      .doc = EYE_LUT_DOC("C: in-cell samples per axis of each direction tile")},
-    {.name = "lut_dirs", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
+    {.name = "lut_dirs", .group = "table", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
      .doc = EYE_LUT_DOC("D: direction tiles per axis (hemi-octahedral map)")},
-    {.name = "lut_supersample", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
+    {.name = "lut_supersample", .group = "table", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
      .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1: a table "
                         "change takes about 90 ms on 2 CPU cores; 2 is 4x the rays)")},
-    EYE_COEF("ka", "0.2", "ambient coefficient a of eq. 5.31 (client uniform in mode lut)"),
-    EYE_COEF("kd", "0.8", "diffuse coefficient d of eq. 5.31"),
-    EYE_COEF("ks", "0.3", "specular coefficient s of eq. 5.31"),
-    {.name = "shininess", .type = PARAM_FLOAT, .def = "32", .min = 1, .max = 256, .unit = "",
+    EYE_COEF("ka", "0.2", "ambient coefficient a of eq. 5.31 (client uniform in mode lut)", .group = "shading"),
+    EYE_COEF("kd", "0.8", "diffuse coefficient d of eq. 5.31", .group = "shading"),
+    EYE_COEF("ks", "0.3", "specular coefficient s of eq. 5.31", .group = "shading"),
+    {.name = "shininess", .group = "shading", .type = PARAM_FLOAT, .def = "32", .min = 1, .max = 256, .unit = "",
      .doc = "Phong exponent of the specular term"},
-    {.name = "shading_normal", .type = PARAM_ENUM, .def = "\"lens\"", .choices = eye_normal_names, .unit = "",
+    {.name = "shading_normal", .group = "shading", .type = PARAM_ENUM, .def = "\"lens\"", .choices = eye_normal_names, .unit = "",
      .doc = "normal for Phong: lens (the lens sphere at the entry point, thesis Fig. 6.20 c-d) or object"},
-    {.name = "model", .type = PARAM_ENUM, .def = "\"hemisphere\"", .choices = eye_model_names, .unit = "",
+    {.name = "model", .group = "bake", .type = PARAM_ENUM, .def = "\"hemisphere\"", .choices = eye_model_names, .unit = "",
      .flags = PARAM_RESTART,
      .doc = "mode bake: a built-in model or the name of an OBJ file (without .obj) in the assets directory"},
-    {.name = "bake_size", .type = PARAM_INT, .def = "512", .min = 128, .max = 2048, .unit = "texels",
+    {.name = "bake_size", .group = "bake", .type = PARAM_INT, .def = "512", .min = 128, .max = 2048, .unit = "texels",
      .flags = PARAM_RESTART, .doc = "mode bake: width and height of the view texture"},
-    {.name = "eye", .type = PARAM_VEC3, .def = "[0.4,0.3,3]", .min = -1000, .max = 1000, .unit = "model units",
+    {.name = "eye", .group = "bake", .type = PARAM_VEC3, .def = "[0.4,0.3,3]", .min = -1000, .max = 1000, .unit = "model units",
      .doc = "mode bake: eye position in the model's space"},
-    {.name = "light", .type = PARAM_VEC3, .def = "[0.4,0.6,1]", .min = -1000, .max = 1000, .unit = "direction",
+    {.name = "light", .group = "bake", .type = PARAM_VEC3, .def = "[0.4,0.6,1]", .min = -1000, .max = 1000, .unit = "direction",
      .flags = PARAM_NONZERO, .doc = "mode bake: direction towards the light, normalised by the server"},
-    {.name = "compression", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
+    {.name = "compression", .group = "bake", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
      .doc = "mode bake: OpenEXR compression of the view texture"},
-    {.name = "fps", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 120, .unit = "1/s",
+    {.name = "fps", .group = "output", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 120, .unit = "1/s",
      .doc = "steps per second; a step sends a frame only when something changed"},
     {0},
 };

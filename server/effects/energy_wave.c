@@ -36,11 +36,11 @@ static const char *const ew_output_names[] = {"Y", "RGBA", NULL};
 
 /* ---- parameters -------------------------------------------------------------------- */
 
-#define EW_POS(nm, dflt, what) \
-    {.name = nm, .type = PARAM_VEC3, .def = dflt, .min = -1000, .max = 1000, .unit = "world units", .doc = what}
-#define EW_DIR(nm, dflt, what)                                                                              \
+#define EW_POS(nm, dflt, what, ...) \
+    {.name = nm, .type = PARAM_VEC3, .def = dflt, .min = -1000, .max = 1000, .unit = "world units", .doc = what, __VA_ARGS__}
+#define EW_DIR(nm, dflt, what, ...)                                                                              \
     {.name = nm, .type = PARAM_VEC3, .def = dflt, .min = -1000, .max = 1000, .unit = "direction",          \
-     .doc = what ", normalised by the server", .flags = PARAM_NONZERO}
+     .doc = what ", normalised by the server", .flags = PARAM_NONZERO, __VA_ARGS__}
 #define EW_COEF(dflt)                                                                                       \
     {.name = "coef", .type = PARAM_FLOAT, .def = dflt, .min = -20, .max = 20, .unit = "",                  \
      .doc = "energy coefficient (sign unrestricted, eq. 3.28)"}
@@ -95,88 +95,88 @@ static const char ew_default_curves[] =
     "\"W\":[1.0,0.8,0.5,1.0,0.6,0.2,1.0]}]";
 
 const struct param_def energy_wave_params[] = {
-    {.name = "points", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_point_fields,
+    {.name = "points", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_point_fields,
      .unit = "", .doc = "point sources 1/max(eps,|P-M|)"},
-    {.name = "lines", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_line_fields,
+    {.name = "lines", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_line_fields,
      .unit = "", .doc = "infinite line sources"},
-    {.name = "tori", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_torus_fields,
+    {.name = "tori", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_torus_fields,
      .unit = "", .doc = "torus sources: 1/distance to the centre circle of radius R"},
-    {.name = "curves", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = EW_MAX_SRC,
+    {.name = "curves", .group = "sources", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = EW_MAX_SRC,
      .fields = ew_curve_fields, .unit = "", .doc = "quadratic Bezier sources with B-spline strength W"},
-    {.name = "epsilon", .type = PARAM_FLOAT, .def = "0.05", .min = 1e-5, .max = 0.5, .unit = "world units",
+    {.name = "epsilon", .group = "sources", .type = PARAM_FLOAT, .def = "0.05", .min = 1e-5, .max = 0.5, .unit = "world units",
      .doc = "distance floor of every kernel 1/max(eps, d)"},
-    {.name = "alpha", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "",
+    {.name = "alpha", .group = "integration", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "",
      .doc = "attenuation gain: zeta(s) = alpha/(s+beta)^2 (eq. 3.31)"},
-    {.name = "beta", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 10, .unit = "",
+    {.name = "beta", .group = "integration", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 10, .unit = "",
      .doc = "attenuation offset in ray parameter s (must stay > 0)"},
-    {.name = "divisions", .type = PARAM_INT, .def = "200", .min = 2, .max = 1024, .unit = "",
+    {.name = "divisions", .group = "integration", .type = PARAM_INT, .def = "200", .min = 2, .max = 1024, .unit = "",
      .doc = "Simpson divisions n (n+1 samples per ray), used by mode simpson", .flags = PARAM_EVEN},
-    {.name = "mode", .type = PARAM_ENUM, .def = "\"adaptive\"", .choices = ew_mode_names, .unit = "",
+    {.name = "mode", .group = "integration", .type = PARAM_ENUM, .def = "\"adaptive\"", .choices = ew_mode_names, .unit = "",
      .doc = "simpson: the thesis's composite Simpson with `divisions` (n+1 samples per ray); adaptive: "
             "closed forms for points/lines, and per torus/curve a 12-point Gauss-Legendre rule in u where "
             "s = s* + w sinh(u) around the ray's closest approach (about 9x faster than simpson n=200 and "
             "more accurate, no banding; ignores `divisions`)"},
-    EW_POS("eye", "[0,0,48]", "camera position V"),
-    EW_POS("center", "[0,0,18]", "billboard centre C; rays start on the billboard and look away from eye"),
-    EW_DIR("up", "[0,1,0]", "camera up vector, not parallel to eye->center"),
-    {.name = "size", .type = PARAM_FLOAT, .def = "20.4", .min = 0.01, .max = 1000, .unit = "world units",
+    EW_POS("eye", "[0,0,48]", "camera position V", .group = "camera"),
+    EW_POS("center", "[0,0,18]", "billboard centre C; rays start on the billboard and look away from eye", .group = "camera"),
+    EW_DIR("up", "[0,1,0]", "camera up vector, not parallel to eye->center", .group = "camera"),
+    {.name = "size", .group = "camera", .type = PARAM_FLOAT, .def = "20.4", .min = 0.01, .max = 1000, .unit = "world units",
      .doc = "billboard width l (height l*height/width)"},
-    {.name = "width", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
+    {.name = "width", .group = "camera", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
      .doc = "texture width"},
-    {.name = "height", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
+    {.name = "height", .group = "camera", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
      .doc = "texture height"},
-    {.name = "nu", .type = PARAM_FLOAT, .def = "2.0", .min = 1.05, .max = 16, .unit = "",
+    {.name = "nu", .group = "integration", .type = PARAM_FLOAT, .def = "2.0", .min = 1.05, .max = 16, .unit = "",
      .doc = "ray end E = V + nu(S - V) (eq. 4.3, translation-invariant form)"},
-    {.name = "fps", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 240, .unit = "1/s",
+    {.name = "fps", .group = "output", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 240, .unit = "1/s",
      .doc = "frames per second of the stream"},
     /* Default rle: lossless and 2.3 ms at 512^2 half Y (bench_exr); zip is 1.8x smaller but 16 ms,
      * b44a 1.5 ms but lossy (~3% at steep peaks). */
-    {.name = "compression", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
+    {.name = "compression", .group = "output", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
      .doc = "OpenEXR compression of the texture frames (rle: lossless and fast; zip: smallest; b44a: lossy)"},
-    {.name = "output", .type = PARAM_ENUM, .def = "\"Y\"", .choices = ew_output_names, .unit = "",
+    {.name = "output", .group = "output", .type = PARAM_ENUM, .def = "\"Y\"", .choices = ew_output_names, .unit = "",
      .doc = "Y: raw luminance B (HDR, half float); RGBA: colour map clamp((1-B)Cb + B Ce), A = clamp(B)"},
-    {.name = "color_energy", .type = PARAM_COLOR, .def = "[0.35,0.75,1.0]", .min = 0, .max = 1, .unit = "linear RGB",
+    {.name = "color_energy", .group = "output", .type = PARAM_COLOR, .def = "[0.35,0.75,1.0]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "energy colour C_e of the RGBA colour map (eq. 4.8)"},
-    {.name = "color_background", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
+    {.name = "color_background", .group = "output", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "background colour C_b of the RGBA colour map (eq. 4.8)"},
-    {.name = "animate", .type = PARAM_BOOL, .def = "true", .unit = "",
+    {.name = "animate", .group = "animation", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "multiply each curve's W by the eq. (5.1) travelling pulse"},
-    {.name = "anim_rate", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
+    {.name = "anim_rate", .group = "animation", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
      .doc = "eq. (5.1) animation frames per second of stream time (a pulse enters every 7n + 10 frames)"},
     /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7): on by default, since the
      * issue asks every energy_wave stream to light its surroundings; ~1 kB a frame. */
-    {.name = "light_rig", .type = PARAM_BOOL, .def = "true", .unit = "",
+    {.name = "light_rig", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "also send a light-rig frame (kind 3: centre-line segments, toon ramp, outline, shadow) with "
             "every texture, for clients that light their own scene with the wave"},
-    {.name = "curve_segments", .type = PARAM_INT, .def = "8", .min = 1, .max = 32, .unit = "",
+    {.name = "curve_segments", .group = "light rig", .type = PARAM_INT, .def = "8", .min = 1, .max = 32, .unit = "",
      .doc = "light rig: chords per Bezier curve of the centre line (64 segments in all at most)"},
-    {.name = "torus_segments", .type = PARAM_INT, .def = "12", .min = 3, .max = 32, .unit = "",
+    {.name = "torus_segments", .group = "light rig", .type = PARAM_INT, .def = "12", .min = 3, .max = 32, .unit = "",
      .doc = "light rig: chords per torus centre circle"},
-    {.name = "light_strength", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
+    {.name = "light_strength", .group = "light rig", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
      .doc = "light rig: mix of the toon colour over the client's own shading (1: full replacement, the thesis)"},
-    {.name = "ramp", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = LIGHT_RIG_MAX_BANDS,
+    {.name = "ramp", .group = "light rig", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = LIGHT_RIG_MAX_BANDS,
      .fields = ew_band_fields, .unit = "",
      .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5); empty: three bands "
             "that follow color_energy C_e (0.4 C_e from -1, 0.2 + 0.7 C_e from -0.3, 0.75 + 0.25 C_e from 0)"},
-    {.name = "features", .type = PARAM_BOOL, .def = "true", .unit = "",
+    {.name = "features", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "light rig: multiply the feature texture onto the toon colour (eq. 2.6)"},
-    {.name = "outline", .type = PARAM_BOOL, .def = "true", .unit = "",
+    {.name = "outline", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "light rig: draw back-face outlines (eq. 2.7)"},
-    {.name = "outline_width", .type = PARAM_FLOAT, .def = "0.005", .min = 0, .max = 0.05, .unit = "x depth",
+    {.name = "outline_width", .group = "light rig", .type = PARAM_FLOAT, .def = "0.005", .min = 0, .max = 0.05, .unit = "x depth",
      .doc = "light rig: outline thickness d, R' = R + d|R_z|U in view space (eq. 2.7)"},
-    {.name = "outline_color", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
+    {.name = "outline_color", .group = "light rig", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "light rig: outline colour"},
-    {.name = "shadow", .type = PARAM_BOOL, .def = "true", .unit = "",
+    {.name = "shadow", .group = "shadow", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "light rig: draw the clamped planar shadows (eqs. 2.8-2.32)"},
-    {.name = "shadow_theta", .type = PARAM_FLOAT, .def = "60", .min = 0, .max = 89, .unit = "degrees",
+    {.name = "shadow_theta", .group = "shadow", .type = PARAM_FLOAT, .def = "60", .min = 0, .max = 89, .unit = "degrees",
      .doc = "light rig: largest angle theta of the shadow direction from the plane's downward normal; "
             "a shadow is at most height x tan(theta) long (eq. 2.14)"},
-    {.name = "shadow_color", .type = PARAM_COLOR, .def = "[0.02,0.03,0.06]", .min = 0, .max = 1, .unit = "linear RGB",
+    {.name = "shadow_color", .group = "shadow", .type = PARAM_COLOR, .def = "[0.02,0.03,0.06]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "light rig: shadow colour"},
-    {.name = "shadow_opacity", .type = PARAM_FLOAT, .def = "0.65", .min = 0, .max = 1, .unit = "",
+    {.name = "shadow_opacity", .group = "shadow", .type = PARAM_FLOAT, .def = "0.65", .min = 0, .max = 1, .unit = "",
      .doc = "light rig: shadow opacity where t >= 0 (eq. 2.32; 0 elsewhere)"},
-    EW_POS("shadow_plane_point", "[0,-9,0]", "light rig: a point I of the shadow-receiving plane"),
-    EW_DIR("shadow_plane_normal", "[0,1,0]", "light rig: up normal Y of the shadow-receiving plane"),
+    EW_POS("shadow_plane_point", "[0,-9,0]", "light rig: a point I of the shadow-receiving plane", .group = "shadow"),
+    EW_DIR("shadow_plane_normal", "[0,1,0]", "light rig: up normal Y of the shadow-receiving plane", .group = "shadow"),
     {0},
 };
 

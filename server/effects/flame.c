@@ -62,10 +62,10 @@ static const char *const fl_shape_names[] = {"plate", "box", NULL};
 static const char *const fl_pform_names[] = {"difference", "symmetric", NULL};
 static const char *const fl_diff_names[] = {"stabilized", "literal", NULL};
 
-#define FL_F(nm, dflt, lo, hi, un, what, fl) \
-    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = un, .doc = what, .flags = fl}
-#define FL_I(nm, dflt, lo, hi, un, what, fl) \
-    {.name = nm, .type = PARAM_INT, .def = dflt, .min = lo, .max = hi, .unit = un, .doc = what, .flags = fl}
+#define FL_F(nm, dflt, lo, hi, un, what, fl, ...) \
+    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = un, .doc = what, .flags = fl, __VA_ARGS__}
+#define FL_I(nm, dflt, lo, hi, un, what, fl, ...) \
+    {.name = nm, .type = PARAM_INT, .def = dflt, .min = lo, .max = hi, .unit = un, .doc = what, .flags = fl, __VA_ARGS__}
 
 static const struct param_def fl_source_fields[] = {
     {.name = "center", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -100, .max = 100, .unit = "m",
@@ -100,59 +100,59 @@ static const struct param_def fl_obstacle_fields[] = {
  * (H90/W90 1.3, 20% below the source). The thesis's dt of 1 ms would need 10 M particle-steps/s
  * for 10k particles in real time. */
 const struct param_def flame_params[] = {
-    {.name = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.015}]", .max_len = 16,
+    {.name = "sources", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.015}]", .max_len = 16,
      .fields = fl_source_fields, .unit = "", .doc = "burning solids (digest §2.13)"},
-    {.name = "obstacles", .type = PARAM_OBJECT_LIST, .max_len = 16,
+    {.name = "obstacles", .group = "sources", .type = PARAM_OBJECT_LIST, .max_len = 16,
      .def = "[{\"shape\":\"plate\",\"size\":[0.036,0.036,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]", .fields = fl_obstacle_fields,
      .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (digest §9 #16)"},
-    {.name = "wind_accel", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
+    {.name = "wind_accel", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
      .doc = "uniform acceleration of gas particles (digest §2.14, §9 #15)"},
-    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, digest §9 #5)", 0),
-    {.name = "up", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
+    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, digest §9 #5)", 0, .group = "forces"),
+    {.name = "up", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
      .doc = "upward unit vector (normalised; digest §9 #20)", .flags = PARAM_NONZERO},
-    FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure constant p = k (rho - rho_rest) (eq 3.11)", 0),
-    FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity (eq 3.13)", 0),
-    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density; pressure p = k (rho - rho_rest), clamped at 0", 0),
+    FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure constant p = k (rho - rho_rest) (eq 3.11)", 0, .group = "forces"),
+    FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity (eq 3.13)", 0, .group = "forces"),
+    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density; pressure p = k (rho - rho_rest), clamped at 0", 0, .group = "forces"),
     /* Both forms clamp eq 3.11's p at 0. Unclamped, the difference form (p_j - p_i) pushes the
      * density-deficient free boundary of a gas with no air around it outward (digest §2.5) far
      * faster than buoyancy lifts it: on the default scene no burning gas is left after 2.5 s
      * (1.2k particles), against a flame rising 7.6 cm (centroid at 2.5-3 s) with the clamp
      * (PROTOCOL.md §11.2). Default symmetric (Mueller's form, digest §9 #3): every figure of the
      * default scene and every group D behaviour is measured with it. */
-    {.name = "pressure_form", .type = PARAM_ENUM, .def = "\"symmetric\"", .choices = fl_pform_names, .unit = "",
+    {.name = "pressure_form", .group = "forces", .type = PARAM_ENUM, .def = "\"symmetric\"", .choices = fl_pform_names, .unit = "",
      .doc = "difference: eq 3.12 with the sign fixed; symmetric: Mueller's -(p_i+p_j)/2 form (digest §9 #3); "
             "both with p >= 0"},
-    FL_F("T_amb", "300", 250, 400, "K", "ambient temperature, also of inserted particles", 0),
-    FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature", 0),
-    FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F (eq 3.17)", 0),
-    FL_F("k_cf", "5", 0, 20, "", "fuel consumption dF/dt = -k_cf S (eq 3.18)", 0),
-    FL_F("k_pt", "500", 0, 2000, "", "heat production dT/dt = k_pt S (eq 3.19)", 0),
-    FL_F("k_h", "0.02", 0, 0.1, "m^2/s", "heat diffusion (eq 3.20)", 0),
-    FL_F("k_f", "0.001", 0, 0.01, "m^2/(s K)", "fuel diffusion, weighted by temperature (eq 3.21)", 0),
-    {.name = "diffusion_mode", .type = PARAM_ENUM, .def = "\"stabilized\"", .choices = fl_diff_names, .unit = "",
+    FL_F("T_amb", "300", 250, 400, "K", "ambient temperature, also of inserted particles", 0, .group = "combustion"),
+    FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature", 0, .group = "combustion"),
+    FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F (eq 3.17)", 0, .group = "combustion"),
+    FL_F("k_cf", "5", 0, 20, "", "fuel consumption dF/dt = -k_cf S (eq 3.18)", 0, .group = "combustion"),
+    FL_F("k_pt", "500", 0, 2000, "", "heat production dT/dt = k_pt S (eq 3.19)", 0, .group = "combustion"),
+    FL_F("k_h", "0.02", 0, 0.1, "m^2/s", "heat diffusion (eq 3.20)", 0, .group = "diffusion"),
+    FL_F("k_f", "0.001", 0, 0.01, "m^2/(s K)", "fuel diffusion, weighted by temperature (eq 3.21)", 0, .group = "diffusion"),
+    {.name = "diffusion_mode", .group = "diffusion", .type = PARAM_ENUM, .def = "\"stabilized\"", .choices = fl_diff_names, .unit = "",
      .doc = "stabilized: per-particle weights capped at omega_max, a convex update (digest §9 #4; viscosity too); "
             "literal: eqs 3.13/3.20/3.21 as printed (unstable at the thesis's k_f)"},
-    FL_F("omega_max", "0.5", 0.05, 1, "", "cap of the summed explicit diffusion weights per step (digest §9 #4)", 0),
-    FL_F("k_cool", "0", 0, 50, "1/s", "Newtonian cooling toward T_amb, not in the thesis (digest §9 #13)", 0),
-    FL_F("fuel_eps", "0.001", 0, 1, "", "flame test F > fuel_eps (digest §9 #12)", 0),
-    FL_I("resample_interval", "5", 1, 20, "steps", "steps between particle birth/death passes (digest §2.12)", 0),
+    FL_F("omega_max", "0.5", 0.05, 1, "", "cap of the summed explicit diffusion weights per step (digest §9 #4)", 0, .group = "diffusion"),
+    FL_F("k_cool", "0", 0, 50, "1/s", "Newtonian cooling toward T_amb, not in the thesis (digest §9 #13)", 0, .group = "combustion"),
+    FL_F("fuel_eps", "0.001", 0, 1, "", "flame test F > fuel_eps (digest §9 #12)", 0, .group = "combustion"),
+    FL_I("resample_interval", "5", 1, 20, "steps", "steps between particle birth/death passes (digest §2.12)", 0, .group = "numerics"),
     FL_I("insert_nbr_threshold", "24", 4, 60, "", "flame particles with fewer neighbours get one new particle (digest §9 #8)",
-         0),
+         0, .group = "numerics"),
     FL_F("h", "0.0035", 0.002, 0.05, "m", "kernel support radius (Table 3.1: 0.01125; finer by default)",
-         PARAM_RESTART),
-    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (digest §9 #7)", PARAM_RESTART),
+         PARAM_RESTART, .group = "numerics"),
+    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (digest §9 #7)", PARAM_RESTART, .group = "numerics"),
     FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so a lattice at spacing d has rho_rest (digest §9 #6)",
-         PARAM_RESTART),
-    FL_F("dt", "0.003", 0.0001, 0.004, "s", "time step of the simulation", 0),
+         PARAM_RESTART, .group = "numerics"),
+    FL_F("dt", "0.003", 0.0001, 0.004, "s", "time step of the simulation", 0, .group = "numerics"),
     FL_I("max_substeps", "24", 1, 256, "steps", "most steps per frame; beyond it the stream runs slower than real "
-                                                "time (see the real-time factor in /metrics)", 0),
+                                                "time (see the real-time factor in /metrics)", 0, .group = "numerics"),
     FL_I("max_particles", "1000000", 1000, 4000000, "", "particle limit; reaching it is a runaway (reset)",
-         PARAM_RESTART),
-    FL_I("seed", "1", 0, 1000000, "", "seed of the deterministic fallback insertion directions", PARAM_RESTART),
-    FL_F("fps", "30", 1, 240, "1/s", "frames per second of the stream", 0),
-    FL_F("time_scale", "1", 0, 10, "", "simulated seconds per wall second (0 pauses)", 0),
-    FL_F("space_scale", "1", 0.001, 1000, "", "world units per simulated metre in the frames", 0),
-    FL_I("pos_bits", "16", 8, 24, "bits", "position quantisation of the particle codec", 0),
+         PARAM_RESTART, .group = "numerics"),
+    FL_I("seed", "1", 0, 1000000, "", "seed of the deterministic fallback insertion directions", PARAM_RESTART, .group = "numerics"),
+    FL_F("fps", "30", 1, 240, "1/s", "frames per second of the stream", 0, .group = "output"),
+    FL_F("time_scale", "1", 0, 10, "", "simulated seconds per wall second (0 pauses)", 0, .group = "output"),
+    FL_F("space_scale", "1", 0.001, 1000, "", "world units per simulated metre in the frames", 0, .group = "output"),
+    FL_I("pos_bits", "16", 8, 24, "bits", "position quantisation of the particle codec", 0, .group = "output"),
     {0},
 };
 

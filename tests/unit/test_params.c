@@ -14,7 +14,7 @@ static const struct param_def t_item[] = {
     {0},
 };
 static const struct param_def t_defs[] = {
-    {.name = "fps", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 240, .unit = "1/s", .doc = "rate"},
+    {.name = "fps", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 240, .unit = "1/s", .doc = "rate", .group = "output"},
     {.name = "n", .type = PARAM_INT, .def = "64", .min = 2, .max = 1024, .flags = PARAM_EVEN, .doc = "divisions"},
     {.name = "on", .type = PARAM_BOOL, .def = "true", .doc = "toggle"},
     {.name = "mode", .type = PARAM_ENUM, .def = "\"fast\"", .choices = t_modes, .doc = "mode"},
@@ -142,6 +142,8 @@ static void test_describe(void)
     CHECK(!strcmp(cJSON_GetObjectItem(size, "update")->valuestring, "restart"), "restart");
     CHECK(cJSON_GetArraySize(cJSON_GetObjectItem(mode, "choices")) == 2, "choices");
     CHECK(cJSON_GetArraySize(cJSON_GetObjectItem(items, "fields")) == 3, "fields");
+    CHECK(!strcmp(cJSON_GetStringValue(cJSON_GetObjectItem(fps, "group")), "output"), "group");
+    CHECK(!cJSON_GetObjectItem(size, "group"), "a parameter without a group has no \"group\"");
     cJSON_Delete(d);
 }
 
