@@ -29,6 +29,13 @@ struct effect_frame {
     double encode_ms;        /* time spent encoding this payload, for /metrics */
 };
 
+/* A built-in preset (presets.h): a partial document over the effect's defaults. */
+struct effect_preset {
+    const char *name; /* 1-63 characters of [A-Za-z0-9_.-] */
+    const char *doc;  /* one line: what it shows and where it comes from */
+    const char *params;
+};
+
 typedef int (*effect_emit_fn)(void *ctx, const struct effect_frame *frame);
 
 struct effect_ops {
@@ -36,6 +43,7 @@ struct effect_ops {
     const char *doc;              /* one paragraph for describe */
     const struct param_def *params; /* {0}-terminated; must contain "fps" (PARAM_FLOAT) */
     const char *outputs_json;     /* JSON array describing the outputs, for describe */
+    const struct effect_preset *presets; /* built-in read-only presets, {0}-terminated (may be NULL) */
 
     /* Cross-parameter rules beyond the table (may be NULL). Called on every merged
      * document before it is accepted; code bad_param with err->param set. */

@@ -12,7 +12,8 @@
 
 struct fx_err {
     char code[24];    /* bad_json, bad_request, unknown_op, unknown_effect, unknown_stream,
-                         exists, bad_param, limit, internal */
+                         exists, bad_param, limit, internal, unknown_preset, read_only,
+                         unavailable, unauthorized, forbidden */
     char param[96];   /* offending parameter path (e.g. "curves[1].W[3]"), or "" */
     char message[320];
 };

@@ -34,7 +34,7 @@ static void hub_changed(struct hub *hub)
     pthread_cond_broadcast(&hub->cv);
 }
 
-static bool hub_valid_name(const char *name)
+bool hub_valid_name(const char *name)
 {
     size_t n = strlen(name);
     if (n == 0 || n >= STREAM_NAME_MAX) return false;

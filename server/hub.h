@@ -63,6 +63,8 @@ struct hub {
 };
 
 int hub_init(struct hub *hub, int max_streams);
+/* The name rule of streams (and presets): 1-63 characters of [A-Za-z0-9_.-]. */
+bool hub_valid_name(const char *name);
 void hub_free(struct hub *hub);
 
 /* Adds a stream at revision rev (1 for a new one; stored streams keep theirs). Takes

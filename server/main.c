@@ -120,7 +120,8 @@ static int main_serve(struct server *srv, struct fx_err *err)
     if (ocl_open(&srv->ocl, srv->cfg.device, err)) return -1;
     log_info("OpenCL device: %s (%s)", ocl_device_name(srv->ocl), ocl_platform_name(srv->ocl));
     hub_init(&srv->hub, srv->cfg.limits.max_streams);
-    int rc = main_create_streams(srv, err);
+    int rc = presets_load(&srv->presets, srv->cfg.state_dir, err);
+    if (!rc) rc = main_create_streams(srv, err);
     if (!rc) rc = net_open(&main_net, srv, err);
     if (!rc) rc = engine_start(&srv->engine, &srv->hub, srv->ocl, srv->cfg.pause_idle, err);
     if (!rc) {
@@ -140,6 +141,7 @@ static int main_serve(struct server *srv, struct fx_err *err)
     net_close(main_net);
     main_net = NULL;
     hub_free(&srv->hub);
+    presets_free(&srv->presets);
     ocl_close(srv->ocl);
     return rc;
 }

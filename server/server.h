@@ -13,6 +13,7 @@
 #include "access.h"
 #include "engine.h"
 #include "hub.h"
+#include "presets.h"
 
 #define FX_VERSION "0.1.0"
 
@@ -57,6 +58,7 @@ struct ocl;
 struct server {
     struct config cfg;
     struct hub hub;
+    struct presets presets;   /* network thread only (presets.h) */
     struct engine engine;
     struct ocl *ocl;
     struct counters counters;

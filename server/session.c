@@ -423,6 +423,25 @@ static int session_op_get(struct session *ss, const cJSON *req, const cJSON *id,
     return 0;
 }
 
+/* The revision check of every change (set, preset_load). */
+static int session_rev_ok(const struct stream *s, uint64_t rev, struct fx_err *err)
+{
+    if ((double)rev + 1 < HUB_REV_MAX) return 0;
+    return fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
+}
+
+/* Installs an accepted complete document: a new revision, stored, broadcast to the stream's
+ * other subscribers and sent to the requester (PROTOCOL.md §3.8). Takes doc. */
+static void session_accept_params(struct session *ss, struct stream *s, const cJSON *id, cJSON *doc)
+{
+    uint64_t rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
+    ss->hold |= store_mark(ss->srv);
+    for (struct session *o = ss->srv->sessions; o; o = o->next)
+        if (o != ss && session_find_sub(o, s) >= 0)
+            session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));
+    session_send(ss, session_params_msg(s, id, rev, doc));
+}
+
 static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
     static const char *const allowed[] = {"stream", "params", NULL};
@@ -433,24 +452,11 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     if (!s) return -1;
     uint64_t rev;
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
-    cJSON *doc = NULL;
-    if ((double)rev + 1 >= HUB_REV_MAX)
-        fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
-    else
-        doc = effect_params(s->effect, cur, partial, err);
+    cJSON *doc = session_rev_ok(s, rev, err) ? NULL : effect_params(s->effect, cur, partial, err);
     cJSON_Delete(cur);
-    if (!doc) {
-        stream_unref(s);
-        return -1;
-    }
-    rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
-    ss->hold |= store_mark(ss->srv);
-    for (struct session *o = ss->srv->sessions; o; o = o->next)
-        if (o != ss && session_find_sub(o, s) >= 0)
-            session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));
-    session_send(ss, session_params_msg(s, id, rev, doc));
+    if (doc) session_accept_params(ss, s, id, doc);
     stream_unref(s);
-    return 0;
+    return doc ? 0 : -1;
 }
 
 static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
@@ -464,6 +470,80 @@ static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *i
     cJSON_AddStringToObject(r, "stream", s->name);
     session_send(ss, r);
     stream_unref(s);
+    return 0;
+}
+
+/* ---- presets (presets.h, PROTOCOL.md §3.12) ---- */
+
+static int session_op_presets(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"effect", NULL};
+    if (session_only(req, "presets", allowed, err)) return -1;
+    const struct effect_ops *fx = NULL;
+    if (cJSON_GetObjectItemCaseSensitive(req, "effect") && !(fx = session_effect(req, err))) return -1;
+    cJSON *r = session_reply("presets", id);
+    cJSON_AddItemToObject(r, "presets", presets_list(&ss->srv->presets, fx));
+    session_send(ss, r);
+    return 0;
+}
+
+static int session_op_preset_save(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", "name", "doc", NULL};
+    if (session_only(req, "preset_save", allowed, err)) return -1;
+    const char *doc = "";
+    if (cJSON_GetObjectItemCaseSensitive(req, "doc") && !(doc = session_str(req, "doc", err))) return -1;
+    const char *name = session_str(req, "name", err);
+    struct stream *s = name ? session_stream(ss, req, err) : NULL;
+    if (!s) return -1;
+    uint64_t rev;
+    bool replaced = false;
+    cJSON *params = hub_get_params(&ss->srv->hub, s, &rev);
+    int rc = presets_save(&ss->srv->presets, s->effect, name, doc, params, &replaced, err);
+    cJSON_Delete(params);
+    if (!rc) {
+        log_info("preset %s/%s saved from stream %s", s->effect->name, name, s->name);
+        cJSON *r = session_reply("preset_saved", id);
+        cJSON_AddStringToObject(r, "effect", s->effect->name);
+        cJSON_AddStringToObject(r, "name", name);
+        cJSON_AddBoolToObject(r, "replaced", replaced);
+        session_announce(ss, r);
+        session_send(ss, r);
+    }
+    stream_unref(s);
+    return rc;
+}
+
+static int session_op_preset_load(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", "name", NULL};
+    if (session_only(req, "preset_load", allowed, err)) return -1;
+    const char *name = session_str(req, "name", err);
+    struct stream *s = name ? session_stream(ss, req, err) : NULL;
+    if (!s) return -1;
+    uint64_t rev;
+    cJSON_Delete(hub_get_params(&ss->srv->hub, s, &rev));
+    cJSON *preset = session_rev_ok(s, rev, err) ? NULL : presets_params(&ss->srv->presets, s->effect, name, err);
+    cJSON *doc = preset ? effect_params(s->effect, NULL, preset, err) : NULL;
+    cJSON_Delete(preset);
+    if (doc) session_accept_params(ss, s, id, doc);
+    stream_unref(s);
+    return doc ? 0 : -1;
+}
+
+static int session_op_preset_delete(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"effect", "name", NULL};
+    if (session_only(req, "preset_delete", allowed, err)) return -1;
+    const struct effect_ops *fx = session_effect(req, err);
+    const char *name = fx ? session_str(req, "name", err) : NULL;
+    if (!name || presets_delete(&ss->srv->presets, fx, name, err)) return -1;
+    log_info("preset %s/%s deleted", fx->name, name);
+    cJSON *r = session_reply("preset_deleted", id);
+    cJSON_AddStringToObject(r, "effect", fx->name);
+    cJSON_AddStringToObject(r, "name", name);
+    session_announce(ss, r);
+    session_send(ss, r);
     return 0;
 }
 
@@ -503,6 +583,10 @@ static const struct {
     {"get", session_op_get, ACCESS_VIEW},
     {"set", session_op_set, ACCESS_TUNE},
     {"reset", session_op_reset, ACCESS_TUNE},
+    {"presets", session_op_presets, ACCESS_VIEW},
+    {"preset_load", session_op_preset_load, ACCESS_TUNE},
+    {"preset_save", session_op_preset_save, ACCESS_ADMIN},
+    {"preset_delete", session_op_preset_delete, ACCESS_ADMIN},
 };
 
 static int session_allowed(const struct session *ss, const char *op, enum access_role need, struct fx_err *err)

@@ -1,10 +1,8 @@
 /* store.c — see store.h. */
 #include <errno.h>
-#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "jsonfile.h"
 #include "log.h"
@@ -29,39 +27,6 @@ static cJSON *store_snapshot(struct server *srv)
     return arr;
 }
 
-static int store_write_all(int fd, const char *text, size_t len)
-{
-    while (len) {
-        ssize_t w = write(fd, text, len);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) return -1;
-        text += w;
-        len -= (size_t)w;
-    }
-    return 0;
-}
-
-static int store_write_file(const char *dir, const char *name, const char *text)
-{
-    char tmp[PATH_MAX + 64], path[PATH_MAX + 64];
-    snprintf(tmp, sizeof tmp, "%s/%s.tmp", dir, name);
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) return -1;
-    int rc = store_write_all(fd, text, strlen(text)) || fsync(fd);
-    rc |= close(fd);
-    if (rc || rename(tmp, path)) {
-        unlink(tmp);
-        return -1;
-    }
-    int dfd = open(dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (dfd >= 0) {
-        fsync(dfd);
-        close(dfd);
-    }
-    return 0;
-}
-
 bool store_mark(struct server *srv)
 {
     if (srv->cfg.state_dir[0]) srv->store_dirty = true;
@@ -76,7 +41,7 @@ void store_flush(struct server *srv)
     cJSON *doc = store_snapshot(srv);
     char *text = cJSON_Print(doc);
     cJSON_Delete(doc);
-    if (!text || store_write_file(srv->cfg.state_dir, "streams.json", text))
+    if (!text || jsonfile_write(srv->cfg.state_dir, "streams.json", text))
         log_error("cannot save state to %s/streams.json: %s", srv->cfg.state_dir, strerror(errno));
     free(text);
 }
@@ -115,7 +80,7 @@ int store_quarantine(const struct server *srv, const cJSON *entries)
     for (const cJSON *e = entries->child; e; e = e->next) cJSON_AddItemToArray(all, cJSON_Duplicate(e, 1));
     char *text = cJSON_Print(all);
     cJSON_Delete(all);
-    int rc = text ? store_write_file(srv->cfg.state_dir, "streams.quarantine.json", text) : -1;
+    int rc = text ? jsonfile_write(srv->cfg.state_dir, "streams.quarantine.json", text) : -1;
     free(text);
     return rc;
 }

@@ -109,6 +109,26 @@ const struct param_def compound_eye_params[] = {
     {0},
 };
 
+/* Built-in presets (presets.h): the thesis's settings (digest 004 §3: square lattice, R_t 300,
+ * n 1.491, texture plane at 2r, the slice-plane search and 3-candidate neighbour rule, l of the
+ * order of 10), its Fig. 6.18 density sweep at 50, and artist looks on the default hex eye. */
+static const struct effect_preset compound_eye_presets[] = {
+    {"thesis", "the thesis's settings: square lattice, R_t 300, n 1.491, slice search, thesis4 neighbours, l = 10",
+     "{\"lattice\":\"square\",\"density\":300,\"refractive_index\":1.491,\"pigment_depth\":2.0,"
+     "\"sphere_search\":\"slices\",\"neighbor_select\":\"thesis4\",\"max_passes\":10}"},
+    {"thesis-fig6.18-r50", "Fig. 6.18 at R_t 50: the thesis's square lattice, coarse enough to see each lens",
+     "{\"lattice\":\"square\",\"density\":50,\"sphere_search\":\"slices\",\"neighbor_select\":\"thesis4\","
+     "\"max_passes\":10}"},
+    {"insect-hex", "hex lattice at density 60: one central and six side pseudopupils (the default stream)", "{}"},
+    {"jewel-beetle", "artist look: green-gold lenses with a soft inner glow and a glossy highlight",
+     "{\"base_color\":[0.16,0.42,0.22],\"dot_color\":[0.01,0.04,0.02],\"glow_radius\":0.16,"
+     "\"glow_color\":[0.35,0.55,0.1],\"ks\":0.6,\"shininess\":80}"},
+    {"fly-red", "artist look: a red fly eye with dark-ringed pupils",
+     "{\"base_color\":[0.55,0.1,0.06],\"dot_color\":[0.04,0.01,0.01],\"ring_inner\":0.21,\"ring_outer\":0.3,"
+     "\"ring_color\":[0.22,0.04,0.02]}"},
+    {0},
+};
+
 /* Every parameter whose change regenerates the lens table (mode lut). */
 static const char *const eye_lut_keys[] = {
     "lattice", "lens_radius", "refractive_index", "pigment_depth", "max_passes", "sphere_search", "slice_steps",
@@ -518,6 +538,7 @@ const struct effect_ops compound_eye_effect = {
            "it changes, for one look-up per pixel on the client; mode bake sends a model's shaded view texture "
            "(kind 2 EXR) whenever the view changes.",
     .params = compound_eye_params,
+    .presets = compound_eye_presets,
     .outputs_json = "[{\"kind\":4,\"codec\":\"lut_pack\",\"products\":\"PIGM, LLUT, LMAC (RGBA8, zstd)\","
                     "\"size\":\"LLUT atlas lut_dirs*(lut_cells+2) square\",\"rate\":\"on change, mode lut\"},"
                     "{\"kind\":2,\"codec\":\"exr\",\"channels\":\"RGBA (half)\",\"size\":\"bake_size square\","

@@ -180,6 +180,34 @@ const struct param_def energy_wave_params[] = {
     {0},
 };
 
+/* Built-in presets (presets.h): the thesis's ch. 5 figures where the digest gives the values
+ * (000 §4: torus R and t_i of Figs 5.1/5.2, curve b_i of Figs 5.3/5.4/5.6, W of Fig 5.6); the
+ * camera, billboard size and control points are not given and are ours (the default scene's).
+ * The billboard (20.4 wide at 30 units from the eye) is narrowed to frame the smaller tori. */
+#define EW_JOINED_CURVES(coef, w0, w1)                                                                      \
+    "[{\"p0\":[-13.2,-4.2,1.8],\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":" coef ",\"W\":" w0 "},"     \
+    "{\"p0\":[0,0,0],\"p1\":[6.6,-9.0,1.8],\"p2\":[13.2,4.2,-1.8],\"coef\":" coef ",\"W\":" w1 "}]"
+#define EW_FLAT_W "[1,1,1,1,1,1,1]"
+static const struct effect_preset energy_wave_presets[] = {
+    {"thesis-fig5.1", "Fig. 5.1: a torus with R 0.9 and t_i 5.1, seen at an angle (the hole partly filled by glow)",
+     "{\"curves\":[],\"tori\":[{\"R\":0.9,\"coef\":5.1,\"axis\":[0,1,1]}],\"size\":3.6}"},
+    {"thesis-fig5.2", "Fig. 5.2: a torus with R 3.0 and t_i 7.4, seen at an angle (a clear ring)",
+     "{\"curves\":[],\"tori\":[{\"R\":3.0,\"coef\":7.4,\"axis\":[0,1,1]}],\"size\":7.5}"},
+    {"thesis-fig5.3", "Fig. 5.3: two C1-joined Bezier curves, b_i 5.0, all strengths at maximum, no pulse",
+     "{\"curves\":" EW_JOINED_CURVES("5.0", EW_FLAT_W, EW_FLAT_W) ",\"animate\":false}"},
+    {"thesis-fig5.4", "Fig. 5.4: the same curves with b_i 7.5",
+     "{\"curves\":" EW_JOINED_CURVES("7.5", EW_FLAT_W, EW_FLAT_W) ",\"animate\":false}"},
+    {"thesis-fig5.6", "Fig. 5.6 (right) and 5.7: b_i 8.0, W = [1.0,0.2,0.6,1.0,0.5,0.8,1.0], the eq. 5.1 pulse "
+                      "running (the default stream)",
+     "{}"},
+    {"plasma-ring", "artist look: a magenta torus ring, R 2, lit surroundings in its colour",
+     "{\"curves\":[],\"tori\":[{\"R\":2.0,\"coef\":6.5,\"axis\":[0.3,1,0.8]}],\"size\":6,"
+     "\"color_energy\":[1.0,0.3,0.85]}"},
+    {"ember-arc", "artist look: the joined curves as a warm orange arc with a slower pulse",
+     "{\"color_energy\":[1.0,0.45,0.12],\"anim_rate\":20}"},
+    {0},
+};
+
 /* ---- state ------------------------------------------------------------------------- */
 
 struct ew_curve_src {
@@ -689,6 +717,7 @@ const struct effect_ops energy_wave_effect = {
            "line, torus and quadratic Bezier sources (B-spline strength W, optional travelling pulse), seen "
            "through a billboard camera; streamed as OpenEXR textures (raw luminance Y or colour-mapped RGBA).",
     .params = energy_wave_params,
+    .presets = energy_wave_presets,
     .outputs_json = "[{\"kind\":2,\"codec\":\"exr\",\"channels\":\"Y (raw B, half) or RGBA (colour map), "
                     "per `output`\",\"size\":\"width x height\",\"rate\":\"fps\"},"
                     "{\"kind\":3,\"codec\":\"rig1\",\"channels\":\"centre-line segments, toon ramp, outline "

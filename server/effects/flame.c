@@ -156,6 +156,26 @@ const struct param_def flame_params[] = {
     {0},
 };
 
+/* Built-in presets (presets.h). "thesis-table3.1" is the thesis's base scene: Table 3.1's h and
+ * dt with a free-floating 3 cm disc (digest §3: source geometry [P]); 34 substeps keep its 1 ms
+ * steps in real time at 30 fps. The others are looks on the default scale. */
+static const struct effect_preset flame_presets[] = {
+    {"thesis-table3.1", "the thesis's base scene: Table 3.1 (h 11.25 mm, dt 1 ms), a free 3 cm disc, F_init 100",
+     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"obstacles\":[],\"sources\":[{\"radius\":0.015}]}"},
+    {"thesis-f80", "Table 3.1's scene at the low end of the thesis's F_init range (80): a smaller, calmer flame",
+     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"obstacles\":[],\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
+    {"candle", "a 1.2 cm wick on a small plate: a narrow, steady flame",
+     "{\"sources\":[{\"radius\":0.006,\"F_init\":90}],"
+     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.016,0.016,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]}"},
+    {"campfire", "three 2.4 cm logs on a 9 cm bed, coarser particles (h 5 mm) to stay in real time",
+     "{\"h\":0.005,\"sources\":[{\"center\":[-0.022,0,0],\"radius\":0.012},{\"center\":[0.022,0,0],\"radius\":0.012},"
+     "{\"center\":[0,0.025,0.005],\"radius\":0.012,\"F_init\":120}],"
+     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.09,0.09,0],\"pos\":[0,0,-0.006],\"velocity\":[0,0,0]}]}"},
+    {"gusty", "the default flame in a steady sideways wind (wind_accel 8 m/s^2 along x)",
+     "{\"wind_accel\":[8,0,0]}"},
+    {0},
+};
+
 /* ---- state ------------------------------------------------------------------------- */
 
 enum fl_kernel { K_HASH, K_HIST, K_SCAN, K_SCATTER, K_REORDER, K_CSTART, K_DENSITY, K_FORCES, K_COUNT,
@@ -1001,6 +1021,7 @@ const struct effect_ops flame_effect = {
            "obstacles, with particles born next to flame particles and deleted away from them; every step on "
            "the OpenCL device, advancing in real time (time_scale) and streamed as particle frames.",
     .params = flame_params,
+    .presets = flame_presets,
     .outputs_json = "[{\"kind\":1,\"codec\":\"particles\",\"fields\":\"xyz (x space_scale), T, F, flags "
                     "(type bits 0-1, flame bit 2)\",\"count\":\"particles\",\"rate\":\"fps\"}]",
     .create = fl_create,

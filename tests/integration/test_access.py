@@ -70,10 +70,18 @@ async def test_roles(t):
         t.check(r["op"] == "params" and r["rev"] == 2, "tune may set")
         r = await c.request("create", effect="energy_wave", stream="x")
         t.check(r["code"] == "forbidden", "tune may not create")
+        r = await c.request("preset_load", stream="energy", name="thesis-fig5.3")
+        t.check(r["op"] == "params", "tune may load a preset")
+        r = await c.request("preset_save", stream="energy", name="mine")
+        t.check(r["code"] == "forbidden" and "needs role admin" in r["message"], "tune may not save a preset")
         r = await c.request("auth", token=ADMIN)
         t.check(r["role"] == "admin", "the FXSTREAMD_TOKENS admin token works")
         t.check((await c.request("create", effect="energy_wave", stream="x"))["op"] == "created", "admin may create")
         t.check((await c.request("destroy", stream="x"))["op"] == "destroyed", "admin may destroy")
+        t.check((await c.request("preset_save", stream="energy", name="mine"))["op"] == "preset_saved",
+                "admin may save a preset")
+        t.check((await c.request("preset_delete", effect="energy_wave", name="mine"))["op"] == "preset_deleted",
+                "admin may delete a preset")
         await c.close()
 
         c = await connect(d, headers={"Authorization": "Bearer " + TUNE})

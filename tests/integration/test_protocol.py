@@ -322,6 +322,44 @@ async def test_rev_64bit(t):
         await c.close()
 
 
+async def test_presets_persist(t):
+    """User presets survive a restart; a save whose file write fails is `unavailable` and changes
+    nothing; a stored preset that no longer validates loads as bad_param (issue 14 item 5)."""
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        await c.request("set", stream="flame", params={"k_buo": 0.02, "fps": 24})
+        r = await c.request("preset_save", stream="flame", name="tall", doc="strong buoyancy")
+        t.check(r.get("op") == "preset_saved", "preset_save acknowledged (%s)" % r)
+        t.check(os.path.exists(os.path.join(state, "presets.json")), "presets.json written before the reply")
+        os.mkdir(os.path.join(state, "presets.json.tmp"))  # the next write fails, even as root
+        r = await c.request("preset_save", stream="flame", name="lost")
+        t.check(r.get("code") == "unavailable" and "presets.json" in r.get("message", ""),
+                "a failed write: unavailable naming the file (%s)" % r)
+        r = await c.request("preset_delete", effect="flame", name="tall")
+        t.check(r.get("code") == "unavailable", "a failed delete: unavailable (%s)" % r.get("code"))
+        names = [p["name"] for p in (await c.request("presets", effect="flame"))["presets"] if not p["builtin"]]
+        t.check(names == ["tall"], "nothing changed in memory (%s)" % names)
+        os.rmdir(os.path.join(state, "presets.json.tmp"))
+        t.check((await c.request("get", stream="flame"))["params"]["k_buo"] == 0.02, "connection usable")
+        await c.close()
+    stored = json.load(open(os.path.join(state, "presets.json")))
+    stored.append({"effect": "flame", "name": "old", "doc": "", "params": {"k_buo": 9}})
+    with open(os.path.join(state, "presets.json"), "w") as f:
+        json.dump(stored, f)
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        await c.request("preset_load", stream="flame", name="thesis-table3.1")
+        r = await c.request("preset_load", stream="flame", name="tall")
+        t.check(r.get("op") == "params" and r["params"]["k_buo"] == 0.02 and r["params"]["fps"] == 24 and
+                r["params"]["h"] == 0.0035, "the saved preset survives a restart and loads whole (%s)" % r.get("op"))
+        r = await c.request("preset_load", stream="flame", name="old")
+        t.check(r.get("code") == "bad_param" and r.get("param") == "k_buo", "a preset that no longer validates: "
+                "bad_param k_buo (%s)" % r)
+        t.check((await c.request("get", stream="flame"))["params"]["k_buo"] == 0.02, "and changes nothing")
+        await c.close()
+
+
 async def test_quarantine(t):
     """Stored streams that no longer validate are kept aside, not erased (issue 15 item 6)."""
     state = tempfile.mkdtemp(prefix="fxs-state-")
@@ -425,7 +463,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_quarantine, test_stream_events,
+               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_presets_persist, test_quarantine, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)

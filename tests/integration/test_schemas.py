@@ -82,7 +82,7 @@ def server_schema(m):
         return "event.error.json" if "stream" in m else "reply.error.json"
     if op == "unsubscribed":
         return "event.unsubscribed.json" if "reason" in m else "reply.unsubscribed.json"
-    if op in ("params", "created", "destroyed"):  # this suite always sends ids: without one it is an event
+    if op in ("params", "created", "destroyed", "preset_saved", "preset_deleted"):  # this suite always sends ids: without one it is an event
         return ("reply.%s.json" if "id" in m else "event.%s.json") % op
     return "reply.%s.json" % op
 
@@ -237,6 +237,12 @@ VALID_BUT_FAILING = [
     ({"op": "set", "stream": "energy", "params": {"curves": [{"W": [1, 1, 2]}]}}, "bad_param", "list item element"),
     ({"op": "create", "effect": "energy_wave", "stream": "x2", "params": {"mode": "euler"}}, "bad_param",
      "create with a bad enum"),
+    ({"op": "presets", "effect": "smoke"}, "unknown_effect", "presets of an unknown effect"),
+    ({"op": "preset_load", "stream": "energy", "name": "nope"}, "unknown_preset", "load an unknown preset"),
+    ({"op": "preset_load", "stream": "ghost", "name": "thesis-fig5.1"}, "unknown_stream", "load into an unknown stream"),
+    ({"op": "preset_save", "stream": "energy", "name": "thesis-fig5.1"}, "read_only", "save over a built-in"),
+    ({"op": "preset_delete", "effect": "energy_wave", "name": "thesis-fig5.1"}, "read_only", "delete a built-in"),
+    ({"op": "preset_delete", "effect": "energy_wave", "name": "nope"}, "unknown_preset", "delete an unknown preset"),
 ]
 
 # Requests the schemas must reject, and the server too (bad_request unless said otherwise).
@@ -266,7 +272,46 @@ INVALID = [
     ({"op": "subscribe"}, "bad_request", "subscribe without stream"),
     ({"op": "reset", "stream": ["energy"]}, "bad_request", "stream an array"),
     ({"op": "destroy", "stream": "energy", "force": True}, "bad_request", "unknown field on destroy"),
+    ({"op": "presets", "effect": 1}, "bad_request", "presets effect not a string"),
+    ({"op": "preset_save", "stream": "energy"}, "bad_request", "preset_save without name"),
+    ({"op": "preset_save", "stream": "energy", "name": "a b"}, "bad_request", "preset name with a space"),
+    ({"op": "preset_save", "stream": "energy", "name": "ok", "doc": 5}, "bad_request", "preset doc not a string"),
+    ({"op": "preset_save", "stream": "energy", "name": "ok", "doc": "d" * 201}, "bad_request", "preset doc too long"),
+    ({"op": "preset_load", "stream": "energy"}, "bad_request", "preset_load without name"),
+    ({"op": "preset_load", "stream": "energy", "name": "x", "params": {}}, "bad_request", "unknown field on preset_load"),
+    ({"op": "preset_delete", "name": "x"}, "bad_request", "preset_delete without effect"),
 ]
+
+
+async def test_presets(t):
+    """Every preset reply and event, valid per its schema: list, load (params to the requester and
+    the broadcast to a subscriber), save (and the event to another connection), delete."""
+    a = await Rec.open(t, D, "P")
+    b = await Rec.open(t, D, "Q")
+    r = await a.req("presets", "presets of all effects")
+    effects = {p["effect"] for p in r["presets"]}
+    t.check(effects == {"energy_wave", "flame", "compound_eye"} and all(p["builtin"] for p in r["presets"]),
+            "built-in presets of every effect (%s)" % sorted(effects))
+    r = await a.req("presets", effect="energy_wave")
+    t.check({p["effect"] for p in r["presets"]} == {"energy_wave"}, "presets of one effect")
+    await a.req("create", effect="energy_wave", stream="sch.p", params=SMALL)
+    await b.req("subscribe", stream="sch.p")
+    r = await a.req("preset_load", stream="sch.p", name="thesis-fig5.2")
+    t.check(r["op"] == "params" and r["rev"] == 2 and r["params"]["tori"][0]["R"] == 3.0,
+            "preset_load replies params with the preset's values")
+    ev = await b.text()
+    t.check(ev["op"] == "params" and "id" not in ev and ev["rev"] == 2, "the subscriber gets the params broadcast")
+    r = await a.req("preset_save", stream="sch.p", name="sch-look", doc="a test look")
+    t.check(r["op"] == "preset_saved" and r["replaced"] is False, "preset_save")
+    ev = await b.text()
+    t.check(ev["op"] == "preset_saved" and "id" not in ev and ev["name"] == "sch-look", "others get preset_saved")
+    r = await a.req("preset_delete", effect="energy_wave", name="sch-look")
+    t.check(r["op"] == "preset_deleted", "preset_delete")
+    ev = await b.text()
+    t.check(ev["op"] == "preset_deleted" and "id" not in ev, "others get preset_deleted")
+    await a.req("destroy", stream="sch.p")
+    await a.close()
+    await b.close()
 
 
 async def test_errors(t):
@@ -379,7 +424,7 @@ if __name__ == "__main__":
     D = Daemon()
     s = Suite("test_schemas")
     try:
-        s.run([test_schema_files, test_session, test_errors, test_frames, test_limits, test_stream_error_event],
+        s.run([test_schema_files, test_session, test_presets, test_errors, test_frames, test_limits, test_stream_error_event],
               timeout=40)
     finally:
         D.stop(signal.SIGKILL)
