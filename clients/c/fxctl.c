@@ -68,6 +68,12 @@ static const char fxctl_help[] =
     "                                which shares its texture's SEQ, goes to\n"
     "                                DIR/NAME-SEQ-rig.bin and .json. Fails when the stream is\n"
     "                                destroyed or the server goes away.\n"
+    "  presets [EFFECT]              presets of EFFECT (or of every effect): effect, name,\n"
+    "                                builtin, doc, params\n"
+    "  preset load NAME PRESET       give stream NAME its effect's defaults with PRESET's\n"
+    "                                values over them (like set: all or nothing)\n"
+    "  preset save NAME PRESET [DOC] save stream NAME's parameters as PRESET (admin)\n"
+    "  preset delete EFFECT PRESET   delete a user preset of EFFECT (admin)\n"
     "  watch [--count N]             prints the list reply, then every created and\n"
     "                                destroyed event (streams made or removed by\n"
     "                                anyone) as a JSON line; stops after N events\n"
@@ -227,7 +233,26 @@ static const struct fxctl_cmd fxctl_cmds[] = {
     { "reset", 1, 1, "stream", "reset NAME" },
     { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]" },
     { "watch", 0, 0, NULL, "watch [--count N]" },
+    { "presets", 0, 1, "effect", "presets [EFFECT]" },
+    { "preset", 3, 4, NULL, "preset load NAME PRESET | preset save NAME PRESET [DOC] | preset delete EFFECT PRESET" },
 };
+
+/* `preset VERB ...`: the op and the field its first argument fills. */
+static const struct {
+    const char *verb, *op, *first_field;
+    int max_args;
+} fxctl_preset_verbs[] = {
+    { "load", "preset_load", "stream", 3 },
+    { "save", "preset_save", "stream", 4 },
+    { "delete", "preset_delete", "effect", 3 },
+};
+
+static int fxctl_preset_verb(const char *verb)
+{
+    for (int i = 0; i < (int)(sizeof fxctl_preset_verbs / sizeof fxctl_preset_verbs[0]); i++)
+        if (!strcmp(fxctl_preset_verbs[i].verb, verb)) return i;
+    return -1;
+}
 
 static const struct fxctl_cmd *fxctl_find_cmd(const char *name)
 {
@@ -248,7 +273,25 @@ static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cm
         return fxctl_usage("--frames, --max-fps, --kind and --out go with subscribe only", NULL);
     if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
     if (o->count && strcmp(cmd->name, "watch")) return fxctl_usage("--count goes with watch only", NULL);
+    if (!strcmp(cmd->name, "preset")) {
+        int v = fxctl_preset_verb(o->args[0]);
+        if (v < 0) return fxctl_usage("preset needs load, save or delete", o->args[0]);
+        if (o->nargs > fxctl_preset_verbs[v].max_args) {
+            fprintf(stderr, "fxctl: wrong number of arguments; usage: fxctl %s\nTry 'fxctl --help'.\n", cmd->synopsis);
+            return FXCTL_USAGE;
+        }
+    }
     return 0;
+}
+
+/* The request of `preset VERB A PRESET [DOC]`. */
+static void fxctl_build_preset(const struct fxctl_opts *o, cJSON *req)
+{
+    int v = fxctl_preset_verb(o->args[0]);
+    cJSON_AddStringToObject(req, "op", fxctl_preset_verbs[v].op);
+    cJSON_AddStringToObject(req, fxctl_preset_verbs[v].first_field, o->args[1]);
+    cJSON_AddStringToObject(req, "name", o->args[2]);
+    if (o->nargs > 3) cJSON_AddStringToObject(req, "doc", o->args[3]);
 }
 
 /* Builds the request of a command. Returns 0, or an exit status. */
@@ -258,8 +301,12 @@ static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, 
     int i = 1, r = 0;
     *out = req;
     if (!req) return FXCTL_FAIL;
+    if (!strcmp(cmd->name, "preset")) {
+        fxctl_build_preset(o, req);
+        return 0;
+    }
     cJSON_AddStringToObject(req, "op", strcmp(cmd->name, "watch") ? cmd->name : "list");
-    if (cmd->first_field) cJSON_AddStringToObject(req, cmd->first_field, o->args[0]);
+    if (cmd->first_field && o->nargs) cJSON_AddStringToObject(req, cmd->first_field, o->args[0]);
     if (!strcmp(cmd->name, "create")) cJSON_AddStringToObject(req, "stream", o->args[i++]);
     if (o->max_fps >= 0) cJSON_AddNumberToObject(req, "max_fps", o->max_fps);
     if (i < o->nargs) params = cJSON_AddObjectToObject(req, "params");

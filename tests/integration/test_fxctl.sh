@@ -129,6 +129,21 @@ check_watch() {
     fx get energy --count 1; check "--count goes with watch only" 2 "" "watch only"
 }
 
+# Presets: list, load (a params reply), save and delete a user preset, and the errors.
+check_presets() {
+    fx presets flame; check "presets EFFECT lists its built-ins" 0 '"name":"thesis-table3.1","builtin":true'
+    fx presets; check "presets lists every effect's" 0 '"effect":"compound_eye"'
+    fx preset load flame candle; check "preset load: the params reply" 0 '"op":"params","stream":"flame"'
+    fx get flame; check "the preset's values are in place" 0 '"radius":0.006'
+    fx preset save flame fxctl-look "from the CLI"; check "preset save" 0 '"op":"preset_saved","effect":"flame","name":"fxctl-look","replaced":false'
+    fx presets flame; check "the saved preset is listed with its doc" 0 '"name":"fxctl-look","builtin":false,"doc":"from the CLI"'
+    fx preset delete flame fxctl-look; check "preset delete" 0 '"op":"preset_deleted"'
+    fx preset delete flame candle; check "a built-in cannot be deleted: exit 1" 1 "" "read_only"
+    fx preset load flame candel; check "an unknown preset: exit 1 with a suggestion" 1 "" 'did you mean "candle"'
+    fx preset frob flame x; check "an unknown preset verb: exit 2" 2 "" "load, save or delete"
+    fx preset load flame; check "preset load without a preset name: exit 2" 2 "" "wrong number of arguments"
+}
+
 # A subscriber must fail clearly when the server goes away.
 check_server_close() {
     timeout "$T" "$FXCTL" subscribe energy --frames 100000 >"$tmp/close.out" 2>"$tmp/close.err" &
@@ -148,5 +163,6 @@ check_subscribe
 check_subscribe_rig
 check_destroyed
 check_watch
+check_presets
 check_server_close
 summary
