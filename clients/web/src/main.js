@@ -132,10 +132,14 @@ async function attach(info) {
     rebuildViewList();
   }
   applyParams(st, got.params, got.rev);
-  const send = (partial) => conn.request('set', { stream: st.name, params: partial }).then((m) => { applyParams(st, m.params, m.rev); return m; });
+  const api = {
+    set: (partial) => conn.request('set', { stream: st.name, params: partial }).then((m) => { applyParams(st, m.params, m.rev); return m; }),
+    request: (op, fields) => conn.request(op, fields),
+    applied: (m) => applyParams(st, m.params, m.rev),
+  };
   if (st.panel) st.panel.update(st.params, st.rev);
   else {
-    st.panel = new StreamPanel(gui, st.name, st.effect, schema, st.params, st.rev, send);
+    st.panel = new StreamPanel(gui, st.name, st.effect, schema, st.params, st.rev, api);
     st.panel.folder.close();
   }
   st.maxFps = START_FPS;
@@ -187,6 +191,8 @@ function onEvent(m) {
     if (!st) return;
     applyParams(st, m.params, m.rev);
     st.panel?.update(m.params, m.rev);
+  } else if ((m.op === 'preset_saved' || m.op === 'preset_deleted') && !m.id) { // another panel's preset
+    for (const st of streams.values()) if (st.effect === m.effect) st.panel?.refreshPresets();
   } else if (m.op === 'unsubscribed' && m.reason) {
     const st = streams.get(m.stream);
     if (st) detach(st);
