@@ -80,8 +80,15 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
                  "Connections closed because their socket stayed full for stall_timeout_s.");
     metrics_printf(out, "fxs_connections_stalled_total %llu\n", (unsigned long long)atomic_load(&c->stalled_closed));
     metrics_head(out, "fxs_state_writes_total", "counter",
-                 "State files written to the state directory (one per group of accepted changes).");
+                 "Writes of streams.json tried, one per accepted create, destroy or parameter change.");
     metrics_printf(out, "fxs_state_writes_total %llu\n", (unsigned long long)atomic_load(&c->state_writes));
+    metrics_head(out, "fxs_state_write_failures_total", "counter",
+                 "State writes (streams.json, presets.json) the disk refused; each change stayed unapplied.");
+    metrics_printf(out, "fxs_state_write_failures_total %llu\n",
+                   (unsigned long long)atomic_load(&c->state_write_failures));
+    metrics_head(out, "fxs_state_writable", "gauge",
+                 "0 after a state write failed, until one succeeds (changes are refused with unavailable meanwhile).");
+    metrics_printf(out, "fxs_state_writable %d\n", srv->state_error[0] ? 0 : 1);
     metrics_head(out, "fxs_handshakes_evicted_total", "counter",
                  "Connections dropped before their first request to make room for newer ones.");
     metrics_printf(out, "fxs_handshakes_evicted_total %llu\n", (unsigned long long)atomic_load(&c->handshakes_evicted));
@@ -137,13 +144,16 @@ int metrics_health(struct server *srv, struct fx_buf *out)
     int n;
     struct stream **all = hub_snapshot(&srv->hub, &n);
     cJSON *h = cJSON_CreateObject();
-    cJSON_AddStringToObject(h, "status", "ok");
+    cJSON_AddStringToObject(h, "status", srv->state_error[0] ? "degraded" : "ok");
     cJSON_AddStringToObject(h, "version", FX_VERSION);
     cJSON_AddNumberToObject(h, "uptime_s", metrics_uptime(srv));
     cJSON_AddStringToObject(h, "device", srv->ocl ? ocl_device_name(srv->ocl) : "none");
     cJSON_AddStringToObject(h, "platform", srv->ocl ? ocl_platform_name(srv->ocl) : "none");
     cJSON_AddNumberToObject(h, "connections", srv->nsessions);
     cJSON_AddNumberToObject(h, "quarantined", srv->quarantined); /* stored streams set aside at start */
+    cJSON *state = cJSON_AddObjectToObject(h, "state"); /* store.h: the last state write's outcome */
+    cJSON_AddBoolToObject(state, "writable", !srv->state_error[0]);
+    if (srv->state_error[0]) cJSON_AddStringToObject(state, "last_error", srv->state_error);
     cJSON *arr = cJSON_AddArrayToObject(h, "streams");
     pthread_mutex_lock(&srv->hub.mu);
     for (int i = 0; i < n; i++) {

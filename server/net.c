@@ -367,7 +367,7 @@ static int net_writable(struct net *net, struct session *ss)
     struct outmsg *m;
     if (ss->cur) {
         if (net_send_chunk(ss)) return -1;
-    } else if (!ss->hold && (m = session_pop(ss))) {
+    } else if ((m = session_pop(ss))) {
         int w = lws_write(ss->wsi, m->data + FRAME_HEADROOM, m->len, LWS_WRITE_TEXT);
         size_t len = m->len;
         free(m);
@@ -381,7 +381,7 @@ static int net_writable(struct net *net, struct session *ss)
         return 0;
     }
     ss->last_write = net_now();
-    if (ss->cur || (ss->q_head && !ss->hold) || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
+    if (ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
     return 0;
 }
 
@@ -602,29 +602,15 @@ void net_request_stop(struct net *net)
     lws_cancel_service(net->ctx);
 }
 
-/* Group commit (store.h): one write for all changes of this round, then their replies. */
-static void net_commit(struct net *net)
-{
-    if (!net->srv->store_dirty) return;
-    store_flush(net->srv);
-    for (struct session *ss = net->srv->sessions; ss; ss = ss->next)
-        if (ss->hold) {
-            ss->hold = false;
-            lws_callback_on_writable(ss->wsi);
-        }
-}
-
 void net_run(struct net *net)
 {
     double deadline = 0;
     for (;;) {
         if (lws_service(net->ctx, 0) < 0) break;
-        net_commit(net);
         if (!net->stopping) continue;
         if (deadline == 0) deadline = net_now() + NET_SHUTDOWN_GRACE_S;
         if (net->srv->nsessions == 0 || net_now() > deadline) break;
     }
-    net_commit(net); /* changes whose replies did not go out are still kept */
 }
 
 void net_close(struct net *net)

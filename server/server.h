@@ -48,7 +48,8 @@ struct config {
 struct counters {
     atomic_uint_fast64_t connections_total, messages_in, errors_out, frames_sent, frames_skipped, bytes_sent;
     atomic_uint_fast64_t stalled_closed; /* connections closed for not reading (stall_timeout_s) */
-    atomic_uint_fast64_t state_writes;   /* state files written (one per group commit, store.h) */
+    atomic_uint_fast64_t state_writes;   /* streams.json writes tried (one per accepted change, store.h) */
+    atomic_uint_fast64_t state_write_failures; /* state writes the disk refused (streams.json, presets.json) */
     atomic_uint_fast64_t handshakes_evicted; /* pending connections dropped for newer ones (net.c) */
 };
 
@@ -65,7 +66,7 @@ struct server {
     struct session *sessions; /* network thread only */
     int nsessions;
     int quarantined;          /* stored streams moved to streams.quarantine.json at start */
-    bool store_dirty;         /* network thread only: accepted changes not yet on disk (store.h) */
+    char state_error[320];    /* network thread only: why the last state write failed, "" once one succeeds */
     double start_time;        /* CLOCK_MONOTONIC seconds */
     /* Called by the session layer when a session has output queued (net.c asks the
      * socket for a writable callback). */

@@ -300,7 +300,10 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
         cJSON_Delete(doc);
         return -1;
     }
-    ss->hold |= store_mark(ss->srv);
+    if (store_commit(ss->srv, NULL, err)) { /* not yet announced nor subscribed: undone cleanly */
+        stream_unref(hub_destroy(&ss->srv->hub, name, &(struct fx_err){0}));
+        return -1;
+    }
     log_info("stream %s created (effect %s)", name, fx->name);
     cJSON *r = session_reply("created", id);
     cJSON_AddStringToObject(r, "stream", name);
@@ -315,13 +318,14 @@ static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON 
 {
     static const char *const allowed[] = {"stream", NULL};
     if (session_only(req, "destroy", allowed, err)) return -1;
-    const char *name = session_str(req, "stream", err);
-    if (!name) return -1;
-    struct stream *s = hub_destroy(&ss->srv->hub, name, err);
+    struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
+    int rc = store_commit(ss->srv, &(struct store_change){.stream = s->name}, err);
+    stream_unref(s);
+    const char *name = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring;
+    if (rc || !(s = hub_destroy(&ss->srv->hub, name, err))) return -1;
     session_stream_gone(ss->srv, s);
     stream_unref(s);
-    ss->hold |= store_mark(ss->srv);
     log_info("stream %s destroyed", name);
     cJSON *r = session_reply("destroyed", id);
     cJSON_AddStringToObject(r, "stream", name);
@@ -430,16 +434,22 @@ static int session_rev_ok(const struct stream *s, uint64_t rev, struct fx_err *e
     return fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
 }
 
-/* Installs an accepted complete document: a new revision, stored, broadcast to the stream's
- * other subscribers and sent to the requester (PROTOCOL.md §3.8). Takes doc. */
-static void session_accept_params(struct session *ss, struct stream *s, const cJSON *id, cJSON *doc)
+/* Installs an accepted complete document at revision rev + 1: stored first (store.h), then
+ * applied, broadcast to the stream's other subscribers and sent to the requester (PROTOCOL.md
+ * §3.8). Takes doc; -1 with err (unavailable) when it could not be stored. */
+static int session_accept_params(struct session *ss, struct stream *s, uint64_t rev, const cJSON *id, cJSON *doc,
+                                 struct fx_err *err)
 {
-    uint64_t rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
-    ss->hold |= store_mark(ss->srv);
+    if (store_commit(ss->srv, &(struct store_change){s->name, s->effect->name, rev + 1, doc}, err)) {
+        cJSON_Delete(doc);
+        return -1;
+    }
+    rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
     for (struct session *o = ss->srv->sessions; o; o = o->next)
         if (o != ss && session_find_sub(o, s) >= 0)
             session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));
     session_send(ss, session_params_msg(s, id, rev, doc));
+    return 0;
 }
 
 static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
@@ -454,9 +464,9 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
     cJSON *doc = session_rev_ok(s, rev, err) ? NULL : effect_params(s->effect, cur, partial, err);
     cJSON_Delete(cur);
-    if (doc) session_accept_params(ss, s, id, doc);
+    int rc = doc ? session_accept_params(ss, s, rev, id, doc, err) : -1;
     stream_unref(s);
-    return doc ? 0 : -1;
+    return rc;
 }
 
 static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
@@ -474,6 +484,13 @@ static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *i
 }
 
 /* ---- presets (presets.h, PROTOCOL.md §3.12) ---- */
+
+/* A preset op's write outcome, for the state condition of /healthz and /metrics (store.h). */
+static void session_note_write(struct session *ss, int rc, const struct fx_err *err)
+{
+    if (!rc) store_note(ss->srv, NULL);
+    else if (!strcmp(err->code, "unavailable")) store_note(ss->srv, err->message);
+}
 
 static int session_op_presets(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
@@ -501,6 +518,7 @@ static int session_op_preset_save(struct session *ss, const cJSON *req, const cJ
     cJSON *params = hub_get_params(&ss->srv->hub, s, &rev);
     int rc = presets_save(&ss->srv->presets, s->effect, name, doc, params, &replaced, err);
     cJSON_Delete(params);
+    session_note_write(ss, rc, err);
     if (!rc) {
         log_info("preset %s/%s saved from stream %s", s->effect->name, name, s->name);
         cJSON *r = session_reply("preset_saved", id);
@@ -526,9 +544,9 @@ static int session_op_preset_load(struct session *ss, const cJSON *req, const cJ
     cJSON *preset = session_rev_ok(s, rev, err) ? NULL : presets_params(&ss->srv->presets, s->effect, name, err);
     cJSON *doc = preset ? effect_params(s->effect, NULL, preset, err) : NULL;
     cJSON_Delete(preset);
-    if (doc) session_accept_params(ss, s, id, doc);
+    int rc = doc ? session_accept_params(ss, s, rev, id, doc, err) : -1;
     stream_unref(s);
-    return doc ? 0 : -1;
+    return rc;
 }
 
 static int session_op_preset_delete(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
@@ -537,7 +555,10 @@ static int session_op_preset_delete(struct session *ss, const cJSON *req, const 
     if (session_only(req, "preset_delete", allowed, err)) return -1;
     const struct effect_ops *fx = session_effect(req, err);
     const char *name = fx ? session_str(req, "name", err) : NULL;
-    if (!name || presets_delete(&ss->srv->presets, fx, name, err)) return -1;
+    if (!name) return -1;
+    int rc = presets_delete(&ss->srv->presets, fx, name, err);
+    session_note_write(ss, rc, err);
+    if (rc) return -1;
     log_info("preset %s/%s deleted", fx->name, name);
     cJSON *r = session_reply("preset_deleted", id);
     cJSON_AddStringToObject(r, "effect", fx->name);

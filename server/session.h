@@ -53,7 +53,6 @@ struct session {
     double retry_at;
     bool retry_queued;
     const char *kill;     /* set: the network layer closes the connection (1008) with this reason */
-    bool hold;            /* replies wait until the change they acknowledge is on disk (store.h) */
     enum access_role role;
     int auth_failures;
 };

@@ -8,42 +8,70 @@
 #include "log.h"
 #include "store.h"
 
-static cJSON *store_snapshot(struct server *srv)
+static cJSON *store_entry(const char *stream, const char *effect, uint64_t rev, cJSON *params)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "stream", stream);
+    cJSON_AddStringToObject(o, "effect", effect);
+    cJSON_AddNumberToObject(o, "rev", (double)rev);
+    cJSON_AddItemToObject(o, "params", params);
+    return o;
+}
+
+/* Every stream in creation order, with `change` applied (may be NULL). */
+static cJSON *store_snapshot(struct server *srv, const struct store_change *change)
 {
     cJSON *arr = cJSON_CreateArray();
+    bool seen = false;
     int n;
     struct stream **all = hub_snapshot(&srv->hub, &n);
     for (int i = 0; i < n; i++) {
         uint64_t rev;
-        cJSON *o = cJSON_CreateObject();
-        cJSON_AddStringToObject(o, "stream", all[i]->name);
-        cJSON_AddStringToObject(o, "effect", all[i]->effect->name);
+        if (change && !strcmp(all[i]->name, change->stream)) {
+            seen = true;
+            if (change->params)
+                cJSON_AddItemToArray(arr, store_entry(change->stream, change->effect, change->rev,
+                                                      cJSON_Duplicate(change->params, 1)));
+            continue;
+        }
         cJSON *params = hub_get_params(&srv->hub, all[i], &rev);
-        cJSON_AddNumberToObject(o, "rev", rev);
-        cJSON_AddItemToObject(o, "params", params);
-        cJSON_AddItemToArray(arr, o);
+        cJSON_AddItemToArray(arr, store_entry(all[i]->name, all[i]->effect->name, rev, params));
     }
     hub_release_all(all, n);
+    if (change && !seen && change->params)
+        cJSON_AddItemToArray(arr, store_entry(change->stream, change->effect, change->rev, cJSON_Duplicate(change->params, 1)));
     return arr;
 }
 
-bool store_mark(struct server *srv)
+void store_note(struct server *srv, const char *why)
 {
-    if (srv->cfg.state_dir[0]) srv->store_dirty = true;
-    return srv->store_dirty;
+    if (!why) {
+        if (srv->state_error[0]) log_info("state directory writable again");
+        srv->state_error[0] = 0;
+        return;
+    }
+    atomic_fetch_add(&srv->counters.state_write_failures, 1);
+    snprintf(srv->state_error, sizeof srv->state_error, "%s", why);
+    log_error("%s", why);
 }
 
-void store_flush(struct server *srv)
+int store_commit(struct server *srv, const struct store_change *change, struct fx_err *err)
 {
-    if (!srv->store_dirty) return;
-    srv->store_dirty = false;
-    atomic_fetch_add(&srv->counters.state_writes, 1);
-    cJSON *doc = store_snapshot(srv);
+    if (!srv->cfg.state_dir[0]) return 0;
+    cJSON *doc = store_snapshot(srv, change);
     char *text = cJSON_Print(doc);
     cJSON_Delete(doc);
-    if (!text || jsonfile_write(srv->cfg.state_dir, "streams.json", text))
-        log_error("cannot save state to %s/streams.json: %s", srv->cfg.state_dir, strerror(errno));
-    free(text);
+    int rc = text ? jsonfile_write(srv->cfg.state_dir, "streams.json", text) : -1;
+    int e = text ? errno : ENOMEM;
+    cJSON_free(text);
+    atomic_fetch_add(&srv->counters.state_writes, 1);
+    if (!rc) {
+        store_note(srv, NULL);
+        return 0;
+    }
+    fx_fail(err, "unavailable", NULL, "cannot save %s/streams.json: %s (nothing changed)", srv->cfg.state_dir, strerror(e));
+    store_note(srv, err->message);
+    return -1;
 }
 
 /* Far above any real state (max_streams documents), small enough to refuse a runaway file. */

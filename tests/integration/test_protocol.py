@@ -322,6 +322,53 @@ async def test_rev_64bit(t):
         await c.close()
 
 
+async def test_state_write_failure(t):
+    """A change the state directory refuses is not applied (issue 15 item 5): set, create and
+    destroy get `unavailable`, nothing changes, /healthz and /metrics show the condition until a
+    write succeeds, and a restart finds exactly the acknowledged state."""
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    blocker = os.path.join(state, "streams.json.tmp")  # a directory there fails the write, even as root
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        r = await c.request("set", stream="energy", params={"alpha": 1.5})
+        t.check(r.get("rev") == 2, "a set is stored and acknowledged (rev 2)")
+        os.mkdir(blocker)
+        r = await c.request("set", stream="energy", params={"alpha": 3})
+        t.check(r.get("code") == "unavailable" and "streams.json" in r.get("message", ""),
+                "a set the disk refuses: unavailable naming the file (%s)" % r)
+        g = await c.request("get", stream="energy")
+        t.check(g["rev"] == 2 and g["params"]["alpha"] == 1.5, "and it is not applied (rev %s, alpha %s)"
+                % (g["rev"], g["params"]["alpha"]))
+        r = await c.request("create", effect="energy_wave", stream="nope", params={"width": 32, "height": 32})
+        names = [s["stream"] for s in (await c.request("list"))["streams"]]
+        t.check(r.get("code") == "unavailable" and "nope" not in names, "a create: unavailable, no stream (%s)" % names)
+        r = await c.request("destroy", stream="eye")
+        names = [s["stream"] for s in (await c.request("list"))["streams"]]
+        t.check(r.get("code") == "unavailable" and "eye" in names, "a destroy: unavailable, the stream stays")
+        with urllib.request.urlopen(d.http + "/healthz", timeout=10) as h:
+            h = json.loads(h.read())
+        t.check(h["status"] == "degraded" and h["state"]["writable"] is False and "streams.json" in h["state"]["last_error"],
+                "/healthz: degraded, state not writable, with the reason (%s)" % h.get("state"))
+        with urllib.request.urlopen(d.http + "/metrics", timeout=10) as m:
+            m = m.read().decode()
+        t.check("fxs_state_writable 0" in m and "fxs_state_write_failures_total 3" in m,
+                "/metrics: fxs_state_writable 0, 3 failures")
+        os.rmdir(blocker)
+        r = await c.request("set", stream="energy", params={"alpha": 2.5})
+        with urllib.request.urlopen(d.http + "/healthz", timeout=10) as h:
+            h = json.loads(h.read())
+        t.check(r.get("rev") == 3 and h["status"] == "ok" and h["state"] == {"writable": True},
+                "once a write succeeds: rev 3, /healthz ok again (%s)" % h.get("state"))
+        await c.close()
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        g = await c.request("get", stream="energy")
+        names = [s["stream"] for s in (await c.request("list"))["streams"]]
+        t.check(g["rev"] == 3 and g["params"]["alpha"] == 2.5 and names == ["energy", "flame", "eye"],
+                "a restart finds exactly the acknowledged state (rev %s, %s)" % (g["rev"], names))
+        await c.close()
+
+
 async def test_presets_persist(t):
     """User presets survive a restart; a save whose file write fails is `unavailable` and changes
     nothing; a stored preset that no longer validates loads as bad_param (issue 14 item 5)."""
@@ -463,7 +510,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_presets_persist, test_quarantine, test_stream_events,
+               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_state_write_failure, test_presets_persist, test_quarantine, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)
