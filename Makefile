@@ -24,7 +24,8 @@ LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
 PROTO_SRC   := $(wildcard protocol/*.c)
 SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c)) $(PROTO_SRC)
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
-CLIENT_MAIN := clients/c/fxctl.c clients/c/fxload.c
+FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c
+CLIENT_MAIN := $(FXCTL_SRC) clients/c/fxload.c
 CLIENT_SRC  := $(filter-out $(CLIENT_MAIN),$(wildcard clients/c/*.c)) $(PROTO_SRC)
 CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o)
 REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
@@ -149,7 +150,8 @@ $(BUILD)/libfxclient.a: $(CLIENT_OBJ)
 $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
-$(BUILD)/fxctl: $(BUILD)/obj/clients/c/fxctl.o $(BUILD)/libfxclient.a
+# fxctl's "did you mean" for commands is the daemon's (server/suggest.c).
+$(BUILD)/fxctl: $(FXCTL_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/suggest.o $(BUILD)/libfxclient.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/fxload: $(BUILD)/obj/clients/c/fxload.o $(BUILD)/libfxclient.a

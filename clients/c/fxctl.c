@@ -1,9 +1,11 @@
 /* fxctl.c — the command-line client of fxstreamd, built on libfxclient.
  *
  * Owns argument parsing, turning one command into one fxstream.v1 request, and
- * printing: every reply is one line of JSON on stdout (easy to pipe into jq or a
- * script), every failure one line on stderr with exit status 1 (server or
- * transport) or 2 (usage). `subscribe` also owns writing frames to disk. */
+ * printing: on a terminal, replies for people (fxctl_print.h); with --json or when
+ * stdout is not a terminal, every reply is one line of JSON (easy to pipe into jq or a
+ * script). Every failure is one line on stderr with exit status 1 (server or
+ * transport) or 2 (usage); notes (a set that restarts the simulation, a stale first
+ * frame) go to stderr too. `subscribe` also owns writing frames to disk. */
 #include <errno.h>
 #include <inttypes.h>
 #include <math.h>
@@ -11,16 +13,20 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <libwebsockets.h>
 
 #include "fxclient.h"
+#include "fxctl_print.h"
 #include "fxs_particles.h"
 #include "lutpack.h"
 #include "png.h"
+#include "suggest.h"
 
 #define FXCTL_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
 #define FXCTL_DEFAULT_TIMEOUT_MS 10000
+#define FXCTL_STALE_MS 1000 /* a first frame older than this gets a note */
 
 enum { FXCTL_OK = 0, FXCTL_FAIL = 1, FXCTL_USAGE = 2 };
 
@@ -33,6 +39,7 @@ struct fxctl_opts {
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
     const char *out_dir;
+    int human;         /* stdout is a terminal and no --json: print for people */
     const char *cmd;
     char **args;       /* positional arguments after the command */
     int nargs;
@@ -89,12 +96,18 @@ static const char fxctl_help[] =
     "  --token T      access token (default $FXSTREAM_TOKEN; PROTOCOL.md §3.11)\n"
     "  --ca-file F    PEM bundle that signs a wss:// server's certificate\n"
     "                 (default $FXSTREAM_CA_FILE, else the system's)\n"
+    "  --json         print every reply as one line of JSON (the default when stdout\n"
+    "                 is not a terminal; on a terminal describe, get, set, list and\n"
+    "                 presets print tables)\n"
     "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
     "                 each frame (with watch --count, each event; default 10000)\n"
     "  --help, -h     this text\n"
     "\n"
-    "output: each reply is printed on stdout as one line of JSON (the server's reply\n"
-    "object without the request id). Errors go to stderr as\n"
+    "output: on a terminal, describe is a table per parameter group, get is aligned\n"
+    "name = value, set shows the values it changed and the new rev, list and presets are\n"
+    "tables; otherwise (or with --json) each reply is one line of JSON (the server's\n"
+    "reply object without the request id). A set that restarts the simulation and a\n"
+    "first frame older than 1 s are noted on stderr. Errors go to stderr as\n"
     "\"fxctl: CODE: MESSAGE\" for server errors or \"fxctl: WHAT\" for transport errors.\n"
     "exit status: 0 success, 1 server or transport error, 2 usage error (bad URL too).\n"
     "environment: FXCTL_URL default URL; FXSTREAM_TOKEN, FXSTREAM_CA_FILE as above;\n"
@@ -184,6 +197,8 @@ static int fxctl_parse_args(struct fxctl_opts *o, int argc, char **argv)
         } else if (!strcmp(a, "--help")) {
             fputs(fxctl_help, stdout);
             return -1;
+        } else if (!strcmp(a, "--json")) {
+            o->human = 0;
         } else if ((r = fxctl_take_opt(o, argc, argv, &i))) {
             return r;
         }
@@ -199,6 +214,9 @@ static int fxctl_add_kv(cJSON *obj, const char *kv)
     char *key;
     cJSON *v;
     if (!eq || eq == kv) return fxctl_usage("expected KEY=VALUE", kv);
+    for (const cJSON *e = obj->child; e; e = e->next)
+        if (strlen(e->string) == (size_t)(eq - kv) && !strncmp(e->string, kv, (size_t)(eq - kv)))
+            return fxctl_usage("parameter given twice", e->string);
     v = cJSON_ParseWithOpts(eq + 1, NULL, 1);
     if (!v) v = cJSON_CreateString(eq + 1);
     key = strndup(kv, (size_t)(eq - kv));
@@ -208,7 +226,6 @@ static int fxctl_add_kv(cJSON *obj, const char *kv)
         fprintf(stderr, "fxctl: out of memory\n");
         return FXCTL_FAIL;
     }
-    cJSON_DeleteItemFromObjectCaseSensitive(obj, key);
     cJSON_AddItemToObject(obj, key, v);
     free(key);
     return 0;
@@ -259,6 +276,16 @@ static const struct fxctl_cmd *fxctl_find_cmd(const char *name)
     for (size_t i = 0; i < sizeof fxctl_cmds / sizeof fxctl_cmds[0]; i++)
         if (!strcmp(fxctl_cmds[i].name, name)) return &fxctl_cmds[i];
     return NULL;
+}
+
+static int fxctl_unknown_cmd(const char *name)
+{
+    struct suggest sg;
+    char hint[96], why[160];
+    suggest_init(&sg, name);
+    for (size_t i = 0; i < sizeof fxctl_cmds / sizeof fxctl_cmds[0]; i++) suggest_offer(&sg, fxctl_cmds[i].name);
+    snprintf(why, sizeof why, "unknown command%s", suggest_text(&sg, hint, sizeof hint));
+    return fxctl_usage(why, name);
 }
 
 /* Checks argument counts and command-specific options before any network I/O. */
@@ -331,6 +358,12 @@ static void fxctl_fmt_double(char *buf, size_t len, double v)
     if (strtod(buf, NULL) != v) snprintf(buf, len, "%.17g", v);
 }
 
+/* Milliseconds from the frame's server time to its arrival. */
+static double fxctl_age_ms(const struct fxc_msg *m)
+{
+    return ((double)m->recv_time_us - (double)m->header.server_time_us) / 1000.0;
+}
+
 /* Formats one frame's header as a JSON line (no newline) into buf. */
 static void fxctl_frame_line(char *buf, size_t len, const char *stream, const struct fxc_msg *m)
 {
@@ -349,7 +382,7 @@ static void fxctl_frame_line(char *buf, size_t len, const char *stream, const st
              ",\"payload_bytes\":%" PRIu32 ",%s,\"flags\":%" PRIu32 "}",
              qname ? qname : "null", h->channel, (unsigned)h->kind, h->seq, h->param_rev,
              sim, h->server_time_us,
-             ((double)m->recv_time_us - (double)h->server_time_us) / 1000.0, h->codec, h->payload_bytes,
+             fxctl_age_ms(m), h->codec, h->payload_bytes,
              size, h->flags);
     free(qname);
     cJSON_Delete(name);
@@ -489,7 +522,9 @@ static int fxctl_on_frame(struct fxctl_sub *s, const struct fxc_msg *m)
     fxctl_frame_line(line, sizeof line, s->stream, m);
     printf("%s\n", line);
     fflush(stdout);
-    s->got++;
+    if (!s->got++ && fxctl_age_ms(m) > FXCTL_STALE_MS)
+        fprintf(stderr, "fxctl: note: the first frame is %.1f s old (the stream's newest, sent at once on subscribe: it "
+                        "only sends on change, or it is paused)\n", fxctl_age_ms(m) / 1000);
     if (s->o->out_dir && fxctl_save_frame(s->o->out_dir, s->stream, m, line, particles ? &p : NULL)) r = FXCTL_FAIL;
     fxs_particles_free(&p);
     return r;
@@ -579,6 +614,35 @@ static int fxctl_watch(struct fxc_client *c, const struct fxctl_opts *o)
     return 0;
 }
 
+/* After an accepted set: a note on stderr naming the parameters whose change restarted the
+ * simulation (describe's `update`). Best effort: a failed lookup prints nothing. */
+static void fxctl_restart_note(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req)
+{
+    const char *stream = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring, *effect = NULL;
+    cJSON *list = NULL, *desc = NULL, *q = cJSON_CreateObject();
+    char err[256], names[512] = "";
+    cJSON_AddStringToObject(q, "op", "list");
+    if (!fxc_request(c, q, &list, o->timeout_ms, err, sizeof err))
+        for (const cJSON *s = cJSON_GetObjectItemCaseSensitive(list, "streams")->child; s; s = s->next)
+            if (!strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "stream")), stream))
+                effect = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "effect"));
+    cJSON_Delete(q);
+    q = cJSON_CreateObject();
+    cJSON_AddStringToObject(q, "op", "describe");
+    cJSON_AddStringToObject(q, "effect", effect ? effect : "");
+    if (effect && !fxc_request(c, q, &desc, o->timeout_ms, err, sizeof err))
+        for (const cJSON *p = cJSON_GetObjectItemCaseSensitive(desc, "params")->child; p; p = p->next) {
+            const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(p, "name"));
+            if (cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(req, "params"), name) &&
+                !strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(p, "update")), "restart"))
+                snprintf(names + strlen(names), sizeof names - strlen(names), "%s%s", names[0] ? ", " : "", name);
+        }
+    if (names[0]) fprintf(stderr, "fxctl: note: changing %s restarted the simulation of %s (sim_time back to 0)\n", names, stream);
+    cJSON_Delete(q);
+    cJSON_Delete(list);
+    cJSON_Delete(desc);
+}
+
 /* ---- main ------------------------------------------------------------------------------------ */
 
 static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req)
@@ -598,8 +662,10 @@ static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, co
         r = FXCTL_FAIL;
     } else {
         cJSON_DeleteItemFromObjectCaseSensitive(reply, "id");
-        fxctl_print_json(stdout, reply);
+        const cJSON *only = !strcmp(cmd->name, "set") ? cJSON_GetObjectItemCaseSensitive(req, "params") : NULL;
+        if (!o->human || !fxctl_print_human(stdout, reply, only)) fxctl_print_json(stdout, reply);
         fflush(stdout);
+        if (!strcmp(cmd->name, "set")) fxctl_restart_note(c, o, req);
         if (!strcmp(cmd->name, "subscribe")) r = fxctl_subscribe(c, o, reply);
         if (!strcmp(cmd->name, "watch")) r = fxctl_watch(c, o);
     }
@@ -610,7 +676,7 @@ static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, co
 
 int main(int argc, char **argv)
 {
-    struct fxctl_opts o = { .timeout_ms = FXCTL_DEFAULT_TIMEOUT_MS, .max_fps = -1 };
+    struct fxctl_opts o = { .timeout_ms = FXCTL_DEFAULT_TIMEOUT_MS, .max_fps = -1, .human = isatty(STDOUT_FILENO) };
     const struct fxctl_cmd *cmd = NULL;
     const char *log = getenv("FXCTL_LWS_LOG");
     cJSON *req = NULL;
@@ -621,7 +687,7 @@ int main(int argc, char **argv)
     lws_set_log_level(log ? atoi(log) : 0, NULL);
     if (!(o.args = calloc((size_t)argc, sizeof *o.args))) return FXCTL_FAIL;
     r = fxctl_parse_args(&o, argc, argv);
-    if (r == 0 && !(cmd = fxctl_find_cmd(o.cmd))) r = fxctl_usage("unknown command", o.cmd);
+    if (r == 0 && !(cmd = fxctl_find_cmd(o.cmd))) r = fxctl_unknown_cmd(o.cmd);
     if (r == 0) r = fxctl_validate(&o, cmd);
     if (r == 0) r = fxctl_build(&o, cmd, &req);
     if (r == 0) r = fxctl_run(&o, cmd, req);

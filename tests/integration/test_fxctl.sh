@@ -19,6 +19,13 @@ fx() {
     rc=$?
 }
 
+# fxtty ARGS...: fxctl on a pseudo-terminal 100 columns wide (script(1)); stdout and stderr
+# both in $tmp/out, exit status in $rc.
+fxtty() {
+    timeout "$T" script -qec "stty cols 100; $FXCTL --timeout 15000 $*" /dev/null >"$tmp/out" 2>"$tmp/err"
+    rc=$?
+}
+
 rev_of() { grep -o '"rev":[0-9]*' "$tmp/out" | head -n 1 | cut -d: -f2; }
 
 start_fxctl_daemon() {
@@ -144,6 +151,27 @@ check_presets() {
     fx preset load flame; check "preset load without a preset name: exit 2" 2 "" "wrong number of arguments"
 }
 
+# On a terminal fxctl prints for people; --json and pipes keep the JSON lines.
+check_human() {
+    fxtty describe flame; check "tty describe: a table per group" 0 '^\[combustion\]'
+    grep -q '^name  *type  *default  *range  *unit  *update  *doc' "$tmp/out" && ! grep -q '"op"' "$tmp/out"
+    rc=$?; check "tty describe: aligned columns, no JSON" 0
+    test "$(grep -c '^\[combustion\]' "$tmp/out")" -eq 1; rc=$?; check "tty describe: each group once" 0
+    fxtty get flame; check "tty get: aligned name = value" 0 '^  k_buo  *= 0.01'
+    fxtty set flame k_buo=0.011 fps=29; check "tty set: the stream and its new rev" 0 '^flame · rev [0-9]'
+    grep -q '^  fps  *= 29' "$tmp/out" && ! grep -q 'k_stiff' "$tmp/out"; rc=$?
+    check "tty set: only the values it changed" 0
+    fxtty set flame h=0.004; check "a set that restarts the simulation says so" 0 "changing h restarted the simulation of flame"
+    fx set flame h=0.0035 k_buo=0.01 fps=30; check "piped set: JSON on stdout, the restart note on stderr" 0 '^{"op":"params"' "restarted the simulation"
+    fxtty --json get flame; check "tty --json: one JSON line" 0 '^{"op":"params","stream":"flame"'
+    fxtty list; check "tty list: a table" 0 '^flame  *flame  *[0-9]'
+    fx set flame k_buo=0.01 k_buo=0.02; check "the same parameter twice: usage error" 2 "" "parameter given twice: k_buo"
+    fx sett flame; check "an unknown command: did you mean" 2 "" 'did you mean "set"'
+    fx set flame alpa=1; check "an unknown parameter: the server's did you mean" 1 "" 'unknown parameter'
+    fx subscribe eye --frames 1; sleep 1.5
+    fx subscribe eye --frames 1; check "a stale first frame is noted" 0 '"kind":4' "the first frame is [0-9.]* s old"
+}
+
 # A subscriber must fail clearly when the server goes away.
 check_server_close() {
     timeout "$T" "$FXCTL" subscribe energy --frames 100000 >"$tmp/close.out" 2>"$tmp/close.err" &
@@ -164,5 +192,6 @@ check_subscribe_rig
 check_destroyed
 check_watch
 check_presets
+check_human
 check_server_close
 summary
