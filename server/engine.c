@@ -133,6 +133,7 @@ static int engine_emit(void *ctx, const struct effect_frame *ef)
     struct frame *f = frame_new(&h, ef->payload, ef->payload_bytes);
     if (!f) return -1;
     c->encode_ms += ef->encode_ms;
+    if (ef->kind == FXS_KIND_PARTICLES) atomic_store(&c->sl->s->particles, ef->count_or_width);
     hub_publish(c->eng->hub, c->sl->s, f);
     return 0;
 }
@@ -208,8 +209,8 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     }
     engine_realtime(eng, sl, now);
     atomic_fetch_add(&s->steps, 1);
-    atomic_fetch_add(&s->step_us, (uint64_t)(ms * 1e3));
-    atomic_fetch_add(&s->encode_us, (uint64_t)(ctx.encode_ms * 1e3));
+    hist_observe(&s->step_time, ms * 1e-3);
+    hist_observe(&s->encode_time, ctx.encode_ms * 1e-3);
     return rc ? -1 : 0;
 }
 

@@ -84,6 +84,9 @@ int hub_create(struct hub *hub, const struct effect_ops *effect, const char *nam
         s->channel = hub->next_channel++;
         s->params = params;
         s->rev = rev;
+        hist_init(&s->step_time, hist_step_bounds, hist_step_nb);
+        hist_init(&s->encode_time, hist_step_bounds, hist_step_nb);
+        hist_init(&s->frame_age, hist_age_bounds, hist_age_nb);
         hub->streams[hub->n++] = s;
         hub_changed(hub);
     }

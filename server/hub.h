@@ -19,6 +19,7 @@
 #include "effect.h"
 #include "err.h"
 #include "frame.h"
+#include "histogram.h"
 
 #define STREAM_NAME_MAX 64
 
@@ -45,9 +46,16 @@ struct stream {
     bool failing;     /* since that error the stream has not stepped successfully */
     double realtime;  /* effect-simulated seconds per wall second, recent steps */
 
-    /* Counters for /metrics. */
+    /* For /metrics. */
     atomic_uint_fast64_t steps, frames_produced, frames_sent, frames_skipped, bytes_sent;
-    atomic_uint_fast64_t step_us, encode_us;
+    atomic_uint_fast64_t sent_by_kind[FXS_KIND_MAX + 1]; /* frames sent, per kind */
+    atomic_uint particles;           /* of the latest particle frame (kind 1) */
+    struct histogram step_time, encode_time, frame_age; /* engine, engine, network thread */
+    /* Network thread only: frames of each kind per subscriber per second over the last
+     * second or more (net.c), and the counts that rate started from. */
+    double delivered_fps[FXS_KIND_MAX + 1];
+    uint64_t rate_base[FXS_KIND_MAX + 1];
+    double rate_time;
 };
 
 struct hub {

@@ -1,5 +1,6 @@
 /* metrics.c — see metrics.h. */
 #include <stdarg.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -7,6 +8,7 @@
 
 #include "metrics.h"
 #include "ocl.h"
+#include "session.h"
 
 static double metrics_uptime(const struct server *srv)
 {
@@ -50,8 +52,7 @@ static double m_sent(struct stream *s) { return (double)atomic_load(&s->frames_s
 static double m_skipped(struct stream *s) { return (double)atomic_load(&s->frames_skipped); }
 static double m_bytes(struct stream *s) { return (double)atomic_load(&s->bytes_sent); }
 static double m_steps(struct stream *s) { return (double)atomic_load(&s->steps); }
-static double m_step_s(struct stream *s) { return atomic_load(&s->step_us) * 1e-6; }
-static double m_encode_s(struct stream *s) { return atomic_load(&s->encode_us) * 1e-6; }
+static double m_particles(struct stream *s) { return atomic_load(&s->particles); }
 static double m_errors(struct stream *s) { return (double)s->error_gen; }
 static double m_rev(struct stream *s) { return s->rev; }
 static double m_realtime(struct stream *s) { return s->realtime; }
@@ -110,12 +111,78 @@ static void metrics_kernels(struct server *srv, struct fx_buf *out)
         metrics_printf(out, "fxs_kernel_runs_total{kernel=\"%s\"} %llu\n", st[i].name, (unsigned long long)st[i].runs);
 }
 
+/* Updates each stream's delivered frames per second per subscriber and kind, over the time
+ * since the last update (the first: since the start) when that is a second or more (a scrape
+ * sooner reuses it). */
+static void metrics_update_rates(struct server *srv, struct stream **all, int n)
+{
+    double now = metrics_uptime(srv);
+    for (int i = 0; i < n; i++) {
+        struct stream *s = all[i];
+        double dt = now - s->rate_time;
+        if (dt < 1.0) continue;
+        for (int k = 1; k <= FXS_KIND_MAX; k++) {
+            uint64_t c = atomic_load(&s->sent_by_kind[k]);
+            s->delivered_fps[k] = s->subscribers > 0 ? (double)(c - s->rate_base[k]) / dt / s->subscribers : 0;
+            s->rate_base[k] = c;
+        }
+        s->rate_time = now;
+    }
+}
+
+static void metrics_delivered(struct fx_buf *out, struct stream **all, int n)
+{
+    metrics_head(out, "fxs_stream_delivered_fps", "gauge",
+                 "Frames of each kind sent per subscriber per second, over the last second or more between scrapes "
+                 "(compare with the stream's fps: below it, subscribers skip).");
+    for (int i = 0; i < n; i++)
+        for (int k = 1; k <= FXS_KIND_MAX; k++)
+            if (atomic_load(&all[i]->sent_by_kind[k]) || all[i]->delivered_fps[k] > 0)
+                metrics_printf(out, "fxs_stream_delivered_fps{stream=\"%s\",effect=\"%s\",kind=\"%d\"} %.4g\n",
+                               all[i]->name, all[i]->effect->name, k, all[i]->delivered_fps[k]);
+}
+
+static void metrics_histograms(struct fx_buf *out, struct stream **all, int n)
+{
+    static const struct {
+        const char *name, *help;
+        size_t off;
+    } h[] = {
+        {"fxs_stream_step_seconds", "Wall time per step of the effect, encoding included.", offsetof(struct stream, step_time)},
+        {"fxs_stream_encode_seconds", "Wall time encoding the frames of one step.", offsetof(struct stream, encode_time)},
+        {"fxs_stream_frame_age_seconds", "Age of a frame (since its server_time) when its sending starts.",
+         offsetof(struct stream, frame_age)},
+    };
+    for (size_t j = 0; j < sizeof h / sizeof h[0]; j++) {
+        metrics_head(out, h[j].name, "histogram", h[j].help);
+        for (int i = 0; i < n; i++) {
+            char labels[160];
+            snprintf(labels, sizeof labels, "stream=\"%s\",effect=\"%s\"", all[i]->name, all[i]->effect->name);
+            hist_render(out, (const struct histogram *)((const char *)all[i] + h[j].off), h[j].name, labels);
+        }
+    }
+}
+
+/* Bytes waiting to be sent (queued replies and the rest of the frame being sent), summed by
+ * the connections' role. */
+static void metrics_queues(struct server *srv, struct fx_buf *out)
+{
+    double bytes[ACCESS_ADMIN + 1] = {0};
+    for (const struct session *ss = srv->sessions; ss; ss = ss->next)
+        bytes[ss->role] += (double)ss->q_bytes + (ss->cur ? (double)(ss->cur->len - ss->cur_off) : 0);
+    metrics_head(out, "fxs_send_queue_bytes", "gauge",
+                 "Bytes queued for sending (replies, events and the rest of the frame in flight) by connection role.");
+    for (int r = ACCESS_NONE; r <= ACCESS_ADMIN; r++)
+        metrics_printf(out, "fxs_send_queue_bytes{role=\"%s\"} %.0f\n", access_role_name((enum access_role)r), bytes[r]);
+}
+
 int metrics_render(struct server *srv, struct fx_buf *out)
 {
     int n;
     struct stream **all = hub_snapshot(&srv->hub, &n);
     metrics_global(srv, out, n);
     pthread_mutex_lock(&srv->hub.mu); /* subscribers, rev and error_gen are guarded */
+    metrics_update_rates(srv, all, n);
     metrics_per_stream(out, all, n, "fxs_stream_subscribers", "gauge", "Subscribers per stream.", m_subs);
     metrics_per_stream(out, all, n, "fxs_stream_param_rev", "gauge", "Parameter revision.", m_rev);
     metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream failures (OpenCL build, kernel or device error, NaN), one per error event.", m_errors);
@@ -130,11 +197,13 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     metrics_per_stream(out, all, n, "fxs_stream_frames_skipped_total", "counter",
                        "Frames a subscriber skipped (latest frame wins).", m_skipped);
     metrics_per_stream(out, all, n, "fxs_stream_bytes_sent_total", "counter", "Frame bytes sent.", m_bytes);
-    metrics_per_stream(out, all, n, "fxs_stream_step_seconds_count", "counter", "Steps run.", m_steps);
-    metrics_per_stream(out, all, n, "fxs_stream_step_seconds_sum", "counter", "Time in steps, encoding included.",
-                       m_step_s);
-    metrics_per_stream(out, all, n, "fxs_stream_encode_seconds_sum", "counter", "Time encoding frames.", m_encode_s);
+    metrics_per_stream(out, all, n, "fxs_stream_steps_total", "counter", "Steps run.", m_steps);
+    metrics_per_stream(out, all, n, "fxs_stream_particles", "gauge",
+                       "Particles in the latest particle frame (kind 1); 0 for effects without particles.", m_particles);
+    metrics_delivered(out, all, n);
+    metrics_histograms(out, all, n);
     hub_release_all(all, n);
+    metrics_queues(srv, out);
     metrics_kernels(srv, out);
     return 0;
 }

@@ -302,6 +302,14 @@ static bool net_pick_frame(struct net *net, struct session *ss)
     return false;
 }
 
+/* Wall-clock microseconds, the clock of the frame header's server_time_us. */
+static double net_wall_us(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec * 1e6 + ts.tv_nsec * 1e-3;
+}
+
 /* Sends the next chunk of the current frame as a fragment of one binary message. */
 static int net_send_chunk(struct session *ss)
 {
@@ -310,12 +318,14 @@ static int net_send_chunk(struct session *ss)
     bool start = ss->cur_off == 0, end = n == left;
     uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE];
     if (!start) memcpy(saved, p - LWS_PRE, LWS_PRE);
+    else hist_observe(&ss->cur_stream->frame_age, net_wall_us() * 1e-6 - (double)f->hdr.server_time_us * 1e-6);
     int w = lws_write(ss->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
     if (!start) memcpy(p - LWS_PRE, saved, LWS_PRE);
     if (w < (int)n) return -1;
     ss->cur_off += n;
     if (end) {
         atomic_fetch_add(&ss->cur_stream->frames_sent, 1);
+        if (f->hdr.kind <= FXS_KIND_MAX) atomic_fetch_add(&ss->cur_stream->sent_by_kind[f->hdr.kind], 1);
         atomic_fetch_add(&ss->cur_stream->bytes_sent, f->len);
         atomic_fetch_add(&ss->srv->counters.frames_sent, 1);
         atomic_fetch_add(&ss->srv->counters.bytes_sent, f->len);
@@ -451,7 +461,12 @@ static enum access_role net_role(struct net *net, struct lws *wsi, bool *bad)
 static void net_check_stall(struct net *net, struct session *ss, double now)
 {
     if (ss->kill || now - ss->last_write < net->srv->cfg.limits.stall_timeout_s || !net_backlogged(net, ss)) return;
-    log_warn("closing a connection that has not read for %d s", net->srv->cfg.limits.stall_timeout_s);
+    char peer[64] = "?", subs[256] = "";
+    lws_get_peer_simple(ss->wsi, peer, sizeof peer);
+    for (int i = 0; i < ss->nsubs; i++)
+        snprintf(subs + strlen(subs), sizeof subs - strlen(subs), "%s%s", i ? ", " : "", ss->subs[i].s->name);
+    log_warn("closing the connection from %s (subscribed to %s) that has not read for %d s", peer,
+             ss->nsubs ? subs : "nothing", net->srv->cfg.limits.stall_timeout_s);
     atomic_fetch_add(&net->srv->counters.stalled_closed, 1);
     ss->kill = "not reading";
     lws_set_timeout(ss->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);

@@ -83,6 +83,9 @@ async def test_stalled_reader(t):
         stalled = metric(d, "fxs_connections_stalled_total")
         t.check(stalled == 1, "the stalled connection was closed after stall_timeout_s (metric %s)" % stalled)
         t.check(closed_by_peer(s), "the stalled client's socket is closed by the server")
+        line = [l for l in d.log().splitlines() if "has not read" in l]
+        t.check(line and "127.0.0.1" in line[0] and "subscribed to big" in line[0],
+                "the log line names the peer and its subscriptions (%s)" % line[:1])
         growth = rss_kib(d) - rss0
         t.check(growth < 64 * 1024, "daemon memory bounded while stalled (RSS +%d KiB)" % growth)
         t.check(metric(d, "fxs_connections") == 1, "one connection left")

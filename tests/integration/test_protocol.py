@@ -41,8 +41,45 @@ async def test_http(t):
     status, ctype, body = http_get("/metrics")
     t.check(status == 200 and ctype.startswith("text/plain"), "metrics is text")
     for name in ("fxs_connections", "fxs_frames_sent_total", "fxs_stream_frames_produced_total", "fxs_stream_step_seconds_sum",
+                 "fxs_stream_particles", "fxs_stream_delivered_fps", "fxs_send_queue_bytes",
                  "fxs_stream_bytes_sent_total", "fxs_stream_frames_skipped_total"):
         t.check(name in body, "metrics has " + name)
+
+
+async def test_metrics_parse(t):
+    """/metrics by Prometheus's own text parser (issue 16): every family parses, counters end in
+    _total, histograms have cumulative buckets ending at +Inf with _count = the +Inf bucket, and
+    the per-stream figures are there for a flame that is being watched."""
+    from prometheus_client.parser import text_string_to_metric_families
+    c = await Client.connect(D)
+    await c.request("subscribe", stream="flame")
+    for _ in range(8):
+        await c.frame(kind=1)
+    http_get("/metrics")  # starts the delivered-fps window
+    end = time.monotonic() + 1.5
+    while time.monotonic() < end:  # keep reading, as a subscriber does
+        await c.frame(kind=1)
+    _, _, body = http_get("/metrics")
+    fams = {f.name: f for f in text_string_to_metric_families(body)}
+    t.check(len(fams) >= 25, "the text parser reads %d metric families" % len(fams))
+    bad = [n for n, f in fams.items() if f.type == "counter" and not any(s.name.endswith("_total") for s in f.samples)]
+    t.check(not bad, "every counter's samples end in _total (%s)" % bad)
+    for name in ("fxs_stream_step_seconds", "fxs_stream_encode_seconds", "fxs_stream_frame_age_seconds"):
+        f = fams.get(name)
+        ok = f is not None and f.type == "histogram"
+        flame = [s for s in (f.samples if f else []) if s.labels.get("stream") == "flame"]
+        buckets = [s.value for s in flame if s.name.endswith("_bucket")]
+        count = [s.value for s in flame if s.name.endswith("_count")]
+        ok = ok and buckets == sorted(buckets) and flame and [s for s in flame if s.labels.get("le") == "+Inf"] and \
+            count and count[0] == buckets[-1] and count[0] > 0
+        t.check(bool(ok), "%s: a histogram with cumulative buckets for the flame (%s)" % (name, count))
+    parts = [s.value for s in fams["fxs_stream_particles"].samples if s.labels["stream"] == "flame"]
+    t.check(parts and parts[0] > 1000, "fxs_stream_particles of the flame (%s)" % parts)
+    fps = [s.value for s in fams["fxs_stream_delivered_fps"].samples if s.labels["stream"] == "flame" and s.labels["kind"] == "1"]
+    t.check(fps and 1 <= fps[0] <= 60, "fxs_stream_delivered_fps of the flame, kind 1 (%s per subscriber)" % fps)
+    roles = {s.labels["role"] for s in fams["fxs_send_queue_bytes"].samples}
+    t.check(roles == {"none", "view", "tune", "admin"}, "fxs_send_queue_bytes by role (%s)" % sorted(roles))
+    await c.close()
 
 
 async def test_static_root(t):
@@ -509,7 +546,7 @@ if __name__ == "__main__":
     D = Daemon()
     s = Suite("test_protocol")
     try:
-        s.run([test_http, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
+        s.run([test_http, test_metrics_parse, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
                test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_state_write_failure, test_presets_persist, test_quarantine, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
