@@ -78,6 +78,6 @@ const struct effect_ops *const *effect_all(void); /* NULL-terminated */
 /* The one validation path for an effect's parameters (create, set, config, restored
  * state): partial (NULL: none) merged into base (NULL: the effect's defaults) by its
  * table, then its cross-parameter rules. A new complete document, or NULL with err. */
-cJSON *effect_params(const struct effect_ops *fx, const cJSON *base, const cJSON *partial, struct fx_err *err);
+cJSON *effect_params(const struct effect_ops *ops, const cJSON *base, const cJSON *partial, struct fx_err *err);
 
 #endif

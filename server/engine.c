@@ -20,8 +20,8 @@
 
 struct engine_slot {
     struct stream *s;
-    void *fx;            /* effect state, NULL until created (or after a failure) */
-    cJSON *params;       /* the document fx was created/updated with */
+    void *state;         /* effect state, NULL until created (or after a failure) */
+    cJSON *params;       /* the document state was created/updated with */
     uint64_t rev;        /* its revision */
     uint32_t failed_rev; /* creation failed at this revision: wait for a change */
     uint64_t reset_gen;
@@ -50,8 +50,8 @@ static uint64_t engine_realtime_us(void)
 
 static void engine_drop_fx(struct engine_slot *sl)
 {
-    if (sl->fx) sl->s->effect->destroy(sl->fx);
-    sl->fx = NULL;
+    if (sl->state) sl->s->effect->destroy(sl->state);
+    sl->state = NULL;
     cJSON_Delete(sl->params);
     sl->params = NULL;
 }
@@ -73,30 +73,29 @@ static double engine_backoff(int n)
     return fmin(ENGINE_BACKOFF_MIN_S * pow(2.0, n > 1 ? n - 1 : 0), ENGINE_BACKOFF_MAX_S);
 }
 
-/* Brings the effect up to the hub's parameter revision: 0 when fx is usable, -1 when its
+/* Brings the effect up to the hub's parameter revision: 0 when the state is usable, -1 when its
  * (re)creation failed just now (reported), 1 while waiting for a change after that. */
 static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
 {
     struct stream *s = sl->s;
-    uint64_t rev;
-    pthread_mutex_lock(&eng->hub->mu);
-    rev = s->rev;
-    pthread_mutex_unlock(&eng->hub->mu);
-    if (sl->fx && rev == sl->rev) return 0;
-    if (!sl->fx && rev == sl->failed_rev) return 1;
+    struct stream_status st;
+    hub_status(eng->hub, s, &st);
+    uint64_t rev = st.rev;
+    if (sl->state && rev == sl->rev) return 0;
+    if (!sl->state && rev == sl->failed_rev) return 1;
 
     cJSON *doc = hub_get_params(eng->hub, s, &rev);
     struct fx_err err = {0};
-    bool restart = !sl->fx || params_restart_changed(s->effect->params, sl->params, doc);
-    if (!restart && s->effect->apply(sl->fx, doc, &err) == 0) {
+    bool restart = !sl->state || params_restart_changed(s->effect->params, sl->params, doc);
+    if (!restart && s->effect->apply(sl->state, doc, &err) == 0) {
         cJSON_Delete(sl->params);
     } else {
         if (!restart) engine_fail(eng, sl, &err, "re-creating the effect");
         engine_drop_fx(sl);
         memset(&err, 0, sizeof err);
-        sl->fx = s->effect->create(eng->ocl, doc, &err);
+        sl->state = s->effect->create(eng->ocl, doc, &err);
         sl->sim_time = 0;
-        if (!sl->fx) {
+        if (!sl->state) {
             engine_fail(eng, sl, &err, "waiting for a parameter change");
             cJSON_Delete(doc);
             sl->failed_rev = rev;
@@ -142,17 +141,15 @@ static int engine_emit(void *ctx, const struct effect_frame *ef)
  * wall second (effects without their own clock follow the stream's, factor 1). */
 static void engine_realtime(struct engine *eng, struct engine_slot *sl, double now)
 {
-    const struct effect_ops *fx = sl->s->effect;
-    double sim = fx->sim_seconds && sl->fx ? fx->sim_seconds(sl->fx) : sl->sim_time;
+    const struct effect_ops *ops = sl->s->effect;
+    double sim = ops->sim_seconds && sl->state ? ops->sim_seconds(sl->state) : sl->sim_time;
     if (sl->rt_wall == 0 || sim < sl->rt_sim) { /* first step, or a reset */
         sl->rt_wall = now;
         sl->rt_sim = sim;
         return;
     }
     if (now - sl->rt_wall < 1.0) return;
-    pthread_mutex_lock(&eng->hub->mu);
-    sl->s->realtime = (sim - sl->rt_sim) / (now - sl->rt_wall);
-    pthread_mutex_unlock(&eng->hub->mu);
+    hub_set_realtime(eng->hub, sl->s, (sim - sl->rt_sim) / (now - sl->rt_wall));
     sl->rt_wall = now;
     sl->rt_sim = sim;
 }
@@ -165,7 +162,7 @@ static void engine_step_failed(struct engine *eng, struct engine_slot *sl, const
     struct fx_err reset_err = {0};
     char then[200];
     double pause = engine_backoff(++sl->fails);
-    if (sl->s->effect->reset(sl->fx, &reset_err) == 0) {
+    if (sl->s->effect->reset(sl->state, &reset_err) == 0) {
         snprintf(then, sizeof then, "state reset, next step in %.1f s", pause);
     } else {
         snprintf(then, sizeof then, "reset failed too, re-creating in %.1f s (%.120s)", pause, reset_err.message);
@@ -184,13 +181,13 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     if (sync < 0) sl->fails++;
     if (sync) return sync < 0 ? -1 : 0;
 
-    pthread_mutex_lock(&eng->hub->mu);
-    uint64_t reset_gen = s->reset_gen;
-    pthread_mutex_unlock(&eng->hub->mu);
+    struct stream_status st;
+    hub_status(eng->hub, s, &st);
+    uint64_t reset_gen = st.reset_gen;
     if (reset_gen != sl->reset_gen) {
         sl->reset_gen = reset_gen;
         sl->sim_time = 0;
-        if (s->effect->reset(sl->fx, &err)) engine_fail(eng, sl, &err, NULL);
+        if (s->effect->reset(sl->state, &err)) engine_fail(eng, sl, &err, NULL);
     }
 
     double dt = fmin(fmax(now - sl->last_wall, 0.0), 0.25); /* a long stall does not jump time */
@@ -198,7 +195,7 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     sl->sim_time += dt;
     struct engine_emit_ctx ctx = {eng, sl, 0};
     double t0 = engine_now();
-    int rc = s->effect->step(sl->fx, sl->sim_time, dt, engine_emit, &ctx, &err);
+    int rc = s->effect->step(sl->state, sl->sim_time, dt, engine_emit, &ctx, &err);
     double ms = (engine_now() - t0) * 1e3;
     if (rc) {
         engine_step_failed(eng, sl, &err);
@@ -258,12 +255,11 @@ static double engine_run_due(struct engine *eng)
     double now = engine_now(), next = now + 1.0;
     for (int i = 0; i < eng->nslots; i++) {
         struct engine_slot *sl = &eng->slots[i];
-        pthread_mutex_lock(&eng->hub->mu);
-        int subs = sl->s->subscribers;
-        double fps = params_num(sl->s->params, "fps");
-        uint64_t rev = sl->s->rev;
-        uint64_t reset_gen = sl->s->reset_gen;
-        pthread_mutex_unlock(&eng->hub->mu);
+        struct stream_status st;
+        hub_status(eng->hub, sl->s, &st);
+        int subs = st.subscribers;
+        double fps = st.fps;
+        uint64_t rev = st.rev, reset_gen = st.reset_gen;
         if (eng->pause_idle && subs == 0) {
             sl->running = false;
             sl->rt_wall = 0; /* a pause is not slowness */
@@ -292,10 +288,8 @@ static void *engine_main(void *arg)
 {
     struct engine *eng = arg;
     for (;;) {
-        pthread_mutex_lock(&eng->hub->mu);
-        uint64_t gen = eng->hub->gen;
-        bool stopping = eng->hub->stopping;
-        pthread_mutex_unlock(&eng->hub->mu);
+        bool stopping;
+        uint64_t gen = hub_generation(eng->hub, &stopping);
         if (stopping) break;
         engine_sync_slots(eng);
         double next = engine_run_due(eng);

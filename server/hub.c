@@ -83,6 +83,7 @@ int hub_create(struct hub *hub, const struct effect_ops *effect, const char *nam
         s->effect = effect;
         s->channel = hub->next_channel++;
         s->params = params;
+        s->fps = params_num(params, "fps");
         s->rev = rev;
         hist_init(&s->step_time, hist_step_bounds, hist_step_nb);
         hist_init(&s->encode_time, hist_step_bounds, hist_step_nb);
@@ -156,6 +157,7 @@ uint64_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc)
     pthread_mutex_lock(&hub->mu);
     cJSON_Delete(s->params);
     s->params = doc;
+    s->fps = params_num(doc, "fps");
     uint64_t rev = ++s->rev;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
@@ -169,6 +171,32 @@ cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev)
     *rev = s->rev;
     pthread_mutex_unlock(&hub->mu);
     return doc;
+}
+
+void hub_status(struct hub *hub, struct stream *s, struct stream_status *out)
+{
+    pthread_mutex_lock(&hub->mu);
+    *out = (struct stream_status){.rev = s->rev, .reset_gen = s->reset_gen, .error_gen = s->error_gen,
+                                  .subscribers = s->subscribers, .fps = s->fps, .realtime = s->realtime,
+                                  .failing = s->failing};
+    memcpy(out->error, s->error, sizeof out->error);
+    pthread_mutex_unlock(&hub->mu);
+}
+
+void hub_set_realtime(struct hub *hub, struct stream *s, double factor)
+{
+    pthread_mutex_lock(&hub->mu);
+    s->realtime = factor;
+    pthread_mutex_unlock(&hub->mu);
+}
+
+uint64_t hub_generation(struct hub *hub, bool *stopping)
+{
+    pthread_mutex_lock(&hub->mu);
+    uint64_t gen = hub->gen;
+    *stopping = hub->stopping;
+    pthread_mutex_unlock(&hub->mu);
+    return gen;
 }
 
 void hub_request_reset(struct hub *hub, struct stream *s)

@@ -34,8 +34,9 @@ struct stream {
     const struct effect_ops *effect;
     uint32_t channel; /* unique for the daemon's lifetime; the `subscribed` reply's channel */
 
-    /* Guarded by hub.mu. */
+    /* Guarded by hub.mu; read outside hub.c through hub_status. */
     cJSON *params;    /* complete, validated */
+    double fps;       /* params' "fps", read once per change (the engine's tick needs it) */
     uint64_t rev;     /* +1 per accepted change, starts at 1; below HUB_REV_MAX */
     uint64_t reset_gen;
     bool destroyed;
@@ -90,6 +91,20 @@ struct stream **hub_snapshot(struct hub *hub, int *n);
 void hub_release_all(struct stream **streams, int n);
 void stream_ref(struct stream *s);
 void stream_unref(struct stream *s);
+
+/* The guarded fields of a stream at one instant. */
+struct stream_status {
+    uint64_t rev, reset_gen, error_gen;
+    int subscribers;
+    double fps, realtime;
+    bool failing;
+    char error[320]; /* the latest stream error ("" if none) */
+};
+void hub_status(struct hub *hub, struct stream *s, struct stream_status *out);
+/* Engine side: the real-time factor of the stream's recent steps. */
+void hub_set_realtime(struct hub *hub, struct stream *s, double factor);
+/* The hub's change generation, and whether it is stopping. */
+uint64_t hub_generation(struct hub *hub, bool *stopping);
 
 /* Replaces the parameters (takes ownership of doc); returns the new revision. */
 uint64_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc);

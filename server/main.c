@@ -41,10 +41,10 @@ static int main_create_stream(struct server *srv, const cJSON *def, struct fx_er
     const cJSON *rev = cJSON_GetObjectItemCaseSensitive(def, "rev");
     if (!cJSON_IsString(name) || !cJSON_IsString(effect))
         return fx_fail(err, "bad_request", NULL, "each stream needs string fields \"stream\" and \"effect\"");
-    const struct effect_ops *fx = effect_find(effect->valuestring);
-    if (!fx) return fx_fail(err, "unknown_effect", "effect", "stream %s: no effect named \"%s\"", name->valuestring,
+    const struct effect_ops *ops = effect_find(effect->valuestring);
+    if (!ops) return fx_fail(err, "unknown_effect", "effect", "stream %s: no effect named \"%s\"", name->valuestring,
                             effect->valuestring);
-    cJSON *doc = effect_params(fx, NULL, params, err);
+    cJSON *doc = effect_params(ops, NULL, params, err);
     if (!doc) return -1;
     if (rev && !(cJSON_IsNumber(rev) && rev->valuedouble >= 1 && rev->valuedouble < HUB_REV_MAX &&
                  rev->valuedouble == floor(rev->valuedouble))) {
@@ -53,7 +53,7 @@ static int main_create_stream(struct server *srv, const cJSON *def, struct fx_er
                        name->valuestring);
     }
     uint64_t r = rev ? (uint64_t)rev->valuedouble : 1;
-    if (hub_create(&srv->hub, fx, name->valuestring, doc, r, err)) {
+    if (hub_create(&srv->hub, ops, name->valuestring, doc, r, err)) {
         cJSON_Delete(doc);
         return -1;
     }

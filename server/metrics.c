@@ -36,27 +36,46 @@ static void metrics_head(struct fx_buf *out, const char *name, const char *type,
     metrics_printf(out, "# HELP %s %s\n# TYPE %s %s\n", name, help, name, type);
 }
 
+/* A stream and its guarded fields read once (hub_status), for one scrape. */
+struct m_row {
+    struct stream *s;
+    struct stream_status st;
+};
+
 /* One metric line per stream, value read by `get`. */
-static void metrics_per_stream(struct fx_buf *out, struct stream **all, int n, const char *name,
-                               const char *type, const char *help, double (*get)(struct stream *))
+static void metrics_per_stream(struct fx_buf *out, const struct m_row *rows, int n, const char *name,
+                               const char *type, const char *help, double (*get)(const struct m_row *))
 {
     metrics_head(out, name, type, help);
     for (int i = 0; i < n; i++)
-        metrics_printf(out, "%s{stream=\"%s\",effect=\"%s\"} %.9g\n", name, all[i]->name, all[i]->effect->name,
-                       get(all[i]));
+        metrics_printf(out, "%s{stream=\"%s\",effect=\"%s\"} %.9g\n", name, rows[i].s->name,
+                       rows[i].s->effect->name, get(&rows[i]));
 }
 
-static double m_subs(struct stream *s) { return s->subscribers; }
-static double m_produced(struct stream *s) { return (double)atomic_load(&s->frames_produced); }
-static double m_sent(struct stream *s) { return (double)atomic_load(&s->frames_sent); }
-static double m_skipped(struct stream *s) { return (double)atomic_load(&s->frames_skipped); }
-static double m_bytes(struct stream *s) { return (double)atomic_load(&s->bytes_sent); }
-static double m_steps(struct stream *s) { return (double)atomic_load(&s->steps); }
-static double m_particles(struct stream *s) { return atomic_load(&s->particles); }
-static double m_errors(struct stream *s) { return (double)s->error_gen; }
-static double m_rev(struct stream *s) { return s->rev; }
-static double m_realtime(struct stream *s) { return s->realtime; }
-static double m_failing(struct stream *s) { return s->failing; }
+static double m_subs(const struct m_row *r) { return r->st.subscribers; }
+static double m_rev(const struct m_row *r) { return (double)r->st.rev; }
+static double m_errors(const struct m_row *r) { return (double)r->st.error_gen; }
+static double m_realtime(const struct m_row *r) { return r->st.realtime; }
+static double m_failing(const struct m_row *r) { return r->st.failing; }
+static double m_produced(const struct m_row *r) { return (double)atomic_load(&r->s->frames_produced); }
+static double m_sent(const struct m_row *r) { return (double)atomic_load(&r->s->frames_sent); }
+static double m_skipped(const struct m_row *r) { return (double)atomic_load(&r->s->frames_skipped); }
+static double m_bytes(const struct m_row *r) { return (double)atomic_load(&r->s->bytes_sent); }
+static double m_steps(const struct m_row *r) { return (double)atomic_load(&r->s->steps); }
+static double m_particles(const struct m_row *r) { return atomic_load(&r->s->particles); }
+
+/* Every live stream with its status; free() the result (references released by the caller
+ * through hub_release_all on *all). */
+static struct m_row *metrics_rows(struct server *srv, struct stream ***all, int *n)
+{
+    *all = hub_snapshot(&srv->hub, n);
+    struct m_row *rows = calloc((size_t)(*n > 0 ? *n : 1), sizeof *rows);
+    for (int i = 0; rows && i < *n; i++) {
+        rows[i].s = (*all)[i];
+        hub_status(&srv->hub, (*all)[i], &rows[i].st);
+    }
+    return rows;
+}
 
 static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
 {
@@ -114,16 +133,17 @@ static void metrics_kernels(struct server *srv, struct fx_buf *out)
 /* Updates each stream's delivered frames per second per subscriber and kind, over the time
  * since the last update (the first: since the start) when that is a second or more (a scrape
  * sooner reuses it). */
-static void metrics_update_rates(struct server *srv, struct stream **all, int n)
+static void metrics_update_rates(struct server *srv, const struct m_row *rows, int n)
 {
     double now = metrics_uptime(srv);
     for (int i = 0; i < n; i++) {
-        struct stream *s = all[i];
+        struct stream *s = rows[i].s;
+        int subs = rows[i].st.subscribers;
         double dt = now - s->rate_time;
         if (dt < 1.0) continue;
         for (int k = 1; k <= FXS_KIND_MAX; k++) {
             uint64_t c = atomic_load(&s->sent_by_kind[k]);
-            s->delivered_fps[k] = s->subscribers > 0 ? (double)(c - s->rate_base[k]) / dt / s->subscribers : 0;
+            s->delivered_fps[k] = subs > 0 ? (double)(c - s->rate_base[k]) / dt / subs : 0;
             s->rate_base[k] = c;
         }
         s->rate_time = now;
@@ -179,29 +199,33 @@ static void metrics_queues(struct server *srv, struct fx_buf *out)
 int metrics_render(struct server *srv, struct fx_buf *out)
 {
     int n;
-    struct stream **all = hub_snapshot(&srv->hub, &n);
+    struct stream **all;
+    struct m_row *rows = metrics_rows(srv, &all, &n);
+    if (!rows) {
+        hub_release_all(all, n);
+        return -1;
+    }
     metrics_global(srv, out, n);
-    pthread_mutex_lock(&srv->hub.mu); /* subscribers, rev and error_gen are guarded */
-    metrics_update_rates(srv, all, n);
-    metrics_per_stream(out, all, n, "fxs_stream_subscribers", "gauge", "Subscribers per stream.", m_subs);
-    metrics_per_stream(out, all, n, "fxs_stream_param_rev", "gauge", "Parameter revision.", m_rev);
-    metrics_per_stream(out, all, n, "fxs_stream_errors_total", "counter", "Stream failures (OpenCL build, kernel or device error, NaN), one per error event.", m_errors);
-    metrics_per_stream(out, all, n, "fxs_stream_realtime_factor", "gauge",
+    metrics_update_rates(srv, rows, n);
+    metrics_per_stream(out, rows, n, "fxs_stream_subscribers", "gauge", "Subscribers per stream.", m_subs);
+    metrics_per_stream(out, rows, n, "fxs_stream_param_rev", "gauge", "Parameter revision.", m_rev);
+    metrics_per_stream(out, rows, n, "fxs_stream_errors_total", "counter", "Stream failures (OpenCL build, kernel or device error, NaN), one per error event.", m_errors);
+    metrics_per_stream(out, rows, n, "fxs_stream_realtime_factor", "gauge",
                        "Simulated seconds per wall second over the last second of stepping.", m_realtime);
-    metrics_per_stream(out, all, n, "fxs_stream_failing", "gauge",
+    metrics_per_stream(out, rows, n, "fxs_stream_failing", "gauge",
                        "1 while the stream is failing (its last error, in /healthz, not yet followed by a good step).",
                        m_failing);
-    pthread_mutex_unlock(&srv->hub.mu);
-    metrics_per_stream(out, all, n, "fxs_stream_frames_produced_total", "counter", "Frames encoded.", m_produced);
-    metrics_per_stream(out, all, n, "fxs_stream_frames_sent_total", "counter", "Frames sent, all subscribers.", m_sent);
-    metrics_per_stream(out, all, n, "fxs_stream_frames_skipped_total", "counter",
+    metrics_per_stream(out, rows, n, "fxs_stream_frames_produced_total", "counter", "Frames encoded.", m_produced);
+    metrics_per_stream(out, rows, n, "fxs_stream_frames_sent_total", "counter", "Frames sent, all subscribers.", m_sent);
+    metrics_per_stream(out, rows, n, "fxs_stream_frames_skipped_total", "counter",
                        "Frames a subscriber skipped (latest frame wins).", m_skipped);
-    metrics_per_stream(out, all, n, "fxs_stream_bytes_sent_total", "counter", "Frame bytes sent.", m_bytes);
-    metrics_per_stream(out, all, n, "fxs_stream_steps_total", "counter", "Steps run.", m_steps);
-    metrics_per_stream(out, all, n, "fxs_stream_particles", "gauge",
+    metrics_per_stream(out, rows, n, "fxs_stream_bytes_sent_total", "counter", "Frame bytes sent.", m_bytes);
+    metrics_per_stream(out, rows, n, "fxs_stream_steps_total", "counter", "Steps run.", m_steps);
+    metrics_per_stream(out, rows, n, "fxs_stream_particles", "gauge",
                        "Particles in the latest particle frame (kind 1); 0 for effects without particles.", m_particles);
     metrics_delivered(out, all, n);
     metrics_histograms(out, all, n);
+    free(rows);
     hub_release_all(all, n);
     metrics_queues(srv, out);
     metrics_kernels(srv, out);
@@ -224,18 +248,18 @@ int metrics_health(struct server *srv, struct fx_buf *out)
     cJSON_AddBoolToObject(state, "writable", !srv->state_error[0]);
     if (srv->state_error[0]) cJSON_AddStringToObject(state, "last_error", srv->state_error);
     cJSON *arr = cJSON_AddArrayToObject(h, "streams");
-    pthread_mutex_lock(&srv->hub.mu);
     for (int i = 0; i < n; i++) {
+        struct stream_status st;
+        hub_status(&srv->hub, all[i], &st);
         cJSON *o = cJSON_CreateObject();
         cJSON_AddStringToObject(o, "stream", all[i]->name);
         cJSON_AddStringToObject(o, "effect", all[i]->effect->name);
-        cJSON_AddNumberToObject(o, "subscribers", all[i]->subscribers);
-        cJSON_AddNumberToObject(o, "rev", all[i]->rev);
-        if (all[i]->error[0]) cJSON_AddStringToObject(o, "last_error", all[i]->error);
-        cJSON_AddBoolToObject(o, "failing", all[i]->failing);
+        cJSON_AddNumberToObject(o, "subscribers", st.subscribers);
+        cJSON_AddNumberToObject(o, "rev", (double)st.rev);
+        if (st.error[0]) cJSON_AddStringToObject(o, "last_error", st.error);
+        cJSON_AddBoolToObject(o, "failing", st.failing);
         cJSON_AddItemToArray(arr, o);
     }
-    pthread_mutex_unlock(&srv->hub.mu);
     hub_release_all(all, n);
     char *text = cJSON_PrintUnformatted(h);
     cJSON_Delete(h);

@@ -10,9 +10,9 @@
 #define PRESETS_FILE "presets.json"
 #define PRESETS_MAX_BYTES (64L << 20) /* 3 effects x 64 presets of a few kB: far below */
 
-static const struct effect_preset *presets_builtin(const struct effect_ops *fx, const char *name)
+static const struct effect_preset *presets_builtin(const struct effect_ops *ops, const char *name)
 {
-    for (const struct effect_preset *p = fx->presets; p && p->name; p++)
+    for (const struct effect_preset *p = ops->presets; p && p->name; p++)
         if (!strcmp(p->name, name)) return p;
     return NULL;
 }
@@ -22,13 +22,13 @@ static const char *presets_str(const cJSON *o, const char *name)
     return cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(o, name));
 }
 
-/* Index of fx's user preset `name` in ps->user, or -1. */
-static int presets_user_index(const struct presets *ps, const struct effect_ops *fx, const char *name)
+/* Index of the effect's user preset `name` in ps->user, or -1. */
+static int presets_user_index(const struct presets *ps, const struct effect_ops *ops, const char *name)
 {
     int i = 0;
     for (const cJSON *e = ps->user ? ps->user->child : NULL; e; e = e->next, i++) {
         const char *ef = presets_str(e, "effect"), *nm = presets_str(e, "name");
-        if (ef && nm && !strcmp(ef, fx->name) && !strcmp(nm, name)) return i;
+        if (ef && nm && !strcmp(ef, ops->name) && !strcmp(nm, name)) return i;
     }
     return -1;
 }
@@ -79,11 +79,11 @@ static cJSON *presets_item(const char *effect, const char *name, bool builtin, c
     return o;
 }
 
-cJSON *presets_list(const struct presets *ps, const struct effect_ops *fx)
+cJSON *presets_list(const struct presets *ps, const struct effect_ops *ops)
 {
     cJSON *arr = cJSON_CreateArray();
     for (const struct effect_ops *const *e = effect_all(); *e; e++) {
-        if (fx && *e != fx) continue;
+        if (ops && *e != ops) continue;
         for (const struct effect_preset *p = (*e)->presets; p && p->name; p++)
             cJSON_AddItemToArray(arr, presets_item((*e)->name, p->name, true, p->doc, cJSON_Parse(p->params)));
         for (const cJSON *u = ps->user->child; u; u = u->next)
@@ -94,25 +94,25 @@ cJSON *presets_list(const struct presets *ps, const struct effect_ops *fx)
     return arr;
 }
 
-static int presets_unknown(const struct presets *ps, const struct effect_ops *fx, const char *name, struct fx_err *err)
+static int presets_unknown(const struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err)
 {
     struct suggest sg;
     char hint[96];
     suggest_init(&sg, name);
-    for (const struct effect_preset *p = fx->presets; p && p->name; p++) suggest_offer(&sg, p->name);
+    for (const struct effect_preset *p = ops->presets; p && p->name; p++) suggest_offer(&sg, p->name);
     for (const cJSON *u = ps->user->child; u; u = u->next)
-        if (!strcmp(presets_str(u, "effect"), fx->name)) suggest_offer(&sg, presets_str(u, "name"));
-    return fx_fail(err, "unknown_preset", "name", "%s has no preset named \"%.64s\"%s", fx->name, name,
+        if (!strcmp(presets_str(u, "effect"), ops->name)) suggest_offer(&sg, presets_str(u, "name"));
+    return fx_fail(err, "unknown_preset", "name", "%s has no preset named \"%.64s\"%s", ops->name, name,
                    suggest_text(&sg, hint, sizeof hint));
 }
 
-cJSON *presets_params(const struct presets *ps, const struct effect_ops *fx, const char *name, struct fx_err *err)
+cJSON *presets_params(const struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err)
 {
-    const struct effect_preset *b = presets_builtin(fx, name);
+    const struct effect_preset *b = presets_builtin(ops, name);
     if (b) return cJSON_Parse(b->params);
-    int i = presets_user_index(ps, fx, name);
+    int i = presets_user_index(ps, ops, name);
     if (i < 0) {
-        presets_unknown(ps, fx, name, err);
+        presets_unknown(ps, ops, name, err);
         return NULL;
     }
     return cJSON_Duplicate(cJSON_GetObjectItemCaseSensitive(cJSON_GetArrayItem(ps->user, i), "params"), 1);
@@ -137,28 +137,28 @@ static int presets_commit(struct presets *ps, cJSON *before, struct fx_err *err)
     return 0;
 }
 
-static int presets_writable(const struct effect_ops *fx, const char *name, struct fx_err *err)
+static int presets_writable(const struct effect_ops *ops, const char *name, struct fx_err *err)
 {
     if (!hub_valid_name(name))
         return fx_fail(err, "bad_request", "name", "preset names are 1-63 characters of A-Z a-z 0-9 _ . -");
-    if (presets_builtin(fx, name))
-        return fx_fail(err, "read_only", "name", "\"%s\" is a built-in %s preset and cannot be changed", name, fx->name);
+    if (presets_builtin(ops, name))
+        return fx_fail(err, "read_only", "name", "\"%s\" is a built-in %s preset and cannot be changed", name, ops->name);
     return 0;
 }
 
-int presets_save(struct presets *ps, const struct effect_ops *fx, const char *name, const char *doc,
+int presets_save(struct presets *ps, const struct effect_ops *ops, const char *name, const char *doc,
                  const cJSON *params, bool *replaced, struct fx_err *err)
 {
-    if (presets_writable(fx, name, err)) return -1;
+    if (presets_writable(ops, name, err)) return -1;
     if (strlen(doc) > PRESETS_MAX_DOC)
         return fx_fail(err, "bad_request", "doc", "a preset's doc is at most %d bytes", PRESETS_MAX_DOC);
-    int i = presets_user_index(ps, fx, name), count = 0;
-    for (const cJSON *u = ps->user->child; u; u = u->next) count += !strcmp(presets_str(u, "effect"), fx->name);
+    int i = presets_user_index(ps, ops, name), count = 0;
+    for (const cJSON *u = ps->user->child; u; u = u->next) count += !strcmp(presets_str(u, "effect"), ops->name);
     if (i < 0 && count >= PRESETS_MAX_PER_EFFECT)
-        return fx_fail(err, "limit", "name", "%s already has %d presets (delete one first)", fx->name, count);
+        return fx_fail(err, "limit", "name", "%s already has %d presets (delete one first)", ops->name, count);
     cJSON *before = cJSON_Duplicate(ps->user, 1);
     cJSON *item = cJSON_CreateObject();
-    cJSON_AddStringToObject(item, "effect", fx->name);
+    cJSON_AddStringToObject(item, "effect", ops->name);
     cJSON_AddStringToObject(item, "name", name);
     cJSON_AddStringToObject(item, "doc", doc);
     cJSON_AddItemToObject(item, "params", cJSON_Duplicate(params, 1));
@@ -168,11 +168,11 @@ int presets_save(struct presets *ps, const struct effect_ops *fx, const char *na
     return presets_commit(ps, before, err);
 }
 
-int presets_delete(struct presets *ps, const struct effect_ops *fx, const char *name, struct fx_err *err)
+int presets_delete(struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err)
 {
-    if (presets_writable(fx, name, err)) return -1;
-    int i = presets_user_index(ps, fx, name);
-    if (i < 0) return presets_unknown(ps, fx, name, err);
+    if (presets_writable(ops, name, err)) return -1;
+    int i = presets_user_index(ps, ops, name);
+    if (i < 0) return presets_unknown(ps, ops, name, err);
     cJSON *before = cJSON_Duplicate(ps->user, 1);
     cJSON_DeleteItemFromArray(ps->user, i);
     return presets_commit(ps, before, err);

@@ -37,19 +37,19 @@ void presets_free(struct presets *ps);
 
 /* [{effect, name, builtin, doc, params}] of one effect (NULL: every effect), each effect's
  * built-ins first, then its user presets in save order. */
-cJSON *presets_list(const struct presets *ps, const struct effect_ops *fx);
+cJSON *presets_list(const struct presets *ps, const struct effect_ops *ops);
 
 /* A new copy of the preset's parameters (partial for a built-in, complete for a user one),
  * or NULL with unknown_preset (param `name`). */
-cJSON *presets_params(const struct presets *ps, const struct effect_ops *fx, const char *name, struct fx_err *err);
+cJSON *presets_params(const struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err);
 
-/* Saves params (a complete document of fx) as a user preset, replacing one of that name
+/* Saves params (a complete document of the effect) as a user preset, replacing one of that name
  * (*replaced). Errors: bad_request (name, doc), read_only (a built-in's name), limit
  * (PRESETS_MAX_PER_EFFECT), unavailable (the file could not be written; nothing changed). */
-int presets_save(struct presets *ps, const struct effect_ops *fx, const char *name, const char *doc,
+int presets_save(struct presets *ps, const struct effect_ops *ops, const char *name, const char *doc,
                  const cJSON *params, bool *replaced, struct fx_err *err);
 
 /* Deletes a user preset. Errors: read_only, unknown_preset, unavailable. */
-int presets_delete(struct presets *ps, const struct effect_ops *fx, const char *name, struct fx_err *err);
+int presets_delete(struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err);
 
 #endif

@@ -104,9 +104,9 @@ static cJSON *session_hello(struct server *srv)
     cJSON_AddStringToObject(h, "protocol", "fxstream.v1");
     cJSON_AddStringToObject(h, "server", "fxstreamd/" FX_VERSION);
     cJSON_AddStringToObject(h, "device", srv->ocl ? ocl_device_name(srv->ocl) : "none");
-    cJSON *fx = cJSON_AddArrayToObject(h, "effects");
+    cJSON *names = cJSON_AddArrayToObject(h, "effects");
     for (const struct effect_ops *const *e = effect_all(); *e; e++)
-        cJSON_AddItemToArray(fx, cJSON_CreateString((*e)->name));
+        cJSON_AddItemToArray(names, cJSON_CreateString((*e)->name));
     cJSON *lim = cJSON_AddObjectToObject(h, "limits");
     cJSON_AddNumberToObject(lim, "max_connections", l->max_connections);
     cJSON_AddNumberToObject(lim, "max_queued_messages", l->max_queued_messages);
@@ -232,13 +232,13 @@ static int session_op_list(struct session *ss, const cJSON *req, const cJSON *id
     struct stream **all = hub_snapshot(&ss->srv->hub, &n);
     for (int i = 0; i < n; i++) {
         cJSON *o = cJSON_CreateObject();
-        pthread_mutex_lock(&ss->srv->hub.mu);
+        struct stream_status st;
+        hub_status(&ss->srv->hub, all[i], &st);
         cJSON_AddStringToObject(o, "stream", all[i]->name);
         cJSON_AddStringToObject(o, "effect", all[i]->effect->name);
-        cJSON_AddNumberToObject(o, "subscribers", all[i]->subscribers);
-        cJSON_AddNumberToObject(o, "rev", all[i]->rev);
-        cJSON_AddNumberToObject(o, "fps", params_num(all[i]->params, "fps"));
-        pthread_mutex_unlock(&ss->srv->hub.mu);
+        cJSON_AddNumberToObject(o, "subscribers", st.subscribers);
+        cJSON_AddNumberToObject(o, "rev", (double)st.rev);
+        cJSON_AddNumberToObject(o, "fps", st.fps);
         cJSON_AddItemToArray(arr, o);
     }
     hub_release_all(all, n);
@@ -250,28 +250,28 @@ static const struct effect_ops *session_effect(const cJSON *req, struct fx_err *
 {
     const char *name = session_str(req, "effect", err);
     if (!name) return NULL;
-    const struct effect_ops *fx = effect_find(name);
-    if (!fx) {
+    const struct effect_ops *ops = effect_find(name);
+    if (!ops) {
         struct suggest sg;
         char hint[96];
         suggest_init(&sg, name);
         for (const struct effect_ops *const *e = effect_all(); *e; e++) suggest_offer(&sg, (*e)->name);
         fx_fail(err, "unknown_effect", "effect", "no effect named \"%s\"%s", name, suggest_text(&sg, hint, sizeof hint));
     }
-    return fx;
+    return ops;
 }
 
 static int session_op_describe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
     static const char *const allowed[] = {"effect", NULL};
     if (session_only(req, "describe", allowed, err)) return -1;
-    const struct effect_ops *fx = session_effect(req, err);
-    if (!fx) return -1;
+    const struct effect_ops *ops = session_effect(req, err);
+    if (!ops) return -1;
     cJSON *r = session_reply("describe", id);
-    cJSON_AddStringToObject(r, "effect", fx->name);
-    cJSON_AddStringToObject(r, "doc", fx->doc);
-    cJSON_AddItemToObject(r, "params", params_describe(fx->params));
-    cJSON_AddItemToObject(r, "outputs", cJSON_Parse(fx->outputs_json));
+    cJSON_AddStringToObject(r, "effect", ops->name);
+    cJSON_AddStringToObject(r, "doc", ops->doc);
+    cJSON_AddItemToObject(r, "params", params_describe(ops->params));
+    cJSON_AddItemToObject(r, "outputs", cJSON_Parse(ops->outputs_json));
     session_send(ss, r);
     return 0;
 }
@@ -291,12 +291,12 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
 {
     static const char *const allowed[] = {"effect", "stream", "params", NULL};
     if (session_only(req, "create", allowed, err)) return -1;
-    const struct effect_ops *fx = session_effect(req, err);
-    const char *name = fx ? session_str(req, "stream", err) : NULL;
+    const struct effect_ops *ops = session_effect(req, err);
+    const char *name = ops ? session_str(req, "stream", err) : NULL;
     if (!name) return -1;
-    cJSON *doc = effect_params(fx, NULL, cJSON_GetObjectItemCaseSensitive(req, "params"), err);
+    cJSON *doc = effect_params(ops, NULL, cJSON_GetObjectItemCaseSensitive(req, "params"), err);
     if (!doc) return -1;
-    if (hub_create(&ss->srv->hub, fx, name, doc, 1, err)) {
+    if (hub_create(&ss->srv->hub, ops, name, doc, 1, err)) {
         cJSON_Delete(doc);
         return -1;
     }
@@ -304,10 +304,10 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
         stream_unref(hub_destroy(&ss->srv->hub, name, &(struct fx_err){0}));
         return -1;
     }
-    log_info("stream %s created (effect %s)", name, fx->name);
+    log_info("stream %s created (effect %s)", name, ops->name);
     cJSON *r = session_reply("created", id);
     cJSON_AddStringToObject(r, "stream", name);
-    cJSON_AddStringToObject(r, "effect", fx->name);
+    cJSON_AddStringToObject(r, "effect", ops->name);
     cJSON_AddNumberToObject(r, "rev", 1);
     session_announce(ss, r);
     session_send(ss, r);
@@ -372,9 +372,9 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
         i = ss->nsubs++;
         memset(&p[i], 0, sizeof p[i]);
         p[i].s = s; /* the reference passes to the subscription */
-        pthread_mutex_lock(&ss->srv->hub.mu);
-        p[i].error_gen = s->error_gen;
-        pthread_mutex_unlock(&ss->srv->hub.mu);
+        struct stream_status st;
+        hub_status(&ss->srv->hub, s, &st);
+        p[i].error_gen = st.error_gen;
         hub_add_subscriber(&ss->srv->hub, s, +1);
     } else {
         stream_unref(s); /* already subscribed: only max_fps changes */
@@ -496,10 +496,10 @@ static int session_op_presets(struct session *ss, const cJSON *req, const cJSON 
 {
     static const char *const allowed[] = {"effect", NULL};
     if (session_only(req, "presets", allowed, err)) return -1;
-    const struct effect_ops *fx = NULL;
-    if (cJSON_GetObjectItemCaseSensitive(req, "effect") && !(fx = session_effect(req, err))) return -1;
+    const struct effect_ops *ops = NULL;
+    if (cJSON_GetObjectItemCaseSensitive(req, "effect") && !(ops = session_effect(req, err))) return -1;
     cJSON *r = session_reply("presets", id);
-    cJSON_AddItemToObject(r, "presets", presets_list(&ss->srv->presets, fx));
+    cJSON_AddItemToObject(r, "presets", presets_list(&ss->srv->presets, ops));
     session_send(ss, r);
     return 0;
 }
@@ -553,15 +553,15 @@ static int session_op_preset_delete(struct session *ss, const cJSON *req, const 
 {
     static const char *const allowed[] = {"effect", "name", NULL};
     if (session_only(req, "preset_delete", allowed, err)) return -1;
-    const struct effect_ops *fx = session_effect(req, err);
-    const char *name = fx ? session_str(req, "name", err) : NULL;
+    const struct effect_ops *ops = session_effect(req, err);
+    const char *name = ops ? session_str(req, "name", err) : NULL;
     if (!name) return -1;
-    int rc = presets_delete(&ss->srv->presets, fx, name, err);
+    int rc = presets_delete(&ss->srv->presets, ops, name, err);
     session_note_write(ss, rc, err);
     if (rc) return -1;
-    log_info("preset %s/%s deleted", fx->name, name);
+    log_info("preset %s/%s deleted", ops->name, name);
     cJSON *r = session_reply("preset_deleted", id);
-    cJSON_AddStringToObject(r, "effect", fx->name);
+    cJSON_AddStringToObject(r, "effect", ops->name);
     cJSON_AddStringToObject(r, "name", name);
     session_announce(ss, r);
     session_send(ss, r);
@@ -719,12 +719,11 @@ void session_poll_errors(struct session *ss)
 {
     for (int i = 0; i < ss->nsubs; i++) {
         struct sub *sub = &ss->subs[i];
-        char msg[sizeof sub->s->error];
-        pthread_mutex_lock(&ss->srv->hub.mu);
-        bool fresh = sub->s->error_gen != sub->error_gen;
-        sub->error_gen = sub->s->error_gen;
-        memcpy(msg, sub->s->error, sizeof msg);
-        pthread_mutex_unlock(&ss->srv->hub.mu);
+        struct stream_status st;
+        hub_status(&ss->srv->hub, sub->s, &st);
+        bool fresh = st.error_gen != sub->error_gen;
+        sub->error_gen = st.error_gen;
+        const char *msg = st.error;
         if (!fresh) continue;
         cJSON *ev = session_reply("error", NULL);
         cJSON_AddStringToObject(ev, "code", "internal");

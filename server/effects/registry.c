@@ -27,14 +27,14 @@ const struct effect_ops *effect_find(const char *name)
     return NULL;
 }
 
-cJSON *effect_params(const struct effect_ops *fx, const cJSON *base, const cJSON *partial, struct fx_err *err)
+cJSON *effect_params(const struct effect_ops *ops, const cJSON *base, const cJSON *partial, struct fx_err *err)
 {
-    cJSON *defaults = base ? NULL : params_defaults(fx->params);
+    cJSON *defaults = base ? NULL : params_defaults(ops->params);
     cJSON *empty = partial ? NULL : cJSON_CreateObject();
     cJSON *doc = NULL;
-    if (!base && !defaults) fx_fail(err, "internal", NULL, "effect %s: invalid default parameters", fx->name);
-    else if (!params_merge(fx->params, base ? base : defaults, partial ? partial : empty, &doc, err) && fx->check &&
-             fx->check(doc, err)) {
+    if (!base && !defaults) fx_fail(err, "internal", NULL, "effect %s: invalid default parameters", ops->name);
+    else if (!params_merge(ops->params, base ? base : defaults, partial ? partial : empty, &doc, err) && ops->check &&
+             ops->check(doc, err)) {
         cJSON_Delete(doc);
         doc = NULL;
     }
