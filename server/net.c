@@ -42,11 +42,25 @@ _Static_assert(LWS_PRE <= FRAME_HEADROOM, "frame headroom must hold the WebSocke
 #define NET_PENDING_MAX 128     /* connections waiting for their first request */
 #define NET_PENDING_TIMEOUT_S 3 /* ... for at most this long */
 
+/* A WebSocket connection: its protocol session (session.h) and what only the network layer
+ * keeps about it. lws allocates it as the per-session data; the session comes first, so a
+ * session pointer is its connection's pointer (net_conn_of). */
+struct net_conn {
+    struct session ss;
+    struct lws *wsi;
+    double last_write; /* CLOCK_MONOTONIC seconds of the last write to the socket */
+    struct net_conn *retry_next, *retry_prev; /* the list of connections to wake at retry_at */
+    double retry_at;
+    bool retry_queued;
+};
+
+static struct net_conn *net_conn_of(struct session *ss) { return (struct net_conn *)ss; }
+
 struct net {
     struct server *srv;
     struct lws_context *ctx;
     struct lws_vhost *vh;
-    struct session *retry_head; /* sessions to wake at their retry_at (net_retry_later) */
+    struct net_conn *retry_head; /* connections to wake at their retry_at (net_retry_later) */
     lws_sorted_usec_list_t retry_sul;
     double retry_sul_at;        /* when retry_sul fires; 0 = not scheduled */
     struct lws_protocols protocols[3];
@@ -206,16 +220,16 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
 
 /* ---- WebSocket: sending ---- */
 
-static void net_wake(struct session *ss) { lws_callback_on_writable(ss->wsi); }
+static void net_wake(struct session *ss) { lws_callback_on_writable(net_conn_of(ss)->wsi); }
 
-static void net_retry_unlink(struct net *net, struct session *ss)
+static void net_retry_unlink(struct net *net, struct net_conn *c)
 {
-    if (!ss->retry_queued) return;
-    if (ss->retry_prev) ss->retry_prev->retry_next = ss->retry_next;
-    else net->retry_head = ss->retry_next;
-    if (ss->retry_next) ss->retry_next->retry_prev = ss->retry_prev;
-    ss->retry_next = ss->retry_prev = NULL;
-    ss->retry_queued = false;
+    if (!c->retry_queued) return;
+    if (c->retry_prev) c->retry_prev->retry_next = c->retry_next;
+    else net->retry_head = c->retry_next;
+    if (c->retry_next) c->retry_next->retry_prev = c->retry_prev;
+    c->retry_next = c->retry_prev = NULL;
+    c->retry_queued = false;
 }
 
 static void net_retry_fire(lws_sorted_usec_list_t *sul);
@@ -229,38 +243,38 @@ static void net_retry_schedule(struct net *net, double at, double now)
 /* Wakes ss after `delay` seconds (or earlier, when it is already due sooner). */
 static void net_retry_later(struct net *net, struct session *ss, double delay)
 {
+    struct net_conn *c = net_conn_of(ss);
     double now = net_now(), at = now + delay;
-    if (ss->retry_queued && ss->retry_at <= at) return;
-    if (!ss->retry_queued) {
-        ss->retry_next = net->retry_head;
-        ss->retry_prev = NULL;
-        if (net->retry_head) net->retry_head->retry_prev = ss;
-        net->retry_head = ss;
-        ss->retry_queued = true;
+    if (c->retry_queued && c->retry_at <= at) return;
+    if (!c->retry_queued) {
+        c->retry_next = net->retry_head;
+        c->retry_prev = NULL;
+        if (net->retry_head) net->retry_head->retry_prev = c;
+        net->retry_head = c;
+        c->retry_queued = true;
     }
-    ss->retry_at = at;
+    c->retry_at = at;
     if (net->retry_sul_at == 0 || at < net->retry_sul_at) net_retry_schedule(net, at, now);
 }
 
-/* The one retry timer: wakes the sessions that are due, then waits for the next. */
+/* The one retry timer: wakes the connections that are due, then waits for the next. */
 static void net_retry_fire(lws_sorted_usec_list_t *sul)
 {
     struct net *net = lws_container_of(sul, struct net, retry_sul);
     double now = net_now(), next = 0;
     net->retry_sul_at = 0;
-    for (struct session *ss = net->retry_head, *nx; ss; ss = nx) {
-        nx = ss->retry_next;
-        if (ss->retry_at <= now) {
-            net_retry_unlink(net, ss);
-            lws_callback_on_writable(ss->wsi);
-        } else if (next == 0 || ss->retry_at < next) {
-            next = ss->retry_at;
+    for (struct net_conn *c = net->retry_head, *nx; c; c = nx) {
+        nx = c->retry_next;
+        if (c->retry_at <= now) {
+            net_retry_unlink(net, c);
+            lws_callback_on_writable(c->wsi);
+        } else if (next == 0 || c->retry_at < next) {
+            next = c->retry_at;
         }
     }
     if (next > 0) net_retry_schedule(net, next, now);
 }
 
-/* Picks the next frame to send, or asks for a retry when only max_fps holds one back. */
 static bool net_pick_frame(struct net *net, struct session *ss)
 {
     double now = net_now(), wait = -1;
@@ -319,7 +333,7 @@ static int net_send_chunk(struct session *ss)
     uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE];
     if (!start) memcpy(saved, p - LWS_PRE, LWS_PRE);
     else hist_observe(&ss->cur_stream->frame_age, net_wall_us() * 1e-6 - (double)f->hdr.server_time_us * 1e-6);
-    int w = lws_write(ss->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
+    int w = lws_write(net_conn_of(ss)->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
     if (!start) memcpy(p - LWS_PRE, saved, LWS_PRE);
     if (w < (int)n) return -1;
     ss->cur_off += n;
@@ -361,24 +375,24 @@ static size_t net_unsent(struct lws *wsi)
  * latency stays about max_buffered_bytes / its read rate instead of the kernel's buffer. */
 static bool net_backlogged(const struct net *net, struct session *ss)
 {
-    return lws_send_pipe_choked(ss->wsi) || net_unsent(ss->wsi) >= (size_t)net->srv->cfg.limits.max_buffered_bytes;
+    return lws_send_pipe_choked(net_conn_of(ss)->wsi) || net_unsent(net_conn_of(ss)->wsi) >= (size_t)net->srv->cfg.limits.max_buffered_bytes;
 }
 
 static int net_writable(struct net *net, struct session *ss)
 {
     if (net->stopping) {
-        lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_GOINGAWAY, (uint8_t *)"server shutting down", 20);
+        lws_close_reason(net_conn_of(ss)->wsi, LWS_CLOSE_STATUS_GOINGAWAY, (uint8_t *)"server shutting down", 20);
         return -1;
     }
     if (ss->kill) {
-        lws_close_reason(ss->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (uint8_t *)ss->kill, strlen(ss->kill));
+        lws_close_reason(net_conn_of(ss)->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (uint8_t *)ss->kill, strlen(ss->kill));
         return -1;
     }
     struct outmsg *m;
     if (ss->cur) {
         if (net_send_chunk(ss)) return -1;
     } else if ((m = session_pop(ss))) {
-        int w = lws_write(ss->wsi, m->data + FRAME_HEADROOM, m->len, LWS_WRITE_TEXT);
+        int w = lws_write(net_conn_of(ss)->wsi, m->data + FRAME_HEADROOM, m->len, LWS_WRITE_TEXT);
         size_t len = m->len;
         free(m);
         if (w < (int)len) return -1;
@@ -390,8 +404,8 @@ static int net_writable(struct net *net, struct session *ss)
     } else {
         return 0;
     }
-    ss->last_write = net_now();
-    if (ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
+    net_conn_of(ss)->last_write = net_now();
+    if (ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(net_conn_of(ss)->wsi);
     return 0;
 }
 
@@ -460,16 +474,16 @@ static enum access_role net_role(struct net *net, struct lws *wsi, bool *bad)
  * server memory beyond the socket's buffers and one chunk. Checked on every wake. */
 static void net_check_stall(struct net *net, struct session *ss, double now)
 {
-    if (ss->kill || now - ss->last_write < net->srv->cfg.limits.stall_timeout_s || !net_backlogged(net, ss)) return;
+    if (ss->kill || now - net_conn_of(ss)->last_write < net->srv->cfg.limits.stall_timeout_s || !net_backlogged(net, ss)) return;
     char peer[64] = "?", subs[256] = "";
-    lws_get_peer_simple(ss->wsi, peer, sizeof peer);
+    lws_get_peer_simple(net_conn_of(ss)->wsi, peer, sizeof peer);
     for (int i = 0; i < ss->nsubs; i++)
         snprintf(subs + strlen(subs), sizeof subs - strlen(subs), "%s%s", i ? ", " : "", ss->subs[i].s->name);
     log_warn("closing the connection from %s (subscribed to %s) that has not read for %d s", peer,
              ss->nsubs ? subs : "nothing", net->srv->cfg.limits.stall_timeout_s);
     atomic_fetch_add(&net->srv->counters.stalled_closed, 1);
     ss->kill = "not reading";
-    lws_set_timeout(ss->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
+    lws_set_timeout(net_conn_of(ss)->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
 }
 
 /* The engine published frames or errors, or a stop was requested. */
@@ -483,7 +497,7 @@ static void net_on_wake(struct net *net)
     for (struct session *ss = net->srv->sessions; ss; ss = ss->next) {
         net_check_stall(net, ss, now);
         session_poll_errors(ss);
-        if (net->stopping || ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(ss->wsi);
+        if (net->stopping || ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(net_conn_of(ss)->wsi);
     }
 }
 
@@ -495,8 +509,9 @@ static int net_established(struct net *net, struct session *ss, struct lws *wsi)
         lws_close_reason(wsi, (enum lws_close_status)1013 /* try again later */, (uint8_t *)"connection limit reached", 24);
         return -1;
     }
-    session_open(ss, net->srv, wsi, net_role(net, wsi, &bad));
-    ss->last_write = net_now();
+    net_conn_of(ss)->wsi = wsi; /* before session_open: its hello wakes the connection */
+    net_conn_of(ss)->last_write = net_now();
+    session_open(ss, net->srv, net_role(net, wsi, &bad));
     if (bad) {
         log_warn("connection closed: invalid token in its Authorization header");
         ss->kill = "invalid token in the Authorization header";
@@ -522,7 +537,7 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
         return net_writable(net, ss);
     case LWS_CALLBACK_CLOSED:
         if (ss && ss->srv) {
-            net_retry_unlink(net, ss);
+            net_retry_unlink(net, net_conn_of(ss));
             session_close(ss);
         }
         break;
@@ -568,7 +583,7 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     if (!net) return fx_fail(err, "internal", NULL, "out of memory");
     net->srv = srv;
     net->protocols[0] = (struct lws_protocols){"http", net_http_cb, sizeof(struct net_http), 0, 0, NULL, 0};
-    net->protocols[1] = (struct lws_protocols){"fxstream.v1", net_ws_cb, sizeof(struct session),
+    net->protocols[1] = (struct lws_protocols){"fxstream.v1", net_ws_cb, sizeof(struct net_conn),
                                                (size_t)srv->cfg.limits.max_message_bytes + 1024, 0, NULL, 0};
     net_setup_mounts(net);
     lws_set_log_level(LLL_ERR | LLL_WARN, net_lws_log);

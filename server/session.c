@@ -126,11 +126,10 @@ static void session_add_auth(cJSON *hello, const struct session *ss)
     cJSON_AddStringToObject(a, "role", access_role_name(ss->role));
 }
 
-void session_open(struct session *ss, struct server *srv, void *wsi, enum access_role role)
+void session_open(struct session *ss, struct server *srv, enum access_role role)
 {
     memset(ss, 0, sizeof *ss);
     ss->srv = srv;
-    ss->wsi = wsi;
     ss->role = role;
     ss->tokens = srv->cfg.limits.max_control_per_sec;
     ss->last_refill = session_now();

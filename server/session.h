@@ -36,7 +36,6 @@ struct outmsg {
 struct session {
     struct session *next, *prev;
     struct server *srv;
-    void *wsi;            /* the network layer's handle */
     struct sub *subs;
     int nsubs, rr;        /* rr: round-robin start for frame sends */
     struct outmsg *q_head, *q_tail;
@@ -48,18 +47,15 @@ struct session {
     struct fx_buf rx;     /* fragments of the message being received */
     bool rx_overflow;
     double tokens, last_refill;
-    double last_write;    /* CLOCK_MONOTONIC seconds of the last write to the socket (net.c) */
-    struct session *retry_next, *retry_prev; /* net.c's list of sessions to wake at retry_at */
-    double retry_at;
-    bool retry_queued;
     const char *kill;     /* set: the network layer closes the connection (1008) with this reason */
     enum access_role role;
     int auth_failures;
 };
 
 /* Links the session into srv->sessions and queues `hello`; role is what the handshake
- * established (access.h). */
-void session_open(struct session *ss, struct server *srv, void *wsi, enum access_role role);
+ * established (access.h). The network layer keeps its own connection state around the
+ * session (net.c's struct net_conn). */
+void session_open(struct session *ss, struct server *srv, enum access_role role);
 /* Unsubscribes everything, frees queued messages, unlinks. */
 void session_close(struct session *ss);
 /* One received piece of a WebSocket message; final marks its last piece. */

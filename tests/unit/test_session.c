@@ -34,7 +34,7 @@ static void t_server_free(void)
 static struct session *t_open(void)
 {
     struct session *s = malloc(sizeof *s);
-    session_open(s, &t_srv, NULL, ACCESS_ADMIN);
+    session_open(s, &t_srv, ACCESS_ADMIN);
     return s;
 }
 
@@ -199,7 +199,7 @@ static void test_broadcast(void)
 {
     t_server_init();
     struct session *a = t_open(), *b = t_open(), *c = t_open(), *none = malloc(sizeof *none);
-    session_open(none, &t_srv, NULL, ACCESS_NONE); /* not authenticated: may not list, hears nothing */
+    session_open(none, &t_srv, ACCESS_NONE); /* not authenticated: may not list, hears nothing */
     t_drain(a), t_drain(b), t_drain(c), t_drain(none);
     cJSON_Delete(t_req(a, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"x\"}"));
     for (int k = 0; k < 2; k++) { /* the other connections hear of the new stream */
@@ -310,7 +310,7 @@ static void test_roles(void)
     CHECK(!access_add_token(&t_srv.cfg.access, "tune", "tune-token-0123456789", "t", &err), "%s", err.message);
     CHECK(!access_add_token(&t_srv.cfg.access, "admin", "admin-token-012345678", "t", &err), "%s", err.message);
     struct session *s = malloc(sizeof *s);
-    session_open(s, &t_srv, NULL, access_default_role(&t_srv.cfg.access));
+    session_open(s, &t_srv, access_default_role(&t_srv.cfg.access));
     cJSON *h = t_next(s);
     const cJSON *auth = cJSON_GetObjectItem(h, "auth");
     CHECK(auth && cJSON_IsTrue(cJSON_GetObjectItem(auth, "required")), "hello says auth is required");
