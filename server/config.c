@@ -9,7 +9,6 @@
 #include <unistd.h>
 
 #include "config.h"
-#include "effects/eye_model.h"
 #include "jsonfile.h"
 #include "log.h"
 
@@ -194,7 +193,7 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
     if (!strcmp(k, "state_dir")) return config_str(cfg->state_dir, sizeof cfg->state_dir, v, k, err);
     if (!strcmp(k, "web_root")) return config_str(cfg->web_root, sizeof cfg->web_root, v, k, err);
     if (!strcmp(k, "device")) return config_device(v, cfg->device, sizeof cfg->device, err);
-    if (!strcmp(k, "assets_dir")) return eye_models_set_dir(v, err);
+    if (!strcmp(k, "assets_dir")) return config_str(cfg->assets_dir, sizeof cfg->assets_dir, v, k, err);
     if (!strcmp(k, "tls_cert")) return config_str(cfg->tls_cert, sizeof cfg->tls_cert, v, k, err);
     if (!strcmp(k, "tls_key")) return config_str(cfg->tls_key, sizeof cfg->tls_key, v, k, err);
     int lv = log_parse_level(v); /* the last string key: log_level */
@@ -247,7 +246,7 @@ static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_e
     case OPT_STATE: return config_str(cfg->state_dir, sizeof cfg->state_dir, arg, "--state-dir", err);
     case OPT_DEVICE: return config_device(arg, cfg->device, sizeof cfg->device, err);
     case OPT_WEB: return config_str(cfg->web_root, sizeof cfg->web_root, arg, "--web-root", err);
-    case OPT_ASSETS: return eye_models_set_dir(arg, err);
+    case OPT_ASSETS: return config_str(cfg->assets_dir, sizeof cfg->assets_dir, arg, "--assets-dir", err);
     case OPT_CERT: return config_str(cfg->tls_cert, sizeof cfg->tls_cert, arg, "--tls-cert", err);
     case OPT_KEY: return config_str(cfg->tls_key, sizeof cfg->tls_key, arg, "--tls-key", err);
     case OPT_LOG:

@@ -36,6 +36,11 @@ struct effect_preset {
     const char *params;
 };
 
+/* What the daemon hands every effect once at start (effects_init). */
+struct effect_env {
+    const char *assets_dir; /* "" = none */
+};
+
 typedef int (*effect_emit_fn)(void *ctx, const struct effect_frame *frame);
 
 struct effect_ops {
@@ -44,6 +49,10 @@ struct effect_ops {
     const struct param_def *params; /* {0}-terminated; must contain "fps" (PARAM_FLOAT) */
     const char *outputs_json;     /* JSON array describing the outputs, for describe */
     const struct effect_preset *presets; /* built-in read-only presets, {0}-terminated (may be NULL) */
+
+    /* Once at start, before any stream is created (may be NULL): e.g. scan the assets that
+     * some parameter's choices name. Fails when the environment is unusable. */
+    int (*init)(const struct effect_env *env, struct fx_err *err);
 
     /* Cross-parameter rules beyond the table (may be NULL). Called on every merged
      * document before it is accepted; code bad_param with err->param set. */
@@ -74,6 +83,8 @@ struct effect_ops {
 /* The registry (effects/registry.c). */
 const struct effect_ops *effect_find(const char *name);
 const struct effect_ops *const *effect_all(void); /* NULL-terminated */
+/* Runs every effect's init with env; the first failure is returned. */
+int effects_init(const struct effect_env *env, struct fx_err *err);
 
 /* The one validation path for an effect's parameters (create, set, config, restored
  * state): partial (NULL: none) merged into base (NULL: the effect's defaults) by its

@@ -156,6 +156,11 @@ int main(int argc, char **argv)
     case CONFIG_OK: break;
     }
     log_set_level(srv.cfg.log_level);
+    if (effects_init(&(struct effect_env){.assets_dir = srv.cfg.assets_dir}, &err)) {
+        fprintf(stderr, "fxstreamd: %s\n", err.message);
+        config_free(&srv.cfg);
+        return 2;
+    }
     int rc = main_serve(&srv, &err);
     if (rc) fprintf(stderr, "fxstreamd: %s\n", err.message);
     config_free(&srv.cfg);

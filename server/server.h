@@ -36,6 +36,7 @@ struct config {
     char state_dir[PATH_MAX];
     char device[64];
     char web_root[PATH_MAX];
+    char assets_dir[PATH_MAX]; /* handed to the effects at start (effect_env) */
     int log_level;
     bool pause_idle;
     struct limits limits;

@@ -500,6 +500,9 @@ static int eye_step(void *self, double sim_time, double dt, effect_emit_fn emit,
 /* Cross-parameter rules: gap-free lens coverage (digest §2.1 [D]: the union of the
  * spheres covers the plane at depth r only if r >= the lattice's covering radius), a
  * ring with inner <= outer, and an OBJ model that loads. */
+/* The assets directory's OBJ files become choices of `model` (eye_model.h). */
+static int eye_init(const struct effect_env *env, struct fx_err *err) { return eye_models_set_dir(env->assets_dir, err); }
+
 static int eye_check(const cJSON *p, struct fx_err *err)
 {
     int hex = !strcmp(params_str(p, "lattice"), "hex");
@@ -543,6 +546,7 @@ const struct effect_ops compound_eye_effect = {
                     "\"size\":\"LLUT atlas lut_dirs*(lut_cells+2) square\",\"rate\":\"on change, mode lut\"},"
                     "{\"kind\":2,\"codec\":\"exr\",\"channels\":\"RGBA (half)\",\"size\":\"bake_size square\","
                     "\"rate\":\"on change, at most fps, mode bake\"}]",
+    .init = eye_init,
     .check = eye_check,
     .create = eye_create,
     .apply = eye_apply,

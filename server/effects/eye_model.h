@@ -2,7 +2,8 @@
  * meshes generated in code and OBJ files from the configured assets directory.
  *
  * A model is chosen by NAME only, never by a client path: names are [A-Za-z0-9_-]{1,64};
- * the assets directory (config key `assets_dir`) is scanned once at start-up, and the
+ * the assets directory (config key `assets_dir`) is scanned once at start-up (compound_eye's
+ * init, called by effects_init with the daemon's effect_env), and the
  * `model` parameter's choices are the built-in names followed by the stems of the
  * directory's *.obj files. Loading re-checks the name and bounds the file and its
  * counts. A model becomes a UV-space geometry atlas for the bake kernel: per texel the

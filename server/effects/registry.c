@@ -20,6 +20,13 @@ static const struct effect_ops *const registry_effects[] = {
 
 const struct effect_ops *const *effect_all(void) { return registry_effects; }
 
+int effects_init(const struct effect_env *env, struct fx_err *err)
+{
+    for (int i = 0; registry_effects[i]; i++)
+        if (registry_effects[i]->init && registry_effects[i]->init(env, err)) return -1;
+    return 0;
+}
+
 const struct effect_ops *effect_find(const char *name)
 {
     for (int i = 0; registry_effects[i]; i++)
