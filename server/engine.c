@@ -12,6 +12,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "clock.h"
 #include "engine.h"
 #include "log.h"
 
@@ -33,20 +34,6 @@ struct engine_slot {
     double next_due, last_wall, sim_time;
     double rt_wall, rt_sim; /* start of the current real-time factor window */
 };
-
-static double engine_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
-static uint64_t engine_realtime_us(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (uint64_t)ts.tv_sec * 1000000u + (uint64_t)ts.tv_nsec / 1000u;
-}
 
 static void engine_drop_fx(struct engine_slot *sl)
 {
@@ -123,7 +110,7 @@ static int engine_emit(void *ctx, const struct effect_frame *ef)
         .param_rev = c->sl->rev,
         .seq = ++c->sl->seq[ef->kind],
         .sim_time = c->sl->sim_time,
-        .server_time_us = engine_realtime_us(),
+        .server_time_us = clock_wall_us(),
         .codec = ef->codec,
         .count_or_width = ef->count_or_width,
         .height = ef->height,
@@ -194,9 +181,9 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     sl->last_wall = now;
     sl->sim_time += dt;
     struct engine_emit_ctx ctx = {eng, sl, 0};
-    double t0 = engine_now();
+    double t0 = clock_now();
     int rc = s->effect->step(sl->state, sl->sim_time, dt, engine_emit, &ctx, &err);
-    double ms = (engine_now() - t0) * 1e3;
+    double ms = (clock_now() - t0) * 1e3;
     if (rc) {
         engine_step_failed(eng, sl, &err);
     } else if (sl->fails) {
@@ -252,7 +239,7 @@ static void engine_pause(struct engine_slot *sl, uint64_t rev, uint64_t reset_ge
 /* Steps what is due; returns the time of the next deadline. */
 static double engine_run_due(struct engine *eng)
 {
-    double now = engine_now(), next = now + 1.0;
+    double now = clock_now(), next = now + 1.0;
     for (int i = 0; i < eng->nslots; i++) {
         struct engine_slot *sl = &eng->slots[i];
         struct stream_status st;
@@ -275,7 +262,7 @@ static double engine_run_due(struct engine *eng)
             bool failed = engine_step(eng, sl, now) != 0;
             double period = 1.0 / (fps > 0 ? fps : 1.0);
             sl->next_due += period;
-            now = engine_now();
+            now = clock_now();
             if (sl->next_due < now) sl->next_due = now; /* overrun: no catch-up burst */
             if (failed) engine_pause(sl, rev, reset_gen, now);
         }

@@ -11,6 +11,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "clock.h"
 #include "config.h"
 #include "effect.h"
 #include "log.h"
@@ -113,9 +114,7 @@ static void main_signals(void)
 
 static int main_serve(struct server *srv, struct fx_err *err)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    srv->start_time = (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+    srv->start_time = clock_now();
     if (main_prepare_state_dir(srv->cfg.state_dir, err)) return -1;
     if (ocl_open(&srv->ocl, srv->cfg.device, err)) return -1;
     log_info("OpenCL device: %s (%s)", ocl_device_name(srv->ocl), ocl_platform_name(srv->ocl));

@@ -6,15 +6,14 @@
 #include <string.h>
 #include <time.h>
 
+#include "clock.h"
 #include "metrics.h"
 #include "ocl.h"
 #include "session.h"
 
 static double metrics_uptime(const struct server *srv)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9 - srv->start_time;
+    return clock_now() - srv->start_time;
 }
 
 static void metrics_printf(struct fx_buf *out, const char *fmt, ...) __attribute__((format(printf, 2, 3)));

@@ -26,6 +26,7 @@
 
 #include <libwebsockets.h>
 
+#include "clock.h"
 #include "log.h"
 #include "metrics.h"
 #include "net.h"
@@ -101,13 +102,6 @@ static void net_pending_add(struct net *net, struct lws *wsi)
 struct net_http {
     struct fx_buf body; /* LWS_PRE bytes, then the response body */
 };
-
-static double net_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 /* ---- HTTP: /healthz and /metrics ---- */
 
@@ -244,7 +238,7 @@ static void net_retry_schedule(struct net *net, double at, double now)
 static void net_retry_later(struct net *net, struct session *ss, double delay)
 {
     struct net_conn *c = net_conn_of(ss);
-    double now = net_now(), at = now + delay;
+    double now = clock_now(), at = now + delay;
     if (c->retry_queued && c->retry_at <= at) return;
     if (!c->retry_queued) {
         c->retry_next = net->retry_head;
@@ -261,7 +255,7 @@ static void net_retry_later(struct net *net, struct session *ss, double delay)
 static void net_retry_fire(lws_sorted_usec_list_t *sul)
 {
     struct net *net = lws_container_of(sul, struct net, retry_sul);
-    double now = net_now(), next = 0;
+    double now = clock_now(), next = 0;
     net->retry_sul_at = 0;
     for (struct net_conn *c = net->retry_head, *nx; c; c = nx) {
         nx = c->retry_next;
@@ -277,7 +271,7 @@ static void net_retry_fire(lws_sorted_usec_list_t *sul)
 
 static bool net_pick_frame(struct net *net, struct session *ss)
 {
-    double now = net_now(), wait = -1;
+    double now = clock_now(), wait = -1;
     for (int n = 0; n < ss->nsubs; n++) {
         int i = (ss->rr + n) % ss->nsubs;
         struct sub *sub = &ss->subs[i];
@@ -316,14 +310,6 @@ static bool net_pick_frame(struct net *net, struct session *ss)
     return false;
 }
 
-/* Wall-clock microseconds, the clock of the frame header's server_time_us. */
-static double net_wall_us(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_REALTIME, &ts);
-    return (double)ts.tv_sec * 1e6 + ts.tv_nsec * 1e-3;
-}
-
 /* Sends the next chunk of the current frame as a fragment of one binary message. */
 static int net_send_chunk(struct session *ss)
 {
@@ -332,7 +318,7 @@ static int net_send_chunk(struct session *ss)
     bool start = ss->cur_off == 0, end = n == left;
     uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE];
     if (!start) memcpy(saved, p - LWS_PRE, LWS_PRE);
-    else hist_observe(&ss->cur_stream->frame_age, net_wall_us() * 1e-6 - (double)f->hdr.server_time_us * 1e-6);
+    else hist_observe(&ss->cur_stream->frame_age, (double)clock_wall_us() * 1e-6 - (double)f->hdr.server_time_us * 1e-6);
     int w = lws_write(net_conn_of(ss)->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
     if (!start) memcpy(p - LWS_PRE, saved, LWS_PRE);
     if (w < (int)n) return -1;
@@ -404,7 +390,7 @@ static int net_writable(struct net *net, struct session *ss)
     } else {
         return 0;
     }
-    net_conn_of(ss)->last_write = net_now();
+    net_conn_of(ss)->last_write = clock_now();
     if (ss->cur || ss->q_head || net_has_frame(ss)) lws_callback_on_writable(net_conn_of(ss)->wsi);
     return 0;
 }
@@ -493,7 +479,7 @@ static void net_on_wake(struct net *net)
         net->stopping = true;
         log_info("shutting down: closing %d connections", net->srv->nsessions);
     }
-    double now = net_now();
+    double now = clock_now();
     for (struct session *ss = net->srv->sessions; ss; ss = ss->next) {
         net_check_stall(net, ss, now);
         session_poll_errors(ss);
@@ -510,7 +496,7 @@ static int net_established(struct net *net, struct session *ss, struct lws *wsi)
         return -1;
     }
     net_conn_of(ss)->wsi = wsi; /* before session_open: its hello wakes the connection */
-    net_conn_of(ss)->last_write = net_now();
+    net_conn_of(ss)->last_write = clock_now();
     session_open(ss, net->srv, net_role(net, wsi, &bad));
     if (bad) {
         log_warn("connection closed: invalid token in its Authorization header");
@@ -638,8 +624,8 @@ void net_run(struct net *net)
     for (;;) {
         if (lws_service(net->ctx, 0) < 0) break;
         if (!net->stopping) continue;
-        if (deadline == 0) deadline = net_now() + NET_SHUTDOWN_GRACE_S;
-        if (net->srv->nsessions == 0 || net_now() > deadline) break;
+        if (deadline == 0) deadline = clock_now() + NET_SHUTDOWN_GRACE_S;
+        if (net->srv->nsessions == 0 || clock_now() > deadline) break;
     }
 }
 

@@ -6,6 +6,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "clock.h"
 #include "effect.h"
 #include "log.h"
 #include "ocl.h"
@@ -15,13 +16,6 @@
 #include "suggest.h"
 
 #define SESSION_MAX_AUTH_FAILURES 5 /* wrong tokens on one connection before it is closed */
-
-static double session_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 void session_send(struct session *ss, cJSON *msg)
 {
@@ -132,7 +126,7 @@ void session_open(struct session *ss, struct server *srv, enum access_role role)
     ss->srv = srv;
     ss->role = role;
     ss->tokens = srv->cfg.limits.max_control_per_sec;
-    ss->last_refill = session_now();
+    ss->last_refill = clock_now();
     ss->next = srv->sessions;
     if (srv->sessions) srv->sessions->prev = ss;
     srv->sessions = ss;
@@ -644,7 +638,7 @@ static int session_json_depth(const char *t, size_t len)
 /* Token bucket: max_control_per_sec per second with an equal burst. */
 static bool session_rate_ok(struct session *ss)
 {
-    double rate = ss->srv->cfg.limits.max_control_per_sec, now = session_now();
+    double rate = ss->srv->cfg.limits.max_control_per_sec, now = clock_now();
     ss->tokens = fmin(rate, ss->tokens + (now - ss->last_refill) * rate);
     ss->last_refill = now;
     if (ss->tokens < 1) return false;
