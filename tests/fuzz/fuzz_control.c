@@ -32,7 +32,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                                      .max_control_per_sec = 1 << 20, .max_queued_messages = 1 << 20, .max_queued_bytes = 1 << 30,
                                      .stall_timeout_s = 10};
     hub_init(&srv.hub, srv.cfg.limits.max_streams);
-    session_open(&ss, &srv, NULL, ACCESS_ADMIN);
+    session_open(&ss, &srv, ACCESS_ADMIN);
     for (size_t i = 0; i < size;) {
         const uint8_t *nl = memchr(data + i, '\n', size - i);
         size_t n = nl ? (size_t)(nl - (data + i)) : size - i;
