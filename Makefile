@@ -15,7 +15,7 @@ EXRLIB  := $(filter -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null
 # build needs regardless lives in FX_CFLAGS/FX_LDLIBS so a command line cannot drop it.
 CFLAGS  ?= -O2 -g
 FX_CFLAGS := -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -pthread \
-             $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Iserver -Iclients/c
+             $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Iserver -Iclients/c -Ikernels
 FX_LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXRLIB) -lm -lpthread
 CC_ALL  = $(CC) $(FX_CFLAGS) $(CFLAGS)
 LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
@@ -38,6 +38,7 @@ FUZZ_CC     := clang
 FUZZ_FLAGS  := -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FUZZ_SECONDS ?= 300
 KERNELS     := $(wildcard kernels/*.cl)
+KERNEL_LAYOUTS := $(wildcard kernels/*_layout.h)
 # The browser client: npm packages from the committed lock file (npm ci), bundled by esbuild
 # into clients/web/dist/ (git-ignored), which fxstreamd serves with the rest of clients/web.
 WEB_SRC     := $(wildcard clients/web/src/*.js) clients/web/fxs_particles.js clients/web/build.mjs
@@ -123,7 +124,7 @@ uninstall:
 clean:
 	rm -rf $(BUILD) clients/web/dist
 
-$(BUILD)/gen/kernels.c: $(KERNELS) tools/embed_kernels.sh
+$(BUILD)/gen/kernels.c: $(KERNELS) $(KERNEL_LAYOUTS) tools/embed_kernels.sh
 	@mkdir -p $(@D)
 	tools/embed_kernels.sh $(KERNELS) > $@
 

@@ -15,43 +15,14 @@
  * divergent walks across work-items, but emits AVX for float8 code. Loops run while any
  * lane still needs them, lanes that are done are masked (select instead of if).
  *
- * The host (server/effects/compound_eye.c, eye_lut.c) mirrors struct eye_optics and the
- * EYE_* constants; tests/ref/eye_ref.c is the independent double-precision reference. */
+ * The host shares struct eye_optics and the EYE_* constants through compound_eye_layout.h;
+ * tests/ref/eye_ref.c is the independent double-precision reference. */
 
-#define EYE_SQUARE 0
-#define EYE_HEX 1
-#define EYE_SEARCH_EXACT 0
-#define EYE_SEARCH_SLICES 1
-#define EYE_SELECT_ALL 0
-#define EYE_SELECT_THESIS4 1
-#define EYE_TIR_REFLECT 0
-#define EYE_TIR_MISS 1
-#define EYE_TIR_ABSORB 2
-
-#define EYE_LANDED 0   /* reached the pigment plane at `land` */
-#define EYE_MISSED 1   /* never reaches the pigment: upward exit (G9), or TIR policy/bounce limit */
-#define EYE_ABSORBED 2 /* TIR under policy "absorb": reads as pigment */
-
+/* The optics record, its enum values and EYE_LANES come from compound_eye_layout.h, which
+ * the build prepends. */
 #define EYE_MAX_BOUNCES 4 /* digest §7 G8: reflect at most 4 times, then count a miss */
 #define EYE_WALK_MAX 96   /* Voronoi cells walked looking for the entry lens */
-#define EYE_SQRT3 1.7320508f
-#define EYE_LANES 8
 #define EYE_BIG 1e30f /* "none yet" (finite: the build may assume finite math) */
-
-/* Mirrors struct eye_optics in server/effects/compound_eye.h: 4-byte fields only. */
-struct eye_optics {
-    float r;        /* lens radius, pitches (digest G12: r_rel) */
-    float n;        /* refractive index of the lens (air outside and below, G10) */
-    float plane;    /* depth of the pigment plane below the surface, pitches */
-    float tile_h;   /* lattice period along b: 1 (square) or sqrt(3) (hex) */
-    int lattice;    /* EYE_SQUARE | EYE_HEX */
-    int max_passes; /* l: neighbour switches allowed (G7) */
-    int search;     /* EYE_SEARCH_EXACT | EYE_SEARCH_SLICES */
-    int slices;     /* slice planes for EYE_SEARCH_SLICES */
-    int select;     /* EYE_SELECT_ALL | EYE_SELECT_THESIS4 */
-    int tir;        /* EYE_TIR_* */
-    int pad0, pad1;
-};
 
 typedef float8 fv;
 typedef int8 iv; /* lane masks: -1 where true (vector comparisons), 0 elsewhere */

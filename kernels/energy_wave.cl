@@ -17,17 +17,10 @@
  *                       smooth. Where S(t*) jumps (the curve's medial set) the span is
  *                       split at the jump, found by bisection.
  * The ew_test_* kernels run the same device functions for the unit tests (lane 0).
- * Buffer layouts below must match server/effects/energy_wave.c. */
+ * The buffer layouts (record strides, camera block) come from energy_wave_layout.h, which the
+ * build prepends and server/effects/energy_wave.c includes. */
 
-#define EW_PT_STRIDE 4  /* pos.xyz, coef */
-#define EW_LN_STRIDE 8  /* pos.xyz, coef, dir.xyz (unit), 0 */
-#define EW_TO_STRIDE 16 /* center.xyz, R, e1.xyz, coef, e2.xyz, 0, axis.xyz (unit), 0 */
-#define EW_CV_STRIDE 16 /* C0.xyz, coef, C1.xyz, |C2|², C2.xyz, C1·C2, |C1|², nw, t_lo, t_hi */
-#define EW_MAX_W 32     /* curve i's weights start at wts[i·EW_MAX_W] */
-#define EW_LANES 8
 #define EW_BIG 1e30f /* "none yet" (finite: the build may assume finite math) */
-/* Camera buffer: billboard centre (0..2), l·r (4..6), l·(H/W)·u (8..10), eye (12..14),
- * nu (15), alpha (16), beta (17), epsilon (18). */
 
 /* Gauss–Legendre rules on [0,1], measured RMS error against the converged reference
  * (bench_energy_accuracy; the bound is 0.5%): curves take 10 points per span (Bézier
@@ -268,7 +261,7 @@ static ew_scene ew_scene_make(__constant const float *cam, __global const float 
                               __global const float *lns, int nl, __global const float *tor, int nt,
                               __global const float *cur, int nc, __global const float *wts)
 {
-    ew_scene sc = {pts, lns, tor, cur, wts, np, nl, nt, nc, cam[16], cam[17], cam[18]};
+    ew_scene sc = {pts, lns, tor, cur, wts, np, nl, nt, nc, cam[EW_CAM_ALPHA], cam[EW_CAM_BETA], cam[EW_CAM_EPS]};
     return sc;
 }
 
@@ -279,10 +272,12 @@ static void ew_texel_rays(__constant const float *cam, int i0, int j, int width,
     fv i = convert_float8(min((int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7), width - 1));
     fv x = (i + 0.5f) / (float)width - 0.5f;
     fv y = (fv)(0.5f - ((float)j + 0.5f) / (float)height);
-    v3 V = v3_make((fv)(cam[12]), (fv)(cam[13]), (fv)(cam[14]));
-    *S = v3_mad(v3_mad(v3_make((fv)(cam[0]), (fv)(cam[1]), (fv)(cam[2])), x, v3_make((fv)(cam[4]), (fv)(cam[5]), (fv)(cam[6]))),
-                y, v3_make((fv)(cam[8]), (fv)(cam[9]), (fv)(cam[10])));
-    *Q = v3_mul(v3_sub(*S, V), (fv)(cam[15] - 1.0f));
+    v3 V = v3_make((fv)(cam[EW_CAM_EYE]), (fv)(cam[EW_CAM_EYE + 1]), (fv)(cam[EW_CAM_EYE + 2]));
+    v3 C = v3_make((fv)(cam[EW_CAM_CENTER]), (fv)(cam[EW_CAM_CENTER + 1]), (fv)(cam[EW_CAM_CENTER + 2]));
+    v3 R = v3_make((fv)(cam[EW_CAM_RIGHT]), (fv)(cam[EW_CAM_RIGHT + 1]), (fv)(cam[EW_CAM_RIGHT + 2]));
+    v3 U = v3_make((fv)(cam[EW_CAM_UP]), (fv)(cam[EW_CAM_UP + 1]), (fv)(cam[EW_CAM_UP + 2]));
+    *S = v3_mad(v3_mad(C, x, R), y, U);
+    *Q = v3_mul(v3_sub(*S, V), (fv)(cam[EW_CAM_NU] - 1.0f));
 }
 
 static void ew_store(__global float *out, fv B, int i0, int j, int width)

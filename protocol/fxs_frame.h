@@ -11,6 +11,8 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "fxs_bytes.h"
+
 #define FXS_MAGIC "FXS1"
 #define FXS_HEADER_BYTES 64u
 
@@ -51,29 +53,6 @@ struct fxs_header {
     uint32_t height;
     uint32_t flags;
 };
-
-static inline void fxs_put_u16(uint8_t *p, uint16_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); }
-static inline void fxs_put_u32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
-}
-static inline void fxs_put_u64(uint8_t *p, uint64_t v)
-{
-    for (int i = 0; i < 8; i++) p[i] = (uint8_t)(v >> (8 * i));
-}
-static inline uint16_t fxs_get_u16(const uint8_t *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
-static inline uint32_t fxs_get_u32(const uint8_t *p)
-{
-    uint32_t v = 0;
-    for (int i = 3; i >= 0; i--) v = (v << 8) | p[i];
-    return v;
-}
-static inline uint64_t fxs_get_u64(const uint8_t *p)
-{
-    uint64_t v = 0;
-    for (int i = 7; i >= 0; i--) v = (v << 8) | p[i];
-    return v;
-}
 
 /* Writes the 64 header bytes at out. */
 static inline void fxs_header_pack(const struct fxs_header *h, uint8_t out[FXS_HEADER_BYTES])

@@ -320,3 +320,11 @@ void params_vec3(const cJSON *obj, const char *name, double out[3])
         out[i] = cJSON_IsNumber(e) ? e->valuedouble : 0.0;
     }
 }
+
+int params_enum(const cJSON *obj, const char *name, const char *const *choices)
+{
+    const char *s = params_str(obj, name);
+    for (int i = 0; choices[i]; i++)
+        if (strcmp(choices[i], s) == 0) return i;
+    return 0;
+}

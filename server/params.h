@@ -71,5 +71,7 @@ double params_num(const cJSON *obj, const char *name);
 bool params_bool(const cJSON *obj, const char *name);
 const char *params_str(const cJSON *obj, const char *name);
 void params_vec3(const cJSON *obj, const char *name, double out[3]);
+/* The index of a PARAM_ENUM value in its NULL-terminated choices (0 when absent). */
+int params_enum(const cJSON *obj, const char *name, const char *const *choices);
 
 #endif

@@ -58,11 +58,9 @@ struct fxc_client {
     struct fxc_stats stats;
 };
 
-static int64_t fxc_now_us(clockid_t clk) { return fxws_now_us(clk); }
-
 static int64_t fxc_deadline(int timeout_ms)
 {
-    return timeout_ms < 0 ? INT64_MAX : fxc_now_us(CLOCK_MONOTONIC) + (int64_t)timeout_ms * 1000;
+    return timeout_ms < 0 ? INT64_MAX : fxws_now_us(CLOCK_MONOTONIC) + (int64_t)timeout_ms * 1000;
 }
 
 /* ---- queue ---------------------------------------------------------------- */
@@ -186,8 +184,8 @@ static int fxc_on_receive(struct fxc_client *c, struct lws *wsi, const void *in,
     int r = fxws_rx_append(&c->rx, wsi, in, len, FXC_MAX_MESSAGE_BYTES, SIZE_MAX, c->err, sizeof c->err);
     if (r == -1) lws_close_reason(wsi, LWS_CLOSE_STATUS_MESSAGE_TOO_LARGE, NULL, 0);
     if (r <= 0) return r < 0 ? -1 : 0;
-    if (c->rx.binary) fxc_on_frame(c, fxc_now_us(CLOCK_REALTIME));
-    else fxc_on_text(c, fxc_now_us(CLOCK_REALTIME));
+    if (c->rx.binary) fxc_on_frame(c, fxws_now_us(CLOCK_REALTIME));
+    else fxc_on_text(c, fxws_now_us(CLOCK_REALTIME));
     return 0;
 }
 
@@ -286,7 +284,7 @@ typedef int (*fxc_cond)(const struct fxc_client *c);
 static int fxc_pump(struct fxc_client *c, int64_t deadline, fxc_cond cond)
 {
     for (;;) {
-        int64_t now = fxc_now_us(CLOCK_MONOTONIC);
+        int64_t now = fxws_now_us(CLOCK_MONOTONIC);
         if (cond(c)) return 1;
         if (c->state == FXC_CLOSED) return -1;
         if (now >= deadline) return 0;

@@ -20,7 +20,7 @@
 #include "fxclient.h"
 #include "fxctl_print.h"
 #include "fxs_particles.h"
-#include "lutpack.h"
+#include "fxs_lut.h"
 #include "png.h"
 #include "suggest.h"
 
@@ -448,12 +448,12 @@ static int fxctl_decode_particles(const struct fxc_msg *m, struct fxs_particles 
 static int fxctl_write_lut(const char *base, const struct fxc_msg *m)
 {
     char msg[160] = "", path[4300];
-    struct lutpack_product e;
+    struct fxs_lut_product e;
     const uint8_t *p = m->payload;
     size_t len = m->header.payload_bytes;
-    int count = lutpack_entry(p, len, 0, &e, msg, sizeof msg);
+    int count = fxs_lut_entry(p, len, 0, &e, msg, sizeof msg);
     for (int i = 0; i < count && !msg[0]; i++) {
-        uint8_t *px = lutpack_entry(p, len, i, &e, msg, sizeof msg) < 0 ? NULL : lutpack_texels(p, len, &e, msg, sizeof msg);
+        uint8_t *px = fxs_lut_entry(p, len, i, &e, msg, sizeof msg) < 0 ? NULL : fxs_lut_texels(p, len, &e, msg, sizeof msg);
         if (!px) break;
         snprintf(path, sizeof path, "%s-%s.png", base, e.name);
         if (png_write_rgba8(path, px, e.width, e.height)) snprintf(msg, sizeof msg, "cannot write %.100s: %.40s", path, strerror(errno));

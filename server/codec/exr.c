@@ -21,14 +21,6 @@ const char *const exr_codec_names[] = {
     "none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", NULL,
 };
 
-int exr_codec_parse(const char *name)
-{
-    if (!name) return -1;
-    for (int i = 0; exr_codec_names[i]; i++)
-        if (strcmp(name, exr_codec_names[i]) == 0) return i;
-    return -1;
-}
-
 /* Where OpenEXRCore's writes land: out, starting at byte base. */
 struct exr_sink {
     struct fx_buf *out;

@@ -34,9 +34,6 @@ enum exr_codec {
  * "pxr24","b44","b44a". Used directly as a PARAM_ENUM choices list. */
 extern const char *const exr_codec_names[];
 
-/* Codec id for a name, or -1. */
-int exr_codec_parse(const char *name);
-
 /* Writes img as an EXR file into out (appending; out may be reused across frames to
  * avoid reallocations: reset out->len to 0 first). Returns 0, or -1 with err. */
 int exr_write_mem(const struct exr_image *img, struct fx_buf *out, struct fx_err *err);

@@ -11,9 +11,9 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "../buf.h"
+#include "../clock.h"
 #include "../codec/exr.h"
 #include "../effect.h"
 #include "../ocl.h"
@@ -21,8 +21,6 @@
 #include "eye_model.h"
 #include "fxs_frame.h"
 
-#define EYE_KERNEL_FILE "compound_eye.cl"
-#define EYE_BUILD_OPTS "-cl-fast-relaxed-math"
 
 enum eye_mode { EYE_MODE_LUT, EYE_MODE_BAKE };
 static const char *const eye_mode_names[] = {"lut", "bake", NULL};
@@ -158,33 +156,26 @@ struct compound_eye {
     struct fx_buf exr;
 };
 
-static int eye_enum(const char *const *names, const char *s)
-{
-    for (int i = 0; names[i]; i++)
-        if (!strcmp(names[i], s)) return i;
-    return 0;
-}
-
 static void eye_rgb(const cJSON *p, const char *name, double out[3]) { params_vec3(p, name, out); }
 
 void eye_optics_from_params(const cJSON *p, struct eye_optics *o)
 {
     memset(o, 0, sizeof *o);
-    o->lattice = eye_enum(eye_lattice_names, params_str(p, "lattice"));
+    o->lattice = params_enum(p, "lattice", eye_lattice_names);
     o->r = (float)params_num(p, "lens_radius");
     o->n = (float)params_num(p, "refractive_index");
     o->plane = (float)(params_num(p, "pigment_depth") * params_num(p, "lens_radius"));
     o->tile_h = o->lattice == EYE_HEX ? (float)EYE_SQRT3 : 1.0f;
     o->max_passes = (int)params_num(p, "max_passes");
-    o->search = eye_enum(eye_search_names, params_str(p, "sphere_search"));
+    o->search = params_enum(p, "sphere_search", eye_search_names);
     o->slices = (int)params_num(p, "slice_steps");
-    o->select = eye_enum(eye_select_names, params_str(p, "neighbor_select"));
-    o->tir = eye_enum(eye_tir_names, params_str(p, "tir_policy"));
+    o->select = params_enum(p, "neighbor_select", eye_select_names);
+    o->tir = params_enum(p, "tir_policy", eye_tir_names);
 }
 
 static void eye_pigment_from_params(const cJSON *p, struct eye_pigment *pg)
 {
-    pg->lattice = eye_enum(eye_lattice_names, params_str(p, "lattice"));
+    pg->lattice = params_enum(p, "lattice", eye_lattice_names);
     pg->dot_radius = params_num(p, "dot_radius");
     pg->softness = params_num(p, "dot_softness");
     pg->ring_inner = params_num(p, "ring_inner");
@@ -241,8 +232,7 @@ int compound_eye_set(struct compound_eye *ce, const cJSON *params, struct fx_err
     ce->params = copy;
     eye_optics_from_params(params, &ce->optics);
     eye_pigment_from_params(params, &ce->pigment);
-    ce->compression = exr_codec_parse(params_str(params, "compression"));
-    if (ce->compression < 0) ce->compression = EXR_CODEC_RLE;
+    ce->compression = params_enum(params, "compression", exr_codec_names);
     return eye_pigment_upload(ce, (int)params_num(params, "pigment_res"), err);
 }
 
@@ -264,7 +254,7 @@ static cl_float4 eye_f4(const double v[3], double w)
 static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
 {
     cl_int rc;
-    cl_program prog = ocl_program(ce->ocl, EYE_KERNEL_FILE, EYE_BUILD_OPTS, err);
+    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, COMPOUND_EYE_CL_OPTS, err);
     if (!prog) return -1;
     ce->k_lut = clCreateKernel(prog, "eye_lut", &rc);
     if (rc == CL_SUCCESS) ce->k_bake = clCreateKernel(prog, "eye_bake", &rc);
@@ -391,7 +381,7 @@ int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
         .ks = (float)params_num(p, "ks"),
         .shininess = (float)params_num(p, "shininess"),
         .density = (float)params_num(p, "density"),
-        .lens_normal = eye_enum(eye_normal_names, params_str(p, "shading_normal")),
+        .lens_normal = params_enum(p, "shading_normal", eye_normal_names),
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
     const struct ocl_arg a[] = {
@@ -413,7 +403,7 @@ struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, stru
         return NULL;
     }
     ce->ocl = ocl;
-    ce->mode = eye_enum(eye_mode_names, params_str(params, "mode"));
+    ce->mode = params_enum(params, "mode", eye_mode_names);
     if (eye_kernels_create(ce, err) || compound_eye_set(ce, params, err) ||
         (ce->mode == EYE_MODE_BAKE && eye_bake_setup(ce, params, err))) {
         compound_eye_free(ce);
@@ -441,18 +431,11 @@ void compound_eye_free(struct compound_eye *ce)
 
 /* ---- effect_ops -------------------------------------------------------------------- */
 
-static double eye_now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
 static int eye_emit_table(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
 {
     const void *data;
     size_t len;
-    double t0 = eye_now_ms();
+    double t0 = clock_now() * 1e3;
     if (compound_eye_table(ce, &data, &len, err)) return -1;
     int W = eye_lut_atlas_width((int)params_num(ce->params, "lut_cells"), (int)params_num(ce->params, "lut_dirs"));
     struct effect_frame fr = {
@@ -462,7 +445,7 @@ static int eye_emit_table(struct compound_eye *ce, effect_emit_fn emit, void *ct
         .height = (uint32_t)W,
         .payload = data,
         .payload_bytes = len,
-        .encode_ms = eye_now_ms() - t0,
+        .encode_ms = clock_now() * 1e3 - t0,
     };
     return emit(ctx, &fr);
 }
@@ -470,7 +453,7 @@ static int eye_emit_table(struct compound_eye *ce, effect_emit_fn emit, void *ct
 static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
 {
     if (compound_eye_bake(ce, ce->rgba, err)) return -1;
-    double t0 = eye_now_ms();
+    double t0 = clock_now() * 1e3;
     struct exr_image im = {ce->size, ce->size, 4, ce->rgba, ce->compression};
     ce->exr.len = 0;
     if (exr_write_mem(&im, &ce->exr, err)) return -1;
@@ -481,7 +464,7 @@ static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx
         .height = (uint32_t)ce->size,
         .payload = ce->exr.data,
         .payload_bytes = ce->exr.len,
-        .encode_ms = eye_now_ms() - t0,
+        .encode_ms = clock_now() * 1e3 - t0,
     };
     return emit(ctx, &fr);
 }
@@ -554,62 +537,3 @@ const struct effect_ops compound_eye_effect = {
     .reset = eye_reset,
     .destroy = eye_destroy,
 };
-
-/* ---- raw traces, for tests and the benchmark ---------------------------------------- */
-
-int eye_trace_rays(struct ocl *ocl, const struct eye_optics *o, int n, const float *p, const float *d,
-                   struct eye_rays_out *out, struct fx_err *err)
-{
-    cl_int rc;
-    cl_program prog = ocl_program(ocl, EYE_KERNEL_FILE, EYE_BUILD_OPTS, err);
-    if (!prog) return -1;
-    cl_kernel k = clCreateKernel(prog, "eye_trace_rays", &rc);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel(eye_trace_rays): %s", ocl_errstr(rc));
-    size_t bytes = (size_t)n * 4 * sizeof(float);
-    float *in_p = calloc((size_t)n, 4 * sizeof(float)), *in_d = calloc((size_t)n, 4 * sizeof(float));
-    float *res = malloc(bytes), *nrm = malloc(bytes);
-    cl_mem m[4] = {0};
-    int ret = -1;
-    if (!in_p || !in_d || !res || !nrm) {
-        fx_fail(err, "internal", "", "out of memory for %d rays", n);
-        goto done;
-    }
-    for (int i = 0; i < n; i++) {
-        memcpy(in_p + 4 * i, p + 2 * i, 2 * sizeof(float));
-        memcpy(in_d + 4 * i, d + 3 * i, 3 * sizeof(float));
-    }
-    cl_context ctx = ocl_context(ocl);
-    m[0] = clCreateBuffer(ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, in_p, &rc);
-    if (rc == CL_SUCCESS) m[1] = clCreateBuffer(ctx, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, bytes, in_d, &rc);
-    if (rc == CL_SUCCESS) m[2] = clCreateBuffer(ctx, CL_MEM_WRITE_ONLY, bytes, NULL, &rc);
-    if (rc == CL_SUCCESS) m[3] = clCreateBuffer(ctx, CL_MEM_WRITE_ONLY, bytes, NULL, &rc);
-    for (int i = 0; i < 4 && rc == CL_SUCCESS; i++) rc = clSetKernelArg(k, (cl_uint)i, sizeof(cl_mem), &m[i]);
-    if (rc == CL_SUCCESS) rc = clSetKernelArg(k, 4, sizeof *o, o);
-    if (rc == CL_SUCCESS) rc = clSetKernelArg(k, 5, sizeof n, &n);
-    size_t global = eye_groups((size_t)n);
-    cl_command_queue q = ocl_queue(ocl);
-    if (rc == CL_SUCCESS) rc = clEnqueueNDRangeKernel(q, k, 1, NULL, &global, NULL, 0, NULL, NULL);
-    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, m[2], CL_TRUE, 0, bytes, res, 0, NULL, NULL);
-    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, m[3], CL_TRUE, 0, bytes, nrm, 0, NULL, NULL);
-    if (rc != CL_SUCCESS) {
-        fx_fail(err, "internal", "", "eye_trace_rays: %s", ocl_errstr(rc));
-        goto done;
-    }
-    for (int i = 0; i < n; i++) {
-        if (out->land) memcpy(out->land + 2 * i, res + 4 * i, 2 * sizeof(float));
-        if (out->status) out->status[i] = (int)res[4 * i + 2];
-        if (out->passes) out->passes[i] = (int)res[4 * i + 3];
-        if (out->normal) memcpy(out->normal + 3 * i, nrm + 4 * i, 3 * sizeof(float));
-        if (out->entered) out->entered[i] = (int)nrm[4 * i + 3];
-    }
-    ret = 0;
-done:
-    for (int i = 0; i < 4; i++)
-        if (m[i]) clReleaseMemObject(m[i]);
-    clReleaseKernel(k);
-    free(in_p);
-    free(in_d);
-    free(res);
-    free(nrm);
-    return ret;
-}

@@ -13,44 +13,18 @@
 
 #include "../err.h"
 #include "../params.h"
+#include "compound_eye_layout.h" /* kernels/: struct eye_optics, EYE_* */
 
 struct ocl;
 
-/* Mirrors struct eye_optics in kernels/compound_eye.cl (4-byte fields only). */
-enum eye_lattice { EYE_SQUARE = 0, EYE_HEX = 1 };
-enum eye_search { EYE_SEARCH_EXACT = 0, EYE_SEARCH_SLICES = 1 };
-enum eye_select { EYE_SELECT_ALL = 0, EYE_SELECT_THESIS4 = 1 };
-enum eye_tir { EYE_TIR_REFLECT = 0, EYE_TIR_MISS = 1, EYE_TIR_ABSORB = 2 };
-enum eye_status { EYE_LANDED = 0, EYE_MISSED = 1, EYE_ABSORBED = 2 };
-
-struct eye_optics {
-    float r;        /* lens radius, pitches */
-    float n;        /* refractive index */
-    float plane;    /* pigment plane depth below the surface, pitches */
-    float tile_h;   /* lattice period along b: 1 (square) or sqrt(3) (hex) */
-    int lattice, max_passes, search, slices, select, tir;
-    int pad0, pad1;
-};
-
-#define EYE_SQRT3 1.7320508075688772
-#define EYE_LANES 8 /* rays per work-item in every kernel (float8 lanes) */
+#define COMPOUND_EYE_CL "compound_eye.cl" /* kernels/, and its build options */
+#define COMPOUND_EYE_CL_OPTS "-cl-fast-relaxed-math"
 
 extern const struct param_def compound_eye_params[];
 extern const struct effect_ops compound_eye_effect;
 
 /* The optics of a validated parameter document. */
 void eye_optics_from_params(const cJSON *params, struct eye_optics *o);
-
-/* Traces n rays on the device: entry points p[2k..2k+1] (pitches), unit directions
- * d[3k..3k+2] (d.z < 0). Fills land[2k..], status[k], passes[k], entered[k] and the
- * entry normal normal[3k..] (any output may be NULL). */
-struct eye_rays_out {
-    float *land;
-    int *status, *passes, *entered;
-    float *normal;
-};
-int eye_trace_rays(struct ocl *ocl, const struct eye_optics *o, int n, const float *p, const float *d,
-                   struct eye_rays_out *out, struct fx_err *err);
 
 /* Effect state, exposed for tests and the benchmark. */
 struct compound_eye;

@@ -10,25 +10,19 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "../buf.h"
 #include "../codec/exr.h"
 #include "../ocl.h"
+#include "../clock.h"
+#include "../vec3.h"
+#include "energy_wave_layout.h" /* kernels/: record strides, camera block */
 #include "fxs_frame.h"
 #include "light_rig.h"
+#include "wave_sources.h"
 
-/* Limits and buffer layouts; the strides must match kernels/energy_wave.cl. */
-#define EW_MAX_SRC 16
-#define EW_MAX_W 32
-#define EW_PT_STRIDE 4
-#define EW_LN_STRIDE 8
-#define EW_TO_STRIDE 16
-#define EW_CV_STRIDE 16
-#define EW_CAM_FLOATS 20
-#define EW_LANES 8 /* texels per work item (float8) */
-#define EW_KERNEL_FILE "energy_wave.cl"
-#define EW_BUILD_OPTS "-cl-fast-relaxed-math"
+/* The device's weight rows hold every weight a curve may have. */
+_Static_assert(WAVE_MAX_W <= EW_MAX_W, "curve weights do not fit the kernel's rows");
 
 enum ew_mode { EW_MODE_SIMPSON, EW_MODE_ADAPTIVE };
 static const char *const ew_mode_names[] = {"simpson", "adaptive", NULL};
@@ -73,7 +67,7 @@ static const struct param_def ew_curve_fields[] = {
     EW_POS("p2", "[1,0,0]", "Bezier control point B2 (curve end)"),
     EW_COEF("8.0"),
     {.name = "W", .type = PARAM_FLOAT_LIST, .def = "[1,1,1,1,1,1,1]", .min = 0, .max = 1, .min_len = 3,
-     .max_len = EW_MAX_W, .unit = "", .doc = "strength sequence along the curve (quadratic B-spline, eq. 3.25)"},
+     .max_len = WAVE_MAX_W, .unit = "", .doc = "strength sequence along the curve (quadratic B-spline, eq. 3.25)"},
     {0},
 };
 
@@ -95,13 +89,13 @@ static const char ew_default_curves[] =
     "\"W\":[1.0,0.8,0.5,1.0,0.6,0.2,1.0]}]";
 
 const struct param_def energy_wave_params[] = {
-    {.name = "points", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_point_fields,
+    {.name = "points", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC, .fields = ew_point_fields,
      .unit = "", .doc = "point sources 1/max(eps,|P-M|)"},
-    {.name = "lines", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_line_fields,
+    {.name = "lines", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC, .fields = ew_line_fields,
      .unit = "", .doc = "infinite line sources"},
-    {.name = "tori", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = EW_MAX_SRC, .fields = ew_torus_fields,
+    {.name = "tori", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC, .fields = ew_torus_fields,
      .unit = "", .doc = "torus sources: 1/distance to the centre circle of radius R"},
-    {.name = "curves", .group = "sources", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = EW_MAX_SRC,
+    {.name = "curves", .group = "sources", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = WAVE_MAX_SRC,
      .fields = ew_curve_fields, .unit = "", .doc = "quadratic Bezier sources with B-spline strength W"},
     {.name = "epsilon", .group = "sources", .type = PARAM_FLOAT, .def = "0.05", .min = 1e-5, .max = 0.5, .unit = "world units",
      .doc = "distance floor of every kernel 1/max(eps, d)"},
@@ -154,7 +148,7 @@ const struct param_def energy_wave_params[] = {
      .doc = "light rig: chords per torus centre circle"},
     {.name = "light_strength", .group = "light rig", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
      .doc = "light rig: mix of the toon colour over the client's own shading (1: full replacement, the thesis)"},
-    {.name = "ramp", .group = "light rig", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = LIGHT_RIG_MAX_BANDS,
+    {.name = "ramp", .group = "light rig", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = FXS_RIG_MAX_BANDS,
      .fields = ew_band_fields, .unit = "",
      .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5); empty: three bands "
             "that follow color_energy C_e (0.4 C_e from -1, 0.2 + 0.7 C_e from -0.3, 0.75 + 0.25 C_e from 0)"},
@@ -210,11 +204,6 @@ static const struct effect_preset energy_wave_presets[] = {
 
 /* ---- state ------------------------------------------------------------------------- */
 
-struct ew_curve_src {
-    double b[3][3], coef;
-    int nw;
-    double w[EW_MAX_W];
-};
 
 struct energy_wave {
     struct ocl *ocl;
@@ -225,47 +214,26 @@ struct energy_wave {
     enum ew_mode mode;
     int width, height, divisions, output, compression, animate;
     double anim_rate, color_e[3], color_b[3];
-    int np, nl, nt, ncurves;
-    struct ew_curve_src curves[EW_MAX_SRC];
+    struct wave_sources src;
     /* packed uploads */
     float cam[EW_CAM_FLOATS];
-    float pts[EW_MAX_SRC * EW_PT_STRIDE], lns[EW_MAX_SRC * EW_LN_STRIDE], tor[EW_MAX_SRC * EW_TO_STRIDE];
-    float cur[EW_MAX_SRC * EW_CV_STRIDE], wts[EW_MAX_SRC * EW_MAX_W];
+    float pts[WAVE_MAX_SRC * EW_PT_STRIDE], lns[WAVE_MAX_SRC * EW_LN_STRIDE], tor[WAVE_MAX_SRC * EW_TO_STRIDE];
+    float cur[WAVE_MAX_SRC * EW_CV_STRIDE], wts[WAVE_MAX_SRC * EW_MAX_W];
     /* reused frame buffers */
     float *img, *rgba;
     struct fx_buf exr;
-    /* light rig: the current document (sources and rig constants) and the payload */
+    /* this frame's curve weights (W times the pulses), shared by the kernel and the rig */
+    double w[WAVE_MAX_SRC][WAVE_MAX_W];
+    /* light rig: its settings, this frame's rig and its payload */
     int light_rig;
-    cJSON *doc;
-    struct light_rig rig;
-    uint8_t rig_payload[LIGHT_RIG_MAX_PAYLOAD];
+    struct light_rig lr;
+    struct fxs_rig rig;
+    uint8_t rig_payload[FXS_RIG_MAX_PAYLOAD];
 };
-
-static double ew_dot(const double a[3], const double b[3]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-
-static void ew_cross(const double a[3], const double b[3], double out[3])
-{
-    double r[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-    memcpy(out, r, sizeof r);
-}
-
-static void ew_normalize(double v[3])
-{
-    double n = sqrt(ew_dot(v, v));
-    if (n > 0)
-        for (int k = 0; k < 3; k++) v[k] /= n;
-}
 
 static void ew_put3(float *dst, const double v[3])
 {
     for (int k = 0; k < 3; k++) dst[k] = (float)v[k];
-}
-
-static int ew_enum_index(const char *const *names, const char *s)
-{
-    for (int i = 0; names[i]; i++)
-        if (strcmp(names[i], s) == 0) return i;
-    return 0;
 }
 
 /* Camera: f = normalize(C − V), r = normalize(f × up), u = r × f; the kernel builds
@@ -277,92 +245,56 @@ static void ew_pack_camera(struct energy_wave *ew, const cJSON *p)
     params_vec3(p, "center", C);
     params_vec3(p, "up", up);
     for (int k = 0; k < 3; k++) f[k] = C[k] - V[k];
-    ew_normalize(f);
-    ew_cross(f, up, r);
-    ew_normalize(r);
-    ew_cross(r, f, u);
+    vec3_normalize(f);
+    vec3_cross(f, up, r);
+    vec3_normalize(r);
+    vec3_cross(r, f, u);
     double l = params_num(p, "size"), lh = l * ew->height / ew->width;
     memset(ew->cam, 0, sizeof ew->cam);
-    ew_put3(ew->cam, C);
+    ew_put3(ew->cam + EW_CAM_CENTER, C);
     for (int k = 0; k < 3; k++) {
-        ew->cam[4 + k] = (float)(l * r[k]);
-        ew->cam[8 + k] = (float)(lh * u[k]);
+        ew->cam[EW_CAM_RIGHT + k] = (float)(l * r[k]);
+        ew->cam[EW_CAM_UP + k] = (float)(lh * u[k]);
     }
-    ew_put3(ew->cam + 12, V);
-    ew->cam[15] = (float)params_num(p, "nu");
-    ew->cam[16] = (float)params_num(p, "alpha");
-    ew->cam[17] = (float)params_num(p, "beta");
-    ew->cam[18] = (float)params_num(p, "epsilon");
+    ew_put3(ew->cam + EW_CAM_EYE, V);
+    ew->cam[EW_CAM_NU] = (float)params_num(p, "nu");
+    ew->cam[EW_CAM_ALPHA] = (float)params_num(p, "alpha");
+    ew->cam[EW_CAM_BETA] = (float)params_num(p, "beta");
+    ew->cam[EW_CAM_EPS] = (float)params_num(p, "epsilon");
 }
 
-static void ew_pack_points_lines(struct energy_wave *ew, const cJSON *p)
+/* Points, lines and tori in the kernel's layouts (the strides above). */
+static void ew_pack_sources(struct energy_wave *ew)
 {
-    const cJSON *it;
-    ew->np = ew->nl = 0;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "points")) {
-        float *dst = ew->pts + EW_PT_STRIDE * ew->np++;
-        double pos[3];
-        params_vec3(it, "pos", pos);
-        ew_put3(dst, pos);
-        dst[3] = (float)params_num(it, "coef");
+    const struct wave_sources *src = &ew->src;
+    for (int i = 0; i < src->np; i++) {
+        float *dst = ew->pts + EW_PT_STRIDE * i;
+        ew_put3(dst, src->point[i].pos);
+        dst[3] = (float)src->point[i].coef;
     }
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "lines")) {
-        float *dst = ew->lns + EW_LN_STRIDE * ew->nl++;
-        double pos[3], dir[3];
-        params_vec3(it, "pos", pos);
-        params_vec3(it, "dir", dir);
-        ew_normalize(dir);
-        ew_put3(dst, pos);
-        dst[3] = (float)params_num(it, "coef");
-        ew_put3(dst + 4, dir);
+    for (int i = 0; i < src->nl; i++) {
+        float *dst = ew->lns + EW_LN_STRIDE * i;
+        ew_put3(dst, src->line[i].pos);
+        dst[3] = (float)src->line[i].coef;
+        ew_put3(dst + 4, src->line[i].dir);
         dst[7] = 0.0f;
     }
-}
-
-/* Torus frame: e3 = axis, e1 any unit normal to it, e2 = e3 × e1 (the kernel is
- * symmetric about the axis, so the choice of e1 does not matter). */
-static void ew_pack_tori(struct energy_wave *ew, const cJSON *p)
-{
-    const cJSON *it;
-    ew->nt = 0;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "tori")) {
-        float *dst = ew->tor + EW_TO_STRIDE * ew->nt++;
-        double c[3], e1[3], e2[3], e3[3];
-        params_vec3(it, "center", c);
-        params_vec3(it, "axis", e3);
-        ew_normalize(e3);
-        double helper[3] = {fabs(e3[0]) < 0.9 ? 1.0 : 0.0, fabs(e3[0]) < 0.9 ? 0.0 : 1.0, 0.0};
-        ew_cross(helper, e3, e1);
-        ew_normalize(e1);
-        ew_cross(e3, e1, e2);
+    for (int i = 0; i < src->nt; i++) {
+        const struct wave_torus *t = &src->torus[i];
+        float *dst = ew->tor + EW_TO_STRIDE * i;
         memset(dst, 0, EW_TO_STRIDE * sizeof *dst);
-        ew_put3(dst, c);
-        dst[3] = (float)params_num(it, "R");
-        ew_put3(dst + 4, e1);
-        dst[7] = (float)params_num(it, "coef");
-        ew_put3(dst + 8, e2);
-        ew_put3(dst + 12, e3);
-    }
-}
-
-static void ew_read_curves(struct energy_wave *ew, const cJSON *p)
-{
-    const cJSON *it;
-    static const char *const names[3] = {"p0", "p1", "p2"};
-    ew->ncurves = 0;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "curves")) {
-        struct ew_curve_src *c = &ew->curves[ew->ncurves++];
-        for (int k = 0; k < 3; k++) params_vec3(it, names[k], c->b[k]);
-        c->coef = params_num(it, "coef");
-        const cJSON *w, *W = cJSON_GetObjectItemCaseSensitive(it, "W");
-        c->nw = 0;
-        cJSON_ArrayForEach(w, W) if (c->nw < EW_MAX_W) c->w[c->nw++] = w->valuedouble;
+        ew_put3(dst, t->c);
+        dst[3] = (float)t->R;
+        ew_put3(dst + 4, t->e1);
+        dst[7] = (float)t->coef;
+        ew_put3(dst + 8, t->e2);
+        ew_put3(dst + 12, t->e3);
     }
 }
 
 /* One curve record: (3.10) C₂ = B₀ − 2B₁ + B₂, C₁ = 2(B₁ − B₀), C₀ = B₀, plus |C₂|²,
  * C₁·C₂, |C₁|², the weight count and the lit range [t_lo, t_hi] (S > 0 only there). */
-static void ew_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi)
+void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi)
 {
     double C0[3], C1[3], C2[3];
     for (int k = 0; k < 3; k++) {
@@ -374,52 +306,26 @@ static void ew_pack_curve(float *dst, const double b[3][3], double coef, int nw,
     ew_put3(dst, C0);
     dst[3] = (float)coef;
     ew_put3(dst + 4, C1);
-    dst[7] = (float)ew_dot(C2, C2);
+    dst[7] = (float)vec3_dot(C2, C2);
     ew_put3(dst + 8, C2);
-    dst[11] = (float)ew_dot(C1, C2);
-    dst[12] = (float)ew_dot(C1, C1);
+    dst[11] = (float)vec3_dot(C1, C2);
+    dst[12] = (float)vec3_dot(C1, C1);
     dst[13] = (float)nw;
     dst[14] = (float)t_lo;
     dst[15] = (float)t_hi;
 }
 
-void energy_wave_anim_weights(double frame, int n, double *w)
-{
-    for (int i = 0; i < n; i++) {
-        double th = (frame - 7.0 * i) * M_PI / 25.0;
-        if (th < 0.0 || th > 2.0 * M_PI) th = 0.0;
-        double v = (-cos(th) + 0.8) / 1.5;
-        w[i] = v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v);
-    }
-}
-
-double energy_wave_anim_period(int n) { return 7.0 * n + 10.0; }
-
-void energy_wave_loop_weights(double frame, int n, double *w)
-{
-    double period = energy_wave_anim_period(n), f = fmod(frame, period), one[EW_MAX_W];
-    if (f < 0) f += period;
-    for (int i = 0; i < n; i++) w[i] = 0;
-    /* the pulses started 0, 1, ... periods ago that have not yet left the curve (7(n-1) + 50) */
-    for (double age = f; age <= 7.0 * (n - 1) + 50.0; age += period) {
-        energy_wave_anim_weights(age, n, one);
-        for (int i = 0; i < n; i++) w[i] = fmin(1.0, w[i] + one[i]);
-    }
-}
-
 /* Packs the curves with their (animated) weights; curves whose strength is zero
  * everywhere are left out, so the pulse costs nothing where it is not. Returns count. */
-static int ew_pack_curves(struct energy_wave *ew, double sim_time)
+static int ew_pack_curves(struct energy_wave *ew)
 {
     int nc = 0;
-    for (int i = 0; i < ew->ncurves; i++) {
-        const struct ew_curve_src *c = &ew->curves[i];
-        double anim[EW_MAX_W];
+    for (int i = 0; i < ew->src.nc; i++) {
+        const struct wave_curve *c = &ew->src.curve[i];
         int first = -1, last = -1;
-        if (ew->animate) energy_wave_loop_weights(sim_time * ew->anim_rate, c->nw, anim);
         float *w = ew->wts + nc * EW_MAX_W;
         for (int k = 0; k < c->nw; k++) {
-            w[k] = (float)(c->w[k] * (ew->animate ? anim[k] : 1.0));
+            w[k] = (float)ew->w[i][k];
             if (w[k] > 0.0f) {
                 if (first < 0) first = k;
                 last = k;
@@ -428,7 +334,7 @@ static int ew_pack_curves(struct energy_wave *ew, double sim_time)
         if (first < 0 || c->coef == 0.0) continue;
         /* N_i² is supported on [u_i, u_{i+3}] with u_i = clamp((i−2)/(nw−2), 0, 1) */
         double lo = (first - 2.0) / (c->nw - 2.0), hi = (last + 1.0) / (c->nw - 2.0);
-        ew_pack_curve(ew->cur + nc * EW_CV_STRIDE, c->b, c->coef, c->nw, lo < 0 ? 0 : lo, hi > 1 ? 1 : hi);
+        energy_wave_pack_curve(ew->cur + nc * EW_CV_STRIDE, c->b, c->coef, c->nw, lo < 0 ? 0 : lo, hi > 1 ? 1 : hi);
         nc++;
     }
     return nc;
@@ -447,7 +353,7 @@ static cl_mem ew_buffer(struct energy_wave *ew, cl_mem_flags flags, size_t bytes
 static int ew_kernels_create(struct energy_wave *ew, struct fx_err *err)
 {
     cl_int rc;
-    cl_program prog = ocl_program(ew->ocl, EW_KERNEL_FILE, EW_BUILD_OPTS, err);
+    cl_program prog = ocl_program(ew->ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, err);
     if (!prog) return -1;
     ew->k_simpson = clCreateKernel(prog, "ew_render_simpson", &rc);
     if (rc == CL_SUCCESS) ew->k_adaptive = clCreateKernel(prog, "ew_render_adaptive", &rc);
@@ -458,7 +364,7 @@ static int ew_kernels_create(struct energy_wave *ew, struct fx_err *err)
     if (!(ew->d_lns = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->lns, err))) return -1;
     if (!(ew->d_tor = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->tor, err))) return -1;
     if (!(ew->d_cur = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cur, err))) return -1;
-    if (!(ew->d_wts = ew_buffer(ew, CL_MEM_READ_ONLY, EW_MAX_SRC * EW_MAX_W * f, err))) return -1;
+    if (!(ew->d_wts = ew_buffer(ew, CL_MEM_READ_ONLY, WAVE_MAX_SRC * EW_MAX_W * f, err))) return -1;
     return 0;
 }
 
@@ -484,26 +390,19 @@ static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
 
 int energy_wave_set(struct energy_wave *ew, const cJSON *params, struct fx_err *err)
 {
-    ew->mode = (enum ew_mode)ew_enum_index(ew_mode_names, params_str(params, "mode"));
+    ew->mode = (enum ew_mode)params_enum(params, "mode", ew_mode_names);
     ew->width = (int)params_num(params, "width");
     ew->height = (int)params_num(params, "height");
     ew->divisions = (int)params_num(params, "divisions");
-    ew->output = ew_enum_index(ew_output_names, params_str(params, "output"));
-    ew->compression = exr_codec_parse(params_str(params, "compression"));
-    if (ew->compression < 0) ew->compression = EXR_CODEC_ZIP;
-    ew->animate = params_bool(params, "animate");
-    ew->anim_rate = params_num(params, "anim_rate");
+    ew->output = params_enum(params, "output", ew_output_names);
+    ew->compression = params_enum(params, "compression", exr_codec_names);
     params_vec3(params, "color_energy", ew->color_e);
     params_vec3(params, "color_background", ew->color_b);
     ew_pack_camera(ew, params);
-    ew_pack_points_lines(ew, params);
-    ew_pack_tori(ew, params);
-    ew_read_curves(ew, params);
+    wave_sources_read(params, &ew->src);
+    ew_pack_sources(ew);
     ew->light_rig = params_bool(params, "light_rig");
-    cJSON *doc = cJSON_Duplicate(params, 1);
-    if (!doc) return fx_fail(err, "internal", "", "out of memory");
-    cJSON_Delete(ew->doc);
-    ew->doc = doc;
+    light_rig_read(params, &ew->lr);
     return ew_frame_buffers(ew, err);
 }
 
@@ -534,7 +433,6 @@ void energy_wave_free(struct energy_wave *ew)
     free(ew->img);
     free(ew->rgba);
     fx_buf_free(&ew->exr);
-    cJSON_Delete(ew->doc);
     free(ew);
 }
 
@@ -544,9 +442,9 @@ static int ew_upload(struct energy_wave *ew, int nc, struct fx_err *err)
     const size_t f = sizeof(float);
     struct { cl_mem m; const void *src; size_t bytes; } up[] = {
         {ew->d_cam, ew->cam, sizeof ew->cam},
-        {ew->d_pts, ew->pts, (size_t)ew->np * EW_PT_STRIDE * f},
-        {ew->d_lns, ew->lns, (size_t)ew->nl * EW_LN_STRIDE * f},
-        {ew->d_tor, ew->tor, (size_t)ew->nt * EW_TO_STRIDE * f},
+        {ew->d_pts, ew->pts, (size_t)ew->src.np * EW_PT_STRIDE * f},
+        {ew->d_lns, ew->lns, (size_t)ew->src.nl * EW_LN_STRIDE * f},
+        {ew->d_tor, ew->tor, (size_t)ew->src.nt * EW_TO_STRIDE * f},
         {ew->d_cur, ew->cur, (size_t)nc * EW_CV_STRIDE * f},
         {ew->d_wts, ew->wts, (size_t)nc * EW_MAX_W * f},
     };
@@ -563,8 +461,8 @@ static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, in
 {
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ew->d_out}, {sizeof(cl_mem), &ew->d_cam}, {sizeof(cl_mem), &ew->d_pts},
-        {sizeof(int), &ew->np},       {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->nl},
-        {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->nt},       {sizeof(cl_mem), &ew->d_cur},
+        {sizeof(int), &ew->src.np},   {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->src.nl},
+        {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->src.nt},   {sizeof(cl_mem), &ew->d_cur},
         {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_wts}, {sizeof(int), &ew->width},
         {sizeof(int), &ew->height},   {sizeof(int), &ew->divisions}};
     return ocl_set_args(k, name, a, k == ew->k_simpson ? 14 : 13, err);
@@ -572,7 +470,8 @@ static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, in
 
 int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err)
 {
-    int nc = ew_pack_curves(ew, sim_time);
+    wave_sources_weights(&ew->src, sim_time, ew->w);
+    int nc = ew_pack_curves(ew);
     if (ew_upload(ew, nc, err)) return -1;
     cl_kernel k = ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
     const char *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
@@ -590,13 +489,6 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
 }
 
 /* ---- effect_ops ---------------------------------------------------------------------- */
-
-static double ew_now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 static float ew_clamp01(double v) { return (float)(v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v)); }
 
@@ -625,7 +517,7 @@ static int ew_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
     size_t texels = (size_t)ew->width * (size_t)ew->height;
     (void)dt;
     if (energy_wave_render(ew, sim_time, ew->img, err) || ew_check_finite(ew->img, texels, err)) return -1;
-    double t0 = ew_now_ms();
+    double t0 = clock_now() * 1e3;
     struct exr_image im = {ew->width, ew->height, 1, ew->img, ew->compression};
     if (ew->output == 1) {
         ew_colour_map(ew, texels);
@@ -641,23 +533,23 @@ static int ew_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         .height = (uint32_t)ew->height,
         .payload = ew->exr.data,
         .payload_bytes = ew->exr.len,
-        .encode_ms = ew_now_ms() - t0,
+        .encode_ms = clock_now() * 1e3 - t0,
     };
     if (emit(ctx, &fr)) return -1;
     if (!ew->light_rig) return 0;
     /* The light rig at the same time as the texture. The constants (~150 bytes with 3 bands)
      * go into every frame: the hub keeps only the newest frame per kind for late
      * subscribers, and they cost far less than the texture (PROTOCOL.md §7.7). */
-    t0 = ew_now_ms();
-    light_rig_from_params(ew->doc, sim_time, &ew->rig);
+    t0 = clock_now() * 1e3;
+    light_rig_build(&ew->lr, &ew->src, ew->w, &ew->rig);
     struct effect_frame rf = {
         .kind = FXS_KIND_LIGHT_RIG,
         .codec = FXS_CODEC_LIGHT_RIG,
         .count_or_width = (uint32_t)ew->rig.n_seg,
         .payload = ew->rig_payload,
-        .payload_bytes = light_rig_encode(&ew->rig, 1, ew->rig_payload),
+        .payload_bytes = fxs_rig_encode(&ew->rig, 1, ew->rig_payload),
     };
-    rf.encode_ms = ew_now_ms() - t0;
+    rf.encode_ms = clock_now() * 1e3 - t0;
     return emit(ctx, &rf);
 }
 
@@ -669,26 +561,12 @@ static int ew_check(const cJSON *params, struct fx_err *err)
     params_vec3(params, "center", C);
     params_vec3(params, "up", up);
     for (int k = 0; k < 3; k++) f[k] = C[k] - V[k];
-    double ff = ew_dot(f, f);
+    double ff = vec3_dot(f, f);
     if (ff < 1e-12) return fx_fail(err, "bad_param", "center", "center must differ from eye");
-    ew_cross(f, up, x);
-    if (ew_dot(x, x) <= 1e-10 * ff * ew_dot(up, up))
+    vec3_cross(f, up, x);
+    if (vec3_dot(x, x) <= 1e-10 * ff * vec3_dot(up, up))
         return fx_fail(err, "bad_param", "up", "up must not be parallel to the eye->center direction");
-    /* light rig: the ramp's bands ascend strictly in m_min */
-    const cJSON *it;
-    int i = 0;
-    double prev = -INFINITY;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(params, "ramp")) {
-        double m = params_num(it, "m_min");
-        if (m <= prev) {
-            char path[32];
-            snprintf(path, sizeof path, "ramp[%d].m_min", i);
-            return fx_fail(err, "bad_param", path, "ramp bands must ascend: m_min %g after %g", m, prev);
-        }
-        prev = m;
-        i++;
-    }
-    return 0;
+    return light_rig_check(params, err);
 }
 
 static void *ew_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
@@ -730,90 +608,3 @@ const struct effect_ops energy_wave_effect = {
     .reset = ew_reset,
     .destroy = ew_destroy,
 };
-
-/* ---- device helpers for the tests ------------------------------------------------------ */
-
-/* Runs kernel `name` over n items with the given buffers (in: host data copied in;
- * out: read back into host pointers). Scalars are passed as (int) args at their index. */
-struct ew_arg {
-    const void *in;  /* host data to upload, or NULL */
-    void *out;       /* host destination to read back, or NULL */
-    size_t bytes;    /* buffer size; 0 for an int scalar */
-    int scalar;
-};
-
-static int ew_run_test_kernel(struct ocl *ocl, const char *name, int n, struct ew_arg *args, int nargs,
-                              struct fx_err *err)
-{
-    cl_int rc;
-    cl_mem mems[8] = {0};
-    int ret = -1;
-    cl_program prog = ocl_program(ocl, EW_KERNEL_FILE, EW_BUILD_OPTS, err);
-    if (!prog) return -1;
-    cl_kernel k = clCreateKernel(prog, name, &rc);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel(%s): %s", name, ocl_errstr(rc));
-    for (int i = 0; i < nargs; i++) {
-        if (!args[i].bytes) {
-            rc = clSetKernelArg(k, i, sizeof(int), &args[i].scalar);
-        } else {
-            cl_mem_flags fl = CL_MEM_READ_WRITE | (args[i].in ? CL_MEM_COPY_HOST_PTR : 0);
-            mems[i] = clCreateBuffer(ocl_context(ocl), fl, args[i].bytes, (void *)args[i].in, &rc);
-            if (rc == CL_SUCCESS) rc = clSetKernelArg(k, i, sizeof(cl_mem), &mems[i]);
-        }
-        if (rc != CL_SUCCESS) goto done;
-    }
-    size_t global = (size_t)n;
-    rc = clEnqueueNDRangeKernel(ocl_queue(ocl), k, 1, NULL, &global, NULL, 0, NULL, NULL);
-    for (int i = 0; i < nargs && rc == CL_SUCCESS; i++)
-        if (args[i].out)
-            rc = clEnqueueReadBuffer(ocl_queue(ocl), mems[i], CL_TRUE, 0, args[i].bytes, args[i].out, 0, NULL, NULL);
-    ret = rc == CL_SUCCESS ? 0 : -1;
-done:
-    if (rc != CL_SUCCESS) fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
-    for (int i = 0; i < nargs; i++)
-        if (mems[i]) clReleaseMemObject(mems[i]);
-    clReleaseKernel(k);
-    return ret;
-}
-
-int energy_wave_dev_cubic(struct ocl *ocl, int n, const float *abc, float *roots, int *nroots, struct fx_err *err)
-{
-    size_t f = sizeof(float);
-    struct ew_arg args[] = {
-        {abc, NULL, 3 * (size_t)n * f, 0},
-        {NULL, roots, 3 * (size_t)n * f, 0},
-        {NULL, nroots, (size_t)n * sizeof(int), 0},
-    };
-    return ew_run_test_kernel(ocl, "ew_test_cubic", n, args, 3, err);
-}
-
-int energy_wave_dev_bspline(struct ocl *ocl, int nw, const float *w, int n, const float *t, float *out,
-                            struct fx_err *err)
-{
-    size_t f = sizeof(float);
-    if (nw < 3 || nw > EW_MAX_W) return fx_fail(err, "bad_param", "W", "need 3..%d weights, got %d", EW_MAX_W, nw);
-    struct ew_arg args[] = {
-        {w, NULL, (size_t)nw * f, 0},
-        {NULL, NULL, 0, nw},
-        {t, NULL, (size_t)n * f, 0},
-        {NULL, out, (size_t)n * f, 0},
-    };
-    return ew_run_test_kernel(ocl, "ew_test_bspline", n, args, 4, err);
-}
-
-int energy_wave_dev_curve_nearest(struct ocl *ocl, const float b[9], int n, const float *p, float *dist,
-                                  float *tparam, struct fx_err *err)
-{
-    size_t f = sizeof(float);
-    double bd[3][3];
-    float rec[EW_CV_STRIDE];
-    for (int k = 0; k < 9; k++) bd[k / 3][k % 3] = b[k];
-    ew_pack_curve(rec, bd, 1.0, 3, 0.0, 1.0);
-    struct ew_arg args[] = {
-        {rec, NULL, sizeof rec, 0},
-        {p, NULL, 3 * (size_t)n * f, 0},
-        {NULL, dist, (size_t)n * f, 0},
-        {NULL, tparam, (size_t)n * f, 0},
-    };
-    return ew_run_test_kernel(ocl, "ew_test_curve_nearest", n, args, 4, err);
-}

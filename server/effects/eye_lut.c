@@ -1,14 +1,14 @@
-/* eye_lut.c — see eye_lut.h. The byte layout written here is PROTOCOL.md §7.6; the
- * integration test (tests/integration/test_eye_stream.py) decodes it independently. */
+/* eye_lut.c — see eye_lut.h. The products' layouts are PROTOCOL.md §7.6; the container's
+ * bytes are protocol/fxs_lut.c's; the integration test (tests/integration/test_eye_stream.py)
+ * decodes them independently. */
 #include "eye_lut.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <zstd.h>
 
-#include "compound_eye.h"
-#include "fxs_frame.h"
+#include "compound_eye_layout.h" /* kernels/: EYE_HEX, EYE_SQRT3 */
+#include "fxs_lut.h"
 
 #define EYE_LUT_ZSTD_LEVEL 1 /* level 1: ~5x faster than 3 and within a few % of its size here */
 
@@ -108,92 +108,37 @@ void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
     }
 }
 
-/* ---- the container (PROTOCOL.md §7.6) ------------------------------------------- */
-
-struct eye_product {
-    const char *name;
-    int w, h, tile, tiles, inner;
-    const uint8_t *rgba;
-};
-
-static void eye_put_f32(uint8_t *p, float v)
-{
-    uint32_t u;
-    memcpy(&u, &v, 4);
-    fxs_put_u32(p, u);
-}
-
-static void eye_lut_header(const struct eye_lut_table *t, int count, uint8_t h[EYE_LUT_HEADER_BYTES])
-{
-    memset(h, 0, EYE_LUT_HEADER_BYTES);
-    memcpy(h, EYE_LUT_MAGIC, 4);
-    fxs_put_u16(h + 4, 1);
-    fxs_put_u16(h + 6, EYE_LUT_HEADER_BYTES);
-    fxs_put_u16(h + 8, (uint16_t)count);
-    fxs_put_u16(h + 10, EYE_LUT_ENTRY_BYTES);
-    fxs_put_u32(h + 12, (uint32_t)t->lattice);
-    eye_put_f32(h + 16, t->tile_h);
-    eye_put_f32(h + 20, t->lens_radius);
-    eye_put_f32(h + 24, t->refractive_index);
-    eye_put_f32(h + 28, t->pigment_depth);
-    fxs_put_u32(h + 32, (uint32_t)t->max_passes);
-    fxs_put_u32(h + 36, (uint32_t)t->cells);
-    fxs_put_u32(h + 40, (uint32_t)t->dirs);
-    fxs_put_u32(h + 44, EYE_LUT_GUTTER);
-    fxs_put_u32(h + 48, (uint32_t)t->supersample);
-}
-
-/* Appends one zstd-compressed product at out->len; fills its directory entry. */
-static int eye_lut_add(struct fx_buf *out, const struct eye_product *p, int index, struct fx_err *err)
-{
-    size_t raw = (size_t)p->w * p->h * 4, bound = ZSTD_compressBound(raw);
-    if (fx_buf_reserve(out, bound + 8)) return fx_fail(err, "internal", "", "out of memory packing %s", p->name);
-    while (out->len % 8) out->data[out->len++] = 0; /* products start 8-aligned */
-    uint8_t *entry = out->data + EYE_LUT_HEADER_BYTES + (size_t)index * EYE_LUT_ENTRY_BYTES;
-    size_t n = ZSTD_compress(out->data + out->len, bound, p->rgba, raw, EYE_LUT_ZSTD_LEVEL);
-    if (ZSTD_isError(n)) return fx_fail(err, "internal", "", "zstd (%s): %s", p->name, ZSTD_getErrorName(n));
-    memset(entry, 0, EYE_LUT_ENTRY_BYTES);
-    memcpy(entry, p->name, 4);
-    fxs_put_u32(entry + 4, EYE_LUT_FORMAT_RGBA8);
-    fxs_put_u32(entry + 8, EYE_LUT_CODEC_ZSTD);
-    fxs_put_u32(entry + 12, (uint32_t)p->w);
-    fxs_put_u32(entry + 16, (uint32_t)p->h);
-    fxs_put_u32(entry + 20, (uint32_t)out->len);
-    fxs_put_u32(entry + 24, (uint32_t)n);
-    fxs_put_u32(entry + 28, (uint32_t)raw);
-    fxs_put_u32(entry + 32, (uint32_t)p->tile);
-    fxs_put_u32(entry + 36, (uint32_t)p->tiles);
-    fxs_put_u32(entry + 40, (uint32_t)p->tiles);
-    fxs_put_u32(entry + 44, (uint32_t)p->inner);
-    out->len += n;
-    return 0;
-}
+/* ---- the container (protocol/fxs_lut.h, PROTOCOL.md §7.6) ------------------------ */
 
 int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err)
 {
-    const int W = eye_lut_atlas_width(t->cells, t->dirs), count = 3;
-    size_t pig_bytes = (size_t)t->pw * t->ph * 4, atlas_bytes = (size_t)W * W * 4;
-    uint8_t *pig = malloc(pig_bytes), *atlas = malloc(atlas_bytes), *macro = malloc((size_t)t->dirs * t->dirs * 4);
+    const int W = eye_lut_atlas_width(t->cells, t->dirs);
+    size_t pig_bytes = (size_t)t->pw * t->ph * 4;
+    uint8_t *pig = malloc(pig_bytes), *atlas = malloc((size_t)W * W * 4), *macro = malloc((size_t)t->dirs * t->dirs * 4);
     int rc = -1;
+    struct fxs_lut_product products[3] = {
+        {.name = "PIGM", .width = (uint32_t)t->pw, .height = (uint32_t)t->ph, .tiles_x = 1, .tiles_y = 1, .rgba = pig},
+        {.name = "LLUT", .width = (uint32_t)W, .height = (uint32_t)W, .tile = (uint32_t)(t->cells + 2 * EYE_LUT_GUTTER),
+         .tiles_x = (uint32_t)t->dirs, .tiles_y = (uint32_t)t->dirs, .inner = (uint32_t)t->cells, .rgba = atlas},
+        {.name = "LMAC", .width = (uint32_t)t->dirs, .height = (uint32_t)t->dirs, .tile = 1, .tiles_x = (uint32_t)t->dirs,
+         .tiles_y = (uint32_t)t->dirs, .inner = 1, .rgba = macro},
+    };
+    const struct fxs_lut_info info = {
+        (uint32_t)t->lattice, t->tile_h,          t->lens_radius,     t->refractive_index,         t->pigment_depth,
+        (uint32_t)t->max_passes, (uint32_t)t->cells, (uint32_t)t->dirs, EYE_LUT_GUTTER, (uint32_t)t->supersample,
+    };
+    size_t cap = fxs_lut_bound(products, 3);
     out->len = 0;
-    size_t dir_bytes = EYE_LUT_HEADER_BYTES + (size_t)count * EYE_LUT_ENTRY_BYTES;
-    if (!pig || !atlas || !macro || fx_buf_reserve(out, dir_bytes)) {
+    if (!pig || !atlas || !macro || fx_buf_reserve(out, cap)) {
         fx_fail(err, "internal", "", "out of memory for a %dx%d lens table", W, W);
         goto done;
     }
     for (size_t i = 0; i < pig_bytes; i++) pig[i] = eye_u8(t->pigment[i]);
     eye_lut_atlas(t, atlas);
     eye_lut_macro(t, macro);
-    const struct eye_product products[3] = {
-        {"PIGM", t->pw, t->ph, 0, 1, 0, pig},
-        {"LLUT", W, W, t->cells + 2 * EYE_LUT_GUTTER, t->dirs, t->cells, atlas},
-        {"LMAC", t->dirs, t->dirs, 1, t->dirs, 1, macro},
-    };
-    eye_lut_header(t, count, out->data);
-    out->len = dir_bytes;
-    for (int i = 0; i < count; i++)
-        if (eye_lut_add(out, &products[i], i, err)) goto done;
-    rc = 0;
+    char msg[128];
+    out->len = fxs_lut_encode(&info, products, 3, EYE_LUT_ZSTD_LEVEL, out->data, cap, msg, sizeof msg);
+    rc = out->len ? 0 : fx_fail(err, "internal", "", "%s", msg);
 done:
     free(pig);
     free(atlas);

@@ -4,7 +4,7 @@
  * The pigment tile is computed here on the host (it is small and the LUT kernel samples
  * it); the LUT samples come from kernels/compound_eye.cl (eye_lut) and are laid out here
  * into the atlas with gutters; the macro map is their per-direction mean. All three are
- * RGBA8 (linear values, not sRGB), each compressed with zstd, behind one directory. */
+ * RGBA8 (linear values, not sRGB); protocol/fxs_lut.h packs them into one container. */
 #ifndef FX_EYE_LUT_H
 #define FX_EYE_LUT_H
 
@@ -13,18 +13,13 @@
 #include "../buf.h"
 #include "../err.h"
 
-#define EYE_LUT_MAGIC "FXL1"
-#define EYE_LUT_HEADER_BYTES 64
-#define EYE_LUT_ENTRY_BYTES 64
-#define EYE_LUT_GUTTER 1
-#define EYE_LUT_FORMAT_RGBA8 1
-#define EYE_LUT_CODEC_ZSTD 1
+#define EYE_LUT_GUTTER 1 /* texels around each LLUT tile */
 
 /* The pigment pattern (digest G14): a disc per lens with a smoothstep edge, an optional
  * ring and an optional additive central glow; distances in pitches from the nearest
  * lattice point. */
 struct eye_pigment {
-    int lattice; /* enum eye_lattice */
+    int lattice; /* EYE_SQUARE | EYE_HEX */
     double dot_radius, softness, ring_inner, ring_outer, glow_radius;
     double dot[3], base[3], ring[3], glow[3];
 };
@@ -48,7 +43,7 @@ struct eye_lut_table {
     const float *samples;
 };
 
-/* Packs the container into out (reset to empty first). */
+/* Lays out the three products and packs the container into out (reset to empty first). */
 int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err);
 
 /* The LLUT atlas (RGBA8, atlas_w x atlas_w with atlas_w = dirs*(cells+2)) and the LMAC map

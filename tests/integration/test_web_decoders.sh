@@ -4,7 +4,7 @@
 # with the values they must decode to), kind 3 payloads captured by fxctl from a real
 # daemon on a random loopback port, and kind 4 look-up tables of compound_eye streams
 # (square and hex) with the PNGs fxctl wrote from them through the C decoder
-# (clients/c/lutpack.c). Runs web_decoders_check.mjs; its last line is
+# (protocol/fxs_lut.c). Runs web_decoders_check.mjs; its last line is
 # "test_web_decoders: N passed, M failed". Run from the repo root.
 cd "$(dirname "$0")/../.." || exit 1
 summary_fail() { echo "test_web_decoders: $1"; echo "test_web_decoders: 0 passed, 1 failed"; exit 1; }

@@ -4,7 +4,7 @@
 // against the C side's output. argv: VECDIR (rig-N.bin whole frames + rig-N.json expected
 // values from test_light_rig --dump), REALDIR (fxctl --out of a real daemon: energy-SEQ-rig.bin
 // payloads of kind 3 and lines.txt) and EYEDIR (fxctl --out of compound_eye streams eyesq
-// and eyehex: NAME-SEQ.bin kind 4 payloads, NAME-SEQ-PROD.png decoded by clients/c/lutpack.c,
+// and eyehex: NAME-SEQ.bin kind 4 payloads, NAME-SEQ-PROD.png decoded by protocol/fxs_lut.c,
 // lines.txt). Prints "test_web_decoders: N passed, M failed".
 import { readFileSync, existsSync } from 'node:fs';
 import { inflateSync } from 'node:zlib';

@@ -13,8 +13,10 @@
 #include <string.h>
 
 #include "../ref/energy_ref.h"
+#include "../ref/kernel_probe.h"
 #include "check.h"
 #include "effects/energy_wave.h"
+#include "effects/wave_sources.h"
 #include "ocl.h"
 #include "params.h"
 
@@ -36,6 +38,53 @@ static double tek_rand(double lo, double hi)
     tek_rng ^= tek_rng >> 7;
     tek_rng ^= tek_rng << 17;
     return lo + (hi - lo) * ((tek_rng >> 11) * (1.0 / 9007199254740992.0));
+}
+
+/* ---------------------------------------------------------------- device helpers */
+
+/* Cubic x^3 + a x^2 + b x + c = 0 on the device (ew_test_cubic): abc is 3n floats; roots 3n
+ * floats (the real roots ascending, unused slots 0); nroots n ints. */
+static int tek_dev_cubic(int n, const float *abc, float *roots, int *nroots, struct fx_err *err)
+{
+    size_t f = sizeof(float);
+    const struct probe_arg args[] = {
+        {3 * (size_t)n * f, abc, NULL, 0},
+        {3 * (size_t)n * f, NULL, roots, 0},
+        {(size_t)n * sizeof(int), NULL, nroots, 0},
+    };
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_cubic", (size_t)n, args, 3, err);
+}
+
+/* Quadratic B-spline strength S(t) (digest §2.3) of weights w[0..nw-1] at n parameters t. */
+static int tek_dev_bspline(int nw, const float *w, int n, const float *t, float *out, struct fx_err *err)
+{
+    size_t f = sizeof(float);
+    const struct probe_arg args[] = {
+        {(size_t)nw * f, w, NULL, 0},
+        {0, &nw, NULL, sizeof nw},
+        {(size_t)n * f, t, NULL, 0},
+        {(size_t)n * f, NULL, out, 0},
+    };
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_bspline", (size_t)n, args, 4, err);
+}
+
+/* Nearest point of the Bézier b = {B0, B1, B2} (9 floats) to n points p (3n floats): distance
+ * and curve parameter t* in [0,1]. */
+static int tek_dev_curve_nearest(const float b[9], int n, const float *p, float *dist, float *tparam,
+                                 struct fx_err *err)
+{
+    size_t f = sizeof(float);
+    double bd[3][3];
+    float rec[16];
+    for (int k = 0; k < 9; k++) bd[k / 3][k % 3] = b[k];
+    energy_wave_pack_curve(rec, bd, 1.0, 3, 0.0, 1.0);
+    const struct probe_arg args[] = {
+        {sizeof rec, rec, NULL, 0},
+        {3 * (size_t)n * f, p, NULL, 0},
+        {(size_t)n * f, NULL, dist, 0},
+        {(size_t)n * f, NULL, tparam, 0},
+    };
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_curve_nearest", (size_t)n, args, 4, err);
 }
 
 static int tek_is_simpson(const char *mode) { return strcmp(mode, "simpson") == 0; }
@@ -278,8 +327,8 @@ static void test_dev_cubic(void)
     static int nroots[N];
     int n = tek_cubic_inputs(abc, N), bad = 0;
     struct fx_err err = {0};
-    int rc = energy_wave_dev_cubic(tek_ocl, n, abc, roots, nroots, &err);
-    CHECK(rc == 0, "energy_wave_dev_cubic: %s", err.message);
+    int rc = tek_dev_cubic(n, abc, roots, nroots, &err);
+    CHECK(rc == 0, "tek_dev_cubic: %s", err.message);
     if (rc) return;
     for (int k = 0; k < n; k++) {
         double want[3];
@@ -321,8 +370,8 @@ static void test_dev_bspline(void)
         t[nt++] = 1.0f - 1e-7f;
         while (nt < NT) t[nt++] = (float)tek_rand(0, 1);
         struct fx_err err = {0};
-        int rc = energy_wave_dev_bspline(tek_ocl, nw, w, NT, t, out, &err);
-        CHECK(rc == 0, "energy_wave_dev_bspline: %s", err.message);
+        int rc = tek_dev_bspline(nw, w, NT, t, out, &err);
+        CHECK(rc == 0, "tek_dev_bspline: %s", err.message);
         if (rc) return;
         int bad = 0;
         for (int k = 0; k < NT; k++) {
@@ -347,8 +396,8 @@ static int tek_nearest_check(const float bf[9], int n, const float *p, int repor
 {
     static float dist[1024], tp[1024];
     struct fx_err err = {0};
-    if (energy_wave_dev_curve_nearest(tek_ocl, bf, n, p, dist, tp, &err)) {
-        CHECK(0, "energy_wave_dev_curve_nearest: %s", err.message);
+    if (tek_dev_curve_nearest(bf, n, p, dist, tp, &err)) {
+        CHECK(0, "tek_dev_curve_nearest: %s", err.message);
         return n;
     }
     double b[3][3], scale = 0;
@@ -374,13 +423,13 @@ static void test_dev_curve_nearest_vectors(void)
     static const float p[9] = {1, 0.5f, 0, 1, 3, 0, -1, -1, 0}, ps[3] = {0.7f, 1, 0};
     float d[3], t[3];
     struct fx_err err = {0};
-    CHECK(energy_wave_dev_curve_nearest(tek_ocl, b, 3, p, d, t, &err) == 0, "%s", err.message);
+    CHECK(tek_dev_curve_nearest(b, 3, p, d, t, &err) == 0, "%s", err.message);
     static const double L[3] = {0.5, 2.0, 1.4142135623730951}, T[3] = {0.5, 0.5, 0};
     for (int k = 0; k < 3; k++) {
         CHECK_NEAR(d[k], L[k], 1e-5);
         CHECK_NEAR(t[k], T[k], 1e-4);
     }
-    CHECK(energy_wave_dev_curve_nearest(tek_ocl, s, 1, ps, d, t, &err) == 0, "%s", err.message);
+    CHECK(tek_dev_curve_nearest(s, 1, ps, d, t, &err) == 0, "%s", err.message);
     CHECK_NEAR(d[0], 1.0, 1e-5);
     CHECK_NEAR(t[0], 0.35, 1e-5);
 }
@@ -406,14 +455,14 @@ static void test_dev_anim_weights(void)
 {
     for (double f = -5; f <= 100; f += 0.75) {
         double a[9], b[9];
-        energy_wave_anim_weights(f, 9, a);
+        wave_anim_weights(f, 9, a);
         energy_ref_anim_weights(f, 9, b);
         for (int i = 0; i < 9; i++) CHECK(fabs(a[i] - b[i]) <= 1e-12, "frame %g w%d: %.12g vs %.12g", f, i, a[i], b[i]);
     }
     for (int n = 3; n <= 32; n += 5) /* the looping pulses (fmod + ages) against the reference's sum over starts */
         for (double f = -20; f <= 400; f += 1.25) {
             double a[32], b[32];
-            energy_wave_loop_weights(f, n, a);
+            wave_loop_weights(f, n, a);
             energy_ref_loop_weights(f, n, b);
             for (int i = 0; i < n; i++)
                 CHECK(fabs(a[i] - b[i]) <= 1e-9, "n %d frame %g w%d: %.12g vs %.12g", n, f, i, a[i], b[i]);
@@ -448,7 +497,7 @@ static void test_loop_energy(void)
         int nw = cJSON_GetArraySize(cJSON_GetObjectItemCaseSensitive(c, "W"));
         if (nw > longest) longest = nw;
     }
-    int frames = (int)(2 * energy_wave_anim_period(longest));
+    int frames = (int)(2 * wave_anim_period(longest));
     double rate = params_num(doc, "anim_rate"), *sum = calloc((size_t)frames, sizeof *sum);
     static float tex[64 * 32];
     for (int f = 0; f < frames && !energy_wave_render(ew, f / rate, tex, &err); f++)

@@ -9,10 +9,12 @@
 #include <string.h>
 
 #include "../ref/eye_ref.h"
+#include "../ref/kernel_probe.h"
 #include "check.h"
 #include "effects/compound_eye.h"
 #include "effects/eye_lut.h"
 #include "fxs_frame.h"
+#include "fxs_lut.h"
 #include "ocl.h"
 #include "params.h"
 
@@ -63,8 +65,8 @@ static int tek_trace(const struct eye_optics *o, int n)
 {
     struct fx_err err = {0};
     struct eye_rays_out out = {tek_b.land, tek_b.status, tek_b.passes, tek_b.entered, tek_b.normal};
-    int rc = eye_trace_rays(tek_ocl, o, n, tek_b.p, tek_b.d, &out, &err);
-    CHECK(rc == 0, "eye_trace_rays: %s", err.message);
+    int rc = probe_eye_trace(tek_ocl, o, n, tek_b.p, tek_b.d, &out, &err);
+    CHECK(rc == 0, "probe_eye_trace: %s", err.message);
     return rc;
 }
 
@@ -241,12 +243,12 @@ static void test_table_products(void)
     if (ce) CHECK(compound_eye_table(ce, &data, &len, &err) == 0, "table: %s", err.message);
     if (data) {
         const uint8_t *b = data;
-        CHECK(!memcmp(b, EYE_LUT_MAGIC, 4), "magic");
+        CHECK(!memcmp(b, FXS_LUT_MAGIC, 4), "magic");
         CHECK(fxs_get_u16(b + 8) == 3, "three products");
         const char *names[3] = {"PIGM", "LLUT", "LMAC"};
         int w[3] = {128, 8 * 10, 8}, h[3] = {(int)lround(128 * EYE_SQRT3), 8 * 10, 8};
         for (int i = 0; i < 3; i++) {
-            const uint8_t *e = b + EYE_LUT_HEADER_BYTES + i * EYE_LUT_ENTRY_BYTES;
+            const uint8_t *e = b + FXS_LUT_HEADER_BYTES + i * FXS_LUT_ENTRY_BYTES;
             CHECK(!memcmp(e, names[i], 4), "product %d is %s", i, names[i]);
             CHECK((int)fxs_get_u32(e + 12) == w[i] && (int)fxs_get_u32(e + 16) == h[i], "%s size %ux%u", names[i],
                   fxs_get_u32(e + 12), fxs_get_u32(e + 16));

@@ -15,8 +15,10 @@
 #include "effect.h"
 #include "effects/energy_wave.h"
 #include "effects/light_rig.h"
+#include "effects/wave_sources.h"
 #include "fxs_frame.h"
 #include "../ref/energy_ref.h"
+#include "../ref/light_ref.h"
 
 static cJSON *rig_params(const char *partial_json)
 {
@@ -28,20 +30,33 @@ static cJSON *rig_params(const char *partial_json)
     return doc;
 }
 
-static struct light_consts eq25_ramp(void)
+/* The rig energy_wave sends for document p at stream time t (its step's path: sources and
+ * settings read once, the frame's weights, then the segments). */
+static void rig_at(const cJSON *p, double t, struct fxs_rig *rig)
 {
-    struct light_consts k = {0};
-    struct light_band b[3] = {{-1, {0.0, 0.2, 0.4}}, {-0.3, {0.5, 0.7, 0.9}}, {0, {0.9, 0.9, 1.0}}};
+    static struct wave_sources src;
+    static double w[WAVE_MAX_SRC][WAVE_MAX_W];
+    struct light_rig lr;
+    wave_sources_read(p, &src);
+    light_rig_read(p, &lr);
+    wave_sources_weights(&src, t, w);
+    light_rig_build(&lr, &src, w, rig);
+}
+
+static struct fxs_rig_consts eq25_ramp(void)
+{
+    struct fxs_rig_consts k = {0};
+    struct fxs_rig_band b[3] = {{-1, {0.0, 0.2, 0.4}}, {-0.3, {0.5, 0.7, 0.9}}, {0, {0.9, 0.9, 1.0}}};
     k.n_bands = 3;
     memcpy(k.bands, b, sizeof b);
     return k;
 }
 
-static struct light_rig halfline_rig(void)
+static struct fxs_rig halfline_rig(void)
 {
-    struct light_rig rig = {0};
+    struct fxs_rig rig = {0};
     rig.n_seg = 1;
-    rig.seg[0] = (struct light_seg){{0, 0, 0}, {1, 0, 0}, 0, INFINITY, 1, LR_SRC_LINE, 0};
+    rig.seg[0] = (struct fxs_rig_seg){{0, 0, 0}, {1, 0, 0}, 0, INFINITY, 1, FXS_RIG_LINE, 0};
     rig.k = eq25_ramp();
     return rig;
 }
@@ -49,7 +64,7 @@ static struct light_rig halfline_rig(void)
 /* Digest §5 item 4: golden shading with C = 0, D = (1,0,0), the thesis's half-line. */
 static void test_golden_shading(void)
 {
-    struct light_rig rig = halfline_rig();
+    struct fxs_rig rig = halfline_rig();
     struct { double M[3], N[3], m, rgb[3]; } g[] = {
         {{2, 1, 0}, {0, -1, 0}, 1, {0.9, 0.9, 1.0}},
         {{2, 1, 0}, {1, 0, 0}, 0, {0.9, 0.9, 1.0}},
@@ -58,21 +73,21 @@ static void test_golden_shading(void)
     };
     for (size_t i = 0; i < sizeof g / sizeof g[0]; i++) {
         double E[3], rgb[3];
-        CHECK(light_rig_point_light(&rig, g[i].M, E) == 0, "row %zu: no light", i);
-        double m = light_rig_m(E, g[i].M, g[i].N);
+        CHECK(light_ref_point_light(&rig, g[i].M, E) == 0, "row %zu: no light", i);
+        double m = light_ref_m(E, g[i].M, g[i].N);
         CHECK_NEAR(m, g[i].m, 1e-4);
-        light_rig_ramp(&rig.k, m, rgb);
+        light_ref_ramp(&rig.k, m, rgb);
         for (int c = 0; c < 3; c++) CHECK_NEAR(rgb[c], g[i].rgb[c], 1e-12);
     }
     double M[3] = {-1, 1, 0}, E[3];
-    light_rig_point_light(&rig, M, E);
+    light_ref_point_light(&rig, M, E);
     CHECK(E[0] == 0 && E[1] == 0 && E[2] == 0, "a <= 0 gives E = C (eq. 2.2)");
 }
 
 /* §5 items 1-3: E is the nearest point of the half-line; axis invariance; ranges. */
 static void test_nearest_properties(void)
 {
-    struct light_rig rig = halfline_rig();
+    struct fxs_rig rig = halfline_rig();
     double D[3] = {0.48, 0.6, 0.64}; /* unit */
     memcpy(rig.seg[0].d, D, sizeof D);
     rig.seg[0].c[0] = 0.3;
@@ -85,7 +100,7 @@ static void test_nearest_properties(void)
         }
         double nn = sqrt(N[0] * N[0] + N[1] * N[1] + N[2] * N[2]);
         for (int c = 0; c < 3; c++) N[c] /= nn;
-        light_rig_point_light(&rig, M, E);
+        light_ref_point_light(&rig, M, E);
         const double *C = rig.seg[0].c;
         double a = (M[0] - C[0]) * D[0] + (M[1] - C[1]) * D[1] + (M[2] - C[2]) * D[2];
         double dE = 0;
@@ -101,13 +116,13 @@ static void test_nearest_properties(void)
             for (int c = 0; c < 3; c++) d2 += (C[c] + s * D[c] - M[c]) * (C[c] + s * D[c] - M[c]);
             CHECK(dE <= d2 + 1e-12, "a point of the line at s=%g is nearer", s);
         }
-        double m = light_rig_m(E, M, N);
+        double m = light_ref_m(E, M, N);
         CHECK(m >= -1 && m <= 1 && isfinite(m), "m = %g out of [-1,1]", m);
         if (a > 0) { /* axis invariance: moving M along D changes neither L nor m */
             double M2[3], E2[3];
             for (int c = 0; c < 3; c++) M2[c] = M[c] + 3 * D[c];
-            light_rig_point_light(&rig, M2, E2);
-            CHECK_NEAR(light_rig_m(E2, M2, N), m, 1e-12);
+            light_ref_point_light(&rig, M2, E2);
+            CHECK_NEAR(light_ref_m(E2, M2, N), m, 1e-12);
         }
     }
 }
@@ -115,7 +130,7 @@ static void test_nearest_properties(void)
 /* Digest §5 item 9 (with the gap-1 sign fix). */
 static void test_golden_shadow(void)
 {
-    struct light_consts k = {0};
+    struct fxs_rig_consts k = {0};
     double Y[3] = {0, 1, 0}, X[3] = {1, 0, 0}, Z[3] = {0, 0, 1};
     memcpy(k.plane_y, Y, sizeof Y);
     memcpy(k.plane_x, X, sizeof X);
@@ -123,7 +138,7 @@ static void test_golden_shadow(void)
     k.shadow_theta = 60 * M_PI / 180;
     double B[3] = {0, 1, 0}, W[3] = {-3, 0.5, 0}, e[3], kd[3], lam;
     for (int c = 0; c < 3; c++) e[c] = B[c] - W[c];
-    int clamped = light_rig_shadow_dir(&k, e, NULL, kd, &lam);
+    int clamped = light_ref_shadow_dir(&k, e, NULL, kd, &lam);
     CHECK(clamped == 1, "lambda > theta must clamp");
     CHECK_NEAR(lam * 180 / M_PI, 99.46, 0.005);
     CHECK_NEAR(kd[0], 0.8660254, 1e-6);
@@ -153,11 +168,11 @@ static void test_golden_shadow(void)
     CHECK(fabs(acos(-kd[1]) - acos(-lit[1])) > 0.5, "the fixed k differs from the literal one");
     /* unclamped: k = e, and a vertical light gives a vertical drop */
     double down[3] = {0, -2, 0};
-    CHECK(light_rig_shadow_dir(&k, down, NULL, kd, &lam) == 0 && kd[1] == -1 && lam == 0, "lambda 0: straight down");
+    CHECK(light_ref_shadow_dir(&k, down, NULL, kd, &lam) == 0 && kd[1] == -1 && lam == 0, "lambda 0: straight down");
     /* horizontal offset at height h is at most h tan(theta), even with the light below */
     for (double ey = -1; ey <= 1; ey += 0.1) {
         double ee[3] = {0.7, ey, -0.3};
-        light_rig_shadow_dir(&k, ee, NULL, kd, &lam);
+        light_ref_shadow_dir(&k, ee, NULL, kd, &lam);
         double h = 1.0, tt = h / -kd[1], off = tt * sqrt(kd[0] * kd[0] + kd[2] * kd[2]);
         CHECK(kd[1] < 0 && off <= h * tan(k.shadow_theta) + 1e-9, "offset %g at ey %g", off, ey);
         CHECK(kd[0] * 0.7 + kd[2] * -0.3 >= 0, "horizontal part points away from the light");
@@ -167,25 +182,25 @@ static void test_golden_shadow(void)
 /* §5 item 11: no NaN on degenerate input. */
 static void test_degenerate(void)
 {
-    struct light_consts k = {0};
+    struct fxs_rig_consts k = {0};
     k.plane_y[1] = 1;
     k.plane_x[0] = 1;
     k.plane_z[2] = 1;
     k.shadow_theta = 1.0;
     double zero[3] = {0, 0, 0}, up[3] = {0, 3, 0}, kd[3], lam, prev[3] = {0, 0, 0};
-    light_rig_shadow_dir(&k, zero, prev, kd, &lam);
+    light_ref_shadow_dir(&k, zero, prev, kd, &lam);
     CHECK(isfinite(kd[0]) && isfinite(kd[1]) && isfinite(kd[2]) && kd[1] == -1, "B on the axis: straight down");
     double side[3] = {0, 0, 1};
-    light_rig_shadow_dir(&k, side, prev, kd, &lam); /* sets prev i = +Z */
-    light_rig_shadow_dir(&k, up, prev, kd, &lam);    /* light directly below: f = 0 */
+    light_ref_shadow_dir(&k, side, prev, kd, &lam); /* sets prev i = +Z */
+    light_ref_shadow_dir(&k, up, prev, kd, &lam);    /* light directly below: f = 0 */
     CHECK(isfinite(kd[0] + kd[1] + kd[2]), "f = 0 gives NaN");
     CHECK_NEAR(kd[2], sin(1.0), 1e-12);
-    struct light_rig rig = halfline_rig();
+    struct fxs_rig rig = halfline_rig();
     double M[3] = {2, 0, 0}, N[3] = {0, 0, 1}, E[3];
-    light_rig_point_light(&rig, M, E);
-    CHECK(light_rig_m(E, M, N) == 1.0, "M on the axis: m = 1");
+    light_ref_point_light(&rig, M, E);
+    CHECK(light_ref_m(E, M, N) == 1.0, "M on the axis: m = 1");
     rig.seg[0].strength = 0;
-    CHECK(light_rig_point_light(&rig, M, E) == -1, "a zero-strength segment lights");
+    CHECK(light_ref_point_light(&rig, M, E) == -1, "a zero-strength segment lights");
 }
 
 static void test_bspline(void)
@@ -206,11 +221,11 @@ static void test_segments_curves(void)
     cJSON *p = rig_params("{\"curve_segments\":8}");
     CHECK(p != NULL, "defaults");
     if (!p) return;
-    static struct light_rig rig;
+    static struct fxs_rig rig;
     const double times[] = {0.0, 0.4, 1.3, 2.9};
     for (size_t ti = 0; ti < sizeof times / sizeof times[0]; ti++) {
         double t = times[ti];
-        light_rig_from_params(p, t, &rig);
+        rig_at(p, t, &rig);
         CHECK(rig.n_seg == 16, "n_seg %d", rig.n_seg);
         const cJSON *cv = cJSON_GetObjectItemCaseSensitive(p, "curves"), *it;
         int ci = 0;
@@ -225,11 +240,11 @@ static void test_segments_curves(void)
             energy_ref_loop_weights(t * 30.0, nw, anim);
             for (int k = 0; k < nw; k++) w[k] *= anim[k];
             for (int j = 0; j < 8; j++) {
-                const struct light_seg *s = &rig.seg[ci * 8 + j];
+                const struct fxs_rig_seg *s = &rig.seg[ci * 8 + j];
                 double a[3], e[3];
                 energy_ref_curve_eval(b, j / 8.0, a);
                 energy_ref_curve_eval(b, (j + 1) / 8.0, e);
-                CHECK(s->source == LR_SRC_CURVE && s->index == ci, "source");
+                CHECK(s->source == FXS_RIG_CURVE && s->index == ci, "source");
                 for (int c = 0; c < 3; c++) {
                     CHECK_NEAR(s->c[c], a[c], 1e-9);
                     CHECK_NEAR(s->c[c] + s->a_hi * s->d[c], e[c], 1e-9);
@@ -241,15 +256,15 @@ static void test_segments_curves(void)
         }
     }
     /* the pulse moves: some segment's strength differs between two times */
-    static struct light_rig r2;
-    light_rig_from_params(p, 0.4, &rig);
-    light_rig_from_params(p, 1.3, &r2);
+    static struct fxs_rig r2;
+    rig_at(p, 0.4, &rig);
+    rig_at(p, 1.3, &r2);
     int differ = 0;
     for (int i = 0; i < 16; i++) differ |= fabs(rig.seg[i].strength - r2.seg[i].strength) > 1e-3;
     CHECK(differ, "the pulse does not move the strengths");
     cJSON_Delete(p);
     p = rig_params("{\"animate\":false}");
-    light_rig_from_params(p, 1.3, &rig);
+    rig_at(p, 1.3, &rig);
     CHECK_NEAR(rig.seg[0].strength, 8 * energy_ref_bspline(7, (double[]){1.0, 0.2, 0.6, 1.0, 0.5, 0.8, 1.0}, 1.0 / 16),
                1e-9);
     cJSON_Delete(p);
@@ -269,11 +284,11 @@ static void test_loop_never_dark(void)
     cJSON *p = rig_params("{}");
     CHECK(p != NULL, "defaults");
     if (!p) return;
-    static struct light_rig rig;
+    static struct fxs_rig rig;
     enum { FRAMES = 240 }; /* 8 s at 30 frames/s: several loops of every default curve */
     double total[FRAMES], sorted[FRAMES];
     for (int f = 0; f < FRAMES; f++) {
-        light_rig_from_params(p, f / params_num(p, "anim_rate"), &rig);
+        rig_at(p, f / params_num(p, "anim_rate"), &rig);
         total[f] = 0;
         for (int i = 0; i < rig.n_seg; i++) total[f] += rig.seg[i].strength;
         sorted[f] = total[f];
@@ -289,14 +304,14 @@ static void test_loop_never_dark(void)
  * an explicit ramp is used as given. */
 static void test_ramp_follows_energy_colour(void)
 {
-    static struct light_rig a, b, c;
+    static struct fxs_rig a, b, c;
     cJSON *pa = rig_params("{}"), *pb = rig_params("{\"color_energy\":[1,0.3,0.1]}");
     cJSON *pc = rig_params("{\"color_energy\":[1,0.3,0.1],\"ramp\":[{\"m_min\":-1,\"color\":[0,1,0]}]}");
     CHECK(pa && pb && pc, "documents");
     if (!pa || !pb || !pc) return;
-    light_rig_from_params(pa, 0, &a);
-    light_rig_from_params(pb, 0, &b);
-    light_rig_from_params(pc, 0, &c);
+    rig_at(pa, 0, &a);
+    rig_at(pb, 0, &b);
+    rig_at(pc, 0, &c);
     CHECK(a.k.n_bands == 3 && b.k.n_bands == 3 && a.k.bands[1].m_min == -0.3, "three default bands");
     CHECK(fabs(a.k.bands[1].rgb[2] - 0.9) < 1e-12 && fabs(b.k.bands[1].rgb[0] - 0.9) < 1e-12 &&
               fabs(b.k.bands[1].rgb[2] - 0.27) < 1e-12,
@@ -315,14 +330,14 @@ static void test_segments_other_sources(void)
                           "\"curves\":[],\"torus_segments\":12}");
     CHECK(p != NULL, "params");
     if (!p) return;
-    static struct light_rig rig;
-    light_rig_from_params(p, 0, &rig);
+    static struct fxs_rig rig;
+    rig_at(p, 0, &rig);
     CHECK(rig.n_seg == 1 + 1 + 12, "n_seg %d", rig.n_seg);
-    const struct light_seg *s = &rig.seg[0];
-    CHECK(s->source == LR_SRC_POINT && s->c[0] == 1 && s->c[1] == 2 && s->c[2] == 3 && s->a_lo == 0 && s->a_hi == 0 &&
+    const struct fxs_rig_seg *s = &rig.seg[0];
+    CHECK(s->source == FXS_RIG_POINT && s->c[0] == 1 && s->c[1] == 2 && s->c[2] == 3 && s->a_lo == 0 && s->a_hi == 0 &&
               s->strength == 3, "point segment");
     s = &rig.seg[1];
-    CHECK(s->source == LR_SRC_LINE && s->d[2] == 1 && isinf(s->a_lo) && s->a_lo < 0 && isinf(s->a_hi) &&
+    CHECK(s->source == FXS_RIG_LINE && s->d[2] == 1 && isinf(s->a_lo) && s->a_lo < 0 && isinf(s->a_hi) &&
               s->strength == -2, "line segment (normalised, infinite)");
     for (int j = 0; j < 12; j++) {
         s = &rig.seg[2 + j];
@@ -332,12 +347,12 @@ static void test_segments_other_sources(void)
         CHECK_NEAR(hypot(e[0], e[1]), 2, 1e-9);
         CHECK_NEAR(s->c[2], 5, 1e-12);
         CHECK_NEAR(s->a_hi, 2 * 2 * sin(M_PI / 12), 1e-9); /* chord of 30 degrees */
-        CHECK(s->source == LR_SRC_TORUS && s->strength == 5, "torus chord");
+        CHECK(s->source == FXS_RIG_TORUS && s->strength == 5, "torus chord");
     }
     /* a point on the torus axis is lit; the negative line does not light */
     double M[3] = {0, 1, 0}, E[3];
-    int i = light_rig_point_light(&rig, M, E);
-    CHECK(i >= 0 && rig.seg[i].source != LR_SRC_LINE, "negative coefficient lit (segment %d)", i);
+    int i = light_ref_point_light(&rig, M, E);
+    CHECK(i >= 0 && rig.seg[i].source != FXS_RIG_LINE, "negative coefficient lit (segment %d)", i);
     cJSON_Delete(p);
     /* the cap: 16 curves x 32 chords */
     char buf[4096];
@@ -345,8 +360,8 @@ static void test_segments_other_sources(void)
     for (int c = 0; c < 16; c++) n += (size_t)snprintf(buf + n, sizeof buf - n, "%s{}", c ? "," : "");
     snprintf(buf + n, sizeof buf - n, "]}");
     p = rig_params(buf);
-    light_rig_from_params(p, 0, &rig);
-    CHECK(rig.n_seg == LIGHT_RIG_MAX_SEG, "cap: %d", rig.n_seg);
+    rig_at(p, 0, &rig);
+    CHECK(rig.n_seg == FXS_RIG_MAX_SEG, "cap: %d", rig.n_seg);
     cJSON_Delete(p);
 }
 
@@ -363,10 +378,10 @@ static void test_encoding(void)
     cJSON *p = rig_params("{\"light_rig\":true}");
     CHECK(p != NULL, "params");
     if (!p) return;
-    static struct light_rig rig, back;
-    static uint8_t buf[LIGHT_RIG_MAX_PAYLOAD];
-    light_rig_from_params(p, 0.7, &rig);
-    size_t n = light_rig_encode(&rig, 1, buf);
+    static struct fxs_rig rig, back;
+    static uint8_t buf[FXS_RIG_MAX_PAYLOAD];
+    rig_at(p, 0.7, &rig);
+    size_t n = fxs_rig_encode(&rig, 1, buf);
     size_t cb = 96 + 16 * 3;
     CHECK(n == 32 + 16 * 40 + cb, "payload %zu bytes", n);
     CHECK(memcmp(buf, "FXR1", 4) == 0, "magic");
@@ -391,24 +406,24 @@ static void test_encoding(void)
     CHECK(le_f32(k + 96 + 16) == -0.3f && le_f32(k + 96 + 16 + 12) == 0.9f, "band 1");
     uint32_t id;
     int hc;
-    CHECK(light_rig_decode(buf, n, &back, &id, &hc) == 0 && hc && id == h, "decode");
+    CHECK(fxs_rig_decode(buf, n, &back, &id, &hc) == 0 && hc && id == h, "decode");
     CHECK(back.n_seg == 16 && back.k.n_bands == 3 && back.seg[5].strength == (float)rig.seg[5].strength &&
               back.k.bands[2].rgb[2] == 1.0f, "round trip");
-    CHECK(light_rig_decode(buf, n - 1, &back, &id, &hc) == -1, "short payload accepted");
+    CHECK(fxs_rig_decode(buf, n - 1, &back, &id, &hc) == -1, "short payload accepted");
     buf[0] = 'X';
-    CHECK(light_rig_decode(buf, n, &back, &id, &hc) == -1, "bad magic accepted");
+    CHECK(fxs_rig_decode(buf, n, &back, &id, &hc) == -1, "bad magic accepted");
     /* without constants: same id, 672 bytes */
-    size_t n2 = light_rig_encode(&rig, 0, buf);
+    size_t n2 = fxs_rig_encode(&rig, 0, buf);
     CHECK(n2 == 32 + 640 && fxs_get_u32(buf + 12) == 0 && fxs_get_u32(buf + 20) == 0 && fxs_get_u32(buf + 16) == h,
           "no constants");
-    CHECK(light_rig_decode(buf, n2, &back, &id, &hc) == 0 && !hc, "decode without constants");
+    CHECK(fxs_rig_decode(buf, n2, &back, &id, &hc) == 0 && !hc, "decode without constants");
     /* the id follows the constants, not the segments */
-    light_rig_from_params(p, 2.0, &back);
-    CHECK(light_rig_constants_id(&back.k) == h, "segments changed the id");
+    rig_at(p, 2.0, &back);
+    CHECK(fxs_rig_constants_id(&back.k) == h, "segments changed the id");
     cJSON_Delete(p);
     p = rig_params("{\"ramp\":[{\"m_min\":-1,\"color\":[1,0,0]}]}");
-    light_rig_from_params(p, 0.7, &back);
-    CHECK(light_rig_constants_id(&back.k) != h, "ramp change kept the id");
+    rig_at(p, 0.7, &back);
+    CHECK(fxs_rig_constants_id(&back.k) != h, "ramp change kept the id");
     cJSON_Delete(p);
 }
 
@@ -450,10 +465,10 @@ static int dump_one(const char *dir, int idx, const char *params, double t, int 
 {
     cJSON *p = rig_params(params);
     if (!p) return -1;
-    static struct light_rig rig;
-    static uint8_t frame[64 + LIGHT_RIG_MAX_PAYLOAD];
-    light_rig_from_params(p, t, &rig);
-    size_t n = light_rig_encode(&rig, with_constants, frame + 64);
+    static struct fxs_rig rig;
+    static uint8_t frame[64 + FXS_RIG_MAX_PAYLOAD];
+    rig_at(p, t, &rig);
+    size_t n = fxs_rig_encode(&rig, with_constants, frame + 64);
     struct fxs_header h = {.kind = FXS_KIND_LIGHT_RIG, .channel = 3, .param_rev = 7, .seq = 42, .sim_time = t,
                            .server_time_us = 1795313709549000ull, .codec = FXS_CODEC_LIGHT_RIG,
                            .payload_bytes = (uint32_t)n, .count_or_width = (uint32_t)rig.n_seg};
@@ -466,9 +481,9 @@ static int dump_one(const char *dir, int idx, const char *params, double t, int 
     snprintf(path, sizeof path, "%s/rig-%d.json", dir, idx);
     if (!(f = fopen(path, "w"))) return -1;
     fprintf(f, "{\"payload_bytes\":%zu,\"sim_time\":%.17g,\"constants_id\":%u,\"has_constants\":%s,\"segments\":[",
-            n, t, light_rig_constants_id(&rig.k), with_constants ? "true" : "false");
+            n, t, fxs_rig_constants_id(&rig.k), with_constants ? "true" : "false");
     for (int i = 0; i < rig.n_seg; i++) {
-        const struct light_seg *s = &rig.seg[i];
+        const struct fxs_rig_seg *s = &rig.seg[i];
         fprintf(f, "%s{", i ? "," : "");
         dump_vec(f, "c", s->c, 3);
         fputc(',', f);
@@ -481,7 +496,7 @@ static int dump_one(const char *dir, int idx, const char *params, double t, int 
         dump_num(f, s->strength);
         fprintf(f, ",\"source\":%d,\"index\":%d}", s->source, s->index);
     }
-    const struct light_consts *k = &rig.k;
+    const struct fxs_rig_consts *k = &rig.k;
     fprintf(f, "],\"constants\":{\"flags\":%u,\"strength\":", k->flags);
     dump_num(f, k->strength);
     fprintf(f, ",\"outline_width\":");

@@ -4,7 +4,7 @@
 // shadow direction of a caster, with the thesis's sign error fixed (digest 003 §6 gap 1).
 //
 // Plain ES module without dependencies so node tests it against the C encoder's frames
-// (tests/integration/test_web_decoders.sh); mirrors server/effects/light_rig.c.
+// (tests/integration/test_web_decoders.sh); mirrors protocol/fxs_rig.c.
 
 export const KIND_LIGHT_RIG = 3;
 export const CODEC_LIGHT_RIG = 1;

@@ -1,0 +1,27 @@
+/* energy_wave_layout.h — the buffer layouts server/effects/energy_wave.c packs and
+ * kernels/energy_wave.cl reads: one record per source (floats), the curve weights, the camera
+ * block, and the texels per work-item. Valid C and OpenCL C: energy_wave.c includes it and the
+ * build (tools/embed_kernels.sh) prepends it to energy_wave.cl, so the layout exists once. */
+#ifndef ENERGY_WAVE_LAYOUT_H
+#define ENERGY_WAVE_LAYOUT_H
+
+#define EW_PT_STRIDE 4  /* point: pos.xyz, coef */
+#define EW_LN_STRIDE 8  /* line: pos.xyz, coef, dir.xyz (unit), 0 */
+#define EW_TO_STRIDE 16 /* torus: center.xyz, R, e1.xyz, coef, e2.xyz, 0, axis.xyz (unit), 0 */
+#define EW_CV_STRIDE 16 /* curve: C0.xyz, coef, C1.xyz, |C2|², C2.xyz, C1·C2, |C1|², nw, t_lo, t_hi */
+#define EW_MAX_W 32     /* curve i's weights start at wts[i·EW_MAX_W] */
+#define EW_LANES 8      /* texels per work-item (float8 lanes) */
+
+/* Camera block (EW_CAM_FLOATS floats): billboard centre C, l·r, l·(H/W)·u and the eye V as
+ * xyz triples at these offsets, then ν, α, β and ε. */
+#define EW_CAM_CENTER 0
+#define EW_CAM_RIGHT 4
+#define EW_CAM_UP 8
+#define EW_CAM_EYE 12
+#define EW_CAM_NU 15
+#define EW_CAM_ALPHA 16
+#define EW_CAM_BETA 17
+#define EW_CAM_EPS 18
+#define EW_CAM_FLOATS 20
+
+#endif

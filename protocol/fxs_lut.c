@@ -1,0 +1,124 @@
+/* fxs_lut.c — see fxs_lut.h. Every size and offset is checked against the payload on decode. */
+#include "fxs_lut.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zstd.h>
+
+#include "fxs_bytes.h"
+
+static size_t lut_raw(const struct fxs_lut_product *p) { return (size_t)p->width * p->height * 4; }
+
+size_t fxs_lut_bound(const struct fxs_lut_product *products, int count)
+{
+    size_t n = FXS_LUT_HEADER_BYTES + (size_t)count * FXS_LUT_ENTRY_BYTES;
+    for (int i = 0; i < count; i++) n += 8 + ZSTD_compressBound(lut_raw(&products[i]));
+    return n;
+}
+
+static void lut_header(const struct fxs_lut_info *in, int count, uint8_t *h)
+{
+    memset(h, 0, FXS_LUT_HEADER_BYTES);
+    memcpy(h, FXS_LUT_MAGIC, 4);
+    fxs_put_u16(h + 4, FXS_LUT_VERSION);
+    fxs_put_u16(h + 6, FXS_LUT_HEADER_BYTES);
+    fxs_put_u16(h + 8, (uint16_t)count);
+    fxs_put_u16(h + 10, FXS_LUT_ENTRY_BYTES);
+    fxs_put_u32(h + 12, in->lattice);
+    fxs_put_f32(h + 16, in->tile_h);
+    fxs_put_f32(h + 20, in->lens_radius);
+    fxs_put_f32(h + 24, in->refractive_index);
+    fxs_put_f32(h + 28, in->pigment_depth);
+    fxs_put_u32(h + 32, in->max_passes);
+    fxs_put_u32(h + 36, in->cells);
+    fxs_put_u32(h + 40, in->dirs);
+    fxs_put_u32(h + 44, in->gutter);
+    fxs_put_u32(h + 48, in->supersample);
+}
+
+static void lut_entry(const struct fxs_lut_product *p, uint8_t *e)
+{
+    memset(e, 0, FXS_LUT_ENTRY_BYTES);
+    memcpy(e, p->name, 4);
+    fxs_put_u32(e + 4, p->format);
+    fxs_put_u32(e + 8, p->codec);
+    fxs_put_u32(e + 12, p->width);
+    fxs_put_u32(e + 16, p->height);
+    fxs_put_u32(e + 20, p->offset);
+    fxs_put_u32(e + 24, p->stored);
+    fxs_put_u32(e + 28, p->raw);
+    fxs_put_u32(e + 32, p->tile);
+    fxs_put_u32(e + 36, p->tiles_x);
+    fxs_put_u32(e + 40, p->tiles_y);
+    fxs_put_u32(e + 44, p->inner);
+}
+
+size_t fxs_lut_encode(const struct fxs_lut_info *info, struct fxs_lut_product *products, int count, int zstd_level,
+                      uint8_t *out, size_t cap, char *msg, size_t msgcap)
+{
+    size_t n = FXS_LUT_HEADER_BYTES + (size_t)count * FXS_LUT_ENTRY_BYTES;
+    lut_header(info, count, out);
+    for (int i = 0; i < count; i++) {
+        struct fxs_lut_product *p = &products[i];
+        while (n % 8) out[n++] = 0; /* products start 8-aligned */
+        size_t z = ZSTD_compress(out + n, cap - n, p->rgba, lut_raw(p), zstd_level);
+        if (ZSTD_isError(z)) {
+            snprintf(msg, msgcap, "zstd (%s): %s", p->name, ZSTD_getErrorName(z));
+            return 0;
+        }
+        p->format = FXS_LUT_FORMAT_RGBA8;
+        p->codec = FXS_LUT_CODEC_ZSTD;
+        p->offset = (uint32_t)n;
+        p->stored = (uint32_t)z;
+        p->raw = (uint32_t)lut_raw(p);
+        lut_entry(p, out + FXS_LUT_HEADER_BYTES + (size_t)i * FXS_LUT_ENTRY_BYTES);
+        n += z;
+    }
+    return n;
+}
+
+int fxs_lut_entry(const uint8_t *p, size_t len, int i, struct fxs_lut_product *out, char *msg, size_t cap)
+{
+    if (len < 12 || memcmp(p, FXS_LUT_MAGIC, 4)) return snprintf(msg, cap, "not an FXL1 container"), -1;
+    uint32_t hb = fxs_get_u16(p + 6), count = fxs_get_u16(p + 8), eb = fxs_get_u16(p + 10);
+    if (hb < FXS_LUT_HEADER_BYTES || eb < 48 || hb + (size_t)count * eb > len)
+        return snprintf(msg, cap, "container directory runs past the payload"), -1;
+    if (i < 0 || (uint32_t)i >= count) return snprintf(msg, cap, "no product %d", i), -1;
+    const uint8_t *e = p + hb + (size_t)i * eb;
+    memset(out, 0, sizeof *out);
+    memcpy(out->name, e, 4);
+    out->format = fxs_get_u32(e + 4);
+    out->codec = fxs_get_u32(e + 8);
+    out->width = fxs_get_u32(e + 12);
+    out->height = fxs_get_u32(e + 16);
+    out->offset = fxs_get_u32(e + 20);
+    out->stored = fxs_get_u32(e + 24);
+    out->raw = fxs_get_u32(e + 28);
+    out->tile = fxs_get_u32(e + 32);
+    out->tiles_x = fxs_get_u32(e + 36);
+    out->tiles_y = fxs_get_u32(e + 40);
+    out->inner = fxs_get_u32(e + 44);
+    if ((size_t)out->offset + out->stored > len) return snprintf(msg, cap, "product %s runs past the payload", out->name), -1;
+    return (int)count;
+}
+
+uint8_t *fxs_lut_texels(const uint8_t *p, size_t len, const struct fxs_lut_product *e, char *msg, size_t cap)
+{
+    if (e->format != FXS_LUT_FORMAT_RGBA8 || e->codec != FXS_LUT_CODEC_ZSTD || (uint64_t)e->width * e->height * 4 != e->raw) {
+        snprintf(msg, cap, "product %s: unsupported format %u / codec %u", e->name, e->format, e->codec);
+        return NULL;
+    }
+    if ((size_t)e->offset + e->stored > len) {
+        snprintf(msg, cap, "product %s runs past the payload", e->name);
+        return NULL;
+    }
+    uint8_t *out = malloc(e->raw ? e->raw : 1);
+    size_t n = out ? ZSTD_decompress(out, e->raw, p + e->offset, e->stored) : 0;
+    if (!out || ZSTD_isError(n) || n != e->raw) {
+        snprintf(msg, cap, "product %s: %s", e->name, out && ZSTD_isError(n) ? ZSTD_getErrorName(n) : "size mismatch");
+        free(out);
+        return NULL;
+    }
+    return out;
+}

@@ -1,0 +1,50 @@
+/* fxs_lut.h — the kind 4 codec 1 payload ("FXL1" container, PROTOCOL.md §7.6): a 64-byte
+ * header with the compound eye's optics, a directory of 64-byte entries, and each product's
+ * RGBA8 texels as one zstd frame, 8-byte aligned.
+ *
+ * Shared by the daemon (server/effects/eye_lut.c lays out the products and encodes them
+ * here) and libfxclient (fxctl, the fuzz target), as fxs_particles.h is. Depends on libc
+ * and libzstd only. */
+#ifndef FXS_LUT_H
+#define FXS_LUT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define FXS_LUT_MAGIC "FXL1"
+#define FXS_LUT_VERSION 1
+#define FXS_LUT_HEADER_BYTES 64
+#define FXS_LUT_ENTRY_BYTES 64
+#define FXS_LUT_FORMAT_RGBA8 1
+#define FXS_LUT_CODEC_ZSTD 1
+
+/* The container header's fields after the directory sizes. */
+struct fxs_lut_info {
+    uint32_t lattice; /* 0 square, 1 hexagonal */
+    float tile_h, lens_radius, refractive_index, pigment_depth;
+    uint32_t max_passes, cells, dirs, gutter, supersample;
+};
+
+/* A directory entry. offset/stored/raw are the encoder's output and the decoder's input;
+ * rgba (width x height x 4 bytes) is the encoder's input only. */
+struct fxs_lut_product {
+    char name[5];
+    uint32_t format, codec, width, height, offset, stored, raw;
+    uint32_t tile, tiles_x, tiles_y, inner;
+    const uint8_t *rgba;
+};
+
+/* Bytes fxs_lut_encode may need for these products (directory, alignment, zstd bounds). */
+size_t fxs_lut_bound(const struct fxs_lut_product *products, int count);
+/* Writes the container into out (cap bytes, at least fxs_lut_bound); fills each product's
+ * offset, stored and raw. Returns the size, or 0 with msg when zstd fails. */
+size_t fxs_lut_encode(const struct fxs_lut_info *info, struct fxs_lut_product *products, int count, int zstd_level,
+                      uint8_t *out, size_t cap, char *msg, size_t msgcap);
+
+/* Reads entry i of a container (0..count-1). Returns the entry count (>= 0), or -1 with msg
+ * when the container is malformed or i is out of range. */
+int fxs_lut_entry(const uint8_t *p, size_t len, int i, struct fxs_lut_product *out, char *msg, size_t cap);
+/* Decompresses a product into a malloc'ed buffer of raw texels; NULL with msg on error. */
+uint8_t *fxs_lut_texels(const uint8_t *p, size_t len, const struct fxs_lut_product *e, char *msg, size_t cap);
+
+#endif
