@@ -1,13 +1,16 @@
 /* check.h — the unit-test harness: named tests made of checks.
  *
- * A test passes when none of its checks fails. Each binary ends with the line
- * "<binary>: N passed, M failed" that tests/run.sh adds up, and exits non-zero on
- * any failure. Failed checks print file, line, expression and a message. */
+ * A test passes when none of its checks fails. Each binary's main() runs its tests with RUN
+ * and ends with `return CHECK_DONE();`, which prints "<suite>: N passed, M failed" (the suite
+ * is the source file's name, test_foo) for tests/run.sh to add up and exits non-zero on any
+ * failure; a set-up that fails first ends with `return CHECK_ABORT("why %s", ...);`. Failed
+ * checks print file, line, expression and a message. */
 #ifndef FX_CHECK_H
 #define FX_CHECK_H
 
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 static int check_fails_in_test;
 static int check_tests_passed, check_tests_failed;
@@ -39,10 +42,20 @@ static int check_tests_passed, check_tests_failed;
         fflush(stdout);                                                             \
     } while (0)
 
-static inline int check_summary(const char *name)
+static inline int check_summary(const char *file)
 {
-    printf("%s: %d passed, %d failed\n", name, check_tests_passed, check_tests_failed);
+    const char *base = strrchr(file, '/') ? strrchr(file, '/') + 1 : file;
+    int len = (int)(strrchr(base, '.') ? strrchr(base, '.') - base : (long)strlen(base));
+    printf("%.*s: %d passed, %d failed\n", len, base, check_tests_passed, check_tests_failed);
     return check_tests_failed ? 1 : 0;
 }
+
+/* The summary line and exit status of this file's suite. */
+#define CHECK_DONE() check_summary(__FILE__)
+
+/* A set-up that failed before the tests could run: one failed test, the reason, the summary. */
+#define CHECK_ABORT(...)                                                                \
+    (fprintf(stderr, "  set-up failed: "), fprintf(stderr, __VA_ARGS__), fputc('\n', stderr), \
+     check_tests_failed++, CHECK_DONE())
 
 #endif

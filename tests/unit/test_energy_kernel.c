@@ -862,17 +862,9 @@ static void test_animation_render(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tek_ocl, "cpu", &err)) {
-        fprintf(stderr, "ocl_open(cpu): %s: %s\n", err.code, err.message);
-        check_tests_failed++;
-        return check_summary("test_energy_kernel");
-    }
+    if (ocl_open(&tek_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
     tek_defaults = params_defaults(energy_wave_params);
-    if (!tek_defaults) {
-        fprintf(stderr, "params_defaults(energy_wave_params) failed\n");
-        check_tests_failed++;
-        return check_summary("test_energy_kernel");
-    }
+    if (!tek_defaults) return CHECK_ABORT("params_defaults(energy_wave_params) failed");
     tek_find_modes();
     printf("  modes:");
     for (int m = 0; m < tek_nmodes; m++) printf(" %s", tek_modes[m]);
@@ -895,5 +887,5 @@ int main(void)
     RUN(test_animation_render);
     cJSON_Delete(tek_defaults);
     ocl_close(tek_ocl);
-    return check_summary("test_energy_kernel");
+    return CHECK_DONE();
 }

@@ -622,5 +622,5 @@ int main(void)
     RUN(test_camera_distance_scaling);
     RUN(test_camera_rays);
     RUN(test_scene_from_json);
-    return check_summary("test_energy_ref");
+    return CHECK_DONE();
 }

@@ -53,5 +53,5 @@ int main(void)
 {
     RUN(test_sanitize);
     RUN(test_fail_message);
-    return check_summary("test_err");
+    return CHECK_DONE();
 }

@@ -581,5 +581,5 @@ int main(void)
     RUN(test_append_and_reuse);
     RUN(test_bad_input);
     RUN(test_exrheader);
-    return check_summary("test_exr");
+    return CHECK_DONE();
 }

@@ -291,11 +291,7 @@ static void test_atlas_gutters(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tek_ocl, "cpu", &err)) {
-        fprintf(stderr, "test_eye_kernel: no OpenCL CPU device: %s\n", err.message);
-        printf("test_eye_kernel: 0 passed, 1 failed\n");
-        return 1;
-    }
+    if (ocl_open(&tek_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
     RUN(test_kernel_matches_reference);
     RUN(test_no_nan_over_hemisphere);
     RUN(test_lattice_translation);
@@ -303,5 +299,5 @@ int main(void)
     RUN(test_table_products);
     RUN(test_atlas_gutters);
     ocl_close(tek_ocl);
-    return check_summary("test_eye_kernel");
+    return CHECK_DONE();
 }

@@ -151,14 +151,11 @@ static void test_atlas(void)
 int main(void)
 {
     tep_fx = effect_find("compound_eye");
-    if (!tep_fx) {
-        printf("test_eye_params: effect compound_eye not registered\ntest_eye_params: 0 passed, 1 failed\n");
-        return 1;
-    }
+    if (!tep_fx) return CHECK_ABORT("effect compound_eye not registered");
     RUN(test_table);
     RUN(test_cross_rules);
     RUN(test_model_names);
     RUN(test_obj_errors);
     RUN(test_atlas);
-    return check_summary("test_eye_params");
+    return CHECK_DONE();
 }

@@ -276,5 +276,5 @@ int main(void)
     RUN(test_pupils);
     RUN(test_distance_scaling);
     RUN(test_l_convergence);
-    return check_summary("test_eye_ref");
+    return CHECK_DONE();
 }

@@ -454,11 +454,7 @@ static void test_two_flames_merge(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tfb_ocl, "cpu", &err)) {
-        fprintf(stderr, "ocl_open(cpu): %s: %s\n", err.code, err.message);
-        check_tests_failed++;
-        return check_summary("test_flame_behaviour");
-    }
+    if (ocl_open(&tfb_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
     tfb_defaults = params_defaults(flame_params);
     tfb_h = params_num(tfb_defaults, "h");
     tfb_dt = params_num(tfb_defaults, "dt");
@@ -474,5 +470,5 @@ int main(void)
     free(tfb_base.v);
     cJSON_Delete(tfb_defaults);
     ocl_close(tfb_ocl);
-    return check_summary("test_flame_behaviour");
+    return CHECK_DONE();
 }

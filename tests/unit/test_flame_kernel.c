@@ -887,11 +887,7 @@ static void test_run_positivity(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tfk_ocl, "cpu", &err)) {
-        fprintf(stderr, "ocl_open(cpu): %s: %s\n", err.code, err.message);
-        check_tests_failed++;
-        return check_summary("test_flame_kernel");
-    }
+    if (ocl_open(&tfk_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
     tfk_defaults = params_defaults(flame_params);
     flame_ref_defaults(&tfk_flagp);
     flame_ref_params_from_json(tfk_defaults, &tfk_flagp);
@@ -916,5 +912,5 @@ int main(void)
     RUN(test_run_positivity);
     cJSON_Delete(tfk_defaults);
     ocl_close(tfk_ocl);
-    return check_summary("test_flame_kernel");
+    return CHECK_DONE();
 }

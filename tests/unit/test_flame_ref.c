@@ -370,5 +370,5 @@ int main(void)
     RUN(test_stabilised_diffusion);
     RUN(test_obstacle_source);
     RUN(test_params_json);
-    return check_summary("test_flame_ref");
+    return CHECK_DONE();
 }

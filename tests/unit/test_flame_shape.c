@@ -54,13 +54,9 @@ static void test_difference_form_rises(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tfs_ocl, "cpu", &err)) {
-        fprintf(stderr, "ocl_open(cpu): %s: %s\n", err.code, err.message);
-        check_tests_failed++;
-        return check_summary("test_flame_shape");
-    }
+    if (ocl_open(&tfs_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
     RUN(test_default_shape);
     RUN(test_difference_form_rises);
     ocl_close(tfs_ocl);
-    return check_summary("test_flame_shape");
+    return CHECK_DONE();
 }

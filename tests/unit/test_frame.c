@@ -221,5 +221,5 @@ int main(void)
     RUN(test_reject_header_bytes);
     RUN(test_reject_payload_mismatch);
     RUN(test_longer_header);
-    return check_summary("test_frame");
+    return CHECK_DONE();
 }

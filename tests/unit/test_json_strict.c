@@ -62,5 +62,5 @@ int main(void)
     RUN(test_duplicates);
     RUN(test_nul);
     RUN(test_malformed);
-    return check_summary("test_json_strict");
+    return CHECK_DONE();
 }

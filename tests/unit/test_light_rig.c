@@ -560,5 +560,5 @@ int main(int argc, char **argv)
     RUN(test_segments_other_sources);
     RUN(test_encoding);
     RUN(test_params_rules);
-    return check_summary("test_light_rig");
+    return CHECK_DONE();
 }

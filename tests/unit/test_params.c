@@ -155,5 +155,5 @@ int main(void)
     RUN(test_all_or_nothing);
     RUN(test_restart_changed);
     RUN(test_describe);
-    return check_summary("test_params");
+    return CHECK_DONE();
 }

@@ -509,5 +509,5 @@ int main(int argc, char **argv)
     RUN(test_truncated);
     RUN(test_corrupt);
     RUN(test_header_limits);
-    return check_summary("test_particles");
+    return CHECK_DONE();
 }

@@ -179,5 +179,5 @@ int main(void)
     char cmd[128];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tp_dir);
     if (system(cmd)) fprintf(stderr, "cannot remove %s\n", tp_dir);
-    return check_summary("test_presets");
+    return CHECK_DONE();
 }

@@ -400,5 +400,5 @@ int main(void)
     RUN(test_rate_limit);
     RUN(test_roles);
     RUN(test_access_rules);
-    return check_summary("test_session");
+    return CHECK_DONE();
 }
