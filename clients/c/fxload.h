@@ -1,0 +1,196 @@
+/* fxload.h — what the files of fxload, the load generator of fxstreamd, share: the options,
+ * the state of one run (connections, streams, measurements, per-second rows) and the
+ * functions each file offers the others. Not a library: the Makefile links these files into
+ * build/fxload only, never into libfxclient.
+ *
+ *   fxload.c         help, main: output files, the order of the phases, the exit status
+ *   fxload_opts.c    options, --streams groups, --set specs, validation, the plan of the run
+ *   fxload_run.c     driving libfxclient's pool (fxpool.h): ramp, the callbacks that route
+ *                    what arrives, set messages, stopping and closing
+ *   fxload_stats.c   measurements: frames, bytes, seq gaps and latency per stream and kind,
+ *                    per-second rows, error messages
+ *   fxload_report.c  the per-second table, the summary, the JSON report
+ *   fxload_plot.c    the gnuplot plot
+ *
+ * Everything runs in one thread around fxp_service(); nothing here is shared with another. */
+#ifndef FXLOAD_H
+#define FXLOAD_H
+
+#include <stdint.h>
+#include <stdio.h>
+
+#include <cjson/cJSON.h>
+
+#include "fxpool.h"
+
+#define LD_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
+#define LD_MAX_CONNECTIONS 10000
+#define LD_MAX_STREAMS 64 /* distinct stream names in --streams */
+#define LD_MAX_GROUP 16   /* streams one connection subscribes to (server default limit) */
+#define LD_MAX_GROUPS 64
+#define LD_MAX_SETS 16
+#define LD_MAX_ERRS 32    /* distinct error messages kept */
+#define LD_NAME_MAX 64    /* stream and parameter names, with the terminating 0 */
+#define LD_DEFAULT_STREAMS "energy,flame"
+#define LD_DEFAULT_SET "energy.alpha=0.5..2"
+#define LD_DEFAULT_RATE 10
+
+/* Exit statuses (README "Load testing with fxload"). */
+enum { LD_OK = 0, LD_FAIL = 1, LD_USAGE = 2, LD_DEGRADED = 3 };
+enum ld_mode { LD_SUBSCRIBE = 0, LD_SET = 1 };
+
+/* ---- options -------------------------------------------------------------------- */
+
+struct ld_setspec {
+    char stream[LD_NAME_MAX];
+    char param[LD_NAME_MAX];
+    int range, integer; /* LO..HI; integers when both are */
+    double lo, hi;
+    cJSON *value;       /* a fixed JSON value (range 0) */
+};
+
+struct ld_group {
+    int n;
+    int stream[LD_MAX_GROUP]; /* indexes into ld.streams */
+    double weight, current;   /* smooth weighted round-robin */
+};
+
+struct ld_opts {
+    const char *url;
+    const char *token, *ca_file; /* --token / $FXSTREAM_TOKEN, --ca-file / $FXSTREAM_CA_FILE */
+    long connections;
+    enum ld_mode mode;
+    const char *streams_spec;
+    double max_fps;              /* < 0: not given */
+    struct ld_setspec sets[LD_MAX_SETS];
+    int nsets;
+    double rate;                 /* < 0: not given */
+    double duration, ramp;
+    int ramp_given;
+    const char *json_path, *plot_path;
+    int quiet, payloads;
+    unsigned long seed;
+};
+
+/* ---- state of a run ------------------------------------------------------------------ */
+
+struct ld_kind {
+    uint64_t frames, bytes, skipped;
+};
+
+struct ld_stream {
+    char name[LD_NAME_MAX];
+    struct ld_kind kind[FXS_KIND_MAX + 1]; /* [0]: kinds this fxload does not know */
+    uint64_t frames, bytes, skipped;
+    struct fxp_hist lat;
+    int subscribers;  /* `subscribed` replies */
+    int sub_errors;
+    uint32_t max_rev; /* set mode: highest rev in `params` replies */
+    uint64_t sets_ok, sets_err;
+};
+
+/* One subscription of a connection. */
+struct ld_sub {
+    uint32_t channel; /* 0 until `subscribed` */
+    uint64_t last_seq[FXS_KIND_MAX + 1];
+};
+
+enum ld_conn_state { LDC_IDLE, LDC_CONNECTING, LDC_OPEN, LDC_DONE };
+
+struct ld;
+
+struct ld_conn {
+    struct ld *ld;
+    struct fxp_conn *c;      /* NULL once closed */
+    enum ld_conn_state state;
+    int group;               /* subscribe mode: index into ld.groups; set mode: -1 */
+    struct ld_sub *subs;     /* the group's n subscriptions */
+    int set_busy;            /* set mode: a set is outstanding */
+    double set_id;
+    int64_t set_sent_us;
+    int set_spec;
+};
+
+struct ld_counters {
+    uint64_t frames, bytes, skipped, errors, disconnects, failed, sets_ok, sets_err;
+};
+
+/* One line of the per-second table. */
+struct ld_row {
+    double t, dt;
+    int conns;
+    struct ld_counters d;      /* deltas over the row */
+    double p50, p95, p99, max; /* ms: frames (subscribe) or set round trips (set) */
+    uint64_t timed;
+};
+
+struct ld_err {
+    char msg[200];
+    uint64_t count;
+};
+
+struct ld {
+    struct ld_opts *o;
+    struct fxp_pool *pool;
+    struct ld_stream streams[LD_MAX_STREAMS];
+    int nstreams;
+    struct ld_group groups[LD_MAX_GROUPS];
+    int ngroups;
+    struct ld_conn *conns;
+    struct ld_sub *subs;
+    int started;             /* connections started so far */
+    int open, peak, ever_open;
+    int stopping;            /* the run is over: nothing more is measured */
+    int64_t t0;              /* CLOCK_MONOTONIC µs */
+    struct ld_counters tot, row_base;
+    struct fxp_hist lat, row_lat, set_lat;
+    struct ld_row *rows;
+    int nrows, rows_cap;
+    double row_start;
+    struct ld_err errs[LD_MAX_ERRS];
+    int nerrs;
+    uint64_t other_errs;
+    uint64_t unknown_channel, seq_backwards, sets_skipped, events;
+    double next_set;         /* seconds since t0 */
+    int set_rr;
+    unsigned next_spec;
+    unsigned long rng;
+    double elapsed;
+    const char *end_reason;
+    FILE *tout;              /* table and summary */
+    FILE *json;
+};
+
+/* fxload_opts.c */
+int ld_usage(const char *why, const char *arg);
+/* Fills o from argv. Returns 0, LD_USAGE, or -1 after printing help_text (--help). */
+int ld_parse_args(struct ld_opts *o, int argc, char **argv, const char *help_text);
+/* Checks combinations, fills defaults and the streams (--streams or --set). */
+int ld_validate(struct ld *ld, struct ld_opts *o);
+/* Allocates the connections and assigns each its group. Returns 0, or -1 out of memory. */
+int ld_plan(struct ld *ld);
+/* The index of a stream in ld.streams (added when new); -1 when LD_MAX_STREAMS are known. */
+int ld_stream_index(struct ld *ld, const char *name);
+
+/* fxload_run.c */
+int ld_run(struct ld *ld);
+
+/* fxload_stats.c */
+double ld_now(const struct ld *ld);
+void ld_note(struct ld *ld, const char *msg);
+void ld_error(struct ld *ld, const char *msg);
+void ld_server_error(struct ld *ld, const char *what, const cJSON *m);
+void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *h, size_t bytes, uint64_t now);
+void ld_count_set_reply(struct ld *ld, struct ld_conn *lc, const cJSON *m, const char *op, uint64_t now);
+void ld_row_end(struct ld *ld, double now);
+
+/* fxload_report.c */
+void ld_table_header(const struct ld *ld);
+void ld_table_line(const struct ld *ld, const struct ld_row *r);
+void ld_summary(const struct ld *ld);
+int ld_write_json(struct ld *ld);
+
+/* fxload_plot.c */
+int ld_plot(const struct ld *ld);
+
+#endif

@@ -1,0 +1,260 @@
+/* fxload_report.c — what fxload reports: the per-second table (one line per row as the
+ * run goes), the summary at the end (per stream, totals, set results, the distinct error
+ * messages on stderr) and the JSON document of --json (options, connections, totals,
+ * streams with their kinds, sets, errors, seconds). Reads the run's state, never changes it. */
+#include <errno.h>
+#include <inttypes.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fxload.h"
+
+/* ---- the per-second table -------------------------------------------------------------- */
+
+void ld_table_header(const struct ld *ld)
+{
+    if (ld->o->quiet) return;
+    fprintf(ld->tout, "%6s %6s %9s %8s %7s %7s %8s %8s %8s %8s %5s %5s\n", "t", "conns", "frames/s", "MB/s", "skip/s",
+            "sets/s", "p50_ms", "p95_ms", "p99_ms", "max_ms", "err", "disc");
+    fflush(ld->tout);
+}
+
+void ld_table_line(const struct ld *ld, const struct ld_row *r)
+{
+    double dt = r->dt > 0 ? r->dt : 1;
+    if (ld->o->quiet) return;
+    fprintf(ld->tout, "%6.1f %6d %9.0f %8.2f %7.0f %7.0f %8.3f %8.3f %8.3f %8.3f %5" PRIu64 " %5" PRIu64 "\n", r->t,
+            r->conns, (double)r->d.frames / dt, (double)r->d.bytes / dt / 1e6, (double)r->d.skipped / dt,
+            (double)r->d.sets_ok / dt, r->p50, r->p95, r->p99, r->max, r->d.errors + r->d.failed, r->d.disconnects);
+    fflush(ld->tout);
+}
+
+/* ---- the summary ------------------------------------------------------------------------ */
+
+static void ld_summary_line(FILE *f, const char *name, int subs, uint64_t frames, uint64_t bytes, uint64_t skipped,
+                            const struct fxp_hist *h)
+{
+    fprintf(f, "%-20s %6d %10" PRIu64 " %10.2f %8" PRIu64 " %8.3f %8.3f %8.3f %8.3f\n", name, subs, frames,
+            (double)bytes / 1e6, skipped, fxp_hist_quantile(h, 0.5) / 1000, fxp_hist_quantile(h, 0.95) / 1000,
+            fxp_hist_quantile(h, 0.99) / 1000, fxp_hist_quantile(h, 1.0) / 1000);
+}
+
+static void ld_summary_subscribe(const struct ld *ld, FILE *f)
+{
+    int subs = 0;
+    fprintf(f, "%-20s %6s %10s %10s %8s %8s %8s %8s %8s\n", "stream", "subs", "frames", "MB", "skipped", "p50_ms",
+            "p95_ms", "p99_ms", "max_ms");
+    for (int i = 0; i < ld->nstreams; i++) {
+        const struct ld_stream *st = &ld->streams[i];
+        subs += st->subscribers;
+        ld_summary_line(f, st->name, st->subscribers, st->frames, st->bytes, st->skipped, &st->lat);
+    }
+    ld_summary_line(f, "total", subs, ld->tot.frames, ld->tot.bytes, ld->tot.skipped, &ld->lat);
+    fprintf(f, "throughput: %.0f frames/s, %.2f MB/s\n", ld->elapsed > 0 ? (double)ld->tot.frames / ld->elapsed : 0,
+            ld->elapsed > 0 ? (double)ld->tot.bytes / ld->elapsed / 1e6 : 0);
+}
+
+static void ld_summary_set(const struct ld *ld, FILE *f)
+{
+    const struct fxp_hist *h = &ld->set_lat;
+    fprintf(f, "sets: %" PRIu64 " ok, %" PRIu64 " failed, %" PRIu64 " not sent (no idle connection); round trip ms "
+               "p50 %.3f p95 %.3f p99 %.3f max %.3f\n",
+            ld->tot.sets_ok, ld->tot.sets_err, ld->sets_skipped, fxp_hist_quantile(h, 0.5) / 1000,
+            fxp_hist_quantile(h, 0.95) / 1000, fxp_hist_quantile(h, 0.99) / 1000, fxp_hist_quantile(h, 1.0) / 1000);
+    for (int i = 0; i < ld->nstreams; i++)
+        fprintf(f, "  %s: %" PRIu64 " ok, %" PRIu64 " failed, rev now %" PRIu32 "\n", ld->streams[i].name,
+                ld->streams[i].sets_ok, ld->streams[i].sets_err, ld->streams[i].max_rev);
+}
+
+void ld_summary(const struct ld *ld)
+{
+    FILE *f = ld->tout;
+    const struct ld_opts *o = ld->o;
+    fprintf(f, "fxload: %s, %d of %ld connections (peak %d, failed %" PRIu64 ", disconnects %" PRIu64
+               ") to %s, %.2f s (%s)\n",
+            o->mode == LD_SET ? "set" : "subscribe", ld->ever_open, o->connections, ld->peak, ld->tot.failed,
+            ld->tot.disconnects, o->url, ld->elapsed, ld->end_reason ? ld->end_reason : "");
+    if (o->mode == LD_SUBSCRIBE) ld_summary_subscribe(ld, f);
+    else ld_summary_set(ld, f);
+    fflush(f);
+    for (int i = 0; i < ld->nerrs; i++) fprintf(stderr, "fxload: %" PRIu64 " x %s\n", ld->errs[i].count, ld->errs[i].msg);
+    if (ld->other_errs) fprintf(stderr, "fxload: %" PRIu64 " x other errors\n", ld->other_errs);
+}
+
+/* ---- the JSON report ---------------------------------------------------------------------- */
+
+/* Milliseconds from µs, rounded to the µs. */
+static double ld_ms(double us) { return round(us) / 1000.0; }
+
+static double ld_round3(double v) { return round(v * 1000) / 1000; }
+
+static cJSON *ld_latency_json(const struct fxp_hist *h)
+{
+    cJSON *j = cJSON_CreateObject();
+    cJSON_AddNumberToObject(j, "count", (double)h->count);
+    cJSON_AddNumberToObject(j, "p50", ld_ms(fxp_hist_quantile(h, 0.50)));
+    cJSON_AddNumberToObject(j, "p95", ld_ms(fxp_hist_quantile(h, 0.95)));
+    cJSON_AddNumberToObject(j, "p99", ld_ms(fxp_hist_quantile(h, 0.99)));
+    cJSON_AddNumberToObject(j, "max", ld_ms(fxp_hist_quantile(h, 1.0)));
+    cJSON_AddNumberToObject(j, "mean", h->count ? ld_ms(h->sum_us / (double)h->count) : 0);
+    return j;
+}
+
+static cJSON *ld_options_json(const struct ld_opts *o)
+{
+    cJSON *opt = cJSON_CreateObject();
+    cJSON_AddStringToObject(opt, "url", o->url);
+    cJSON_AddStringToObject(opt, "mode", o->mode == LD_SET ? "set" : "subscribe");
+    cJSON_AddNumberToObject(opt, "connections", (double)o->connections);
+    cJSON_AddNumberToObject(opt, "duration_s", o->duration);
+    cJSON_AddNumberToObject(opt, "ramp_s", o->ramp);
+    if (o->mode == LD_SUBSCRIBE)
+        cJSON_AddStringToObject(opt, "streams", o->streams_spec ? o->streams_spec : LD_DEFAULT_STREAMS);
+    if (o->max_fps > 0) cJSON_AddNumberToObject(opt, "max_fps", o->max_fps);
+    if (o->mode == LD_SET) cJSON_AddNumberToObject(opt, "rate", o->rate);
+    cJSON_AddBoolToObject(opt, "payloads", o->payloads);
+    return opt;
+}
+
+static cJSON *ld_connections_json(const struct ld *ld)
+{
+    cJSON *con = cJSON_CreateObject();
+    cJSON_AddNumberToObject(con, "requested", (double)ld->o->connections);
+    cJSON_AddNumberToObject(con, "connected", ld->ever_open);
+    cJSON_AddNumberToObject(con, "peak", ld->peak);
+    cJSON_AddNumberToObject(con, "open_at_end", ld->open);
+    cJSON_AddNumberToObject(con, "failed", (double)ld->tot.failed);
+    cJSON_AddNumberToObject(con, "disconnects", (double)ld->tot.disconnects);
+    return con;
+}
+
+static cJSON *ld_totals_json(const struct ld *ld)
+{
+    cJSON *tot = cJSON_CreateObject();
+    double el = ld->elapsed;
+    cJSON_AddNumberToObject(tot, "frames", (double)ld->tot.frames);
+    cJSON_AddNumberToObject(tot, "bytes", (double)ld->tot.bytes);
+    cJSON_AddNumberToObject(tot, "skipped", (double)ld->tot.skipped);
+    cJSON_AddNumberToObject(tot, "frames_per_s", el > 0 ? round((double)ld->tot.frames / el) : 0);
+    cJSON_AddNumberToObject(tot, "mbytes_per_s", el > 0 ? round((double)ld->tot.bytes / el / 1e3) / 1e3 : 0);
+    cJSON_AddNumberToObject(tot, "errors", (double)ld->tot.errors);
+    cJSON_AddNumberToObject(tot, "unknown_channel", (double)ld->unknown_channel);
+    cJSON_AddNumberToObject(tot, "seq_backwards", (double)ld->seq_backwards);
+    cJSON_AddNumberToObject(tot, "events", (double)ld->events);
+    cJSON_AddItemToObject(tot, "latency_ms", ld_latency_json(&ld->lat));
+    return tot;
+}
+
+static cJSON *ld_kinds_json(const struct ld_stream *st)
+{
+    cJSON *kinds = cJSON_CreateObject();
+    for (int k = 0; k <= FXS_KIND_MAX; k++) {
+        char key[8];
+        cJSON *kj;
+        if (!st->kind[k].frames) continue;
+        snprintf(key, sizeof key, "%d", k);
+        kj = cJSON_AddObjectToObject(kinds, key);
+        cJSON_AddNumberToObject(kj, "frames", (double)st->kind[k].frames);
+        cJSON_AddNumberToObject(kj, "bytes", (double)st->kind[k].bytes);
+        cJSON_AddNumberToObject(kj, "skipped", (double)st->kind[k].skipped);
+    }
+    return kinds;
+}
+
+static cJSON *ld_stream_json(const struct ld *ld, const struct ld_stream *st)
+{
+    cJSON *s = cJSON_CreateObject();
+    cJSON_AddStringToObject(s, "stream", st->name);
+    if (ld->o->mode == LD_SET) {
+        cJSON_AddNumberToObject(s, "sets_ok", (double)st->sets_ok);
+        cJSON_AddNumberToObject(s, "sets_failed", (double)st->sets_err);
+        cJSON_AddNumberToObject(s, "max_rev", st->max_rev);
+        return s;
+    }
+    cJSON_AddNumberToObject(s, "subscribers", st->subscribers);
+    cJSON_AddNumberToObject(s, "subscribe_errors", st->sub_errors);
+    cJSON_AddNumberToObject(s, "frames", (double)st->frames);
+    cJSON_AddNumberToObject(s, "bytes", (double)st->bytes);
+    cJSON_AddNumberToObject(s, "skipped", (double)st->skipped);
+    cJSON_AddItemToObject(s, "latency_ms", ld_latency_json(&st->lat));
+    cJSON_AddItemToObject(s, "kinds", ld_kinds_json(st));
+    return s;
+}
+
+static cJSON *ld_sets_json(const struct ld *ld)
+{
+    cJSON *sj = cJSON_CreateObject();
+    cJSON_AddNumberToObject(sj, "ok", (double)ld->tot.sets_ok);
+    cJSON_AddNumberToObject(sj, "failed", (double)ld->tot.sets_err);
+    cJSON_AddNumberToObject(sj, "not_sent", (double)ld->sets_skipped);
+    cJSON_AddItemToObject(sj, "latency_ms", ld_latency_json(&ld->set_lat));
+    return sj;
+}
+
+static void ld_add_error_json(cJSON *arr, const char *msg, uint64_t count)
+{
+    cJSON *e = cJSON_CreateObject();
+    cJSON_AddStringToObject(e, "message", msg);
+    cJSON_AddNumberToObject(e, "count", (double)count);
+    cJSON_AddItemToArray(arr, e);
+}
+
+static cJSON *ld_errors_json(const struct ld *ld)
+{
+    cJSON *arr = cJSON_CreateArray();
+    for (int i = 0; i < ld->nerrs; i++) ld_add_error_json(arr, ld->errs[i].msg, ld->errs[i].count);
+    if (ld->other_errs) ld_add_error_json(arr, "(other messages)", ld->other_errs);
+    return arr;
+}
+
+static cJSON *ld_row_json(const struct ld_row *r)
+{
+    cJSON *s = cJSON_CreateObject();
+    cJSON_AddNumberToObject(s, "t", ld_round3(r->t));
+    cJSON_AddNumberToObject(s, "dt", ld_round3(r->dt));
+    cJSON_AddNumberToObject(s, "connections", r->conns);
+    cJSON_AddNumberToObject(s, "frames", (double)r->d.frames);
+    cJSON_AddNumberToObject(s, "bytes", (double)r->d.bytes);
+    cJSON_AddNumberToObject(s, "skipped", (double)r->d.skipped);
+    cJSON_AddNumberToObject(s, "sets", (double)r->d.sets_ok);
+    cJSON_AddNumberToObject(s, "errors", (double)(r->d.errors + r->d.failed));
+    cJSON_AddNumberToObject(s, "disconnects", (double)r->d.disconnects);
+    cJSON_AddNumberToObject(s, "p50_ms", ld_round3(r->p50));
+    cJSON_AddNumberToObject(s, "p95_ms", ld_round3(r->p95));
+    cJSON_AddNumberToObject(s, "p99_ms", ld_round3(r->p99));
+    cJSON_AddNumberToObject(s, "max_ms", ld_round3(r->max));
+    return s;
+}
+
+static cJSON *ld_report_json(const struct ld *ld)
+{
+    cJSON *j = cJSON_CreateObject(), *arr;
+    cJSON_AddStringToObject(j, "tool", "fxload");
+    cJSON_AddItemToObject(j, "options", ld_options_json(ld->o));
+    cJSON_AddNumberToObject(j, "elapsed_s", ld_round3(ld->elapsed));
+    cJSON_AddStringToObject(j, "end", ld->end_reason ? ld->end_reason : "");
+    cJSON_AddItemToObject(j, "connections", ld_connections_json(ld));
+    cJSON_AddItemToObject(j, "totals", ld_totals_json(ld));
+    arr = cJSON_AddArrayToObject(j, "streams");
+    for (int i = 0; i < ld->nstreams; i++) cJSON_AddItemToArray(arr, ld_stream_json(ld, &ld->streams[i]));
+    if (ld->o->mode == LD_SET) cJSON_AddItemToObject(j, "sets", ld_sets_json(ld));
+    cJSON_AddItemToObject(j, "errors", ld_errors_json(ld));
+    arr = cJSON_AddArrayToObject(j, "seconds");
+    for (int i = 0; i < ld->nrows; i++) cJSON_AddItemToArray(arr, ld_row_json(&ld->rows[i]));
+    return j;
+}
+
+int ld_write_json(struct ld *ld)
+{
+    cJSON *j = ld_report_json(ld);
+    char *text = cJSON_Print(j);
+    int ok = text && fprintf(ld->json, "%s\n", text) > 0;
+    free(text);
+    cJSON_Delete(j);
+    if (ld->json == stdout) ok = fflush(stdout) == 0 && ok;
+    else if (fclose(ld->json)) ok = 0;
+    ld->json = NULL;
+    if (!ok) fprintf(stderr, "fxload: cannot write %s: %s\n", ld->o->json_path, strerror(errno));
+    return ok ? 0 : -1;
+}

@@ -1,0 +1,168 @@
+/* fxload_stats.c — fxload's measurements: what each frame and set reply adds to the
+ * counters (frames, bytes, seq gaps and latency per stream and kind, set round trips), the
+ * per-second rows cut from the running totals, and the distinct error messages shown at the
+ * end. Nothing here sends or prints, except the table line of a finished row. */
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "fxload.h"
+#include "fxws.h"
+
+double ld_now(const struct ld *ld) { return (double)(fxws_now_us(CLOCK_MONOTONIC) - ld->t0) / 1e6; }
+
+void ld_note(struct ld *ld, const char *msg)
+{
+    for (int i = 0; i < ld->nerrs; i++)
+        if (!strcmp(ld->errs[i].msg, msg)) {
+            ld->errs[i].count++;
+            return;
+        }
+    if (ld->nerrs < LD_MAX_ERRS) {
+        snprintf(ld->errs[ld->nerrs].msg, sizeof ld->errs[0].msg, "%s", msg);
+        ld->errs[ld->nerrs++].count = 1;
+    } else {
+        ld->other_errs++;
+    }
+}
+
+void ld_error(struct ld *ld, const char *msg)
+{
+    ld->tot.errors++;
+    ld_note(ld, msg);
+}
+
+void ld_server_error(struct ld *ld, const char *what, const cJSON *m)
+{
+    const cJSON *code = cJSON_GetObjectItemCaseSensitive(m, "code");
+    const cJSON *msg = cJSON_GetObjectItemCaseSensitive(m, "message");
+    char line[200];
+    snprintf(line, sizeof line, "%s%s%s: %s", what, *what ? ": " : "", cJSON_IsString(code) ? code->valuestring : "error",
+             cJSON_IsString(msg) ? msg->valuestring : "(no message)");
+    ld_error(ld, line);
+}
+
+/* The subscription of lc that channel belongs to, and its stream; NULL when none. */
+static struct ld_sub *ld_find_sub(struct ld *ld, struct ld_conn *lc, uint32_t channel, struct ld_stream **st)
+{
+    const struct ld_group *g;
+    if (lc->group < 0) return NULL;
+    g = &ld->groups[lc->group];
+    for (int k = 0; k < g->n; k++)
+        if (lc->subs[k].channel == channel) {
+            *st = &ld->streams[g->stream[k]];
+            return &lc->subs[k];
+        }
+    return NULL;
+}
+
+/* Seq gap and latency of a frame after the first of its subscription and kind. */
+static void ld_count_gap_and_latency(struct ld *ld, struct ld_stream *st, unsigned kind, uint64_t last_seq,
+                                     const struct fxs_header *h, uint64_t now)
+{
+    int64_t lat = (int64_t)now - (int64_t)h->server_time_us;
+    if (h->seq > last_seq + 1) {
+        uint64_t gap = h->seq - last_seq - 1;
+        ld->tot.skipped += gap;
+        st->skipped += gap;
+        st->kind[kind].skipped += gap;
+    } else if (h->seq <= last_seq) {
+        ld->seq_backwards++;
+    }
+    fxp_hist_add(&ld->lat, lat);
+    fxp_hist_add(&ld->row_lat, lat);
+    fxp_hist_add(&st->lat, lat);
+}
+
+void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *h, size_t bytes, uint64_t now)
+{
+    unsigned kind = h->kind <= FXS_KIND_MAX ? h->kind : 0;
+    struct ld_stream *st = NULL;
+    struct ld_sub *sub;
+    if (ld->stopping) return;
+    ld->tot.frames++;
+    ld->tot.bytes += bytes;
+    if (!(sub = ld_find_sub(ld, lc, h->channel, &st))) {
+        ld->unknown_channel++;
+        return;
+    }
+    st->frames++;
+    st->bytes += bytes;
+    st->kind[kind].frames++;
+    st->kind[kind].bytes += bytes;
+    /* the first frame of a subscription is the stream's newest, possibly older than it */
+    if (sub->last_seq[kind]) ld_count_gap_and_latency(ld, st, kind, sub->last_seq[kind], h, now);
+    sub->last_seq[kind] = h->seq;
+}
+
+void ld_count_set_reply(struct ld *ld, struct ld_conn *lc, const cJSON *m, const char *op, uint64_t now)
+{
+    const struct ld_setspec *sp = &ld->o->sets[lc->set_spec];
+    struct ld_stream *st = &ld->streams[ld_stream_index(ld, sp->stream)];
+    lc->set_busy = 0;
+    if (!strcmp(op, "params")) {
+        const cJSON *rev = cJSON_GetObjectItemCaseSensitive(m, "rev");
+        int64_t rtt = (int64_t)now - lc->set_sent_us;
+        ld->tot.sets_ok++;
+        st->sets_ok++;
+        if (cJSON_IsNumber(rev) && rev->valuedouble > st->max_rev) st->max_rev = (uint32_t)rev->valuedouble;
+        if (!ld->stopping) {
+            fxp_hist_add(&ld->set_lat, rtt);
+            fxp_hist_add(&ld->row_lat, rtt);
+        }
+    } else {
+        char what[160];
+        ld->tot.sets_err++;
+        st->sets_err++;
+        snprintf(what, sizeof what, "set %s.%s", st->name, sp->param);
+        ld_server_error(ld, what, m);
+    }
+}
+
+/* Room for one more row; -1 out of memory. */
+static int ld_rows_grow(struct ld *ld)
+{
+    int cap;
+    struct ld_row *p;
+    if (ld->nrows < ld->rows_cap) return 0;
+    cap = ld->rows_cap ? 2 * ld->rows_cap : 64;
+    if (!(p = realloc(ld->rows, (size_t)cap * sizeof *p))) return -1;
+    ld->rows = p;
+    ld->rows_cap = cap;
+    return 0;
+}
+
+static void ld_counters_sub(struct ld_counters *d, const struct ld_counters *a, const struct ld_counters *b)
+{
+    d->frames = a->frames - b->frames;
+    d->bytes = a->bytes - b->bytes;
+    d->skipped = a->skipped - b->skipped;
+    d->errors = a->errors - b->errors;
+    d->disconnects = a->disconnects - b->disconnects;
+    d->failed = a->failed - b->failed;
+    d->sets_ok = a->sets_ok - b->sets_ok;
+    d->sets_err = a->sets_err - b->sets_err;
+}
+
+void ld_row_end(struct ld *ld, double now)
+{
+    struct ld_row *r;
+    if (ld_rows_grow(ld)) {
+        ld_error(ld, "out of memory: a second of the per-second table is missing");
+        return;
+    }
+    r = &ld->rows[ld->nrows++];
+    r->t = now;
+    r->dt = now - ld->row_start;
+    r->conns = ld->open;
+    ld_counters_sub(&r->d, &ld->tot, &ld->row_base);
+    r->p50 = fxp_hist_quantile(&ld->row_lat, 0.50) / 1000;
+    r->p95 = fxp_hist_quantile(&ld->row_lat, 0.95) / 1000;
+    r->p99 = fxp_hist_quantile(&ld->row_lat, 0.99) / 1000;
+    r->max = fxp_hist_quantile(&ld->row_lat, 1.0) / 1000;
+    r->timed = ld->row_lat.count;
+    ld->row_base = ld->tot;
+    ld->row_start = now;
+    fxp_hist_reset(&ld->row_lat);
+    ld_table_line(ld, r);
+}
