@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include <libwebsockets.h>
 
@@ -67,8 +68,9 @@ static const char ld_help[] =
     "sets/s, latency p50 p95 p99 max in ms, errors, disconnects), then a summary per\n"
     "stream. Errors go to stderr as \"fxload: WHAT\".\n"
     "exit status: 0 run completed cleanly; 1 nothing could connect, or a failure\n"
-    "(libwebsockets, writing the report, gnuplot); 2 usage error; 3 run completed with\n"
-    "failed connections, disconnects or errors (the report says which).\n";
+    "(libwebsockets, writing the report, gnuplot); 2 usage error, or a stream that does\n"
+    "not exist (the run stops at the server's unknown_stream answer, no report); 3 run\n"
+    "completed with failed connections, disconnects or errors (the report says which).\n";
 
 /* Opens the output files before the run so a bad path fails early. */
 static int ld_open_outputs(struct ld *ld)
@@ -79,9 +81,12 @@ static int ld_open_outputs(struct ld *ld)
     if (o->json_path && !strcmp(o->json_path, "-")) {
         ld->json = stdout;
         ld->tout = stderr;
-    } else if (o->json_path && !(ld->json = fopen(o->json_path, "w"))) {
-        fprintf(stderr, "fxload: cannot write %s: %s\n", o->json_path, strerror(errno));
-        return LD_FAIL;
+    } else if (o->json_path) {
+        if (!(ld->json = fopen(o->json_path, "w"))) {
+            fprintf(stderr, "fxload: cannot write %s: %s\n", o->json_path, strerror(errno));
+            return LD_FAIL;
+        }
+        ld->json_created = 1;
     }
     if (!o->plot_path) return 0;
     if (!(f = fopen(o->plot_path, "w"))) {
@@ -89,11 +94,21 @@ static int ld_open_outputs(struct ld *ld)
         return LD_FAIL;
     }
     fclose(f);
+    ld->plot_created = 1;
     if (system("command -v gnuplot >/dev/null 2>&1") != 0) {
         fprintf(stderr, "fxload: --plot needs gnuplot (Debian package gnuplot-nox; deploy/install-deps.sh)\n");
         return LD_FAIL;
     }
     return 0;
+}
+
+/* A run that ended without reports leaves no empty report files behind. */
+static void ld_discard_outputs(struct ld *ld)
+{
+    if (ld->json && ld->json != stdout) fclose(ld->json);
+    ld->json = NULL;
+    if (ld->json_created) unlink(ld->o->json_path);
+    if (ld->plot_created) unlink(ld->o->plot_path);
 }
 
 static void ld_free(struct ld *ld)
@@ -153,6 +168,7 @@ int main(int argc, char **argv)
     r = ld_prepare(&ld, &o, argc, argv);
     if (!r) r = ld_run(&ld);
     if (!r) r = ld_finish(&ld);
+    else if (r > 0) ld_discard_outputs(&ld);
     ld_free(&ld);
     return r < 0 ? LD_OK : r;
 }

@@ -141,6 +141,7 @@ struct ld {
     int started;             /* connections started so far */
     int open, peak, ever_open;
     int stopping;            /* the run is over: nothing more is measured */
+    int fatal;               /* an exit status that ends the run at once (a misspelled stream) */
     int64_t t0;              /* CLOCK_MONOTONIC µs */
     struct ld_counters tot, row_base;
     struct fxp_hist lat, row_lat, set_lat;
@@ -159,6 +160,7 @@ struct ld {
     const char *end_reason;
     FILE *tout;              /* table and summary */
     FILE *json;
+    int json_created, plot_created; /* files this run created (removed when it fails) */
 };
 
 /* fxload_opts.c */

@@ -45,6 +45,22 @@ static void ld_on_open(struct fxp_conn *c, const cJSON *hello, void *user)
     if (ld->o->mode == LD_SUBSCRIBE) ld_send_subscribes(ld, c, &ld->groups[lc->group]);
 }
 
+/* Ends the run at once with exit status `status`: "fxload: WHAT: code: message" on stderr. */
+static void ld_fatal(struct ld *ld, int status, const char *what, const cJSON *m)
+{
+    const cJSON *code = cJSON_GetObjectItemCaseSensitive(m, "code");
+    const cJSON *msg = cJSON_GetObjectItemCaseSensitive(m, "message");
+    fprintf(stderr, "fxload: %s: %s: %s\n", what, cJSON_IsString(code) ? code->valuestring : "error",
+            cJSON_IsString(msg) ? msg->valuestring : "(no message)");
+    if (!ld->fatal) ld->fatal = status;
+}
+
+static int ld_is_error_code(const cJSON *m, const char *code)
+{
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(m, "code");
+    return cJSON_IsString(c) && !strcmp(c->valuestring, code);
+}
+
 /* The reply to subscribe request id (1 + the stream's place in the connection's group). */
 static void ld_on_subscribe_reply(struct ld *ld, struct ld_conn *lc, int id, const cJSON *m, const char *op)
 {
@@ -61,7 +77,8 @@ static void ld_on_subscribe_reply(struct ld *ld, struct ld_conn *lc, int id, con
         char what[120];
         st->sub_errors++;
         snprintf(what, sizeof what, "subscribe %s", st->name);
-        ld_server_error(ld, what, m);
+        if (ld_is_error_code(m, "unknown_stream")) ld_fatal(ld, LD_USAGE, what, m);
+        else ld_server_error(ld, what, m);
     }
 }
 
@@ -238,6 +255,7 @@ static int ld_loop(struct ld *ld)
         if ((r = ld_start_due(ld, now))) return r;
         if (ld->o->mode == LD_SET) ld_send_due_sets(ld, now);
         for (; now >= next_row && next_row <= ld->o->duration; next_row += 1) ld_row_end(ld, next_row);
+        if (ld->fatal) return ld->fatal;
         if ((ld->end_reason = ld_end_reason(ld, now))) break;
         if (fxp_service(ld->pool, ld_wait_ms(ld, now, next_row)) < 0) {
             fprintf(stderr, "fxload: libwebsockets service failed\n");
@@ -286,7 +304,8 @@ int ld_run(struct ld *ld)
     ld->rng = ld->o->seed * 2654435761UL + 1;
     ld->t0 = fxws_now_us(CLOCK_MONOTONIC);
     ld_table_header(ld);
-    if (!(r = ld_loop(ld))) ld_close_all(ld);
+    r = ld_loop(ld);
+    ld_close_all(ld);
     fxp_pool_destroy(ld->pool);
     ld->pool = NULL;
     return r;

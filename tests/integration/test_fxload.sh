@@ -109,10 +109,7 @@ sys.exit(0 if r.tag.endswith("svg") and len(list(r.iter())) > 20 else 1)' "$tmp/
     if grep -q "p99" "$tmp/run.svg" && grep -q "MB/s" "$tmp/run.svg"; then pass "plot: latency and throughput series"
     else fail "plot: latency and throughput series"; fi
 
-    ld --url "$URL" --connections 4 --duration 2 --ramp 0 --streams nope,energy --payloads --json "$tmp/u.json"
-    check "unknown stream: run completes, exit 3" 3 "" 'subscribe nope: unknown_stream'
-    jcheck "unknown stream: counted per stream, others still measured" "$tmp/u.json" \
-        's["nope"]["subscribe_errors"] == 2 and s["nope"]["subscribers"] == 0 and s["energy"]["frames"] > 0 and d["totals"]["errors"] == 2'
+    check_misspelled_stream
 
     ld --url "$URL" --connections 6 --duration 2 --ramp 0 --streams 'energy+flame:2,flame' --max-fps 10 --quiet --json -
     check "groups, weights, --max-fps, --json - to stdout" 0 '"tool"'
@@ -123,6 +120,20 @@ sys.exit(0 if r.tag.endswith("svg") and len(list(r.iter())) > 20 else 1)' "$tmp/
         's["flame"]["frames"] <= 6 * 10 * 2.5 + 12'
     if ! grep -q "frames/s" "$tmp/out" && grep -q "^total" "$tmp/err"; then pass "--json -: table to stderr, quiet"
     else fail "--json -: table to stderr, quiet"; fi
+}
+
+# A misspelled stream is a usage error: fxload stops at the server's first unknown_stream
+# answer (not after --duration) with exit 2, the server's message, and no report file.
+check_misspelled_stream() {
+    start=$(date +%s)
+    ld --url "$URL" --connections 4 --duration 25 --ramp 0 --streams enrgy,energy --payloads --json "$tmp/u.json"
+    took=$(($(date +%s) - start))
+    check "misspelled stream: exit 2 with the server's message" 2 "" \
+        'fxload: subscribe enrgy: unknown_stream: no stream named "enrgy" (did you mean "energy"?)'
+    if [ "$took" -le 5 ]; then pass "misspelled stream: fails at once (${took} s of 25)"
+    else fail "misspelled stream: fails at once (${took} s of 25)"; fi
+    if [ ! -e "$tmp/u.json" ]; then pass "misspelled stream: no empty report left"
+    else fail "misspelled stream: no empty report left"; fi
 }
 
 check_set() {
