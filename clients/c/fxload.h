@@ -76,17 +76,34 @@ struct ld_opts {
 
 struct ld_kind {
     uint64_t frames, bytes, skipped;
+    struct fxp_hist lat;
 };
+
+/* Where the `get` of a stream's parameters stands (its fps, set mode's values to restore). */
+enum ld_get_state { LDG_NONE, LDG_ASKED, LDG_DONE };
 
 struct ld_stream {
     char name[LD_NAME_MAX];
     struct ld_kind kind[FXS_KIND_MAX + 1]; /* [0]: kinds this fxload does not know */
     uint64_t frames, bytes, skipped;
     struct fxp_hist lat;
-    int subscribers;  /* `subscribed` replies */
+    int subscribers;        /* `subscribed` replies */
     int sub_errors;
-    uint32_t max_rev; /* set mode: highest rev in `params` replies */
+    int active;             /* subscriptions open now */
+    enum ld_get_state get;
+    const struct ld_conn *get_conn; /* where the `get` went (LDG_ASKED) */
+    double fps;             /* the stream's fps parameter; 0 until known */
+    /* delivered rate: subscriber-seconds, and frames of one kind a subscriber would have had
+       at the target rate (fps, or --max-fps when lower) over them */
+    double sub_seconds, unknown_seconds, expected;
+    uint32_t max_rev;       /* set mode: highest rev in `params` replies */
     uint64_t sets_ok, sets_err;
+};
+
+/* Frames delivered per subscriber per second against the target rate. */
+struct ld_delivery {
+    int known;              /* 0: no subscriber-time or the stream's fps unknown */
+    double fps, target, pct;
 };
 
 /* One subscription of a connection. */
@@ -143,6 +160,7 @@ struct ld {
     int stopping;            /* the run is over: nothing more is measured */
     int fatal;               /* an exit status that ends the run at once (a misspelled stream) */
     int64_t t0;              /* CLOCK_MONOTONIC µs */
+    double advanced;         /* seconds: delivered-rate counters accumulated up to here */
     struct ld_counters tot, row_base;
     struct fxp_hist lat, row_lat, set_lat;
     struct ld_row *rows;
@@ -173,6 +191,8 @@ int ld_validate(struct ld *ld, struct ld_opts *o);
 int ld_plan(struct ld *ld);
 /* The index of a stream in ld.streams (added when new); -1 when LD_MAX_STREAMS are known. */
 int ld_stream_index(struct ld *ld, const char *name);
+/* The stream called name, NULL when it is not one of the run's. */
+struct ld_stream *ld_stream_find(struct ld *ld, const char *name);
 
 /* fxload_run.c */
 int ld_run(struct ld *ld);
@@ -185,6 +205,16 @@ void ld_server_error(struct ld *ld, const char *what, const cJSON *m);
 void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *h, size_t bytes, uint64_t now);
 void ld_count_set_reply(struct ld *ld, struct ld_conn *lc, const cJSON *m, const char *op, uint64_t now);
 void ld_row_end(struct ld *ld, double now);
+/* Subscriber-time up to now (seconds since t0); called before `active` changes. */
+void ld_stats_advance(struct ld *ld, double now);
+void ld_stats_sub_start(struct ld *ld, struct ld_stream *st);
+void ld_stats_sub_end(struct ld *ld, struct ld_stream *st);
+/* The stream's fps as the server reports it (`get` reply, `params` broadcast). */
+void ld_stats_set_fps(struct ld *ld, struct ld_stream *st, double fps);
+/* Frames of the stream's most delivered kind: the stream steps a subscriber saw. */
+uint64_t ld_stream_steps(const struct ld_stream *st);
+struct ld_delivery ld_delivered(const struct ld_stream *st, uint64_t frames);
+const char *ld_kind_name(int kind);
 
 /* fxload_report.c */
 void ld_table_header(const struct ld *ld);

@@ -257,6 +257,13 @@ static int ld_stream_add(struct ld *ld, const char *name, size_t n)
 
 int ld_stream_index(struct ld *ld, const char *name) { return ld_stream_add(ld, name, strlen(name)); }
 
+struct ld_stream *ld_stream_find(struct ld *ld, const char *name)
+{
+    for (int i = 0; i < ld->nstreams; i++)
+        if (!strcmp(ld->streams[i].name, name)) return &ld->streams[i];
+    return NULL;
+}
+
 /* Adds the streams of one group, STREAM[+STREAM...], to g. item is for messages. */
 static int ld_parse_group_streams(struct ld *ld, struct ld_group *g, char *s, const char *item)
 {

@@ -32,25 +32,50 @@ void ld_table_line(const struct ld *ld, const struct ld_row *r)
 
 /* ---- the summary ------------------------------------------------------------------------ */
 
-static void ld_summary_line(FILE *f, const char *name, int subs, uint64_t frames, uint64_t bytes, uint64_t skipped,
-                            const struct fxp_hist *h)
+/* "15.0 of 30 fps (50%)": frames per subscriber per second against the target. */
+static void ld_delivery_text(char *buf, size_t len, const struct ld_stream *st, uint64_t frames)
 {
-    fprintf(f, "%-20s %6d %10" PRIu64 " %10.2f %8" PRIu64 " %8.3f %8.3f %8.3f %8.3f\n", name, subs, frames,
+    struct ld_delivery d = ld_delivered(st, frames);
+    if (d.known) snprintf(buf, len, "%.1f of %.4g fps (%.0f%%)", d.fps, d.target, d.pct);
+    else snprintf(buf, len, "%s", st->sub_seconds > 0 ? "fps unknown" : "-");
+}
+
+static void ld_summary_line(FILE *f, const char *name, const char *subs, uint64_t frames, uint64_t bytes,
+                            uint64_t skipped, const struct fxp_hist *h, const char *delivered)
+{
+    fprintf(f, "%-20s %6s %10" PRIu64 " %10.2f %8" PRIu64 " %8.3f %8.3f %8.3f %8.3f%s%s\n", name, subs, frames,
             (double)bytes / 1e6, skipped, fxp_hist_quantile(h, 0.5) / 1000, fxp_hist_quantile(h, 0.95) / 1000,
-            fxp_hist_quantile(h, 0.99) / 1000, fxp_hist_quantile(h, 1.0) / 1000);
+            fxp_hist_quantile(h, 0.99) / 1000, fxp_hist_quantile(h, 1.0) / 1000, *delivered ? "  " : "", delivered);
+}
+
+/* The stream's line, then one line per kind it sent. */
+static void ld_summary_stream(FILE *f, const struct ld_stream *st)
+{
+    char subs[16], delivered[80], name[32];
+    snprintf(subs, sizeof subs, "%d", st->subscribers);
+    ld_delivery_text(delivered, sizeof delivered, st, ld_stream_steps(st));
+    ld_summary_line(f, st->name, subs, st->frames, st->bytes, st->skipped, &st->lat, delivered);
+    for (int k = 0; k <= FXS_KIND_MAX; k++) {
+        const struct ld_kind *kd = &st->kind[k];
+        if (!kd->frames) continue;
+        snprintf(name, sizeof name, "  %d %s", k, ld_kind_name(k));
+        ld_delivery_text(delivered, sizeof delivered, st, kd->frames);
+        ld_summary_line(f, name, "", kd->frames, kd->bytes, kd->skipped, &kd->lat, delivered);
+    }
 }
 
 static void ld_summary_subscribe(const struct ld *ld, FILE *f)
 {
     int subs = 0;
-    fprintf(f, "%-20s %6s %10s %10s %8s %8s %8s %8s %8s\n", "stream", "subs", "frames", "MB", "skipped", "p50_ms",
-            "p95_ms", "p99_ms", "max_ms");
+    char total[16];
+    fprintf(f, "%-20s %6s %10s %10s %8s %8s %8s %8s %8s  %s\n", "stream / kind", "subs", "frames", "MB", "skipped",
+            "p50_ms", "p95_ms", "p99_ms", "max_ms", "delivered per subscriber");
     for (int i = 0; i < ld->nstreams; i++) {
-        const struct ld_stream *st = &ld->streams[i];
-        subs += st->subscribers;
-        ld_summary_line(f, st->name, st->subscribers, st->frames, st->bytes, st->skipped, &st->lat);
+        subs += ld->streams[i].subscribers;
+        ld_summary_stream(f, &ld->streams[i]);
     }
-    ld_summary_line(f, "total", subs, ld->tot.frames, ld->tot.bytes, ld->tot.skipped, &ld->lat);
+    snprintf(total, sizeof total, "%d", subs);
+    ld_summary_line(f, "total", total, ld->tot.frames, ld->tot.bytes, ld->tot.skipped, &ld->lat, "");
     fprintf(f, "throughput: %.0f frames/s, %.2f MB/s\n", ld->elapsed > 0 ? (double)ld->tot.frames / ld->elapsed : 0,
             ld->elapsed > 0 ? (double)ld->tot.bytes / ld->elapsed / 1e6 : 0);
 }
@@ -146,39 +171,70 @@ static cJSON *ld_totals_json(const struct ld *ld)
     return tot;
 }
 
+static double ld_round1(double v) { return round(v * 10) / 10; }
+
+/* delivered_fps (per subscriber), target_fps and delivered_pct of `frames`; null when unknown. */
+static void ld_add_delivery_json(cJSON *j, const struct ld_stream *st, uint64_t frames)
+{
+    struct ld_delivery d = ld_delivered(st, frames);
+    if (!d.known) {
+        cJSON_AddNullToObject(j, "delivered_fps");
+        cJSON_AddNullToObject(j, "target_fps");
+        cJSON_AddNullToObject(j, "delivered_pct");
+        return;
+    }
+    cJSON_AddNumberToObject(j, "delivered_fps", ld_round3(d.fps));
+    cJSON_AddNumberToObject(j, "target_fps", ld_round3(d.target));
+    cJSON_AddNumberToObject(j, "delivered_pct", ld_round1(d.pct));
+}
+
+/* Per kind the stream sent, keyed by its number ("2"): name, counts, latency, delivery. */
 static cJSON *ld_kinds_json(const struct ld_stream *st)
 {
     cJSON *kinds = cJSON_CreateObject();
     for (int k = 0; k <= FXS_KIND_MAX; k++) {
+        const struct ld_kind *kd = &st->kind[k];
         char key[8];
         cJSON *kj;
-        if (!st->kind[k].frames) continue;
+        if (!kd->frames) continue;
         snprintf(key, sizeof key, "%d", k);
         kj = cJSON_AddObjectToObject(kinds, key);
-        cJSON_AddNumberToObject(kj, "frames", (double)st->kind[k].frames);
-        cJSON_AddNumberToObject(kj, "bytes", (double)st->kind[k].bytes);
-        cJSON_AddNumberToObject(kj, "skipped", (double)st->kind[k].skipped);
+        cJSON_AddStringToObject(kj, "name", ld_kind_name(k));
+        cJSON_AddNumberToObject(kj, "frames", (double)kd->frames);
+        cJSON_AddNumberToObject(kj, "bytes", (double)kd->bytes);
+        cJSON_AddNumberToObject(kj, "skipped", (double)kd->skipped);
+        cJSON_AddItemToObject(kj, "latency_ms", ld_latency_json(&kd->lat));
+        ld_add_delivery_json(kj, st, kd->frames);
     }
     return kinds;
+}
+
+static void ld_add_subscribe_json(cJSON *s, const struct ld_stream *st)
+{
+    cJSON_AddNumberToObject(s, "subscribers", st->subscribers);
+    cJSON_AddNumberToObject(s, "subscribe_errors", st->sub_errors);
+    if (st->fps > 0) cJSON_AddNumberToObject(s, "fps", st->fps);
+    else cJSON_AddNullToObject(s, "fps");
+    cJSON_AddNumberToObject(s, "subscriber_seconds", ld_round3(st->sub_seconds));
+    cJSON_AddNumberToObject(s, "frames", (double)st->frames);
+    cJSON_AddNumberToObject(s, "bytes", (double)st->bytes);
+    cJSON_AddNumberToObject(s, "skipped", (double)st->skipped);
+    cJSON_AddItemToObject(s, "latency_ms", ld_latency_json(&st->lat));
+    ld_add_delivery_json(s, st, ld_stream_steps(st));
+    cJSON_AddItemToObject(s, "kinds", ld_kinds_json(st));
 }
 
 static cJSON *ld_stream_json(const struct ld *ld, const struct ld_stream *st)
 {
     cJSON *s = cJSON_CreateObject();
     cJSON_AddStringToObject(s, "stream", st->name);
-    if (ld->o->mode == LD_SET) {
-        cJSON_AddNumberToObject(s, "sets_ok", (double)st->sets_ok);
-        cJSON_AddNumberToObject(s, "sets_failed", (double)st->sets_err);
-        cJSON_AddNumberToObject(s, "max_rev", st->max_rev);
+    if (ld->o->mode == LD_SUBSCRIBE) {
+        ld_add_subscribe_json(s, st);
         return s;
     }
-    cJSON_AddNumberToObject(s, "subscribers", st->subscribers);
-    cJSON_AddNumberToObject(s, "subscribe_errors", st->sub_errors);
-    cJSON_AddNumberToObject(s, "frames", (double)st->frames);
-    cJSON_AddNumberToObject(s, "bytes", (double)st->bytes);
-    cJSON_AddNumberToObject(s, "skipped", (double)st->skipped);
-    cJSON_AddItemToObject(s, "latency_ms", ld_latency_json(&st->lat));
-    cJSON_AddItemToObject(s, "kinds", ld_kinds_json(st));
+    cJSON_AddNumberToObject(s, "sets_ok", (double)st->sets_ok);
+    cJSON_AddNumberToObject(s, "sets_failed", (double)st->sets_err);
+    cJSON_AddNumberToObject(s, "max_rev", st->max_rev);
     return s;
 }
 

@@ -7,6 +7,7 @@
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
@@ -71,8 +72,10 @@ static void ld_on_subscribe_reply(struct ld *ld, struct ld_conn *lc, int id, con
     st = &ld->streams[g->stream[k]];
     if (!strcmp(op, "subscribed")) {
         const cJSON *ch = cJSON_GetObjectItemCaseSensitive(m, "channel");
-        if (!lc->subs[k].channel) st->subscribers++;
-        lc->subs[k].channel = cJSON_IsNumber(ch) ? (uint32_t)ch->valuedouble : 0;
+        if (!cJSON_IsNumber(ch) || ch->valuedouble < 1 || lc->subs[k].channel) return;
+        st->subscribers++;
+        lc->subs[k].channel = (uint32_t)ch->valuedouble;
+        ld_stats_sub_start(ld, st);
     } else if (!strcmp(op, "error")) {
         char what[120];
         st->sub_errors++;
@@ -82,11 +85,33 @@ static void ld_on_subscribe_reply(struct ld *ld, struct ld_conn *lc, int id, con
     }
 }
 
-/* A message without id: errors and unsubscriptions count, other events are only counted. */
-static void ld_on_event(struct ld *ld, const cJSON *m, const char *op)
+/* The fps in a `params` message (reply or broadcast) of stream st. */
+static void ld_take_fps(struct ld *ld, struct ld_stream *st, const cJSON *m)
+{
+    const cJSON *fps = cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(m, "params"), "fps");
+    if (cJSON_IsNumber(fps)) ld_stats_set_fps(ld, st, fps->valuedouble);
+}
+
+/* The server ended lc's subscription of the stream called name (it was destroyed). */
+static void ld_sub_ended(struct ld *ld, struct ld_conn *lc, const char *name)
+{
+    const struct ld_group *g;
+    if (lc->group < 0) return;
+    g = &ld->groups[lc->group];
+    for (int k = 0; k < g->n; k++)
+        if (lc->subs[k].channel && !strcmp(ld->streams[g->stream[k]].name, name)) {
+            lc->subs[k].channel = 0;
+            ld_stats_sub_end(ld, &ld->streams[g->stream[k]]);
+        }
+}
+
+/* A message without id: errors and unsubscriptions count, a `params` broadcast may change
+ * the stream's fps, other events are only counted. */
+static void ld_on_event(struct ld *ld, struct ld_conn *lc, const cJSON *m, const char *op)
 {
     const cJSON *stream = cJSON_GetObjectItemCaseSensitive(m, "stream");
     const char *sname = cJSON_IsString(stream) ? stream->valuestring : NULL;
+    struct ld_stream *st = sname ? ld_stream_find(ld, sname) : NULL;
     ld->events++;
     if (!strcmp(op, "error")) {
         char what[120];
@@ -98,7 +123,70 @@ static void ld_on_event(struct ld *ld, const cJSON *m, const char *op)
         snprintf(line, sizeof line, "unsubscribed from %s (%s)", sname ? sname : "?",
                  cJSON_IsString(why) ? why->valuestring : "no reason");
         ld_error(ld, line);
+        if (sname) ld_sub_ended(ld, lc, sname);
+    } else if (!strcmp(op, "params") && st) {
+        ld_take_fps(ld, st, m);
     }
+}
+
+/* ---- the `get` of each stream's parameters ------------------------------------------------ */
+
+#define LD_GET_ID "get:"
+
+/* An open connection, NULL when none is. */
+static struct ld_conn *ld_open_conn(struct ld *ld)
+{
+    for (long i = 0; i < ld->o->connections; i++)
+        if (ld->conns[i].state == LDC_OPEN) return &ld->conns[i];
+    return NULL;
+}
+
+/* Asks for the parameters of each stream that needs them and has not asked yet: in
+ * subscribe mode once it has a subscriber (for its fps). */
+static void ld_send_gets(struct ld *ld)
+{
+    struct ld_conn *lc = NULL;
+    for (int i = 0; i < ld->nstreams; i++) {
+        struct ld_stream *st = &ld->streams[i];
+        char id[32];
+        cJSON *req;
+        if (st->get != LDG_NONE || (ld->o->mode == LD_SUBSCRIBE && !st->active)) continue;
+        if (!lc && !(lc = ld_open_conn(ld))) return;
+        snprintf(id, sizeof id, LD_GET_ID "%d", i);
+        req = cJSON_CreateObject();
+        cJSON_AddStringToObject(req, "op", "get");
+        cJSON_AddStringToObject(req, "id", id);
+        cJSON_AddStringToObject(req, "stream", st->name);
+        if (fxp_send_json(lc->c, req) == 0) {
+            st->get = LDG_ASKED;
+            st->get_conn = lc;
+        }
+        cJSON_Delete(req);
+    }
+}
+
+/* The reply to a `get` (id "get:INDEX"). */
+static void ld_on_get_reply(struct ld *ld, int index, const cJSON *m, const char *op)
+{
+    struct ld_stream *st;
+    char what[120];
+    if (index < 0 || index >= ld->nstreams || ld->streams[index].get != LDG_ASKED) return;
+    st = &ld->streams[index];
+    st->get = LDG_DONE;
+    if (!strcmp(op, "params")) {
+        ld_take_fps(ld, st, m);
+        return;
+    }
+    snprintf(what, sizeof what, "get %s", st->name);
+    /* in set mode this is the first message about the stream: a misspelled --set */
+    if (ld->o->mode == LD_SET && ld_is_error_code(m, "unknown_stream")) ld_fatal(ld, LD_USAGE, what, m);
+    else ld_server_error(ld, what, m);
+}
+
+/* A reply to one of fxload's own requests (a string id). */
+static void ld_on_control_reply(struct ld *ld, const char *id, const cJSON *m, const char *op)
+{
+    if (!strncmp(id, LD_GET_ID, strlen(LD_GET_ID))) ld_on_get_reply(ld, atoi(id + strlen(LD_GET_ID)), m, op);
 }
 
 static void ld_on_text(struct fxp_conn *c, const cJSON *m, uint64_t now, void *user)
@@ -108,7 +196,8 @@ static void ld_on_text(struct fxp_conn *c, const cJSON *m, uint64_t now, void *u
     const char *op = cJSON_GetObjectItemCaseSensitive(m, "op")->valuestring;
     const cJSON *id = cJSON_GetObjectItemCaseSensitive(m, "id");
     (void)c;
-    if (!cJSON_IsNumber(id)) ld_on_event(ld, m, op);
+    if (cJSON_IsString(id)) ld_on_control_reply(ld, id->valuestring, m, op);
+    else if (!cJSON_IsNumber(id)) ld_on_event(ld, lc, m, op);
     else if (ld->o->mode == LD_SUBSCRIBE) ld_on_subscribe_reply(ld, lc, (int)id->valuedouble, m, op);
     else if (lc->set_busy && id->valuedouble == lc->set_id) ld_count_set_reply(ld, lc, m, op, now);
 }
@@ -121,6 +210,16 @@ static void ld_on_frame(struct fxp_conn *c, const struct fxs_header *h, const ui
     ld_count_frame(((struct ld_conn *)user)->ld, user, h, bytes, now);
 }
 
+/* A closed connection's subscriptions end; a `get` it carried is asked again elsewhere. */
+static void ld_conn_gone(struct ld *ld, struct ld_conn *lc)
+{
+    const struct ld_group *g = lc->group >= 0 ? &ld->groups[lc->group] : NULL;
+    for (int k = 0; g && k < g->n; k++)
+        if (lc->subs[k].channel) ld_stats_sub_end(ld, &ld->streams[g->stream[k]]);
+    for (int i = 0; i < ld->nstreams; i++)
+        if (ld->streams[i].get == LDG_ASKED && ld->streams[i].get_conn == lc) ld->streams[i].get = LDG_NONE;
+}
+
 static void ld_on_close(struct fxp_conn *c, const struct fxp_close_info *info, void *user)
 {
     struct ld_conn *lc = user;
@@ -130,6 +229,7 @@ static void ld_on_close(struct fxp_conn *c, const struct fxp_close_info *info, v
     if (was_open) ld->open--;
     lc->c = NULL;
     lc->state = LDC_DONE;
+    ld_conn_gone(ld, lc);
     if (info->by_client) return;
     if (was_open) ld->tot.disconnects++;
     else ld->tot.failed++;
@@ -253,6 +353,8 @@ static int ld_loop(struct ld *ld)
         int r;
         now = ld_now(ld);
         if ((r = ld_start_due(ld, now))) return r;
+        ld_stats_advance(ld, now);
+        ld_send_gets(ld);
         if (ld->o->mode == LD_SET) ld_send_due_sets(ld, now);
         for (; now >= next_row && next_row <= ld->o->duration; next_row += 1) ld_row_end(ld, next_row);
         if (ld->fatal) return ld->fatal;

@@ -1,7 +1,14 @@
 /* fxload_stats.c — fxload's measurements: what each frame and set reply adds to the
  * counters (frames, bytes, seq gaps and latency per stream and kind, set round trips), the
- * per-second rows cut from the running totals, and the distinct error messages shown at the
- * end. Nothing here sends or prints, except the table line of a finished row. */
+ * delivered rate (subscriber-seconds and the frames the stream's fps promised over them),
+ * the per-second rows cut from the running totals, and the distinct error messages shown at
+ * the end. Nothing here sends or prints, except the table line of a finished row.
+ *
+ * Delivered rate: every subscription open for t seconds of a stream at F fps (or --max-fps
+ * when lower) should see F * t frames of each kind the stream sends every step; what it saw
+ * over that is the delivered percentage. fps may change during the run (a `params`
+ * broadcast): the promise follows it. The subscriber-time before the first `get` reply is
+ * kept apart and promised at the first fps known. */
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -72,6 +79,7 @@ static void ld_count_gap_and_latency(struct ld *ld, struct ld_stream *st, unsign
     fxp_hist_add(&ld->lat, lat);
     fxp_hist_add(&ld->row_lat, lat);
     fxp_hist_add(&st->lat, lat);
+    fxp_hist_add(&st->kind[kind].lat, lat);
 }
 
 void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *h, size_t bytes, uint64_t now)
@@ -98,7 +106,7 @@ void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *
 void ld_count_set_reply(struct ld *ld, struct ld_conn *lc, const cJSON *m, const char *op, uint64_t now)
 {
     const struct ld_setspec *sp = &ld->o->sets[lc->set_spec];
-    struct ld_stream *st = &ld->streams[ld_stream_index(ld, sp->stream)];
+    struct ld_stream *st = ld_stream_find(ld, sp->stream);
     lc->set_busy = 0;
     if (!strcmp(op, "params")) {
         const cJSON *rev = cJSON_GetObjectItemCaseSensitive(m, "rev");
@@ -165,4 +173,73 @@ void ld_row_end(struct ld *ld, double now)
     ld->row_start = now;
     fxp_hist_reset(&ld->row_lat);
     ld_table_line(ld, r);
+}
+
+/* ---- delivered rate --------------------------------------------------------------------- */
+
+static double ld_target_fps(const struct ld *ld, double fps)
+{
+    return ld->o->max_fps > 0 && ld->o->max_fps < fps ? ld->o->max_fps : fps;
+}
+
+void ld_stats_advance(struct ld *ld, double now)
+{
+    double dt = now - ld->advanced;
+    if (ld->stopping || dt <= 0) return;
+    ld->advanced = now;
+    for (int i = 0; i < ld->nstreams; i++) {
+        struct ld_stream *st = &ld->streams[i];
+        double s = st->active * dt;
+        st->sub_seconds += s;
+        if (st->fps > 0) st->expected += ld_target_fps(ld, st->fps) * s;
+        else st->unknown_seconds += s;
+    }
+}
+
+void ld_stats_sub_start(struct ld *ld, struct ld_stream *st)
+{
+    ld_stats_advance(ld, ld_now(ld));
+    st->active++;
+}
+
+void ld_stats_sub_end(struct ld *ld, struct ld_stream *st)
+{
+    ld_stats_advance(ld, ld_now(ld));
+    st->active--;
+}
+
+void ld_stats_set_fps(struct ld *ld, struct ld_stream *st, double fps)
+{
+    if (!(fps > 0) || fps == st->fps) return;
+    ld_stats_advance(ld, ld_now(ld));
+    if (!(st->fps > 0)) {
+        st->expected += ld_target_fps(ld, fps) * st->unknown_seconds;
+        st->unknown_seconds = 0;
+    }
+    st->fps = fps;
+}
+
+uint64_t ld_stream_steps(const struct ld_stream *st)
+{
+    uint64_t best = 0;
+    for (int k = 0; k <= FXS_KIND_MAX; k++)
+        if (st->kind[k].frames > best) best = st->kind[k].frames;
+    return best;
+}
+
+struct ld_delivery ld_delivered(const struct ld_stream *st, uint64_t frames)
+{
+    struct ld_delivery d = { 0, 0, 0, 0 };
+    if (!(st->sub_seconds > 0) || !(st->expected > 0)) return d;
+    d.known = 1;
+    d.fps = (double)frames / st->sub_seconds;
+    d.target = st->expected / st->sub_seconds;
+    d.pct = 100.0 * (double)frames / st->expected;
+    return d;
+}
+
+const char *ld_kind_name(int kind)
+{
+    static const char *const names[FXS_KIND_MAX + 1] = { "unknown", "particles", "texture", "light_rig", "lut" };
+    return kind >= 0 && kind <= FXS_KIND_MAX ? names[kind] : names[0];
 }

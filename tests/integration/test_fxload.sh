@@ -29,7 +29,8 @@ jcheck() {
 import json, sys
 d = json.load(open(sys.argv[1]))
 s = {x["stream"]: x for x in d.get("streams", [])}
-ok = eval(sys.argv[2])
+K = lambda x: x.get("kinds", {})
+ok = eval(sys.argv[2].replace("\n", " "))
 if not ok:
     print("false:", sys.argv[2])
     print(json.dumps({k: d[k] for k in ("connections", "totals", "errors") if k in d})[:800])
@@ -87,6 +88,23 @@ check_subscribe() {
     jcheck "report: 25 subscribers per stream" "$j" 's["energy"]["subscribers"] == 25 and s["flame"]["subscribers"] == 25'
     jcheck "report: energy sends textures (kind 2), flame particles (kind 1)" "$j" \
         '"2" in s["energy"]["kinds"] and "1" in s["flame"]["kinds"]'
+    jcheck "report: energy's textures and light rigs counted apart, adding up to the stream" "$j" \
+        'K(s["energy"])["2"]["name"] == "texture" and K(s["energy"])["3"]["name"] == "light_rig" and
+         K(s["energy"])["2"]["frames"] > 0 and K(s["energy"])["3"]["frames"] > 0 and
+         sum(k["frames"] for k in K(s["energy"]).values()) == s["energy"]["frames"] and
+         sum(k["bytes"] for k in K(s["energy"]).values()) == s["energy"]["bytes"] and
+         K(s["flame"])["1"]["name"] == "particles" and K(s["flame"])["1"]["frames"] == s["flame"]["frames"]'
+    jcheck "report: latency per kind" "$j" \
+        'all(0 < k["latency_ms"]["p50"] <= k["latency_ms"]["max"] for x in d["streams"] for k in K(x).values())'
+    jcheck "report: delivered fps per subscriber against the stream fps (30), 0 < % <= 110" "$j" \
+        'all(x["fps"] == 30 and x["target_fps"] == 30 and x["subscriber_seconds"] > 0 and 0 < x["delivered_pct"] <= 110
+             and abs(x["delivered_fps"] - x["target_fps"] * x["delivered_pct"] / 100) < 0.1
+             and all(0 < k["delivered_pct"] <= 110 for k in K(x).values()) for x in d["streams"])'
+    if grep -q -E '^energy +25 .* [0-9.]+ of 30 fps \([0-9]+%\)$' "$tmp/out" &&
+        grep -q -E '^  2 texture +[1-9][0-9]* .* of 30 fps' "$tmp/out" &&
+        grep -q -E '^  3 light_rig +[1-9][0-9]* ' "$tmp/out" && grep -q -E '^  1 particles +[1-9]' "$tmp/out"; then
+        pass "summary: a line per kind, delivered \"N of 30 fps (P%)\""
+    else fail "summary: a line per kind, delivered \"N of 30 fps (P%)\""; fi
     jcheck "report: totals add up over streams" "$j" \
         'd["totals"]["frames"] == sum(x["frames"] for x in d["streams"]) and d["totals"]["bytes"] == sum(x["bytes"] for x in d["streams"])'
     jcheck "report: 0 < p50 <= p95 <= p99 <= max (total and per stream)" "$j" \
@@ -118,6 +136,8 @@ sys.exit(0 if r.tag.endswith("svg") and len(list(r.iter())) > 20 else 1)' "$tmp/
         's["energy"]["subscribers"] == 4 and s["flame"]["subscribers"] == 6'
     jcheck "max-fps 10 caps the frame rate" "$tmp/g.json" \
         's["flame"]["frames"] <= 6 * 10 * 2.5 + 12'
+    jcheck "max-fps 10: delivered against 10 fps, the stream's fps still 30" "$tmp/g.json" \
+        'all(x["fps"] == 30 and x["target_fps"] == 10 and 0 < x["delivered_pct"] <= 110 for x in d["streams"])'
     if ! grep -q "frames/s" "$tmp/out" && grep -q "^total" "$tmp/err"; then pass "--json -: table to stderr, quiet"
     else fail "--json -: table to stderr, quiet"; fi
 }
