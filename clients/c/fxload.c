@@ -53,6 +53,15 @@ static const char ld_help[] =
     "  --payloads         reassemble whole frames (default: keep only headers, count\n"
     "                     bytes; cheaper, so the load generator disturbs less)\n"
     "  --seed N           random seed for --set values (default 1)\n"
+    "  --max-p99 MS       threshold: p99 latency (of frames; of set round trips in set\n"
+    "                     mode) at most MS milliseconds\n"
+    "  --min-delivered PCT  threshold, subscribe mode: each stream delivers at least\n"
+    "                     PCT% of its fps to its subscribers (see delivered below)\n"
+    "  --max-skipped PCT  threshold, subscribe mode: at most PCT% of the frames due\n"
+    "                     (received + skipped) were skipped\n"
+    "                     Thresholds are judged after the run and listed in the summary\n"
+    "                     and the JSON report with the measured value and pass/FAIL; one\n"
+    "                     without data (nothing timed, fps unknown) fails.\n"
     "  --quiet            no per-second table (the summary is still printed)\n"
     "  --help, -h         this text\n"
     "\n"
@@ -74,7 +83,8 @@ static const char ld_help[] =
     "exit status: 0 run completed cleanly; 1 nothing could connect, or a failure\n"
     "(libwebsockets, writing the report, gnuplot); 2 usage error, or a stream that does\n"
     "not exist (the run stops at the server's unknown_stream answer, no report); 3 run\n"
-    "completed with failed connections, disconnects or errors (the report says which).\n";
+    "completed with failed connections, disconnects or errors (the report says which);\n"
+    "4 a threshold failed (also when 3 would apply).\n";
 
 /* Opens the output files before the run so a bad path fails early. */
 static int ld_open_outputs(struct ld *ld)
@@ -146,6 +156,7 @@ static int ld_prepare(struct ld *ld, struct ld_opts *o, int argc, char **argv)
 static int ld_finish(struct ld *ld)
 {
     int r = LD_OK;
+    ld_thresholds_judge(ld);
     ld_summary(ld);
     if (ld->json && ld_write_json(ld)) r = LD_FAIL;
     if (ld->o->plot_path && ld_plot(ld)) r = LD_FAIL;
@@ -154,6 +165,7 @@ static int ld_finish(struct ld *ld)
         fprintf(stderr, "fxload: no connection could be established to %s\n", ld->o->url);
         return LD_FAIL;
     }
+    if (ld->checks_failed) return LD_THRESHOLD;
     if (ld->tot.failed || ld->tot.disconnects || ld->tot.errors) return LD_DEGRADED;
     return LD_OK;
 }
@@ -162,7 +174,7 @@ int main(int argc, char **argv)
 {
     static struct ld ld; /* large (histograms): not on the stack */
     struct ld_opts o = { .url = LD_DEFAULT_URL, .connections = 10, .max_fps = -1, .rate = -1, .duration = 10,
-                         .seed = 1 };
+                         .seed = 1, .max_p99_ms = -1, .min_delivered = -1, .max_skipped = -1 };
     const char *log = getenv("FXLOAD_LWS_LOG");
     int r;
     o.token = getenv("FXSTREAM_TOKEN");

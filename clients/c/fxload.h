@@ -10,6 +10,8 @@
  *   fxload_stats.c   measurements: frames, bytes, seq gaps and latency per stream and kind,
  *                    per-second rows, error messages
  *   fxload_report.c  the per-second table, the summary, the JSON report
+ *   fxload_thresholds.c  --max-p99, --min-delivered, --max-skipped: pass or fail, and
+ *                    their part of the summary and of the JSON report
  *   fxload_plot.c    the gnuplot plot
  *
  * Everything runs in one thread around fxp_service(); nothing here is shared with another. */
@@ -36,7 +38,7 @@
 #define LD_DEFAULT_RATE 10
 
 /* Exit statuses (README "Load testing with fxload"). */
-enum { LD_OK = 0, LD_FAIL = 1, LD_USAGE = 2, LD_DEGRADED = 3 };
+enum { LD_OK = 0, LD_FAIL = 1, LD_USAGE = 2, LD_DEGRADED = 3, LD_THRESHOLD = 4 };
 enum ld_mode { LD_SUBSCRIBE = 0, LD_SET = 1 };
 
 /* ---- options -------------------------------------------------------------------- */
@@ -69,6 +71,7 @@ struct ld_opts {
     int ramp_given;
     const char *json_path, *plot_path;
     int quiet, payloads;
+    double max_p99_ms, min_delivered, max_skipped; /* thresholds; < 0: not given */
     unsigned long seed;
 };
 
@@ -141,6 +144,19 @@ struct ld_row {
     uint64_t timed;
 };
 
+/* One threshold judged: a limit against what the run measured. */
+struct ld_check {
+    const char *option;        /* "--max-p99", "--min-delivered", "--max-skipped" */
+    const char *what;          /* what was measured, for people: "frame latency p99" */
+    const char *stream;        /* --min-delivered: the stream judged; else NULL (the whole run) */
+    double limit, measured;
+    const char *unit;          /* "ms" or "%" */
+    int at_most;               /* the measure must stay <= limit (--max-*), else >= limit */
+    int has_data, passed;      /* without data (nothing timed, fps unknown) it fails */
+};
+
+#define LD_MAX_CHECKS (2 + LD_MAX_STREAMS)
+
 struct ld_err {
     char msg[200];
     uint64_t count;
@@ -178,6 +194,8 @@ struct ld {
     const char *end_reason;
     FILE *tout;              /* table and summary */
     FILE *json;
+    struct ld_check checks[LD_MAX_CHECKS];
+    int nchecks, checks_failed;
     int json_created, plot_created; /* files this run created (removed when it fails) */
 };
 
@@ -211,6 +229,8 @@ void ld_stats_sub_start(struct ld *ld, struct ld_stream *st);
 void ld_stats_sub_end(struct ld *ld, struct ld_stream *st);
 /* The stream's fps as the server reports it (`get` reply, `params` broadcast). */
 void ld_stats_set_fps(struct ld *ld, struct ld_stream *st, double fps);
+/* Skipped frames in % of the frames due (received + skipped) over the run; 0 when none. */
+double ld_skipped_pct(const struct ld *ld);
 /* Frames of the stream's most delivered kind: the stream steps a subscriber saw. */
 uint64_t ld_stream_steps(const struct ld_stream *st);
 struct ld_delivery ld_delivered(const struct ld_stream *st, uint64_t frames);
@@ -221,6 +241,12 @@ void ld_table_header(const struct ld *ld);
 void ld_table_line(const struct ld *ld, const struct ld_row *r);
 void ld_summary(const struct ld *ld);
 int ld_write_json(struct ld *ld);
+
+/* fxload_thresholds.c */
+/* Judges the thresholds given (fills ld.checks); returns how many failed. */
+int ld_thresholds_judge(struct ld *ld);
+void ld_thresholds_summary(const struct ld *ld, FILE *f);
+cJSON *ld_thresholds_json(const struct ld *ld);
 
 /* fxload_plot.c */
 int ld_plot(const struct ld *ld);

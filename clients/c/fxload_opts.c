@@ -186,6 +186,27 @@ static int ld_opt_seed(struct ld_opts *o, const char *v)
     return 0;
 }
 
+static int ld_opt_max_p99(struct ld_opts *o, const char *v)
+{
+    if (ld_parse_double(v, &o->max_p99_ms) || !(o->max_p99_ms > 0) || o->max_p99_ms > 3600000)
+        return ld_usage("--max-p99 needs milliseconds in (0, 3600000]", v);
+    return 0;
+}
+
+static int ld_opt_min_delivered(struct ld_opts *o, const char *v)
+{
+    if (ld_parse_double(v, &o->min_delivered) || !(o->min_delivered > 0) || o->min_delivered > 100)
+        return ld_usage("--min-delivered needs a percentage in (0, 100]", v);
+    return 0;
+}
+
+static int ld_opt_max_skipped(struct ld_opts *o, const char *v)
+{
+    if (ld_parse_double(v, &o->max_skipped) || o->max_skipped < 0 || o->max_skipped >= 100)
+        return ld_usage("--max-skipped needs a percentage in [0, 100)", v);
+    return 0;
+}
+
 struct ld_optdef {
     const char *name;
     int takes_value;
@@ -207,6 +228,9 @@ static const struct ld_optdef ld_optdefs[] = {
     { "--json", 1, ld_opt_json },
     { "--plot", 1, ld_opt_plot },
     { "--seed", 1, ld_opt_seed },
+    { "--max-p99", 1, ld_opt_max_p99 },
+    { "--min-delivered", 1, ld_opt_min_delivered },
+    { "--max-skipped", 1, ld_opt_max_skipped },
     { "--quiet", 0, ld_opt_quiet },
     { "--payloads", 0, ld_opt_payloads },
 };
@@ -329,6 +353,8 @@ static int ld_validate_set(struct ld *ld, struct ld_opts *o)
     int r;
     if (o->streams_spec) return ld_usage("--streams goes with --mode subscribe (set mode uses --set)", NULL);
     if (o->max_fps >= 0) return ld_usage("--max-fps goes with --mode subscribe", NULL);
+    if (o->min_delivered >= 0) return ld_usage("--min-delivered goes with --mode subscribe", NULL);
+    if (o->max_skipped >= 0) return ld_usage("--max-skipped goes with --mode subscribe", NULL);
     if (o->rate < 0) o->rate = LD_DEFAULT_RATE;
     if (!o->nsets && (r = ld_parse_set(&o->sets[o->nsets++], LD_DEFAULT_SET))) return r;
     for (int i = 0; i < o->nsets; i++)

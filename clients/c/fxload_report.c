@@ -102,6 +102,7 @@ void ld_summary(const struct ld *ld)
             ld->tot.disconnects, o->url, ld->elapsed, ld->end_reason ? ld->end_reason : "");
     if (o->mode == LD_SUBSCRIBE) ld_summary_subscribe(ld, f);
     else ld_summary_set(ld, f);
+    ld_thresholds_summary(ld, f);
     fflush(f);
     for (int i = 0; i < ld->nerrs; i++) fprintf(stderr, "fxload: %" PRIu64 " x %s\n", ld->errs[i].count, ld->errs[i].msg);
     if (ld->other_errs) fprintf(stderr, "fxload: %" PRIu64 " x other errors\n", ld->other_errs);
@@ -139,6 +140,9 @@ static cJSON *ld_options_json(const struct ld_opts *o)
     if (o->max_fps > 0) cJSON_AddNumberToObject(opt, "max_fps", o->max_fps);
     if (o->mode == LD_SET) cJSON_AddNumberToObject(opt, "rate", o->rate);
     cJSON_AddBoolToObject(opt, "payloads", o->payloads);
+    if (o->max_p99_ms >= 0) cJSON_AddNumberToObject(opt, "max_p99_ms", o->max_p99_ms);
+    if (o->min_delivered >= 0) cJSON_AddNumberToObject(opt, "min_delivered_pct", o->min_delivered);
+    if (o->max_skipped >= 0) cJSON_AddNumberToObject(opt, "max_skipped_pct", o->max_skipped);
     return opt;
 }
 
@@ -161,6 +165,7 @@ static cJSON *ld_totals_json(const struct ld *ld)
     cJSON_AddNumberToObject(tot, "frames", (double)ld->tot.frames);
     cJSON_AddNumberToObject(tot, "bytes", (double)ld->tot.bytes);
     cJSON_AddNumberToObject(tot, "skipped", (double)ld->tot.skipped);
+    cJSON_AddNumberToObject(tot, "skipped_pct", ld_round3(ld_skipped_pct(ld)));
     cJSON_AddNumberToObject(tot, "frames_per_s", el > 0 ? round((double)ld->tot.frames / el) : 0);
     cJSON_AddNumberToObject(tot, "mbytes_per_s", el > 0 ? round((double)ld->tot.bytes / el / 1e3) / 1e3 : 0);
     cJSON_AddNumberToObject(tot, "errors", (double)ld->tot.errors);
@@ -295,6 +300,7 @@ static cJSON *ld_report_json(const struct ld *ld)
     arr = cJSON_AddArrayToObject(j, "streams");
     for (int i = 0; i < ld->nstreams; i++) cJSON_AddItemToArray(arr, ld_stream_json(ld, &ld->streams[i]));
     if (ld->o->mode == LD_SET) cJSON_AddItemToObject(j, "sets", ld_sets_json(ld));
+    cJSON_AddItemToObject(j, "thresholds", ld_thresholds_json(ld));
     cJSON_AddItemToObject(j, "errors", ld_errors_json(ld));
     arr = cJSON_AddArrayToObject(j, "seconds");
     for (int i = 0; i < ld->nrows; i++) cJSON_AddItemToArray(arr, ld_row_json(&ld->rows[i]));

@@ -219,6 +219,12 @@ void ld_stats_set_fps(struct ld *ld, struct ld_stream *st, double fps)
     st->fps = fps;
 }
 
+double ld_skipped_pct(const struct ld *ld)
+{
+    uint64_t due = ld->tot.frames + ld->tot.skipped;
+    return due ? 100.0 * (double)ld->tot.skipped / (double)due : 0;
+}
+
 uint64_t ld_stream_steps(const struct ld_stream *st)
 {
     uint64_t best = 0;

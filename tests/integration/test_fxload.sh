@@ -67,6 +67,11 @@ check_usage() {
     ld --rate 5; check "--rate in subscribe mode: usage error" 2 "" "goes with --mode set"
     ld --max-fps 0; check "--max-fps 0: usage error" 2 "" "max-fps needs"
     ld --plot "$tmp/p.pdf"; check "--plot .pdf: usage error" 2 "" ".svg or .png"
+    ld --max-p99 0; check "--max-p99 0: usage error" 2 "" "max-p99 needs milliseconds"
+    ld --min-delivered 150; check "--min-delivered 150: usage error" 2 "" "percentage in (0, 100]"
+    ld --max-skipped -1; check "--max-skipped -1: usage error" 2 "" "percentage in \[0, 100)"
+    ld --mode set --min-delivered 50; check "--min-delivered in set mode: usage error" 2 "" "goes with --mode subscribe"
+    ld --mode set --max-skipped 5; check "--max-skipped in set mode: usage error" 2 "" "goes with --mode subscribe"
     ld --url ws://127.0.0.1:1 --connections 3 --duration 3 --json "$tmp/nowhere/r.json"
     check "unwritable --json fails before the run" 1 "" "cannot write"
     ld --url ws://127.0.0.1:1 --connections 3 --duration 3 --ramp 0
@@ -128,6 +133,7 @@ sys.exit(0 if r.tag.endswith("svg") and len(list(r.iter())) > 20 else 1)' "$tmp/
     else fail "plot: latency and throughput series"; fi
 
     check_misspelled_stream
+    check_thresholds
 
     ld --url "$URL" --connections 6 --duration 2 --ramp 0 --streams 'energy+flame:2,flame' --max-fps 10 --quiet --json -
     check "groups, weights, --max-fps, --json - to stdout" 0 '"tool"'
@@ -154,6 +160,37 @@ check_misspelled_stream() {
     else fail "misspelled stream: fails at once (${took} s of 25)"; fi
     if [ ! -e "$tmp/u.json" ]; then pass "misspelled stream: no empty report left"
     else fail "misspelled stream: no empty report left"; fi
+}
+
+# Thresholds: loose ones pass (exit 0), an impossible p99 fails with exit 4, named in the
+# summary and on stderr; the JSON report lists every check with its measured value.
+check_thresholds() {
+    ld --url "$URL" --connections 6 --duration 3 --ramp 0.5 --quiet --json "$tmp/th.json" \
+        --max-p99 60000 --min-delivered 1 --max-skipped 99
+    check "loose thresholds: exit 0" 0 "thresholds: 0 of 4 failed"
+    if grep -q -E '^  pass  --max-p99 60000 +frame latency p99 [0-9.]+ ms <= 60000 ms$' "$tmp/out" &&
+        grep -q -E '^  pass  --min-delivered 1 +energy delivered [0-9.]+% >= 1%$' "$tmp/out" &&
+        grep -q -E '^  pass  --min-delivered 1 +flame delivered ' "$tmp/out" &&
+        grep -q -E '^  pass  --max-skipped 99 +skipped frames [0-9.]+% <= 99%$' "$tmp/out"; then
+        pass "loose thresholds: each listed with its measured value and pass"
+    else fail "loose thresholds: each listed with its measured value and pass"; fi
+    jcheck "loose thresholds: JSON checks, all passed, measured values" "$tmp/th.json" \
+        'd["thresholds"]["passed"] is True and [c["option"] for c in d["thresholds"]["checks"]] ==
+         ["--max-p99", "--min-delivered", "--min-delivered", "--max-skipped"] and
+         all(c["passed"] and c["measured"] is not None for c in d["thresholds"]["checks"]) and
+         abs(d["thresholds"]["checks"][0]["measured"] - d["totals"]["latency_ms"]["p99"]) < 0.002 and
+         [c["stream"] for c in d["thresholds"]["checks"][1:3]] == ["energy", "flame"] and
+         abs(d["thresholds"]["checks"][1]["measured"] - s["energy"]["delivered_pct"]) < 0.06 and
+         abs(d["thresholds"]["checks"][3]["measured"] - d["totals"]["skipped_pct"]) < 0.002'
+    ld --url "$URL" --connections 6 --duration 3 --ramp 0.5 --quiet --json "$tmp/th.json" --max-p99 0.001 --max-skipped 99
+    check "impossible --max-p99 0.001: exit 4, named on stderr" 4 "thresholds: 1 of 2 failed" \
+        "fxload: threshold failed: --max-p99 0.001 (frame latency p99 [0-9.]* ms > 0.001 ms)"
+    if grep -q -E '^  FAIL  --max-p99 0.001 +frame latency p99 [0-9.]+ ms > 0.001 ms$' "$tmp/out" &&
+        grep -q -E '^  pass  --max-skipped 99 ' "$tmp/out"; then pass "impossible --max-p99: the summary names it FAIL"
+    else fail "impossible --max-p99: the summary names it FAIL"; fi
+    jcheck "impossible --max-p99: JSON says failed, measured above the limit" "$tmp/th.json" \
+        'd["thresholds"]["passed"] is False and d["thresholds"]["checks"][0]["passed"] is False and
+         d["thresholds"]["checks"][0]["measured"] > 0.001 and d["thresholds"]["checks"][1]["passed"] is True'
 }
 
 check_set() {
