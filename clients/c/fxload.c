@@ -42,7 +42,9 @@ static const char ld_help[] =
     "                     repeated, each set message uses the next SPEC in turn.\n"
     "                     Default energy.alpha=0.5..2\n"
     "  --rate R           set mode: set messages per second over all connections, each\n"
-    "                     from the next connection without one outstanding (default 10)\n"
+    "                     from the next connection without one outstanding (default 10)\n"    "                     Before the first set, fxload reads (get) the values of the\n"
+    "                     parameters it changes; after the run it sets them back\n"
+    "  --keep             set mode: leave the last values set instead\n"
     "  --duration S       length of the run in seconds, ramp included (default 10)\n"
     "  --ramp S           open the connections evenly over the first S seconds\n"
     "                     (default 1; 0 opens them all at once; must be < duration)\n"
@@ -81,10 +83,10 @@ static const char ld_help[] =
     "per stream and under it one per kind (1 particles, 2 texture, 3 light_rig, 4 lut).\n"
     "Errors go to stderr as \"fxload: WHAT\".\n"
     "exit status: 0 run completed cleanly; 1 nothing could connect, or a failure\n"
-    "(libwebsockets, writing the report, gnuplot); 2 usage error, or a stream that does\n"
-    "not exist (the run stops at the server's unknown_stream answer, no report); 3 run\n"
-    "completed with failed connections, disconnects or errors (the report says which);\n"
-    "4 a threshold failed (also when 3 would apply).\n";
+    "(libwebsockets, writing the report, gnuplot, restoring the values in set mode);\n"
+    "2 usage error, or a stream or parameter that does not exist (the run stops at the\n"
+    "server's answer, no report); 3 run completed with failed connections, disconnects\n"
+    "or errors (the report says which); 4 a threshold failed (also when 3 would apply).\n";
 
 /* Opens the output files before the run so a bad path fails early. */
 static int ld_open_outputs(struct ld *ld)
@@ -133,6 +135,7 @@ static void ld_free(struct ld *ld)
     free(ld->subs);
     free(ld->rows);
     for (int i = 0; i < ld->o->nsets; i++) cJSON_Delete(ld->o->sets[i].value);
+    for (int i = 0; i < ld->nstreams; i++) cJSON_Delete(ld->streams[i].before);
 }
 
 /* Everything before the run: options, plan, output files. Returns 0, -1 after --help, or an
@@ -165,6 +168,7 @@ static int ld_finish(struct ld *ld)
         fprintf(stderr, "fxload: no connection could be established to %s\n", ld->o->url);
         return LD_FAIL;
     }
+    if (ld->restore_failed) return LD_FAIL;
     if (ld->checks_failed) return LD_THRESHOLD;
     if (ld->tot.failed || ld->tot.disconnects || ld->tot.errors) return LD_DEGRADED;
     return LD_OK;

@@ -6,7 +6,8 @@
  *   fxload.c         help, main: output files, the order of the phases, the exit status
  *   fxload_opts.c    options, --streams groups, --set specs, validation, the plan of the run
  *   fxload_run.c     driving libfxclient's pool (fxpool.h): ramp, the callbacks that route
- *                    what arrives, set messages, stopping and closing
+ *                    what arrives, subscribe and get requests, stopping and closing
+ *   fxload_set.c     set mode: the set messages, the values before the run, restoring them
  *   fxload_stats.c   measurements: frames, bytes, seq gaps and latency per stream and kind,
  *                    per-second rows, error messages
  *   fxload_report.c  the per-second table, the summary, the JSON report
@@ -32,6 +33,7 @@
 #define LD_MAX_GROUPS 64
 #define LD_MAX_SETS 16
 #define LD_MAX_ERRS 32    /* distinct error messages kept */
+#define LD_ERR_MSG_MAX 200 /* bytes of one, longer ones are cut */
 #define LD_NAME_MAX 64    /* stream and parameter names, with the terminating 0 */
 #define LD_DEFAULT_STREAMS "energy,flame"
 #define LD_DEFAULT_SET "energy.alpha=0.5..2"
@@ -71,6 +73,7 @@ struct ld_opts {
     int ramp_given;
     const char *json_path, *plot_path;
     int quiet, payloads;
+    int keep;                    /* set mode: leave the values set at the end of the run */
     double max_p99_ms, min_delivered, max_skipped; /* thresholds; < 0: not given */
     unsigned long seed;
 };
@@ -84,6 +87,12 @@ struct ld_kind {
 
 /* Where the `get` of a stream's parameters stands (its fps, set mode's values to restore). */
 enum ld_get_state { LDG_NONE, LDG_ASKED, LDG_DONE };
+/* Set mode: where putting the values of before the run back stands. */
+enum ld_restore_state { LDR_NONE, LDR_SENT, LDR_DONE, LDR_FAILED };
+
+/* Ids of fxload's own requests: the prefix, then the stream's index in ld.streams. */
+#define LD_GET_ID "get:"
+#define LD_RESTORE_ID "restore:"
 
 struct ld_stream {
     char name[LD_NAME_MAX];
@@ -100,7 +109,11 @@ struct ld_stream {
        at the target rate (fps, or --max-fps when lower) over them */
     double sub_seconds, unknown_seconds, expected;
     uint32_t max_rev;       /* set mode: highest rev in `params` replies */
-    uint64_t sets_ok, sets_err;
+    uint64_t sets_sent, sets_ok, sets_err;
+    cJSON *before;          /* set mode: the values of the parameters --set changes, before the run */
+    enum ld_restore_state restore;
+    char restore_err[200];  /* LDR_FAILED: why */
+    uint32_t restored_rev;  /* LDR_DONE: the rev of the restoring set */
 };
 
 /* Frames delivered per subscriber per second against the target rate. */
@@ -158,7 +171,7 @@ struct ld_check {
 #define LD_MAX_CHECKS (2 + LD_MAX_STREAMS)
 
 struct ld_err {
-    char msg[200];
+    char msg[LD_ERR_MSG_MAX];
     uint64_t count;
 };
 
@@ -187,6 +200,8 @@ struct ld {
     uint64_t other_errs;
     uint64_t unknown_channel, seq_backwards, sets_skipped, events;
     double next_set;         /* seconds since t0 */
+    int sets_ready;          /* every stream's values before the run are known */
+    int restore_failed;      /* streams whose values could not be put back */
     int set_rr;
     unsigned next_spec;
     unsigned long rng;
@@ -213,12 +228,43 @@ int ld_stream_index(struct ld *ld, const char *name);
 struct ld_stream *ld_stream_find(struct ld *ld, const char *name);
 
 /* fxload_run.c */
+/* The run, from the first connection to the last close. Returns 0 (reports follow), or an
+ * exit status when it ended without a report (a fatal error, already on stderr). */
 int ld_run(struct ld *ld);
+/* Ends the run at once with exit status `status` (the first one given wins), after
+ * "fxload: MESSAGE" on stderr. */
+void ld_fatal(struct ld *ld, int status, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+/* ld_fatal with "WHAT: code: message" of the server's error reply m. */
+void ld_fatal_reply(struct ld *ld, int status, const char *what, const cJSON *m);
+/* An open connection, NULL when none is. */
+struct ld_conn *ld_open_conn(struct ld *ld);
+/* Sends {"op":op,"id":"PREFIX INDEX","stream":...,"params":params} (params may be NULL)
+ * about stream ld.streams[index] on lc. Returns 0, or -1 when it cannot be queued. */
+int ld_send_control(struct ld_conn *lc, const char *op, const char *prefix, int index, const cJSON *params);
+/* Services the pool until done(ld), wait_us passed, or no connection is left. */
+void ld_service_until(struct ld *ld, int (*done)(const struct ld *ld), int64_t wait_us);
+
+/* fxload_set.c */
+void ld_set_take_before(struct ld *ld, struct ld_stream *st, const cJSON *reply);
+/* Every stream's values before the run are known: the sets may start. */
+int ld_sets_ready(struct ld *ld);
+/* Sends the sets due by now (seconds since t0), at --rate over the idle connections. */
+void ld_send_due_sets(struct ld *ld, double now);
+void ld_set_on_restore_reply(struct ld *ld, int index, const cJSON *m, const char *op);
+/* After the run: waits for the sets in flight, then (unless --keep) restores the values. */
+void ld_set_finish(struct ld *ld);
 
 /* fxload_stats.c */
+/* Seconds since the run started. */
 double ld_now(const struct ld *ld);
+/* Records msg among the distinct messages shown at the end (not counted as an error). */
 void ld_note(struct ld *ld, const char *msg);
+/* ld_note, counted as an error (exit status 3). */
 void ld_error(struct ld *ld, const char *msg);
+/* "code: message" of the server's error message m. */
+void ld_error_text(const cJSON *m, char *buf, size_t len);
+int ld_is_error_code(const cJSON *m, const char *code);
+/* Counts the server's error message m: "WHAT: code: message" among the errors. */
 void ld_server_error(struct ld *ld, const char *what, const cJSON *m);
 void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *h, size_t bytes, uint64_t now);
 void ld_count_set_reply(struct ld *ld, struct ld_conn *lc, const cJSON *m, const char *op, uint64_t now);

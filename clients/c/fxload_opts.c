@@ -111,6 +111,7 @@ static int ld_opt_ca_file(struct ld_opts *o, const char *v) { o->ca_file = v; re
 static int ld_opt_streams(struct ld_opts *o, const char *v) { o->streams_spec = v; return 0; }
 static int ld_opt_quiet(struct ld_opts *o, const char *v) { (void)v; o->quiet = 1; return 0; }
 static int ld_opt_payloads(struct ld_opts *o, const char *v) { (void)v; o->payloads = 1; return 0; }
+static int ld_opt_keep(struct ld_opts *o, const char *v) { (void)v; o->keep = 1; return 0; }
 
 static int ld_opt_connections(struct ld_opts *o, const char *v)
 {
@@ -233,6 +234,7 @@ static const struct ld_optdef ld_optdefs[] = {
     { "--max-skipped", 1, ld_opt_max_skipped },
     { "--quiet", 0, ld_opt_quiet },
     { "--payloads", 0, ld_opt_payloads },
+    { "--keep", 0, ld_opt_keep },
 };
 
 static const struct ld_optdef *ld_find_opt(const char *name, size_t n)
@@ -345,6 +347,7 @@ static int ld_validate_subscribe(struct ld *ld, struct ld_opts *o)
 {
     if (o->nsets) return ld_usage("--set goes with --mode set", NULL);
     if (o->rate >= 0) return ld_usage("--rate goes with --mode set", NULL);
+    if (o->keep) return ld_usage("--keep goes with --mode set", NULL);
     return ld_parse_streams(ld, o->streams_spec ? o->streams_spec : LD_DEFAULT_STREAMS);
 }
 

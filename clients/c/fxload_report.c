@@ -80,6 +80,44 @@ static void ld_summary_subscribe(const struct ld *ld, FILE *f)
             ld->elapsed > 0 ? (double)ld->tot.bytes / ld->elapsed / 1e6 : 0);
 }
 
+/* "alpha=1, beta=[0,1,0]": the values of before the run. */
+static void ld_before_text(const struct ld_stream *st, char *buf, size_t len)
+{
+    size_t n = 0;
+    buf[0] = 0;
+    for (const cJSON *v = st->before ? st->before->child : NULL; v && n < len; v = v->next) {
+        char *text = cJSON_PrintUnformatted(v);
+        int w = snprintf(buf + n, len - n, "%s%s=%s", n ? ", " : "", v->string, text ? text : "?");
+        free(text);
+        if (w < 0) break;
+        n += (size_t)w;
+    }
+}
+
+/* What became of the values of before the run: restored, kept (--keep), failed. */
+static void ld_restore_text(const struct ld *ld, const struct ld_stream *st, char *buf, size_t len)
+{
+    char before[600];
+    ld_before_text(st, before, sizeof before);
+    if (st->restore == LDR_DONE)
+        snprintf(buf, len, "restored %s (rev %" PRIu32 ")", before, st->restored_rev);
+    else if (st->restore == LDR_FAILED)
+        snprintf(buf, len, "NOT restored (%s): before the run %s", st->restore_err, before);
+    else if (st->sets_sent && ld->o->keep)
+        snprintf(buf, len, "kept (--keep): before the run %s", before);
+    else
+        snprintf(buf, len, "unchanged (no set sent)");
+}
+
+static void ld_summary_set_stream(const struct ld *ld, FILE *f, const struct ld_stream *st)
+{
+    char restore[800];
+    ld_restore_text(ld, st, restore, sizeof restore);
+    fprintf(f, "  %s: %" PRIu64 " ok, %" PRIu64 " failed, rev now %" PRIu32 "; %s\n", st->name, st->sets_ok,
+            st->sets_err, st->max_rev, restore);
+    if (st->restore == LDR_FAILED) fprintf(stderr, "fxload: cannot restore %s: %s\n", st->name, restore);
+}
+
 static void ld_summary_set(const struct ld *ld, FILE *f)
 {
     const struct fxp_hist *h = &ld->set_lat;
@@ -87,9 +125,7 @@ static void ld_summary_set(const struct ld *ld, FILE *f)
                "p50 %.3f p95 %.3f p99 %.3f max %.3f\n",
             ld->tot.sets_ok, ld->tot.sets_err, ld->sets_skipped, fxp_hist_quantile(h, 0.5) / 1000,
             fxp_hist_quantile(h, 0.95) / 1000, fxp_hist_quantile(h, 0.99) / 1000, fxp_hist_quantile(h, 1.0) / 1000);
-    for (int i = 0; i < ld->nstreams; i++)
-        fprintf(f, "  %s: %" PRIu64 " ok, %" PRIu64 " failed, rev now %" PRIu32 "\n", ld->streams[i].name,
-                ld->streams[i].sets_ok, ld->streams[i].sets_err, ld->streams[i].max_rev);
+    for (int i = 0; i < ld->nstreams; i++) ld_summary_set_stream(ld, f, &ld->streams[i]);
 }
 
 void ld_summary(const struct ld *ld)
@@ -139,6 +175,7 @@ static cJSON *ld_options_json(const struct ld_opts *o)
         cJSON_AddStringToObject(opt, "streams", o->streams_spec ? o->streams_spec : LD_DEFAULT_STREAMS);
     if (o->max_fps > 0) cJSON_AddNumberToObject(opt, "max_fps", o->max_fps);
     if (o->mode == LD_SET) cJSON_AddNumberToObject(opt, "rate", o->rate);
+    if (o->mode == LD_SET) cJSON_AddBoolToObject(opt, "keep", o->keep);
     cJSON_AddBoolToObject(opt, "payloads", o->payloads);
     if (o->max_p99_ms >= 0) cJSON_AddNumberToObject(opt, "max_p99_ms", o->max_p99_ms);
     if (o->min_delivered >= 0) cJSON_AddNumberToObject(opt, "min_delivered_pct", o->min_delivered);
@@ -229,6 +266,19 @@ static void ld_add_subscribe_json(cJSON *s, const struct ld_stream *st)
     cJSON_AddItemToObject(s, "kinds", ld_kinds_json(st));
 }
 
+/* Set mode: "before" (the values before the run), "restore" (done, failed, kept, unchanged),
+ * "restored_rev" or "restore_error". */
+static void ld_add_restore_json(const struct ld *ld, cJSON *s, const struct ld_stream *st)
+{
+    static const char *const states[] = { "unchanged", "sent", "done", "failed" };
+    const char *state = st->restore == LDR_NONE && st->sets_sent && ld->o->keep ? "kept" : states[st->restore];
+    if (st->before) cJSON_AddItemToObject(s, "before", cJSON_Duplicate(st->before, 1));
+    else cJSON_AddNullToObject(s, "before");
+    cJSON_AddStringToObject(s, "restore", state);
+    if (st->restore == LDR_DONE) cJSON_AddNumberToObject(s, "restored_rev", st->restored_rev);
+    if (st->restore == LDR_FAILED) cJSON_AddStringToObject(s, "restore_error", st->restore_err);
+}
+
 static cJSON *ld_stream_json(const struct ld *ld, const struct ld_stream *st)
 {
     cJSON *s = cJSON_CreateObject();
@@ -240,6 +290,7 @@ static cJSON *ld_stream_json(const struct ld *ld, const struct ld_stream *st)
     cJSON_AddNumberToObject(s, "sets_ok", (double)st->sets_ok);
     cJSON_AddNumberToObject(s, "sets_failed", (double)st->sets_err);
     cJSON_AddNumberToObject(s, "max_rev", st->max_rev);
+    ld_add_restore_json(ld, s, st);
     return s;
 }
 

@@ -6,6 +6,7 @@
  * inside fxp_service(). */
 #include <math.h>
 #include <signal.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,7 +17,6 @@
 
 #define LD_CLOSE_WAIT_US 2000000
 #define LD_SERVICE_MAX_MS 10
-#define LD_SET_BURST_MAX 10000 /* set messages one loop turn may send to catch up */
 
 static volatile sig_atomic_t ld_signalled;
 
@@ -46,20 +46,22 @@ static void ld_on_open(struct fxp_conn *c, const cJSON *hello, void *user)
     if (ld->o->mode == LD_SUBSCRIBE) ld_send_subscribes(ld, c, &ld->groups[lc->group]);
 }
 
-/* Ends the run at once with exit status `status`: "fxload: WHAT: code: message" on stderr. */
-static void ld_fatal(struct ld *ld, int status, const char *what, const cJSON *m)
+void ld_fatal(struct ld *ld, int status, const char *fmt, ...)
 {
-    const cJSON *code = cJSON_GetObjectItemCaseSensitive(m, "code");
-    const cJSON *msg = cJSON_GetObjectItemCaseSensitive(m, "message");
-    fprintf(stderr, "fxload: %s: %s: %s\n", what, cJSON_IsString(code) ? code->valuestring : "error",
-            cJSON_IsString(msg) ? msg->valuestring : "(no message)");
+    va_list ap;
+    fputs("fxload: ", stderr);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fputc('\n', stderr);
     if (!ld->fatal) ld->fatal = status;
 }
 
-static int ld_is_error_code(const cJSON *m, const char *code)
+void ld_fatal_reply(struct ld *ld, int status, const char *what, const cJSON *m)
 {
-    const cJSON *c = cJSON_GetObjectItemCaseSensitive(m, "code");
-    return cJSON_IsString(c) && !strcmp(c->valuestring, code);
+    char text[200];
+    ld_error_text(m, text, sizeof text);
+    ld_fatal(ld, status, "%s: %s", what, text);
 }
 
 /* The reply to subscribe request id (1 + the stream's place in the connection's group). */
@@ -80,7 +82,7 @@ static void ld_on_subscribe_reply(struct ld *ld, struct ld_conn *lc, int id, con
         char what[120];
         st->sub_errors++;
         snprintf(what, sizeof what, "subscribe %s", st->name);
-        if (ld_is_error_code(m, "unknown_stream")) ld_fatal(ld, LD_USAGE, what, m);
+        if (ld_is_error_code(m, "unknown_stream")) ld_fatal_reply(ld, LD_USAGE, what, m);
         else ld_server_error(ld, what, m);
     }
 }
@@ -131,62 +133,76 @@ static void ld_on_event(struct ld *ld, struct ld_conn *lc, const cJSON *m, const
 
 /* ---- the `get` of each stream's parameters ------------------------------------------------ */
 
-#define LD_GET_ID "get:"
-
 /* An open connection, NULL when none is. */
-static struct ld_conn *ld_open_conn(struct ld *ld)
+struct ld_conn *ld_open_conn(struct ld *ld)
 {
     for (long i = 0; i < ld->o->connections; i++)
         if (ld->conns[i].state == LDC_OPEN) return &ld->conns[i];
     return NULL;
 }
 
+int ld_send_control(struct ld_conn *lc, const char *op, const char *prefix, int index, const cJSON *params)
+{
+    struct ld *ld = lc->ld;
+    char id[32];
+    cJSON *req = cJSON_CreateObject();
+    int r;
+    snprintf(id, sizeof id, "%s%d", prefix, index);
+    cJSON_AddStringToObject(req, "op", op);
+    cJSON_AddStringToObject(req, "id", id);
+    cJSON_AddStringToObject(req, "stream", ld->streams[index].name);
+    if (params) cJSON_AddItemToObject(req, "params", cJSON_Duplicate(params, 1));
+    r = fxp_send_json(lc->c, req);
+    cJSON_Delete(req);
+    return r;
+}
+
 /* Asks for the parameters of each stream that needs them and has not asked yet: in
- * subscribe mode once it has a subscriber (for its fps). */
+ * subscribe mode once it has a subscriber (for its fps), in set mode at once (the values
+ * to restore after the run). */
 static void ld_send_gets(struct ld *ld)
 {
     struct ld_conn *lc = NULL;
     for (int i = 0; i < ld->nstreams; i++) {
         struct ld_stream *st = &ld->streams[i];
-        char id[32];
-        cJSON *req;
         if (st->get != LDG_NONE || (ld->o->mode == LD_SUBSCRIBE && !st->active)) continue;
         if (!lc && !(lc = ld_open_conn(ld))) return;
-        snprintf(id, sizeof id, LD_GET_ID "%d", i);
-        req = cJSON_CreateObject();
-        cJSON_AddStringToObject(req, "op", "get");
-        cJSON_AddStringToObject(req, "id", id);
-        cJSON_AddStringToObject(req, "stream", st->name);
-        if (fxp_send_json(lc->c, req) == 0) {
+        if (ld_send_control(lc, "get", LD_GET_ID, i, NULL) == 0) {
             st->get = LDG_ASKED;
             st->get_conn = lc;
         }
-        cJSON_Delete(req);
     }
+}
+
+/* A `get` failed. In set mode it is the first message about the stream (a misspelled --set
+ * stream), and without the values the run could not restore them: the run ends. */
+static void ld_on_get_error(struct ld *ld, struct ld_stream *st, const cJSON *m)
+{
+    char what[120];
+    snprintf(what, sizeof what, "get %s", st->name);
+    if (ld->o->mode == LD_SUBSCRIBE) ld_server_error(ld, what, m);
+    else if (ld_is_error_code(m, "unknown_stream")) ld_fatal_reply(ld, LD_USAGE, what, m);
+    else ld_fatal_reply(ld, LD_FAIL, what, m);
 }
 
 /* The reply to a `get` (id "get:INDEX"). */
 static void ld_on_get_reply(struct ld *ld, int index, const cJSON *m, const char *op)
 {
     struct ld_stream *st;
-    char what[120];
     if (index < 0 || index >= ld->nstreams || ld->streams[index].get != LDG_ASKED) return;
     st = &ld->streams[index];
     st->get = LDG_DONE;
-    if (!strcmp(op, "params")) {
-        ld_take_fps(ld, st, m);
-        return;
-    }
-    snprintf(what, sizeof what, "get %s", st->name);
-    /* in set mode this is the first message about the stream: a misspelled --set */
-    if (ld->o->mode == LD_SET && ld_is_error_code(m, "unknown_stream")) ld_fatal(ld, LD_USAGE, what, m);
-    else ld_server_error(ld, what, m);
+    if (strcmp(op, "params")) ld_on_get_error(ld, st, m);
+    else if (ld->o->mode == LD_SET) ld_set_take_before(ld, st, m);
+    else ld_take_fps(ld, st, m);
 }
 
-/* A reply to one of fxload's own requests (a string id). */
+/* A reply to one of fxload's own requests (a string id "PREFIX" "INDEX"). */
 static void ld_on_control_reply(struct ld *ld, const char *id, const cJSON *m, const char *op)
 {
-    if (!strncmp(id, LD_GET_ID, strlen(LD_GET_ID))) ld_on_get_reply(ld, atoi(id + strlen(LD_GET_ID)), m, op);
+    size_t get = strlen(LD_GET_ID), restore = strlen(LD_RESTORE_ID);
+    if (!strncmp(id, LD_GET_ID, get)) ld_on_get_reply(ld, atoi(id + get), m, op);
+    else if (!strncmp(id, LD_RESTORE_ID, restore)) ld_set_on_restore_reply(ld, atoi(id + restore), m, op);
 }
 
 static void ld_on_text(struct fxp_conn *c, const cJSON *m, uint64_t now, void *user)
@@ -236,66 +252,6 @@ static void ld_on_close(struct fxp_conn *c, const struct fxp_close_info *info, v
     ld_note(ld, info->reason);
 }
 
-/* ---- set mode ------------------------------------------------------------------------ */
-
-static double ld_rand(struct ld *ld)
-{
-    ld->rng = ld->rng * 6364136223846793005ULL + 1442695040888963407ULL;
-    return (double)(ld->rng >> 11) / 9007199254740992.0;
-}
-
-/* The value of the next set message of sp: drawn from LO..HI, or the fixed JSON value. */
-static cJSON *ld_set_value(struct ld *ld, const struct ld_setspec *sp)
-{
-    double v;
-    if (!sp->range) return cJSON_Duplicate(sp->value, 1);
-    v = sp->integer ? floor(sp->lo + (sp->hi - sp->lo + 1) * ld_rand(ld)) : sp->lo + (sp->hi - sp->lo) * ld_rand(ld);
-    return cJSON_CreateNumber(v > sp->hi ? sp->hi : v);
-}
-
-static void ld_send_set_on(struct ld *ld, struct ld_conn *lc)
-{
-    int spec = (int)(ld->next_spec++ % (unsigned)ld->o->nsets);
-    const struct ld_setspec *sp = &ld->o->sets[spec];
-    cJSON *req = cJSON_CreateObject(), *params;
-    cJSON_AddStringToObject(req, "op", "set");
-    cJSON_AddNumberToObject(req, "id", ++lc->set_id);
-    cJSON_AddStringToObject(req, "stream", sp->stream);
-    params = cJSON_AddObjectToObject(req, "params");
-    cJSON_AddItemToObject(params, sp->param, ld_set_value(ld, sp));
-    if (fxp_send_json(lc->c, req) == 0) {
-        lc->set_busy = 1;
-        lc->set_spec = spec;
-        lc->set_sent_us = fxws_now_us(CLOCK_REALTIME);
-    }
-    cJSON_Delete(req);
-}
-
-/* Sends one set from the next idle open connection. Returns 0, or -1 when none is idle. */
-static int ld_send_set(struct ld *ld)
-{
-    long n = ld->o->connections;
-    for (long tries = 0; tries < n; tries++) {
-        struct ld_conn *lc = &ld->conns[ld->set_rr];
-        ld->set_rr = (int)((ld->set_rr + 1) % n);
-        if (lc->state != LDC_OPEN || lc->set_busy) continue;
-        ld_send_set_on(ld, lc);
-        return 0;
-    }
-    return -1;
-}
-
-/* Sends the sets due by now; a set no idle connection can take is counted, not queued. */
-static void ld_send_due_sets(struct ld *ld, double now)
-{
-    int burst = 0;
-    while (ld->next_set <= now && burst++ < LD_SET_BURST_MAX) {
-        if (ld->open && ld_send_set(ld)) ld->sets_skipped++; /* none open yet: not due */
-        ld->next_set += 1.0 / ld->o->rate;
-    }
-    if (ld->next_set < now) ld->next_set = now; /* fell behind: do not catch up later */
-}
-
 /* ---- the loop -------------------------------------------------------------------------- */
 
 /* Starts the connections due by `now` (ramp). Returns 0, or LD_USAGE for a bad URL. */
@@ -340,7 +296,7 @@ static int ld_wait_ms(const struct ld *ld, double now, double next_row)
     double wait = fmin(next_row, ld->o->duration) - now;
     if (ld->started < ld->o->connections)
         wait = fmin(wait, ld->o->ramp * (double)ld->started / (double)ld->o->connections - now);
-    if (ld->o->mode == LD_SET) wait = fmin(wait, ld->next_set - now);
+    if (ld->o->mode == LD_SET && ld->sets_ready) wait = fmin(wait, ld->next_set - now);
     wait = fmin(fmax(wait, 0), LD_SERVICE_MAX_MS / 1000.0);
     return (int)ceil(wait * 1000);
 }
@@ -352,12 +308,12 @@ static int ld_loop(struct ld *ld)
     for (;;) {
         int r;
         now = ld_now(ld);
+        if (ld->fatal) return ld->fatal;
         if ((r = ld_start_due(ld, now))) return r;
         ld_stats_advance(ld, now);
         ld_send_gets(ld);
         if (ld->o->mode == LD_SET) ld_send_due_sets(ld, now);
         for (; now >= next_row && next_row <= ld->o->duration; next_row += 1) ld_row_end(ld, next_row);
-        if (ld->fatal) return ld->fatal;
         if ((ld->end_reason = ld_end_reason(ld, now))) break;
         if (fxp_service(ld->pool, ld_wait_ms(ld, now, next_row)) < 0) {
             fprintf(stderr, "fxload: libwebsockets service failed\n");
@@ -370,15 +326,21 @@ static int ld_loop(struct ld *ld)
     return 0;
 }
 
-/* Stops measuring and closes every connection politely (bounded wait). */
+void ld_service_until(struct ld *ld, int (*done)(const struct ld *ld), int64_t wait_us)
+{
+    int64_t deadline = fxws_now_us(CLOCK_MONOTONIC) + wait_us;
+    while (!done(ld) && fxp_live(ld->pool) > 0 && fxws_now_us(CLOCK_MONOTONIC) < deadline)
+        if (fxp_service(ld->pool, 10) < 0) break;
+}
+
+static int ld_all_closed(const struct ld *ld) { return fxp_live(ld->pool) == 0; }
+
+/* Closes every connection politely (bounded wait). */
 static void ld_close_all(struct ld *ld)
 {
-    int64_t deadline = fxws_now_us(CLOCK_MONOTONIC) + LD_CLOSE_WAIT_US;
-    ld->stopping = 1;
     for (long i = 0; i < ld->o->connections; i++)
         if (ld->conns[i].c) fxp_close(ld->conns[i].c);
-    while (fxp_live(ld->pool) > 0 && fxws_now_us(CLOCK_MONOTONIC) < deadline)
-        if (fxp_service(ld->pool, 10) < 0) break;
+    ld_service_until(ld, ld_all_closed, LD_CLOSE_WAIT_US);
 }
 
 static void ld_catch_signals(void)
@@ -407,6 +369,8 @@ int ld_run(struct ld *ld)
     ld->t0 = fxws_now_us(CLOCK_MONOTONIC);
     ld_table_header(ld);
     r = ld_loop(ld);
+    ld->stopping = 1; /* nothing more is measured */
+    if (!r && ld->o->mode == LD_SET) ld_set_finish(ld);
     ld_close_all(ld);
     fxp_pool_destroy(ld->pool);
     ld->pool = NULL;

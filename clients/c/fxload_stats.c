@@ -39,13 +39,25 @@ void ld_error(struct ld *ld, const char *msg)
     ld_note(ld, msg);
 }
 
-void ld_server_error(struct ld *ld, const char *what, const cJSON *m)
+void ld_error_text(const cJSON *m, char *buf, size_t len)
 {
     const cJSON *code = cJSON_GetObjectItemCaseSensitive(m, "code");
     const cJSON *msg = cJSON_GetObjectItemCaseSensitive(m, "message");
-    char line[200];
-    snprintf(line, sizeof line, "%s%s%s: %s", what, *what ? ": " : "", cJSON_IsString(code) ? code->valuestring : "error",
+    snprintf(buf, len, "%s: %s", cJSON_IsString(code) ? code->valuestring : "error",
              cJSON_IsString(msg) ? msg->valuestring : "(no message)");
+}
+
+int ld_is_error_code(const cJSON *m, const char *code)
+{
+    const cJSON *c = cJSON_GetObjectItemCaseSensitive(m, "code");
+    return cJSON_IsString(c) && !strcmp(c->valuestring, code);
+}
+
+void ld_server_error(struct ld *ld, const char *what, const cJSON *m)
+{
+    char text[LD_ERR_MSG_MAX], line[2 * LD_ERR_MSG_MAX]; /* ld_note cuts it */
+    ld_error_text(m, text, sizeof text);
+    snprintf(line, sizeof line, "%s%s%s", what, *what ? ": " : "", text);
     ld_error(ld, line);
 }
 

@@ -193,30 +193,70 @@ check_thresholds() {
          d["thresholds"]["checks"][0]["measured"] > 0.001 and d["thresholds"]["checks"][1]["passed"] is True'
 }
 
+# getp STREAM: the stream's `params` reply (fxctl get) in $tmp/get.json; rev, alpha and beta
+# of energy as $grev, $galpha, $gbeta (empty when the get failed).
+getp() {
+    timeout "$T" "$FXCTL" --url "$URL" get "$1" >"$tmp/get.json" 2>&1
+    set -- $(/usr/bin/python3 -c 'import json, sys
+d = json.load(open(sys.argv[1])); p = d["params"]
+print(d["rev"], p.get("alpha", "-"), p.get("beta", "-"))' "$tmp/get.json" 2>/dev/null)
+    grev=${1:-} galpha=${2:-} gbeta=${3:-}
+}
+
 check_set() {
-    timeout "$T" "$FXCTL" --url "$URL" get energy >"$tmp/get0" 2>&1
-    rev0=$(grep -o '"rev":[0-9]*' "$tmp/get0" | head -n 1 | cut -d: -f2)
+    timeout "$T" "$FXCTL" --url "$URL" set energy alpha=1.25 beta=0.75 >"$tmp/out" 2>"$tmp/err"
+    rc=$?; check "set mode: known values before the run (fxctl set alpha=1.25 beta=0.75)" 0
+    getp energy; rev0=$grev
     ld --url "$URL" --mode set --rate 40 --connections 5 --duration 2 --ramp 0.5 --set 'energy.alpha=0.5..2' \
         --set 'energy.beta=1' --json "$tmp/set.json" --plot "$tmp/set.png"
     check "set mode: 40 sets/s from 5 connections" 0 "sets/s"
     jcheck "set mode: sets ok, none failed, round trips ordered" "$tmp/set.json" \
         'd["sets"]["ok"] >= 40 and d["sets"]["failed"] == 0 and 0 < d["sets"]["latency_ms"]["p50"] <= d["sets"]["latency_ms"]["p99"] <= d["sets"]["latency_ms"]["max"]'
+    jcheck "set mode: values before the run in the report, restored at the rev after the last set" "$tmp/set.json" \
+        's["energy"]["before"] == {"alpha": 1.25, "beta": 0.75} and s["energy"]["restore"] == "done" and
+         s["energy"]["restored_rev"] == s["energy"]["max_rev"] + 1 and d["options"]["keep"] is False'
     ok=$(/usr/bin/python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["sets"]["ok"])' "$tmp/set.json" 2>/dev/null)
-    timeout "$T" "$FXCTL" --url "$URL" get energy >"$tmp/get1" 2>&1
-    rev1=$(grep -o '"rev":[0-9]*' "$tmp/get1" | head -n 1 | cut -d: -f2)
-    # a set still in flight when the run stopped is applied without its reply counted: up to +5
-    if [ -n "$rev0" ] && [ -n "$ok" ] && [ -n "$rev1" ] && [ "$rev1" -ge $((rev0 + ok)) ] && [ "$rev1" -le $((rev0 + ok + 5)) ]; then
-        pass "set mode: server revision $rev0 -> $rev1 ($ok sets acknowledged)"
+    getp energy
+    # the sets in flight at the end are answered before the restoring set: +1 exactly
+    if [ -n "$rev0" ] && [ -n "$ok" ] && [ -n "$grev" ] && [ "$grev" -eq $((rev0 + ok + 1)) ]; then
+        pass "set mode: server revision $rev0 -> $grev ($ok sets acknowledged, then the restore)"
     else
-        fail "set mode: server revision advanced by the sets ($rev0 -> $rev1, ok $ok)"
+        fail "set mode: server revision advanced by the sets and the restore ($rev0 -> $grev, ok $ok)"
     fi
-    if grep -q '"alpha"' "$tmp/get1" && [ -s "$tmp/set.png" ] && head -c 8 "$tmp/set.png" | grep -q PNG; then
-        pass "set mode: PNG plot written"
-    else
-        fail "set mode: PNG plot written"
-    fi
+    if [ "$galpha" = 1.25 ] && [ "$gbeta" = 0.75 ]; then pass "set mode: fxctl get shows alpha and beta restored"
+    else fail "set mode: fxctl get shows alpha and beta restored (alpha $galpha, beta $gbeta)"; fi
+    if grep -q -E '^  energy: [0-9]+ ok, 0 failed, rev now [0-9]+; restored alpha=1.25, beta=0.75 \(rev [0-9]+\)$' "$tmp/out"
+    then pass "set mode: the summary says what was restored"
+    else fail "set mode: the summary says what was restored"; fi
+    if [ -s "$tmp/set.png" ] && head -c 8 "$tmp/set.png" | grep -q PNG; then pass "set mode: PNG plot written"
+    else fail "set mode: PNG plot written"; fi
+
+    ld --url "$URL" --mode set --rate 20 --connections 2 --duration 1.5 --ramp 0 --set 'energy.alpha=1.75' --keep \
+        --json "$tmp/keep.json"
+    check "set mode --keep: run completes" 0 "kept (--keep): before the run alpha=1.25"
+    getp energy
+    if [ "$galpha" = 1.75 ]; then pass "set mode --keep: fxctl get shows the value set (1.75)"
+    else fail "set mode --keep: fxctl get shows the value set (alpha $galpha)"; fi
+    jcheck "set mode --keep: the report says kept" "$tmp/keep.json" \
+        's["energy"]["restore"] == "kept" and "restored_rev" not in s["energy"] and d["options"]["keep"] is True'
+    ld --keep; check "--keep in subscribe mode: usage error" 2 "" "keep goes with --mode set"
+
+    getp energy; rev0=$grev
     ld --url "$URL" --mode set --rate 20 --connections 2 --duration 1.5 --ramp 0 --set 'energy.alpha=500..600'
     check "set mode: rejected values reported (bad_param), exit 3" 3 "" "set energy.alpha: bad_param"
+    getp energy
+    if [ "$galpha" = 1.75 ]; then pass "set mode: rejected values leave alpha as it was"
+    else fail "set mode: rejected values leave alpha as it was ($galpha)"; fi
+
+    rev0=$grev start=$(date +%s)
+    ld --url "$URL" --mode set --duration 25 --set 'energy.alhpa=1'
+    check "set mode: misspelled parameter, exit 2" 2 "" 'fxload: --set energy.alhpa: stream energy has no parameter "alhpa"'
+    ld --url "$URL" --mode set --duration 25 --set 'energy.alpha=1' --set 'enrgy.alpha=1'
+    check "set mode: misspelled stream, exit 2" 2 "" 'fxload: get enrgy: unknown_stream: no stream named "enrgy"'
+    took=$(($(date +%s) - start))
+    getp energy
+    if [ "$took" -le 6 ] && [ "$grev" = "$rev0" ]; then pass "set mode: misspellings fail at once, nothing set"
+    else fail "set mode: misspellings fail at once, nothing set (${took} s, rev $rev0 -> $grev)"; fi
 }
 
 check_scale() {
@@ -234,13 +274,23 @@ check_daemon_killed() {
     timeout "$T" "$FXLOAD" --url "$URL" --connections 10 --duration 25 --ramp 0 --json "$tmp/kill.json" \
         >"$tmp/kill.out" 2>"$tmp/kill.err" &
     lpid=$!
+    timeout "$T" "$FXLOAD" --url "$URL" --mode set --rate 20 --connections 2 --duration 25 --ramp 0 \
+        --set energy.alpha=1.5 --json "$tmp/kills.json" >"$tmp/kills.out" 2>"$tmp/kills.err" &
+    spid=$!
     wait_for "$tmp/kill.out" '^ *2\.0 ' 100
+    wait_for "$tmp/kills.out" '^ *2\.0 ' 100
     kill "$dpid"; wait "$dpid" 2>/dev/null; dpid=
     start=$(date +%s)
     wait "$lpid"; rc=$?
     took=$(($(date +%s) - start))
     cp "$tmp/kill.out" "$tmp/out"; cp "$tmp/kill.err" "$tmp/err"
     check "daemon killed mid-run: fxload ends, exit 3" 3 "" "server closed the connection\|lost"
+    wait "$spid"; rc=$?
+    cp "$tmp/kills.out" "$tmp/out"; cp "$tmp/kills.err" "$tmp/err"
+    check "daemon killed in set mode: the values cannot be restored, exit 1" 1 \
+        "NOT restored (no connection open): before the run alpha=" "fxload: cannot restore energy: NOT restored"
+    jcheck "daemon killed in set mode: the report says the restore failed" "$tmp/kills.json" \
+        's["energy"]["restore"] == "failed" and s["energy"]["restore_error"] == "no connection open"'
     if [ "$took" -le 10 ]; then pass "daemon killed: fxload ended by itself within ${took} s"
     else fail "daemon killed: fxload ended by itself (${took} s)"; fi
     jcheck "daemon killed: 10 disconnects reported, run ended early" "$tmp/kill.json" \
