@@ -50,8 +50,10 @@ static const char ld_help[] =
     "                     (default 1; 0 opens them all at once; must be < duration)\n"
     "  --json FILE        write the report as JSON to FILE ('-': stdout; the table and\n"
     "                     summary then go to stderr)\n"
-    "  --plot FILE        plot latency and throughput over time with gnuplot into\n"
-    "                     FILE.svg or FILE.png (needs gnuplot: Debian gnuplot-nox)\n"
+    "  --plot FILE        plot over time with gnuplot into FILE.svg or FILE.png (needs\n"
+    "                     gnuplot: Debian gnuplot-nox): latency percentiles with the\n"
+    "                     open connections; per stream frames/s (and MB/s) and\n"
+    "                     skipped/s on its own axis, or sets/s in set mode\n"
     "  --payloads         reassemble whole frames (default: keep only headers, count\n"
     "                     bytes; cheaper, so the load generator disturbs less)\n"
     "  --seed N           random seed for --set values (default 1)\n"
@@ -134,6 +136,7 @@ static void ld_free(struct ld *ld)
     free(ld->conns);
     free(ld->subs);
     free(ld->rows);
+    free(ld->row_streams);
     for (int i = 0; i < ld->o->nsets; i++) cJSON_Delete(ld->o->sets[i].value);
     for (int i = 0; i < ld->nstreams; i++) cJSON_Delete(ld->streams[i].before);
 }

@@ -94,6 +94,11 @@ enum ld_restore_state { LDR_NONE, LDR_SENT, LDR_DONE, LDR_FAILED };
 #define LD_GET_ID "get:"
 #define LD_RESTORE_ID "restore:"
 
+/* A stream's counts over one row of the per-second table (for the plot's line per stream). */
+struct ld_row_stream {
+    uint64_t frames, skipped, sets;
+};
+
 struct ld_stream {
     char name[LD_NAME_MAX];
     struct ld_kind kind[FXS_KIND_MAX + 1]; /* [0]: kinds this fxload does not know */
@@ -110,6 +115,7 @@ struct ld_stream {
     double sub_seconds, unknown_seconds, expected;
     uint32_t max_rev;       /* set mode: highest rev in `params` replies */
     uint64_t sets_sent, sets_ok, sets_err;
+    struct ld_row_stream row; /* counts of the row being measured */
     cJSON *before;          /* set mode: the values of the parameters --set changes, before the run */
     enum ld_restore_state restore;
     char restore_err[200];  /* LDR_FAILED: why */
@@ -193,6 +199,7 @@ struct ld {
     struct ld_counters tot, row_base;
     struct fxp_hist lat, row_lat, set_lat;
     struct ld_row *rows;
+    struct ld_row_stream *row_streams; /* nstreams per row: row r's at [r * nstreams] */
     int nrows, rows_cap;
     double row_start;
     struct ld_err errs[LD_MAX_ERRS];

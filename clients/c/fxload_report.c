@@ -320,8 +320,26 @@ static cJSON *ld_errors_json(const struct ld *ld)
     return arr;
 }
 
-static cJSON *ld_row_json(const struct ld_row *r)
+/* Row i's counts per stream: frames and skipped (subscribe mode) or sets (set mode). */
+static cJSON *ld_row_streams_json(const struct ld *ld, int i)
 {
+    cJSON *j = cJSON_CreateObject();
+    for (int k = 0; k < ld->nstreams; k++) {
+        const struct ld_row_stream *rs = &ld->row_streams[i * ld->nstreams + k];
+        cJSON *sj = cJSON_AddObjectToObject(j, ld->streams[k].name);
+        if (ld->o->mode == LD_SET) {
+            cJSON_AddNumberToObject(sj, "sets", (double)rs->sets);
+            continue;
+        }
+        cJSON_AddNumberToObject(sj, "frames", (double)rs->frames);
+        cJSON_AddNumberToObject(sj, "skipped", (double)rs->skipped);
+    }
+    return j;
+}
+
+static cJSON *ld_row_json(const struct ld *ld, int i)
+{
+    const struct ld_row *r = &ld->rows[i];
     cJSON *s = cJSON_CreateObject();
     cJSON_AddNumberToObject(s, "t", ld_round3(r->t));
     cJSON_AddNumberToObject(s, "dt", ld_round3(r->dt));
@@ -336,6 +354,7 @@ static cJSON *ld_row_json(const struct ld_row *r)
     cJSON_AddNumberToObject(s, "p95_ms", ld_round3(r->p95));
     cJSON_AddNumberToObject(s, "p99_ms", ld_round3(r->p99));
     cJSON_AddNumberToObject(s, "max_ms", ld_round3(r->max));
+    cJSON_AddItemToObject(s, "streams", ld_row_streams_json(ld, i));
     return s;
 }
 
@@ -354,7 +373,7 @@ static cJSON *ld_report_json(const struct ld *ld)
     cJSON_AddItemToObject(j, "thresholds", ld_thresholds_json(ld));
     cJSON_AddItemToObject(j, "errors", ld_errors_json(ld));
     arr = cJSON_AddArrayToObject(j, "seconds");
-    for (int i = 0; i < ld->nrows; i++) cJSON_AddItemToArray(arr, ld_row_json(&ld->rows[i]));
+    for (int i = 0; i < ld->nrows; i++) cJSON_AddItemToArray(arr, ld_row_json(ld, i));
     return j;
 }
 

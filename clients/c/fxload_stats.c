@@ -84,6 +84,7 @@ static void ld_count_gap_and_latency(struct ld *ld, struct ld_stream *st, unsign
         uint64_t gap = h->seq - last_seq - 1;
         ld->tot.skipped += gap;
         st->skipped += gap;
+        st->row.skipped += gap;
         st->kind[kind].skipped += gap;
     } else if (h->seq <= last_seq) {
         ld->seq_backwards++;
@@ -107,6 +108,7 @@ void ld_count_frame(struct ld *ld, struct ld_conn *lc, const struct fxs_header *
         return;
     }
     st->frames++;
+    st->row.frames++;
     st->bytes += bytes;
     st->kind[kind].frames++;
     st->kind[kind].bytes += bytes;
@@ -125,6 +127,7 @@ void ld_count_set_reply(struct ld *ld, struct ld_conn *lc, const cJSON *m, const
         int64_t rtt = (int64_t)now - lc->set_sent_us;
         ld->tot.sets_ok++;
         st->sets_ok++;
+        st->row.sets++;
         if (cJSON_IsNumber(rev) && rev->valuedouble > st->max_rev) st->max_rev = (uint32_t)rev->valuedouble;
         if (!ld->stopping) {
             fxp_hist_add(&ld->set_lat, rtt);
@@ -144,12 +147,24 @@ static int ld_rows_grow(struct ld *ld)
 {
     int cap;
     struct ld_row *p;
+    struct ld_row_stream *q;
     if (ld->nrows < ld->rows_cap) return 0;
     cap = ld->rows_cap ? 2 * ld->rows_cap : 64;
     if (!(p = realloc(ld->rows, (size_t)cap * sizeof *p))) return -1;
     ld->rows = p;
+    if (!(q = realloc(ld->row_streams, (size_t)cap * (size_t)ld->nstreams * sizeof *q))) return -1;
+    ld->row_streams = q;
     ld->rows_cap = cap;
     return 0;
+}
+
+/* Moves each stream's counts of the row being measured into row r. */
+static void ld_row_streams_end(struct ld *ld, int r)
+{
+    for (int i = 0; i < ld->nstreams; i++) {
+        ld->row_streams[r * ld->nstreams + i] = ld->streams[i].row;
+        memset(&ld->streams[i].row, 0, sizeof ld->streams[i].row);
+    }
 }
 
 static void ld_counters_sub(struct ld_counters *d, const struct ld_counters *a, const struct ld_counters *b)
@@ -171,6 +186,7 @@ void ld_row_end(struct ld *ld, double now)
         ld_error(ld, "out of memory: a second of the per-second table is missing");
         return;
     }
+    ld_row_streams_end(ld, ld->nrows);
     r = &ld->rows[ld->nrows++];
     r->t = now;
     r->dt = now - ld->row_start;

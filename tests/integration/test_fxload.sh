@@ -118,6 +118,10 @@ check_subscribe() {
     jcheck "report: one row per second, frames summing to the total" "$j" \
         '4 <= len(d["seconds"]) <= 5 and sum(r["frames"] for r in d["seconds"]) == d["totals"]["frames"]'
     jcheck "report: 50 connections open in the last full second" "$j" 'd["seconds"][3]["connections"] == 50'
+    jcheck "report: each second's frames and skipped per stream add up" "$j" \
+        'all(sum(x["frames"] for x in r["streams"].values()) == r["frames"] and
+             sum(x["skipped"] for x in r["streams"].values()) == r["skipped"] for r in d["seconds"]) and
+         sum(r["streams"]["energy"]["frames"] for r in d["seconds"]) == s["energy"]["frames"]'
     rows=$(grep -c -E '^ +[0-9]+\.[0-9] +[0-9]+ +[0-9]+ +[0-9.]+ ' "$tmp/out")
     if [ "$rows" -ge 4 ]; then pass "table: $rows per-second lines"; else fail "table: per-second lines ($rows)"; fi
     if grep -q -E '^ +4\.0 +50 +[1-9][0-9]* ' "$tmp/out"; then pass "table: second 4 shows 50 connections and frames"
@@ -131,6 +135,17 @@ sys.exit(0 if r.tag.endswith("svg") and len(list(r.iter())) > 20 else 1)' "$tmp/
     else fail "plot: SVG exists and is well-formed XML"; fi
     if grep -q "p99" "$tmp/run.svg" && grep -q "MB/s" "$tmp/run.svg"; then pass "plot: latency and throughput series"
     else fail "plot: latency and throughput series"; fi
+    if /usr/bin/python3 - "$tmp/run.svg" >"$tmp/err" 2>&1 <<'EOF'
+import sys, xml.etree.ElementTree as E
+texts = {"".join(t.itertext()).strip() for t in E.parse(sys.argv[1]).getroot().iter() if t.tag.endswith("text")}
+need = {"frame latency (ms)", "connections", "frames/s", "MB/s (all)", "skipped/s", "energy", "flame"}
+title = [t for t in texts if t.startswith("fxload subscribe: 50 connections to ")]
+missing = sorted(need - texts)
+print("missing:", missing, "title:", title)
+sys.exit(0 if not missing and title else 1)
+EOF
+    then pass "plot: connections, a line per stream (energy, flame), a skipped/s axis"
+    else fail "plot: connections, a line per stream (energy, flame), a skipped/s axis"; fi
 
     check_misspelled_stream
     check_thresholds
