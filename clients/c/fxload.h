@@ -9,7 +9,8 @@
  *                    what arrives, subscribe and get requests, stopping and closing
  *   fxload_set.c     set mode: the set messages, the values before the run, restoring them
  *   fxload_stats.c   measurements: frames, bytes, seq gaps and latency per stream and kind,
- *                    per-second rows, error messages
+ *                    the delivered rate against each stream's fps, per-second rows, error
+ *                    messages
  *   fxload_report.c  the per-second table, the summary, the JSON report
  *   fxload_thresholds.c  --max-p99, --min-delivered, --max-skipped: pass or fail, and
  *                    their part of the summary and of the JSON report
@@ -118,7 +119,7 @@ struct ld_stream {
     struct ld_row_stream row; /* counts of the row being measured */
     cJSON *before;          /* set mode: the values of the parameters --set changes, before the run */
     enum ld_restore_state restore;
-    char restore_err[200];  /* LDR_FAILED: why */
+    char restore_err[LD_ERR_MSG_MAX]; /* LDR_FAILED: why */
     uint32_t restored_rev;  /* LDR_DONE: the rev of the restoring set */
 };
 
@@ -160,7 +161,6 @@ struct ld_row {
     int conns;
     struct ld_counters d;      /* deltas over the row */
     double p50, p95, p99, max; /* ms: frames (subscribe) or set round trips (set) */
-    uint64_t timed;
 };
 
 /* One threshold judged: a limit against what the run measured. */
@@ -193,7 +193,7 @@ struct ld {
     int started;             /* connections started so far */
     int open, peak, ever_open;
     int stopping;            /* the run is over: nothing more is measured */
-    int fatal;               /* an exit status that ends the run at once (a misspelled stream) */
+    int fatal;               /* an exit status that ends the run at once (a misspelled name) */
     int64_t t0;              /* CLOCK_MONOTONIC µs */
     double advanced;         /* seconds: delivered-rate counters accumulated up to here */
     struct ld_counters tot, row_base;
@@ -229,8 +229,6 @@ int ld_parse_args(struct ld_opts *o, int argc, char **argv, const char *help_tex
 int ld_validate(struct ld *ld, struct ld_opts *o);
 /* Allocates the connections and assigns each its group. Returns 0, or -1 out of memory. */
 int ld_plan(struct ld *ld);
-/* The index of a stream in ld.streams (added when new); -1 when LD_MAX_STREAMS are known. */
-int ld_stream_index(struct ld *ld, const char *name);
 /* The stream called name, NULL when it is not one of the run's. */
 struct ld_stream *ld_stream_find(struct ld *ld, const char *name);
 
@@ -241,8 +239,6 @@ int ld_run(struct ld *ld);
 /* Ends the run at once with exit status `status` (the first one given wins), after
  * "fxload: MESSAGE" on stderr. */
 void ld_fatal(struct ld *ld, int status, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-/* ld_fatal with "WHAT: code: message" of the server's error reply m. */
-void ld_fatal_reply(struct ld *ld, int status, const char *what, const cJSON *m);
 /* An open connection, NULL when none is. */
 struct ld_conn *ld_open_conn(struct ld *ld);
 /* Sends {"op":op,"id":"PREFIX INDEX","stream":...,"params":params} (params may be NULL)
@@ -252,11 +248,11 @@ int ld_send_control(struct ld_conn *lc, const char *op, const char *prefix, int 
 void ld_service_until(struct ld *ld, int (*done)(const struct ld *ld), int64_t wait_us);
 
 /* fxload_set.c */
+/* Keeps, from a `get` reply of st, the values of the parameters --set changes on st. */
 void ld_set_take_before(struct ld *ld, struct ld_stream *st, const cJSON *reply);
-/* Every stream's values before the run are known: the sets may start. */
-int ld_sets_ready(struct ld *ld);
 /* Sends the sets due by now (seconds since t0), at --rate over the idle connections. */
 void ld_send_due_sets(struct ld *ld, double now);
+/* The reply to the restoring set of ld.streams[index]. */
 void ld_set_on_restore_reply(struct ld *ld, int index, const cJSON *m, const char *op);
 /* After the run: waits for the sets in flight, then (unless --keep) restores the values. */
 void ld_set_finish(struct ld *ld);
@@ -296,8 +292,8 @@ void ld_summary(const struct ld *ld);
 int ld_write_json(struct ld *ld);
 
 /* fxload_thresholds.c */
-/* Judges the thresholds given (fills ld.checks); returns how many failed. */
-int ld_thresholds_judge(struct ld *ld);
+/* Judges the thresholds given: fills ld.checks and ld.checks_failed. */
+void ld_thresholds_judge(struct ld *ld);
 void ld_thresholds_summary(const struct ld *ld, FILE *f);
 cJSON *ld_thresholds_json(const struct ld *ld);
 

@@ -281,8 +281,6 @@ static int ld_stream_add(struct ld *ld, const char *name, size_t n)
     return ld->nstreams++;
 }
 
-int ld_stream_index(struct ld *ld, const char *name) { return ld_stream_add(ld, name, strlen(name)); }
-
 struct ld_stream *ld_stream_find(struct ld *ld, const char *name)
 {
     for (int i = 0; i < ld->nstreams; i++)
@@ -361,7 +359,7 @@ static int ld_validate_set(struct ld *ld, struct ld_opts *o)
     if (o->rate < 0) o->rate = LD_DEFAULT_RATE;
     if (!o->nsets && (r = ld_parse_set(&o->sets[o->nsets++], LD_DEFAULT_SET))) return r;
     for (int i = 0; i < o->nsets; i++)
-        if (ld_stream_index(ld, o->sets[i].stream) < 0) return ld_usage("--set: at most 64 distinct streams", NULL);
+        if (ld_stream_add(ld, o->sets[i].stream, strlen(o->sets[i].stream)) < 0) return ld_usage("--set: at most 64 distinct streams", NULL);
     return 0;
 }
 

@@ -1,9 +1,13 @@
 /* fxload_run.c — drives a run of fxload on libfxclient's pool (fxpool.h): opens the
- * connections along the ramp, sends the subscribe requests (subscribe mode) or the set
- * messages at --rate (set mode), routes what arrives through the pool's callbacks to the
- * measurements (fxload_stats.c), decides when the run ends (duration, every connection gone,
- * SIGINT/SIGTERM) and closes the connections politely. One thread: everything happens
- * inside fxp_service(). */
+ * connections along the ramp, sends the subscribe requests and the `get` of each stream's
+ * parameters (its fps; in set mode the values to restore), lets fxload_set.c send the set
+ * messages, routes what arrives through the pool's callbacks to the measurements
+ * (fxload_stats.c), decides when the run ends (duration, every connection gone, SIGINT or
+ * SIGTERM, or at once on a misspelled stream or parameter) and closes the connections
+ * politely. One thread: everything happens inside fxp_service().
+ *
+ * Request ids: subscribe requests carry 1 + the stream's place in the connection's group,
+ * set messages a number per connection, fxload's own requests a string ("get:3"). */
 #include <math.h>
 #include <signal.h>
 #include <stdarg.h>
@@ -57,7 +61,8 @@ void ld_fatal(struct ld *ld, int status, const char *fmt, ...)
     if (!ld->fatal) ld->fatal = status;
 }
 
-void ld_fatal_reply(struct ld *ld, int status, const char *what, const cJSON *m)
+/* ld_fatal with "WHAT: code: message" of the server's error reply m. */
+static void ld_fatal_reply(struct ld *ld, int status, const char *what, const cJSON *m)
 {
     char text[200];
     ld_error_text(m, text, sizeof text);

@@ -29,7 +29,8 @@ void ld_set_take_before(struct ld *ld, struct ld_stream *st, const cJSON *reply)
         if (!v) {
             ld_fatal(ld, LD_USAGE, "--set %s.%s: stream %s has no parameter \"%s\"", sp->stream, sp->param, st->name,
                      sp->param);
-            break;
+            cJSON_Delete(before);
+            return;
         }
         cJSON_AddItemToObject(before, sp->param, cJSON_Duplicate(v, 1));
     }
@@ -38,7 +39,7 @@ void ld_set_take_before(struct ld *ld, struct ld_stream *st, const cJSON *reply)
 }
 
 /* Every stream's values are known: the sets may start. */
-int ld_sets_ready(struct ld *ld)
+static int ld_sets_ready(struct ld *ld)
 {
     for (int i = 0; !ld->sets_ready && i < ld->nstreams; i++)
         if (!ld->streams[i].before) return 0;

@@ -196,7 +196,6 @@ void ld_row_end(struct ld *ld, double now)
     r->p95 = fxp_hist_quantile(&ld->row_lat, 0.95) / 1000;
     r->p99 = fxp_hist_quantile(&ld->row_lat, 0.99) / 1000;
     r->max = fxp_hist_quantile(&ld->row_lat, 1.0) / 1000;
-    r->timed = ld->row_lat.count;
     ld->row_base = ld->tot;
     ld->row_start = now;
     fxp_hist_reset(&ld->row_lat);
