@@ -3,11 +3,14 @@
 #
 # Owns: starting build/fxstreamd --port 0 on a free loopback port (bounded wait for its
 # "listening on" line), running fxload against it in subscribe and set mode, judging
-# the JSON report (python3), the per-second table and the SVG plot (python3's XML
-# parser), a 1000-connection run, option errors, a refused connection, and a daemon
-# killed under a run. Each check counts one pass or fail; the last line is
-# "test_fxload: N passed, M failed". Every fxload call runs under `timeout`, so the
-# suite stays well under 60 s.
+# the JSON report (python3: per-kind counts, delivered rate, thresholds, restored values),
+# the per-second table and summary, the SVG plot (python3's XML parser: connections, a line
+# per stream, skipped/s), thresholds' exit status 4, misspelled streams and parameters
+# (exit 2 at once), set mode's restore and --keep (checked with fxctl get), a
+# 1000-connection run, option errors, a refused connection, and a daemon killed under a
+# run (subscribe and set mode). Each check counts one pass or fail; the last line is
+# "test_fxload: N passed, M failed". Every fxload call runs under `timeout`; the suite
+# takes about 40 s.
 set -u
 cd "$(dirname "$0")/../.."
 
