@@ -25,7 +25,8 @@ PROTO_SRC   := $(wildcard protocol/*.c)
 SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c)) $(PROTO_SRC)
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
 FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c
-CLIENT_MAIN := $(FXCTL_SRC) clients/c/fxload.c
+FXLOAD_SRC  := $(wildcard clients/c/fxload*.c)
+CLIENT_MAIN := $(FXCTL_SRC) $(FXLOAD_SRC)
 CLIENT_SRC  := $(filter-out $(CLIENT_MAIN),$(wildcard clients/c/*.c)) $(PROTO_SRC)
 CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o)
 REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
@@ -155,7 +156,7 @@ $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
 $(BUILD)/fxctl: $(FXCTL_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/suggest.o $(BUILD)/libfxclient.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
-$(BUILD)/fxload: $(BUILD)/obj/clients/c/fxload.o $(BUILD)/libfxclient.a
+$(BUILD)/fxload: $(FXLOAD_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/libfxclient.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
