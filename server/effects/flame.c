@@ -92,8 +92,8 @@ static const struct param_def fl_obstacle_fields[] = {
 /* Default scene (issue 13): the thesis's 3 cm disc (digest §2.13, ch.7's real flame) on a 3.6 cm
  * non-burning base plate 4 mm under it, with h = 3.5 mm (a third of Table 3.1's, so ~10k particles
  * resolve the thesis-size flame) at dt 3 ms. Measured (tests/bench/bench_flame_shape.c): a flame
- * 4.5 times as tall as wide (H90 11.1 cm, W90 2.5 cm), 1.3% of the burning gas below the source
- * plane, flicker 11.4%, 10.0k particles (without the wind drag: 3.6 times, 12.7 and 3.5 cm, 1.1%,
+ * 4.4 times as tall as wide (H90 11.4 cm, W90 2.6 cm), 1.3% of the burning gas below the source
+ * plane, flicker 11.8%, 10.0k particles (without the wind drag: 3.6 times, 12.7 and 3.5 cm, 1.1%,
  * 10.7%, 10.3k). Without the plate, gas heated by the disc's lower layer
  * stays under it (12% of the burning gas below the source plane, as the thesis's free-floating
  * source has no ground); the plate is an obstacle (digest §2.13), so no new physics. The earlier
@@ -116,15 +116,16 @@ const struct param_def flame_params[] = {
      * uniform wind_accel cannot lean a flame whose burning gas lives ~40 ms and rises at ~2.5
      * m/s: without drag 10 m/s^2 moved the burning centroid 1.3 cm (0.10 H90), and as a force
      * density like buoyancy (rho_rest a / rho) 2.9 cm (0.23 H90). A wind *velocity* leans it like a
-     * real flame, by about the ratio of wind to rise speed: 2 m/s moves it 4.8 cm = 0.43 H90
+     * real flame, by about the ratio of wind to rise speed: 2 m/s moves it 4.3 cm = 0.37 H90
      * (tests/unit/test_flame_shape.c). The drag also resists the gas's sideways spreading in
-     * still air: at 30/s the calm flame is 11.1 cm tall and 2.5 cm wide (H90/W90 4.5; without
-     * drag 12.7 and 3.5 cm, 3.6); 20/s gives 11.7 cm and a lean of 0.32 H90 at 2 m/s, 50/s 10.6
-     * cm. Drag on the vertical too cut H90 to 9.3 cm at 10/s and to 3.1 cm at 30/s. */
+     * still air: at 25/s the calm flame is 11.4 cm tall and 2.6 cm wide (H90/W90 4.4; without
+     * drag 12.7 and 3.5 cm, 3.6) with 10.0k particles (10.3k). 20/s: 11.6 cm, a lean of 0.31 H90
+     * at 2 m/s; 30/s: 11.1 cm, 0.43 H90, but 9.97k particles; 50/s: 10.6 cm. Drag on the vertical
+     * too cut H90 to 9.3 cm at 10/s and to 3.1 cm at 30/s. */
     {.name = "wind_velocity", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -20, .max = 20, .unit = "m/s",
      .doc = "velocity of the ambient air; gas is dragged toward it across `up` at wind_drag (digest §2.14's drag "
             "model); its part along `up` is ignored"},
-    FL_F("wind_drag", "30", 0, 200, "1/s", "rate k at which gas takes up the air's velocity across `up`, "
+    FL_F("wind_drag", "25", 0, 200, "1/s", "rate k at which gas takes up the air's velocity across `up`, "
          "f = rho k (wind_velocity - v) (digest §2.14); 0: no air", 0, .group = "forces"),
     FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, digest §9 #5)", 0, .group = "forces"),
     {.name = "up", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
