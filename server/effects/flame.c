@@ -177,13 +177,15 @@ const struct param_def flame_params[] = {
 };
 
 /* Built-in presets (presets.h). "thesis-table3.1" is the thesis's base scene: Table 3.1's h and
- * dt with a free-floating 3 cm disc (digest §3: source geometry [P]); 34 substeps keep its 1 ms
- * steps in real time at 30 fps. The others are looks on the default scale. */
+ * dt with a free-floating 3 cm disc (digest §3: source geometry [P]) and no air (wind_drag 0:
+ * the thesis has none); 34 substeps keep its 1 ms steps in real time at 30 fps. The others are
+ * looks on the default scale. */
 static const struct effect_preset flame_presets[] = {
-    {"thesis-table3.1", "the thesis's base scene: Table 3.1 (h 11.25 mm, dt 1 ms), a free 3 cm disc, F_init 100",
-     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"obstacles\":[],\"sources\":[{\"radius\":0.015}]}"},
+    {"thesis-table3.1", "the thesis's base scene: Table 3.1 (h 11.25 mm, dt 1 ms), a free 3 cm disc, F_init 100, no air drag",
+     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],\"sources\":[{\"radius\":0.015}]}"},
     {"thesis-f80", "Table 3.1's scene at the low end of the thesis's F_init range (80): a smaller, calmer flame",
-     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"obstacles\":[],\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
+     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],"
+     "\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
     {"candle", "a 1.2 cm wick on a small plate: a narrow, steady flame",
      "{\"sources\":[{\"radius\":0.006,\"F_init\":90}],"
      "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.016,0.016,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]}"},
