@@ -10,7 +10,8 @@
  *   fl_forces         walks that list (or the grid again for a particle that overflowed it):
  *                     pressure (sign fixed, §2.5/§9 #1), viscosity (3.13), heat/fuel diffusion
  *                     (3.20/3.21, stabilised §9 #4), chemistry (3.17-3.19), buoyancy (3.16),
- *                     wind (§9 #15), symplectic Euler (3.14/3.15), solids (§2.13, §9 #16),
+ *                     wind (§9 #15; §2.14's drag toward the air's velocity), symplectic Euler
+ *                     (3.14/3.15), solids (§2.13, §9 #16),
  *                     resampling decisions (§2.12, §9 #9-11) and the runaway flag
  *   fl_count/fl_scan_blocks/fl_compact   every resample_interval steps: survivors in order,
  *                     then inserted particles appended in parent order with fresh ids
@@ -59,7 +60,9 @@
 #define FP_NBR_INS 32   /* insertion neighbour threshold (§9 #8) */
 #define FP_SEED 33
 #define FP_INV_CELLX 34 /* cells are h/K wide along x (K = FL_XCELLS), h along y and z */
-#define FP_COUNT 35
+#define FP_WINDV 35     /* 35..37: wind_velocity */
+#define FP_DRAG 38      /* 1 - exp(-wind_drag dt) */
+#define FP_COUNT 39
 
 #define FL_GAS 0u
 #define FL_SOURCE 1u
@@ -481,6 +484,11 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
         /* flame_eval: derivatives only, state unchanged */
     } else if (type == FL_GAS) {
         vn.xyz = vi.xyz + dt * (f / rho + (float3)(P[FP_WIND], P[FP_WIND + 1], P[FP_WIND + 2]));
+        /* drag toward the ambient air, digest §2.14's f = rho k_drag (v_wind - v), across `up` only
+         * (buoyancy is the net vertical force, §2.6): the velocity relative to the wind relaxes
+         * exactly over the step, by the factor exp(-k_drag dt), so any k_drag dt is stable */
+        float3 rel = vn.xyz - (float3)(P[FP_WINDV], P[FP_WINDV + 1], P[FP_WINDV + 2]);
+        vn.xyz -= P[FP_DRAG] * (rel - dot(rel, up) * up);
         pn.xyz = pi.xyz + dt * vn.xyz;
         pn.w = TF.x;
         vn.w = TF.y;

@@ -12,8 +12,8 @@
  * Digest fixes applied: §9 #1 pressure sign, #3 symmetric form option, #4 stabilised
  * diffusion (also capping viscosity, §2.15), #6 derived mass, #7 d = h/2, #8 insertion
  * threshold, #9 outward insertion, #10 inherited velocity, #11 deletion rule, #12 fuel_eps and
- * F >= 0, #13 optional cooling, #14 g = 0, #15 wind, #16 kinematic obstacles, #17 disc
- * sources, #20 up vector. */
+ * F >= 0, #13 optional cooling, #14 g = 0, #15 wind (the uniform acceleration and §2.14's drag toward
+ * a wind velocity), #16 kinematic obstacles, #17 disc sources, #20 up vector. */
 #include "flame.h"
 
 #include <math.h>
@@ -53,7 +53,7 @@
 enum {
     FP_H, FP_H2, FP_INV_CELL, FP_MASS, FP_POLY6, FP_SPIKY, FP_GPOLY6, FP_KSTIFF, FP_RHO0, FP_KVISC, FP_KBUO,
     FP_UP, FP_WIND = FP_UP + 3, FP_TAMB = FP_WIND + 3, FP_TIGN, FP_KRS, FP_KCF, FP_KPT, FP_KH, FP_KF, FP_OMEGA,
-    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_INV_CELLX, FP_COUNT
+    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_INV_CELLX, FP_WINDV, FP_DRAG = FP_WINDV + 3, FP_COUNT
 };
 
 /* ---- parameters -------------------------------------------------------------------- */
@@ -92,8 +92,9 @@ static const struct param_def fl_obstacle_fields[] = {
 /* Default scene (issue 13): the thesis's 3 cm disc (digest §2.13, ch.7's real flame) on a 3.6 cm
  * non-burning base plate 4 mm under it, with h = 3.5 mm (a third of Table 3.1's, so ~10k particles
  * resolve the thesis-size flame) at dt 3 ms. Measured (tests/bench/bench_flame_shape.c): a flame
- * 3.6 times as tall as wide (H90 12.7 cm, W90 3.5 cm), 1.1% of the burning gas below the source
- * plane, flicker 10.7%, 10.3k particles. Without the plate, gas heated by the disc's lower layer
+ * 4.4 times as tall as wide (H90 11.4 cm, W90 2.6 cm), 1.3% of the burning gas below the source
+ * plane, flicker 11.8%, 10.0k particles (without the wind drag: 3.6 times, 12.7 and 3.5 cm, 1.1%,
+ * 10.7%, 10.3k). Without the plate, gas heated by the disc's lower layer
  * stays under it (12% of the burning gas below the source plane, as the thesis's free-floating
  * source has no ground); the plate is an obstacle (digest §2.13), so no new physics. The earlier
  * default (an 11.4 cm disc at h = 11.25 mm) held as many particles but burned as a wide dome
@@ -106,7 +107,26 @@ const struct param_def flame_params[] = {
      .def = "[{\"shape\":\"plate\",\"size\":[0.036,0.036,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]", .fields = fl_obstacle_fields,
      .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (digest §9 #16)"},
     {.name = "wind_accel", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
-     .doc = "uniform acceleration of gas particles (digest §2.14, §9 #15)"},
+     .doc = "uniform acceleration of gas particles (digest §2.14, §9 #15); across `up` the air's drag (wind_drag) "
+            "caps the drift it gives at wind_accel / wind_drag"},
+    /* The wind as the digest's optional drag model (§2.14 [P], f = rho k_drag (v_wind - v)): gas
+     * takes up the velocity of the ambient air the thesis does not simulate, at rate wind_drag,
+     * across `up` only, since buoyancy already is the net vertical force (§2.6 [P]: the air's
+     * resistance to the rise is in k_buo, and §8 B4's exact buoyancy step stays exact). A
+     * uniform wind_accel cannot lean a flame whose burning gas lives ~40 ms and rises at ~2.5
+     * m/s: without drag 10 m/s^2 moved the burning centroid 1.3 cm (0.10 H90), and as a force
+     * density like buoyancy (rho_rest a / rho) 2.9 cm (0.23 H90). A wind *velocity* leans it like a
+     * real flame, by about the ratio of wind to rise speed: 2 m/s moves it 4.3 cm = 0.37 H90
+     * (tests/unit/test_flame_shape.c). The drag also resists the gas's sideways spreading in
+     * still air: at 25/s the calm flame is 11.4 cm tall and 2.6 cm wide (H90/W90 4.4; without
+     * drag 12.7 and 3.5 cm, 3.6) with 10.0k particles (10.3k). 20/s: 11.6 cm, a lean of 0.31 H90
+     * at 2 m/s; 30/s: 11.1 cm, 0.43 H90, but 9.97k particles; 50/s: 10.6 cm. Drag on the vertical
+     * too cut H90 to 9.3 cm at 10/s and to 3.1 cm at 30/s. */
+    {.name = "wind_velocity", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -20, .max = 20, .unit = "m/s",
+     .doc = "velocity of the ambient air; gas is dragged toward it across `up` at wind_drag (digest §2.14's drag "
+            "model); its part along `up` is ignored"},
+    FL_F("wind_drag", "25", 0, 200, "1/s", "rate k at which gas takes up the air's velocity across `up`, "
+         "f = rho k (wind_velocity - v) (digest §2.14); 0: no air", 0, .group = "forces"),
     FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, digest §9 #5)", 0, .group = "forces"),
     {.name = "up", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
      .doc = "upward unit vector (normalised; digest §9 #20)", .flags = PARAM_NONZERO},
@@ -157,13 +177,15 @@ const struct param_def flame_params[] = {
 };
 
 /* Built-in presets (presets.h). "thesis-table3.1" is the thesis's base scene: Table 3.1's h and
- * dt with a free-floating 3 cm disc (digest §3: source geometry [P]); 34 substeps keep its 1 ms
- * steps in real time at 30 fps. The others are looks on the default scale. */
+ * dt with a free-floating 3 cm disc (digest §3: source geometry [P]) and no air (wind_drag 0:
+ * the thesis has none); 34 substeps keep its 1 ms steps in real time at 30 fps. The others are
+ * looks on the default scale. */
 static const struct effect_preset flame_presets[] = {
-    {"thesis-table3.1", "the thesis's base scene: Table 3.1 (h 11.25 mm, dt 1 ms), a free 3 cm disc, F_init 100",
-     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"obstacles\":[],\"sources\":[{\"radius\":0.015}]}"},
+    {"thesis-table3.1", "the thesis's base scene: Table 3.1 (h 11.25 mm, dt 1 ms), a free 3 cm disc, F_init 100, no air drag",
+     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],\"sources\":[{\"radius\":0.015}]}"},
     {"thesis-f80", "Table 3.1's scene at the low end of the thesis's F_init range (80): a smaller, calmer flame",
-     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"obstacles\":[],\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
+     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],"
+     "\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
     {"candle", "a 1.2 cm wick on a small plate: a narrow, steady flame",
      "{\"sources\":[{\"radius\":0.006,\"F_init\":90}],"
      "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.016,0.016,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]}"},
@@ -171,8 +193,8 @@ static const struct effect_preset flame_presets[] = {
      "{\"h\":0.005,\"sources\":[{\"center\":[-0.022,0,0],\"radius\":0.012},{\"center\":[0.022,0,0],\"radius\":0.012},"
      "{\"center\":[0,0.025,0.005],\"radius\":0.012,\"F_init\":120}],"
      "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.09,0.09,0],\"pos\":[0,0,-0.006],\"velocity\":[0,0,0]}]}"},
-    {"gusty", "the default flame in a steady sideways wind (wind_accel 8 m/s^2 along x)",
-     "{\"wind_accel\":[8,0,0]}"},
+    {"gusty", "the default flame in a light breeze (wind_velocity 2 m/s along x): it leans downwind",
+     "{\"wind_velocity\":[2,0,0]}"},
     {0},
 };
 
@@ -387,7 +409,7 @@ static void fl_unit(double v[3])
 
 static void fl_pack(struct flame *fl, const cJSON *p)
 {
-    double h = fl->h, m = params_num(p, "mass"), rho0 = params_num(p, "rho_rest"), w[3];
+    double h = fl->h, m = params_num(p, "mass"), rho0 = params_num(p, "rho_rest"), w[3], wv[3];
     if (m <= 0) m = rho0 / fl_poly6_sum(h, fl->d); /* §9 #6: 1.7626e-7 kg for the thesis's h */
     float *P = fl->P;
     memset(fl->P, 0, sizeof fl->P);
@@ -404,10 +426,14 @@ static void fl_pack(struct flame *fl, const cJSON *p)
     P[FP_KVISC] = (float)params_num(p, "k_viscosity");
     P[FP_KBUO] = (float)params_num(p, "k_buo");
     params_vec3(p, "wind_accel", w);
+    params_vec3(p, "wind_velocity", wv);
     for (int k = 0; k < 3; k++) {
         P[FP_UP + k] = (float)fl->up[k];
         P[FP_WIND + k] = (float)w[k];
+        P[FP_WINDV + k] = (float)wv[k];
     }
+    /* the drag's exact relaxation over one step (kernels/flame.cl fl_forces) */
+    P[FP_DRAG] = (float)-expm1(-params_num(p, "wind_drag") * params_num(p, "dt"));
     static const struct { int i; const char *name; } direct[] = {
         {FP_TAMB, "T_amb"}, {FP_TIGN, "T_ign"}, {FP_KRS, "k_rs"}, {FP_KCF, "k_cf"}, {FP_KPT, "k_pt"},
         {FP_KH, "k_h"}, {FP_KF, "k_f"}, {FP_OMEGA, "omega_max"}, {FP_KCOOL, "k_cool"}, {FP_FEPS, "fuel_eps"},

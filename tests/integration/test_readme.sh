@@ -37,7 +37,7 @@ out_of "set energy alpha=2"; check "set energy: alpha 2 and the orange colour" 0
 test "$(ls "$tmp"/frames/energy-*.exr | wc -l)" -ge 10; rc=$?; check "subscribe --kind 2 --out: 10 textures and more" 0
 ls "$tmp"/frames/energy-*-rig.bin >/dev/null 2>&1; rc=$?; check "subscribe --out without --kind: light rigs too" 0
 get ring; check "create ring: a torus of R 3 alone (no default curves)" 0 '"axis":\[0,1,1\],"R":3,"coef":7.4}\],"curves":\[\]'
-get flame; check "set flame: the wind" 0 '"wind_accel":\[8,0,0\]'
+get flame; check "set flame: the wind" 0 '"wind_velocity":\[2,0,0\]'
 test "$(ls "$tmp"/flame/flame-*.ply | wc -l)" -eq 5; rc=$?; check "subscribe flame --out: 5 PLY files" 0
 out_of "presets flame"; check "presets flame lists the thesis scene" 0 '"name":"thesis-table3.1"'
 get energy; check "preset load energy thesis-fig5.2: its torus" 0 '"tori":\[{"center":\[0,0,0\],"axis":\[0,1,1\],"R":3,'

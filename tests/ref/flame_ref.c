@@ -99,6 +99,8 @@ static int flame_ref_read_forces(const cJSON *doc, struct flame_ref_params *p)
     n += flame_ref_vec(doc, FLAME_REF_NAMES("up"), p->up);
     n += flame_ref_vec(doc, FLAME_REF_NAMES("gravity"), p->gravity);
     n += flame_ref_vec(doc, FLAME_REF_NAMES("wind_accel", "wind"), p->wind);
+    n += flame_ref_vec(doc, FLAME_REF_NAMES("wind_velocity"), p->wind_velocity);
+    n += flame_ref_num(doc, FLAME_REF_NAMES("wind_drag"), &p->wind_drag);
     double len = sqrt(p->up[0] * p->up[0] + p->up[1] * p->up[1] + p->up[2] * p->up[2]);
     if (len > 0)
         for (int k = 0; k < 3; k++) p->up[k] /= len;
@@ -349,6 +351,15 @@ void flame_ref_eval_all(const struct flame_ref_params *p, const struct flame_ref
 
 /* ---------------------------------------------------------------- integration */
 
+void flame_ref_drag(const struct flame_ref_params *p, double v[3])
+{
+    /* dv/dt = k (w - v) on the part normal to up, solved exactly over dt */
+    double rel[3], along = 0, keep = exp(-p->wind_drag * p->dt);
+    for (int k = 0; k < 3; k++) rel[k] = v[k] - p->wind_velocity[k];
+    for (int k = 0; k < 3; k++) along += rel[k] * p->up[k];
+    for (int k = 0; k < 3; k++) v[k] -= (1 - keep) * (rel[k] - along * p->up[k]);
+}
+
 void flame_ref_integrate(const struct flame_ref_params *p, const struct flame_ref_eval *e,
                          struct flame_ref_particle *q)
 {
@@ -363,10 +374,9 @@ void flame_ref_integrate(const struct flame_ref_params *p, const struct flame_re
     double f[3];
     for (int k = 0; k < 3; k++) f[k] = e->f_press[k] + e->f_visc[k];
     flame_ref_buoyancy(p, q->T, f); /* with the updated T (§2.10) */
-    for (int k = 0; k < 3; k++) {
-        q->v[k] += p->dt * (f[k] / e->rho + p->gravity[k] + p->wind[k]);
-        q->r[k] += p->dt * q->v[k];
-    }
+    for (int k = 0; k < 3; k++) q->v[k] += p->dt * (f[k] / e->rho + p->gravity[k] + p->wind[k]);
+    flame_ref_drag(p, q->v);
+    for (int k = 0; k < 3; k++) q->r[k] += p->dt * q->v[k];
 }
 
 int flame_ref_step(const struct flame_ref_params *p, struct flame_ref_particle *ps, int n,

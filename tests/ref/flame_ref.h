@@ -6,7 +6,8 @@
  * neighbour search, density (3.10), pressure (3.11), the pressure force in the difference
  * form of eq 3.12 (sign-fixed, §2.5) and in Müller's symmetric form, viscosity (3.13),
  * heat and fuel diffusion (3.20, 3.21) literal or stabilised (§9 #4), chemistry
- * (3.17-3.19 with the fuel_eps flame test of §9 #12), buoyancy (3.16), wind (§9 #15) and
+ * (3.17-3.19 with the fuel_eps flame test of §9 #12), buoyancy (3.16), wind (§9 #15: a uniform
+ * acceleration, and §2.14's drag toward a wind velocity across `up`) and
  * one symplectic Euler step of Algorithm 3.2 (§2.9, §2.10) for gas, sources and obstacles.
  *
  * It is written independently of server/effects/flame.c and kernels/flame.cl on purpose:
@@ -23,6 +24,7 @@ struct flame_ref_params {
     double k_stiff, k_visc, rho_rest;
     int symmetric_pressure;          /* 0: difference form (3.12), 1: Müller symmetric */
     double k_buo, up[3], gravity[3], wind[3];
+    double wind_velocity[3], wind_drag; /* §2.14 drag model; wind_drag [1/s], 0: none */
     double T_amb, T_ign, k_rs, k_cf, k_pt, k_h, k_f;
     int stabilized;                  /* 0: literal diffusion, 1: §9 #4 convex weights */
     double omega_max, k_cool, fuel_eps;
@@ -88,8 +90,14 @@ double flame_ref_reaction(const struct flame_ref_params *p, double T, double F);
 /* Buoyancy force density (3.16) for temperature T, into f (adds). */
 void flame_ref_buoyancy(const struct flame_ref_params *p, double T, double f[3]);
 
+/* Drag toward the air (§2.14 [P], f = ρ k_drag (v_wind − v)) on a gas velocity v, across up
+ * only: the part of v − wind_velocity normal to up decays by exp(−wind_drag dt), the exact
+ * solution over one step; the part along up is untouched. */
+void flame_ref_drag(const struct flame_ref_params *p, double v[3]);
+
 /* Integrates one particle from its evaluation e (reaction/diffusion, buoyancy with the
- * updated T, wind, gravity, symplectic Euler; sources fixed; obstacles r += dt v). */
+ * updated T, wind, gravity, then the drag; symplectic Euler; sources fixed; obstacles
+ * r += dt v). */
 void flame_ref_integrate(const struct flame_ref_params *p, const struct flame_ref_eval *e,
                          struct flame_ref_particle *q);
 /* One step of Algorithm 3.2 without resampling: eval_all then integrate every particle.

@@ -7,7 +7,8 @@
  * dF, the neighbour and flame-neighbour counts and the flame flag, in every pressure
  * form and diffusion mode. Tolerances are relative to the largest value of each quantity
  * in the set (float32 sums of ~30 terms). Then digest §8 groups B and C through flame_run:
- * isolated particles (invariant, worked step, no ignition, exact buoyancy), solids
+ * isolated particles (invariant, worked step, no ignition, exact buoyancy, the wind drag of
+ * §2.14 step by step against the reference), solids
  * bit-identical, kinematic obstacles, resampling (deletion rule, insertion geometry,
  * N changes only on resampling steps, no source → no insertion), determinism, and
  * positivity/boundedness over a few thousand steps of the default scene. */
@@ -596,6 +597,64 @@ static void test_run_buoyancy(void)
     flame_free(fl);
 }
 
+/* §2.14 drag: lone flame particles (k_rs = 0, so T and F stay) moving in every direction
+ * relax toward wind_velocity across `up` by exp(-wind_drag dt) a step, while along `up`
+ * only buoyancy acts; the device follows the reference's steps (flame_ref_drag) to float
+ * rounding for 20 steps, with a tilted `up` too. */
+static void tfk_drag_case(const char *partial)
+{
+    struct flame_ref_params rp;
+    struct flame *fl = tfk_new(partial, &rp);
+    if (!fl) return;
+    const double tf[3][2] = {{2000, 10}, {1500, 5}, {2500, 1}};
+    struct flame_ref_particle *ps = tfk_isolated(&rp, tf, 3), ref[3];
+    const double v0[3][3] = {{0.5, 0.5, 1}, {-3, 2, -1}, {0, 0, 0}};
+    for (int i = 0; i < 3; i++) {
+        memcpy(ps[i].v, v0[i], sizeof v0[i]);
+        tfk_round(&ps[i]);
+        ref[i] = ps[i];
+    }
+    double worst = 0, worst_up = 0;
+    for (int s = 0; s < 20 && !tfk_isolated_step(fl, ps, 3); s++) {
+        flame_ref_step(&rp, ref, 3, NULL);
+        for (int i = 0; i < 3; i++) {
+            double du = 0, ru = 0;
+            for (int k = 0; k < 3; k++) {
+                worst = fmax(worst, fabs(ps[i].v[k] - ref[i].v[k]));
+                du += ps[i].v[k] * rp.up[k];
+                ru += ref[i].v[k] * rp.up[k];
+            }
+            worst_up = fmax(worst_up, fabs(du - ru));
+        }
+    }
+    /* the reference's own check: along up, v0 + 20 buoyancy steps (ρ of a lone particle) */
+    double rho = rp.mass * flame_ref_w_poly6(0, rp.h), up0 = 0, up1 = 0, across = 0;
+    for (int k = 0; k < 3; k++) {
+        up0 += v0[0][k] * rp.up[k];
+        up1 += ref[0].v[k] * rp.up[k];
+    }
+    CHECK_NEAR(up1, up0 + 20 * rp.dt * rp.k_buo * 1700 / rho, 1e-9);
+    for (int k = 0; k < 3; k++) {
+        double rel0 = v0[0][k] - rp.wind_velocity[k], rel = ref[0].v[k] - rp.wind_velocity[k], a0 = 0, a = 0;
+        for (int j = 0; j < 3; j++) {
+            a0 += (v0[0][j] - rp.wind_velocity[j]) * rp.up[j];
+            a += (ref[0].v[j] - rp.wind_velocity[j]) * rp.up[j];
+        }
+        across = fmax(across, fabs((rel - a * rp.up[k]) - (rel0 - a0 * rp.up[k]) * exp(-20 * rp.wind_drag * rp.dt)));
+    }
+    CHECK(across < 1e-12, "%s: reference drag %g from exp(-k t)", partial, across);
+    CHECK(worst < 2e-5, "%s: device velocity %g m/s from the reference", partial, worst);
+    CHECK(worst_up < 2e-5, "%s: device velocity along up %g m/s from the reference", partial, worst_up);
+    free(ps);
+    flame_free(fl);
+}
+
+static void test_run_drag(void)
+{
+    tfk_drag_case("{\"k_rs\":0,\"wind_velocity\":[2,-1,5],\"wind_drag\":30}");
+    tfk_drag_case("{\"k_rs\":0,\"wind_velocity\":[-1,3,0.5],\"wind_drag\":200,\"dt\":0.004,\"up\":[0,0.6,0.8]}");
+}
+
 /* B3: T0 = 900 with fuel, and T0 = 1500 without, never ignite. They sit next to a burning
  * source so the death rule keeps them; diffusion and all forces are off, so their T and F
  * must stay bit-identical for 300 steps of flame_run (resampling included). */
@@ -903,6 +962,7 @@ int main(void)
     RUN(test_run_burn_limit);
     RUN(test_run_cooling);
     RUN(test_run_buoyancy);
+    RUN(test_run_drag);
     RUN(test_run_no_ignition);
     RUN(test_run_solids);
     RUN(test_run_resampling);

@@ -8,7 +8,8 @@
  * field, pressure toward lower density, zero pressure force on a symmetric pair,
  * the isolated density 0.1939. B: the isolated burning particle (invariant T + 100F,
  * worked step 1200/10 → 1260/9.4, logistic curve within 1 %), no-ignition cases,
- * exact buoyancy Δv, the stabilised diffusion bound, and the JSON reader. */
+ * exact buoyancy Δv, the wind drag of §2.14 (exact decay across up, none along it), the
+ * stabilised diffusion bound, and the JSON reader. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -303,6 +304,42 @@ static void test_buoyancy(void)
     CHECK(q.v[2] == 0 && q.r[2] == 0, "v_z %g at T_amb", q.v[2]);
 }
 
+/* §2.14 drag: across up, v − wind_velocity decays as exp(−k t) (exact at every step, so n
+ * steps match the continuous solution); along up v is untouched (buoyancy stays the net
+ * vertical force); wind_drag 0 changes nothing. */
+static void test_drag(void)
+{
+    struct flame_ref_params p;
+    flame_ref_defaults(&p);
+    CHECK(p.wind_drag == 0, "the digest's default has no drag: %g", p.wind_drag);
+    p.dt = 0.003;
+    p.wind_drag = 30;
+    p.k_buo = 0;
+    const double w[3] = {2, -1, 5};
+    memcpy(p.wind_velocity, w, sizeof w);
+    struct flame_ref_particle q;
+    tfr_isolated(&q, p.T_amb, 0);
+    q.v[0] = 0.5, q.v[1] = 0.5, q.v[2] = 1;
+    for (int s = 1; s <= 20; s++) {
+        flame_ref_step(&p, &q, 1, NULL);
+        double decay = exp(-p.wind_drag * s * p.dt);
+        CHECK_NEAR(q.v[0], w[0] + (0.5 - w[0]) * decay, 1e-12);
+        CHECK_NEAR(q.v[1], w[1] + (0.5 - w[1]) * decay, 1e-12);
+        CHECK(q.v[2] == 1, "step %d: v along up %g", s, q.v[2]);
+    }
+    /* another up: the drag acts on x and z, y is along up */
+    double up[3] = {0, 1, 0}, v[3] = {0.5, 0.5, 1};
+    memcpy(p.up, up, sizeof up);
+    flame_ref_drag(&p, v);
+    double keep = exp(-p.wind_drag * p.dt);
+    CHECK_NEAR(v[0], w[0] + (0.5 - w[0]) * keep, 1e-12);
+    CHECK_NEAR(v[2], w[2] + (1 - w[2]) * keep, 1e-12);
+    CHECK(v[1] == 0.5, "v along up %g", v[1]);
+    p.wind_drag = 0;
+    flame_ref_drag(&p, v);
+    CHECK_NEAR(v[0], w[0] + (0.5 - w[0]) * keep, 1e-12);
+}
+
 /* Literal fuel diffusion overshoots (λ ≫ 1); the stabilised form stays a convex mix. */
 static void test_stabilised_diffusion(void)
 {
@@ -344,9 +381,11 @@ static void test_params_json(void)
     flame_ref_defaults(&p);
     cJSON *doc = cJSON_Parse("{\"h\":0.02,\"k_buo\":0.03,\"T_amb\":310,\"up\":[0,2,0],"
                              "\"diffusion_mode\":\"literal\",\"pressure_form\":\"symmetric\","
-                             "\"particle_diameter\":0.4,\"wind_accel\":[1,0,0]}");
+                             "\"particle_diameter\":0.4,\"wind_accel\":[1,0,0],\"wind_velocity\":[0,2,0],"
+                             "\"wind_drag\":25}");
     int got = flame_ref_params_from_json(doc, &p);
-    CHECK(got == 8, "read %d", got);
+    CHECK(got == 10, "read %d", got);
+    CHECK(p.wind_velocity[1] == 2 && p.wind_drag == 25, "wind velocity %g, drag %g", p.wind_velocity[1], p.wind_drag);
     CHECK(p.h == 0.02 && p.k_buo == 0.03 && p.T_amb == 310 && p.up[1] == 1, "values");
     CHECK(!p.stabilized && p.symmetric_pressure && fabs(p.d - 0.008) < 1e-15 && p.wind[0] == 1, "modes");
     cJSON_Delete(doc);
@@ -367,6 +406,7 @@ int main(void)
     RUN(test_invariant_logistic);
     RUN(test_no_ignition);
     RUN(test_buoyancy);
+    RUN(test_drag);
     RUN(test_stabilised_diffusion);
     RUN(test_obstacle_source);
     RUN(test_params_json);

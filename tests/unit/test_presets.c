@@ -40,14 +40,15 @@ static void test_builtins_valid(void)
     CHECK(total >= 9, "%d presets", total);
 }
 
-/* The thesis presets carry the digests' values (002 Table 3.1, 004 §3). */
+/* The thesis presets carry the digests' values (002 Table 3.1 and no air drag, 004 §3). */
 static void test_thesis_values(void)
 {
     struct presets ps;
     struct fx_err err = {0};
     CHECK(!presets_load(&ps, NULL, &err), "%s", err.message);
     cJSON *fl = presets_params(&ps, tp_flame(), "thesis-table3.1", &err);
-    CHECK(fl && params_num(fl, "h") == 0.01125 && params_num(fl, "dt") == 0.001, "flame thesis preset");
+    CHECK(fl && params_num(fl, "h") == 0.01125 && params_num(fl, "dt") == 0.001 && params_num(fl, "wind_drag") == 0,
+          "flame thesis preset");
     cJSON *eye = presets_params(&ps, effect_find("compound_eye"), "thesis", &err);
     CHECK(eye && params_num(eye, "density") == 300 && params_num(eye, "refractive_index") == 1.491 &&
               !strcmp(params_str(eye, "lattice"), "square"), "eye thesis preset");
