@@ -936,7 +936,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         fl->fuel[i] = fl->h_vel[4 * i + 3];
         fl->flags8[i] = (uint8_t)fl->h_flags[i];
     }
-    struct fxs_particles fp = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8};
+    struct fxs_particles fp = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8, NULL};
     struct fxs_particles_opts opts = {.pos_bits = fl->pos_bits};
     uint8_t *payload = NULL;
     size_t len = 0;
