@@ -662,7 +662,7 @@ static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts 
 static const char *const vec_names[] = { "empty", "one", "seven_8bit", "flame64", "flame64_24bit", "flat_y",
                                          "real_flame600", "real_flame600_12bit", "identical9", "flame64_vel",
                                          "seven_vel_4bit", "empty_vel", "real_vel600_12bit" };
-#define NVEC 12
+#define NVEC 13
 
 /* The JSON the decoder must produce: floats as %.9g (float32 round trips exactly). */
 static char *vec_json(const struct fxs_particles *d)
