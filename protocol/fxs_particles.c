@@ -52,7 +52,7 @@
 #define FXS_PT_F_CTX (7 * 2 * 2)  /* previous residual class x neighbour F == 0 x own flame bit */
 #define FXS_PT_FL_CTX 16          /* neighbour flags & 7 x neighbour F == 0 */
 #define FXS_PT_V_U 2
-#define FXS_PT_V_CTX (3 * 7 * 4)  /* axis x previous residual class of the axis x own flags & 3 */
+#define FXS_PT_V_CTX (3 * 7 * 4)  /* axis x class of the residual before (§7.5.7) x own flags & 3 */
 #define FXS_PT_HAS_VEL 0x10u      /* attr_mode byte: a velocity block follows the header (§7.5.7) */
 
 typedef uint16_t fxs_pt_prob;
@@ -402,11 +402,11 @@ static inline size_t fxs_pt_hdr_bytes(const struct fxs_pt_frame *f)
     return FXS_PARTICLES_HEADER_BYTES + (f->vel ? FXS_PARTICLES_VEL_BLOCK_BYTES : 0u);
 }
 
-/* Context of a velocity residual: axis, class of the previous particle's residual on it,
- * own type (flags & 3). */
-static inline int fxs_pt_vctx(int a, uint32_t zprev, unsigned flags)
+/* Context of a velocity residual: axis, class of the residual coded before it (x: the
+ * previous particle's x, y and z: this particle's x and y), own type (flags & 3). */
+static inline int fxs_pt_vctx(int a, uint32_t zbefore, unsigned flags)
 {
-    return (a * 7 + fxs_pt_rclass(zprev)) * 4 + (int)(flags & 3u);
+    return (a * 7 + fxs_pt_rclass(zbefore)) * 4 + (int)(flags & 3u);
 }
 
 static void fxs_pt_steps(struct fxs_pt_frame *f)
@@ -914,13 +914,13 @@ static inline int32_t fxs_pt_vquant(float v, double scale, int32_t qmax)
 }
 
 /* Velocities of every particle in tree order (§7.5.7): per axis the residual against the
- * nearest recent neighbour's (nbs, as mode 0's), an integer in contexts of the previous
- * particle's residual class on that axis and the particle's type. -1 when out of memory. */
+ * nearest recent neighbour's (nbs, as mode 0's), an integer in contexts of the class of the
+ * residual coded before it and the particle's type. -1 when out of memory. */
 static int fxs_pt_enc_vel(struct fxs_pt_enc *e, const struct fxs_particles *p)
 {
     const struct fxs_pt_frame *f = &e->f;
     const int32_t *nbs = e->nbs;
-    uint32_t n = f->n, zp[3] = { 0, 0, 0 };
+    uint32_t n = f->n, zx = 0;
     int32_t qmax = fxs_pt_vqmax(f->vel_bits), *qv = malloc(12 * (size_t)n);
     double scale[3];
     struct fxs_pt_ew w;
@@ -936,10 +936,12 @@ static int fxs_pt_enc_vel(struct fxs_pt_enc *e, const struct fxs_particles *p)
             free(qv);
             return -1;
         }
+        uint32_t zb = zx; /* the residual before: the previous particle's x, then this one's x, y */
         for (int a = 0; a < 3; a++) {
             uint32_t z = fxs_pt_zigzag(c[a] - (o ? o[a] : 0));
-            fxs_pt_put_int(&w, e->m.v[fxs_pt_vctx(a, zp[a], fl)], FXS_PT_V_U, z);
-            zp[a] = z;
+            fxs_pt_put_int(&w, e->m.v[fxs_pt_vctx(a, zb, fl)], FXS_PT_V_U, z);
+            zb = z;
+            if (!a) zx = z;
         }
     }
     e->w = w;
@@ -1213,17 +1215,18 @@ static int fxs_pt_dec_vel(struct fxs_pt_dec *d, struct fxs_particles *p, int32_t
 {
     const struct fxs_pt_frame *f = &d->f;
     int32_t qmax = fxs_pt_vqmax(f->vel_bits);
-    uint32_t zp[3] = { 0, 0, 0 };
+    uint32_t zx = 0;
     for (uint32_t j = 0; j < f->n; j++) {
         int32_t *c = qv + 3 * (size_t)j, nb = d->nbs[j];
+        uint32_t zb = zx, z;
         for (int a = 0; a < 3; a++) {
-            uint32_t z;
             int64_t v;
-            if (fxs_pt_get_int(&d->io, d->m.v[fxs_pt_vctx(a, zp[a], p->flags[j])], FXS_PT_V_U, &z)) return -1;
+            if (fxs_pt_get_int(&d->io, d->m.v[fxs_pt_vctx(a, zb, p->flags[j])], FXS_PT_V_U, &z)) return -1;
             v = (int64_t)(nb < 0 ? 0 : qv[3 * (size_t)nb + a]) + fxs_pt_unzigzag(z);
             if (v < -qmax || v > qmax || d->io.rc.bad) return -1;
             c[a] = (int32_t)v;
-            zp[a] = z;
+            zb = z;
+            if (!a) zx = z;
             p->vel[3 * (size_t)j + a] = (float)(c[a] * f->vstep[a]);
         }
     }
