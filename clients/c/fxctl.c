@@ -70,7 +70,8 @@ static const char fxctl_help[] =
     "                                per look-up-table product (kind 4), the decoded\n"
     "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 2:\n"
     "                                binary PLY, x y z temperature fuel flags, then\n"
-    "                                vx vy vz if the stream sends velocities) or the\n"
+    "                                vx vy vz if the stream sends velocities, and the\n"
+    "                                payload as received to .bin) or the\n"
     "                                payload to .bin (others), and the line to\n"
     "                                DIR/NAME-SEQ.json; a light-rig frame (kind 3),\n"
     "                                which shares its texture's SEQ, goes to\n"
@@ -469,16 +470,19 @@ static int fxctl_write_lut(const char *base, const struct fxc_msg *m)
     return -1;
 }
 
-/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 2) or .bin,
- * plus one PNG per product of a look-up table (kind 4 codec 1). */
+/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 2, decoded, and
+ * the payload as received in .bin, for other decoders to compare) or .bin, plus one PNG per
+ * product of a look-up table (kind 4 codec 1). */
 static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const struct fxs_particles *p)
 {
     const struct fxs_header *h = &m->header;
     int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
-    char path[4200];
+    char path[4200], raw[4200];
     snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr ? "exr" : "bin");
+    snprintf(raw, sizeof raw, "%s.bin", base);
     if (h->kind == FXS_KIND_LUT && h->codec == FXS_CODEC_LUT_PACK && fxctl_write_lut(base, m)) return -1;
-    return p ? fxctl_write_ply(path, p) : fxctl_write_file(path, m->payload, h->payload_bytes);
+    if (p && fxctl_write_ply(path, p)) return -1;
+    return fxctl_write_file(p ? raw : path, m->payload, h->payload_bytes);
 }
 
 /* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json; a light-rig frame (kind 3) is
