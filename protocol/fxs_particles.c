@@ -15,6 +15,9 @@
  *     fields); mode 1 codes the values as bit trees in contexts of the neighbours' values
  *     (the nearest's flags, the nearest same-flags particle's T, own T for F: real flames,
  *     where burning and cold particles mix and residuals cost more than values);
+ *   - optional velocities (§7.5.7, flagged in attr_mode, a 16-byte block after the header):
+ *     per axis on a symmetric grid of vel_bits, each component a residual against the same
+ *     neighbour's, after the attributes; without them the payload is what it always was;
  *   - one adaptive binary range coder (LZMA's, 12-bit probabilities) for every modelled
  *     decision, and a raw LSB-first bit section for the incompressible bits.
  * Both sides are a few hundred lines of integer code, so the browser decoder
