@@ -366,9 +366,7 @@ export class FlameView {
     }
     const u = this.pbvr.uniforms, lu = this.lineMat.uniforms;
     u.threshold.value = s.threshold;
-    lu.tAmb.value = u.tAmb.value;
-    lu.tMax.value = s.whiteT;
-    lu.velScale.value = s.velScale;
+    lu.velScale.value = s.velScale; // tAmb, tMax and the table: the uniforms all three materials share
     for (const m of [u, lu]) {
       m.smokeOn.value = s.smoke ? 1 : 0;
       m.smokeT.value = s.smokeT;
