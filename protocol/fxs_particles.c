@@ -15,6 +15,9 @@
  *     fields); mode 1 codes the values as bit trees in contexts of the neighbours' values
  *     (the nearest's flags, the nearest same-flags particle's T, own T for F: real flames,
  *     where burning and cold particles mix and residuals cost more than values);
+ *   - optional velocities (§7.5.7, flagged in attr_mode, a 16-byte block after the header):
+ *     per axis on a symmetric grid of vel_bits, each component a residual against the same
+ *     neighbour's, after the attributes; without them the payload is what it always was;
  *   - one adaptive binary range coder (LZMA's, 12-bit probabilities) for every modelled
  *     decision, and a raw LSB-first bit section for the incompressible bits.
  * Both sides are a few hundred lines of integer code, so the browser decoder
@@ -55,6 +58,9 @@
 #define FXS_PT_T_CTX (7 * 8 * 2)  /* previous residual class x own flags & 7 x neighbour F == 0 */
 #define FXS_PT_F_CTX (7 * 2 * 2)  /* previous residual class x neighbour F == 0 x own flame bit */
 #define FXS_PT_FL_CTX 16          /* neighbour flags & 7 x neighbour F == 0 */
+#define FXS_PT_V_U 2
+#define FXS_PT_V_CTX (3 * 7 * 4)  /* axis x class of the residual before (§7.5.7) x own flags & 3 */
+#define FXS_PT_HAS_VEL 0x10u      /* attr_mode byte: a velocity block follows the header (§7.5.7) */
 
 typedef uint16_t fxs_pt_prob;
 
@@ -70,6 +76,7 @@ struct fxs_pt_models {
     fxs_pt_prob vt[8 * 9][256];     /* T by own flags & 7 x the same-flags neighbour's T / 8 (8: none) */
     fxs_pt_prob vf0[8 * 16 * 2];    /* F = 0 by own flags & 7 x T / 16 x neighbour F == 0 */
     fxs_pt_prob vf[8 * 8][256];     /* F - 1 by own flags & 7 x T / 8 */
+    fxs_pt_prob v[FXS_PT_V_CTX][FXS_PT_IPROBS(FXS_PT_V_U)]; /* velocity residuals (§7.5.7) */
 };
 
 static void fxs_pt_models_init(struct fxs_pt_models *m)
@@ -381,6 +388,9 @@ struct fxs_pt_frame {
     uint32_t n;
     int pos_bits, temp_bits, fuel_bits;
     int mode;                /* attribute mode 0 or 1 (§7.5.4) */
+    int vel, vel_bits;       /* velocities present (§7.5.7), bits per component */
+    float vmax[3];           /* largest |v| of each axis */
+    double vstep[3];
     int abits[3];            /* bits of each axis' quantised coordinate */
     float lo[5], hi[5];      /* x, y, z, T, F */
     double step[5];
@@ -390,6 +400,22 @@ struct fxs_pt_frame {
     uint8_t left[FXS_PT_MAXD + 1][3];
 };
 
+/* Largest quantised velocity magnitude: 2^(bits - 1) - 1. */
+static inline int32_t fxs_pt_vqmax(int bits) { return (int32_t)(1u << (bits - 1)) - 1; }
+
+/* Header bytes before the range-coder section: 64, + the velocity block (§7.5.7). */
+static inline size_t fxs_pt_hdr_bytes(const struct fxs_pt_frame *f)
+{
+    return FXS_PARTICLES_HEADER_BYTES + (f->vel ? FXS_PARTICLES_VEL_BLOCK_BYTES : 0u);
+}
+
+/* Context of a velocity residual: axis, class of the residual coded before it (x: the
+ * previous particle's x, y and z: this particle's x and y), own type (flags & 3). */
+static inline int fxs_pt_vctx(int a, uint32_t zbefore, unsigned flags)
+{
+    return (a * 7 + fxs_pt_rclass(zbefore)) * 4 + (int)(flags & 3u);
+}
+
 static void fxs_pt_steps(struct fxs_pt_frame *f)
 {
     double r = 0;
@@ -398,6 +424,7 @@ static void fxs_pt_steps(struct fxs_pt_frame *f)
     for (int a = 0; a < 3; a++) f->step[a] = r / (double)((1u << f->pos_bits) - 1u);
     f->step[3] = ((double)f->hi[3] - (double)f->lo[3]) / (double)((1u << f->temp_bits) - 1u);
     f->step[4] = ((double)f->hi[4] - (double)f->lo[4]) / (double)((1u << f->fuel_bits) - 1u);
+    for (int a = 0; a < 3 && f->vel; a++) f->vstep[a] = (double)f->vmax[a] / (double)fxs_pt_vqmax(f->vel_bits);
 }
 
 /* Splits from the top bit down; at each bit x, then y, then z (axes that have it). */
@@ -442,6 +469,13 @@ static int fxs_pt_bounds(const struct fxs_particles *p, struct fxs_pt_frame *f)
     }
     if (!p->n)
         for (int c = 0; c < 5; c++) f->lo[c] = f->hi[c] = 0;
+    f->vel = p->vel != NULL;
+    for (int a = 0; a < 3; a++) f->vmax[a] = 0;
+    for (size_t i = 0; f->vel && i < 3 * (size_t)p->n; i++) {
+        float m = fabsf(p->vel[i]);
+        if (!isfinite(m)) return -1;
+        if (m > f->vmax[i % 3]) f->vmax[i % 3] = m;
+    }
     return 0;
 }
 
@@ -915,6 +949,50 @@ static int fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p)
     return e->f.mode ? fxs_pt_enc_attrs1(e, qt, qf, fl, nbs, sk) : fxs_pt_enc_attrs0(e, qt, qf, fl, nbs);
 }
 
+/* Velocity component v on the symmetric grid of step 1 / scale, clamped to +-qmax. */
+static inline int32_t fxs_pt_vquant(float v, double scale, int32_t qmax)
+{
+    double q = fabs((double)v) * scale + 0.5;
+    int32_t u = q >= (double)qmax ? qmax : (int32_t)q;
+    return v < 0 ? -u : u;
+}
+
+/* Velocities of every particle in tree order (§7.5.7): per axis the residual against the
+ * nearest recent neighbour's (nbs, as mode 0's), an integer in contexts of the class of the
+ * residual coded before it and the particle's type. -1 when out of memory. */
+static int fxs_pt_enc_vel(struct fxs_pt_enc *e, const struct fxs_particles *p)
+{
+    const struct fxs_pt_frame *f = &e->f;
+    const int32_t *nbs = e->nbs;
+    uint32_t n = f->n, zx = 0;
+    int32_t qmax = fxs_pt_vqmax(f->vel_bits), *qv = malloc(12 * (size_t)n);
+    double scale[3];
+    struct fxs_pt_ew w;
+    if (!qv) return -1;
+    for (int a = 0; a < 3; a++) scale[a] = f->vstep[a] > 0 ? 1.0 / f->vstep[a] : 0;
+    for (uint32_t j = 0; j < n; j++)
+        for (int a = 0; a < 3; a++) qv[3 * (size_t)j + a] = fxs_pt_vquant(p->vel[3 * (size_t)e->order[j] + a], scale[a], qmax);
+    w = e->w;
+    for (uint32_t j = 0; j < n; j++) {
+        const int32_t *c = qv + 3 * (size_t)j, *o = nbs[j] < 0 ? NULL : qv + 3 * (size_t)nbs[j];
+        unsigned fl = p->flags[e->order[j]];
+        if (fxs_pt_room(&e->rb, &e->bb, &w)) {
+            free(qv);
+            return -1;
+        }
+        uint32_t zb = zx; /* the residual before: the previous particle's x, then this one's x, y */
+        for (int a = 0; a < 3; a++) {
+            uint32_t z = fxs_pt_zigzag(c[a] - (o ? o[a] : 0));
+            fxs_pt_put_int(&w, e->m.v[fxs_pt_vctx(a, zb, fl)], FXS_PT_V_U, z);
+            zb = z;
+            if (!a) zx = z;
+        }
+    }
+    e->w = w;
+    free(qv);
+    return 0;
+}
+
 /* Quantises positions into e->q (input order) and sets the axis bits. */
 static void fxs_pt_enc_quant(struct fxs_pt_enc *e, const struct fxs_particles *p)
 {
@@ -940,7 +1018,7 @@ static void fxs_pt_header(const struct fxs_pt_frame *f, uint8_t *out, uint32_t r
     out[6] = (uint8_t)f->temp_bits;
     out[7] = (uint8_t)f->fuel_bits;
     for (int a = 0; a < 3; a++) out[8 + a] = (uint8_t)f->abits[a];
-    out[11] = (uint8_t)f->mode;
+    out[11] = (uint8_t)(f->mode | (f->vel ? FXS_PT_HAS_VEL : 0u));
     fxs_pt_put32(out + 12, f->n);
     for (int c = 0; c < 3; c++) {
         fxs_pt_putf(out + 16 + 4 * c, f->lo[c]);
@@ -952,6 +1030,12 @@ static void fxs_pt_header(const struct fxs_pt_frame *f, uint8_t *out, uint32_t r
     fxs_pt_putf(out + 52, f->hi[4]);
     fxs_pt_put32(out + 56, rc_len);
     fxs_pt_put32(out + 60, bits_len);
+    if (f->vel) {
+        uint8_t *vb = out + FXS_PARTICLES_HEADER_BYTES;
+        memset(vb, 0, FXS_PARTICLES_VEL_BLOCK_BYTES);
+        vb[0] = (uint8_t)f->vel_bits;
+        for (int a = 0; a < 3; a++) fxs_pt_putf(vb + 4 + 4 * a, f->vmax[a]);
+    }
 }
 
 static int fxs_pt_opts(const struct fxs_particles_opts *o, struct fxs_pt_frame *f)
@@ -959,8 +1043,10 @@ static int fxs_pt_opts(const struct fxs_particles_opts *o, struct fxs_pt_frame *
     f->pos_bits = o && o->pos_bits ? o->pos_bits : FXS_PARTICLES_DEFAULT_POS_BITS;
     f->temp_bits = o && o->temp_bits ? o->temp_bits : FXS_PARTICLES_DEFAULT_TEMP_BITS;
     f->fuel_bits = o && o->fuel_bits ? o->fuel_bits : FXS_PARTICLES_DEFAULT_FUEL_BITS;
+    f->vel_bits = o && o->vel_bits ? o->vel_bits : FXS_PARTICLES_DEFAULT_VEL_BITS;
     if (f->pos_bits < 8 || f->pos_bits > 24) return -1;
     if (f->temp_bits < 2 || f->temp_bits > 16 || f->fuel_bits < 2 || f->fuel_bits > 16) return -1;
+    if (f->vel_bits < 2 || f->vel_bits > 16) return -1;
     return 0;
 }
 
@@ -978,13 +1064,13 @@ static int fxs_pt_check_input(const struct fxs_particles *p, char *err, size_t e
 static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, uint8_t **out, size_t *out_len)
 {
     uint32_t n = p->n;
-    size_t rl = 0, bl = 0, nn = n;
+    size_t rl = 0, bl = 0, nn = n, hb = fxs_pt_hdr_bytes(&e->f);
     struct fxs_pt_ew *w = &e->w;
     uint8_t *s;
     fxs_pt_steps(&e->f);
     fxs_pt_ew_init(w);
-    if (!(w->rp = fxs_pt_grow(&e->rb, NULL, FXS_PARTICLES_HEADER_BYTES + nn + 4096))) return -1;
-    w->rp += FXS_PARTICLES_HEADER_BYTES;
+    if (!(w->rp = fxs_pt_grow(&e->rb, NULL, hb + nn + 4096))) return -1;
+    w->rp += hb;
     if (n) {
         /* 32n pd, 16n keys, 8n indices, 4n nbs + n sk (in 8n), 12n + 9n q */
         if (!(s = e->scratch = malloc(nn * 85 + 8))) return -1;
@@ -1003,10 +1089,10 @@ static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, u
         } else if (fxs_pt_enc_wide(e)) {
             return -1;
         }
-        if (fxs_pt_enc_attrs(e, p) || fxs_pt_room(&e->rb, &e->bb, w)) return -1;
+        if (fxs_pt_enc_attrs(e, p) || (e->f.vel && fxs_pt_enc_vel(e, p)) || fxs_pt_room(&e->rb, &e->bb, w)) return -1;
         for (int i = 0; i < 5; i++) fxs_pt_rc_shift(w);
         for (; w->cnt > 0; w->cnt -= 8, w->acc >>= 8) *w->bp++ = (uint8_t)w->acc;
-        rl = (size_t)(w->rp - e->rb.p) - FXS_PARTICLES_HEADER_BYTES;
+        rl = (size_t)(w->rp - e->rb.p) - hb;
         bl = (size_t)(w->bp - e->bb.p);
         if (rl > UINT32_MAX || bl > UINT32_MAX) return -1;
         if (!(w->rp = fxs_pt_grow(&e->rb, w->rp, bl))) return -1;
@@ -1014,7 +1100,7 @@ static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, u
     }
     fxs_pt_header(&e->f, e->rb.p, (uint32_t)rl, (uint32_t)bl);
     *out = e->rb.p;
-    *out_len = FXS_PARTICLES_HEADER_BYTES + rl + bl;
+    *out_len = hb + rl + bl;
     e->rb.p = NULL;
     return 0;
 }
@@ -1028,11 +1114,11 @@ int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particl
     if (!(e = calloc(1, sizeof *e))) return fxs_pt_fail(err, errlen, "out of memory");
     if (fxs_pt_opts(opts, &e->f)) {
         free(e);
-        return fxs_pt_fail(err, errlen, "pos_bits must be 8..24, temp_bits and fuel_bits 2..16");
+        return fxs_pt_fail(err, errlen, "pos_bits must be 8..24, temp_bits, fuel_bits and vel_bits 2..16");
     }
     e->f.n = p->n;
     if (fxs_pt_bounds(p, &e->f)) {
-        r = fxs_pt_fail(err, errlen, "non-finite position, temperature or fuel");
+        r = fxs_pt_fail(err, errlen, "non-finite position, temperature, fuel or velocity");
     } else {
         r = fxs_pt_enc_run(e, p, out, out_len);
         if (r) fxs_pt_fail(err, errlen, "out of memory");
@@ -1051,6 +1137,7 @@ struct fxs_pt_dec {
     struct fxs_pt_dec_io io;
     struct fxs_pt_models m;
     uint32_t *q;      /* 3n coordinates in tree order */
+    int32_t *nbs;     /* n: each particle's nearest recent neighbour (-1: none), for the velocities */
     uint32_t out;     /* particles placed so far */
 };
 
@@ -1106,6 +1193,7 @@ static int fxs_pt_dec_attrs0(struct fxs_pt_dec *d, struct fxs_particles *p, uint
         unsigned nfl = nb < 0 ? 0 : p->flags[nb], v = nfl;
         int f0 = nf == 0;
         int64_t t, fu;
+        d->nbs[j] = (int32_t)nb;
         if (fxs_pt_rc_get(&d->io.rc, &d->m.same[(nfl & 7u) * 2 + (unsigned)f0])) {
             unsigned m = 1;
             while (m < 256) m = 2 * m + (unsigned)fxs_pt_rc_get(&d->io.rc, &d->m.tree[m]);
@@ -1140,6 +1228,7 @@ static int fxs_pt_dec_attrs1(struct fxs_pt_dec *d, struct fxs_particles *p, uint
         unsigned c;
         int nf0 = nb < 0 || qf[nb] == 0, tb;
         unsigned nfl = nb < 0 ? 0 : fl[nb], nc = nb < 0 ? 8 : nfl & 7u;
+        d->nbs[j] = (int32_t)nb;
         v = nfl;
         if (fxs_pt_rc_get(&d->io.rc, &d->m.vsame[nc * 2 + (unsigned)nf0])) {
             if (fxs_pt_get_tree(&d->io, d->m.vfl[nc], 8, &v)) return -1;
@@ -1164,6 +1253,30 @@ static int fxs_pt_dec_attrs1(struct fxs_pt_dec *d, struct fxs_particles *p, uint
     return 0;
 }
 
+/* Velocities (§7.5.7) of every particle in tree order, after the attributes; qv: scratch
+ * for 3n values. */
+static int fxs_pt_dec_vel(struct fxs_pt_dec *d, struct fxs_particles *p, int32_t *qv)
+{
+    const struct fxs_pt_frame *f = &d->f;
+    int32_t qmax = fxs_pt_vqmax(f->vel_bits);
+    uint32_t zx = 0;
+    for (uint32_t j = 0; j < f->n; j++) {
+        int32_t *c = qv + 3 * (size_t)j, nb = d->nbs[j];
+        uint32_t zb = zx, z;
+        for (int a = 0; a < 3; a++) {
+            int64_t v;
+            if (fxs_pt_get_int(&d->io, d->m.v[fxs_pt_vctx(a, zb, p->flags[j])], FXS_PT_V_U, &z)) return -1;
+            v = (int64_t)(nb < 0 ? 0 : qv[3 * (size_t)nb + a]) + fxs_pt_unzigzag(z);
+            if (v < -qmax || v > qmax || d->io.rc.bad) return -1;
+            c[a] = (int32_t)v;
+            zb = z;
+            if (!a) zx = z;
+            p->vel[3 * (size_t)j + a] = (float)(c[a] * f->vstep[a]);
+        }
+    }
+    return 0;
+}
+
 static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_frame *f, uint32_t *rl, uint32_t *bl)
 {
     if (len < FXS_PARTICLES_HEADER_BYTES || memcmp(buf, FXS_PT_MAGIC, 4)) return -1;
@@ -1172,7 +1285,8 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     f->temp_bits = buf[6];
     f->fuel_bits = buf[7];
     for (int a = 0; a < 3; a++) f->abits[a] = buf[8 + a];
-    f->mode = buf[11];
+    f->mode = buf[11] & 0x0Fu;
+    f->vel = (buf[11] & FXS_PT_HAS_VEL) != 0;
     f->n = fxs_pt_get32(buf + 12);
     for (int c = 0; c < 3; c++) {
         f->lo[c] = fxs_pt_getf(buf + 16 + 4 * c);
@@ -1184,7 +1298,15 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     f->hi[4] = fxs_pt_getf(buf + 52);
     *rl = fxs_pt_get32(buf + 56);
     *bl = fxs_pt_get32(buf + 60);
-    return buf[11] > 1 ? -3 : 0;
+    if ((buf[11] & ~FXS_PT_HAS_VEL) > 1) return -3;
+    if (f->vel) {
+        const uint8_t *vb = buf + FXS_PARTICLES_HEADER_BYTES;
+        if (len < FXS_PARTICLES_HEADER_BYTES + FXS_PARTICLES_VEL_BLOCK_BYTES) return -1;
+        if (vb[1] || vb[2] || vb[3]) return -4;
+        f->vel_bits = vb[0];
+        for (int a = 0; a < 3; a++) f->vmax[a] = fxs_pt_getf(vb + 4 + 4 * a);
+    }
+    return 0;
 }
 
 static const char *fxs_pt_check_frame(const struct fxs_pt_frame *f)
@@ -1197,10 +1319,13 @@ static const char *fxs_pt_check_frame(const struct fxs_pt_frame *f)
     if (f->n > FXS_PARTICLES_MAX_N) return "particle count over the limit";
     for (int c = 0; c < 5; c++)
         if (!isfinite(f->lo[c]) || !isfinite(f->hi[c]) || f->lo[c] > f->hi[c]) return "bad bounds";
+    if (f->vel && (f->vel_bits < 2 || f->vel_bits > 16)) return "bad velocity bits";
+    for (int a = 0; a < 3 && f->vel; a++)
+        if (!isfinite(f->vmax[a]) || !(f->vmax[a] >= 0)) return "bad velocity bounds";
     return NULL;
 }
 
-static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n)
+static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n, int vel)
 {
     size_t m = n ? n : 1;
     p->n = n;
@@ -1208,7 +1333,8 @@ static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n)
     p->temp = malloc(m * sizeof *p->temp);
     p->fuel = malloc(m * sizeof *p->fuel);
     p->flags = malloc(m);
-    if (p->xyz && p->temp && p->fuel && p->flags) return 0;
+    p->vel = vel ? malloc(3 * m * sizeof *p->vel) : NULL;
+    if (p->xyz && p->temp && p->fuel && p->flags && (p->vel || !vel)) return 0;
     fxs_particles_free(p);
     return -1;
 }
@@ -1217,10 +1343,11 @@ static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n)
 static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, size_t len, uint32_t rl, uint32_t bl,
                                    struct fxs_particles *p)
 {
-    const uint8_t *body = buf + FXS_PARTICLES_HEADER_BYTES;
+    size_t hb = fxs_pt_hdr_bytes(&d->f), nn = d->f.n;
+    const uint8_t *body = buf + hb;
     uint32_t *qa;
     const char *why = NULL;
-    if ((uint64_t)FXS_PARTICLES_HEADER_BYTES + rl + bl != len) return "section sizes do not match the payload length";
+    if ((uint64_t)hb + rl + bl != len) return "section sizes do not match the payload length";
     if (!d->f.n) return rl || bl ? "bad sizes" : NULL;
     if (fxs_pt_rcr_init(&d->io.rc, body, rl)) return "corrupt particle data";
     d->io.bits.p = body + rl;
@@ -1228,10 +1355,13 @@ static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, siz
     fxs_pt_steps(&d->f);
     fxs_pt_schedule(&d->f);
     fxs_pt_models_init(&d->m);
-    if (!(qa = malloc((size_t)d->f.n * 5 * sizeof *qa))) return "out of memory";
+    /* 3n coordinates, n qT, n qF, n neighbours; 3n quantised velocities */
+    if (!(qa = malloc(nn * (d->f.vel ? 9 : 6) * sizeof *qa))) return "out of memory";
     d->q = qa;
+    d->nbs = (int32_t *)(qa + 5 * nn);
     if (fxs_pt_dec_node(d, d->f.n, 0, 0, 0, 0) || d->out != d->f.n ||
-        (d->f.mode ? fxs_pt_dec_attrs1 : fxs_pt_dec_attrs0)(d, p, qa + 3 * (size_t)d->f.n, qa + 4 * (size_t)d->f.n))
+        (d->f.mode ? fxs_pt_dec_attrs1 : fxs_pt_dec_attrs0)(d, p, qa + 3 * nn, qa + 4 * nn) ||
+        (d->f.vel && fxs_pt_dec_vel(d, p, (int32_t *)(qa + 6 * nn))))
         why = "corrupt particle data";
     else if (d->io.rc.bad || d->io.rc.p != d->io.rc.end)
         why = "corrupt particle data (range coder section not consumed exactly)";
@@ -1255,10 +1385,11 @@ int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p
     why = r == -1   ? "not a codec 2 payload (short or bad magic)"
           : r == -2 ? "unsupported version"
           : r == -3 ? "unknown attribute mode"
+          : r == -4 ? "non-zero reserved bytes in the velocity block"
                     : NULL;
     if (!why) why = fxs_pt_check_frame(&d->f);
-    if (!why && (uint64_t)FXS_PARTICLES_HEADER_BYTES + rl + bl != len) why = "section sizes do not match the payload length";
-    if (!why && fxs_pt_alloc_out(p, d->f.n)) why = "out of memory";
+    if (!why && (uint64_t)fxs_pt_hdr_bytes(&d->f) + rl + bl != len) why = "section sizes do not match the payload length";
+    if (!why && fxs_pt_alloc_out(p, d->f.n, d->f.vel)) why = "out of memory";
     if (!why && (why = fxs_pt_dec_body(d, buf, len, rl, bl, p))) fxs_particles_free(p);
     free(d);
     return why ? fxs_pt_fail(err, errlen, why) : 0;
@@ -1271,5 +1402,6 @@ void fxs_particles_free(struct fxs_particles *p)
     free(p->temp);
     free(p->fuel);
     free(p->flags);
+    free(p->vel);
     memset(p, 0, sizeof *p);
 }

@@ -19,6 +19,9 @@ struct fxs_particles {
     float *temp;     /* n, kelvin */
     float *fuel;     /* n */
     uint8_t *flags;  /* n: enum flame_flag bits (type, flame) */
+    float *vel;      /* 3n velocities (vx, vy, vz), or NULL: none. The encoder sends them when
+                      * set (PROTOCOL.md §7.5.7); the decoder sets it only for payloads that
+                      * carry them */
 };
 
 struct fxs_particles_opts {
@@ -29,15 +32,21 @@ struct fxs_particles_opts {
      * (0 = default). Defaults below. */
     int temp_bits;
     int fuel_bits;
+    /* Bits of each velocity component, sign included, 2..16 (0 = default): one step per axis,
+     * (largest |v| of that axis) / (2^(vel_bits-1) - 1). Used only when p->vel is set. */
+    int vel_bits;
 };
 
 #define FXS_PARTICLES_DEFAULT_POS_BITS 16
 #define FXS_PARTICLES_DEFAULT_TEMP_BITS 10
 #define FXS_PARTICLES_DEFAULT_FUEL_BITS 8
+#define FXS_PARTICLES_DEFAULT_VEL_BITS 8
 /* Most particles one payload may declare; the decoder rejects more (decompression bombs). */
 #define FXS_PARTICLES_MAX_N (1u << 22)
-/* Bytes of the payload's own header (PROTOCOL.md §7.5). */
+/* Bytes of the payload's own header (PROTOCOL.md §7.5.1), and of the velocity block that
+ * follows it in payloads with velocities (§7.5.7). */
 #define FXS_PARTICLES_HEADER_BYTES 64u
+#define FXS_PARTICLES_VEL_BLOCK_BYTES 16u
 
 /* Encodes p into a newly allocated buffer (*out, *out_len; free()). Returns 0, or -1 with
  * a message in err (errlen bytes). */

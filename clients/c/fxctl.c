@@ -68,8 +68,10 @@ static const char fxctl_help[] =
     "                                event of NAME; with --out writes the payload to\n"
     "                                DIR/NAME-SEQ.exr (texture, codec 1), DIR/NAME-SEQ-PROD.png\n"
     "                                per look-up-table product (kind 4), the decoded\n"
-    "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 1:\n"
-    "                                binary PLY, x y z temperature fuel flags) or the\n"
+    "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 2:\n"
+    "                                binary PLY, x y z temperature fuel flags, then\n"
+    "                                vx vy vz if the stream sends velocities, and the\n"
+    "                                payload as received to .bin) or the\n"
     "                                payload to .bin (others), and the line to\n"
     "                                DIR/NAME-SEQ.json; a light-rig frame (kind 3),\n"
     "                                which shares its texture's SEQ, goes to\n"
@@ -397,25 +399,29 @@ static int fxctl_write_file(const char *path, const void *data, size_t len)
     return ok ? 0 : -1;
 }
 
-/* Writes decoded particles as binary little-endian PLY: float x y z temperature fuel, uchar flags. */
+/* Writes decoded particles as binary little-endian PLY: float x y z temperature fuel, uchar
+ * flags, then float vx vy vz when the frame carries velocities. */
 static int fxctl_write_ply(const char *path, const struct fxs_particles *p)
 {
     FILE *f = fopen(path, "wb");
     int ok = f != NULL;
+    size_t size = p->vel ? 33 : 21;
     if (ok)
-        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec 1\nelement vertex %" PRIu32
+        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec 2\nelement vertex %" PRIu32
                         "\nproperty float x\nproperty float y\nproperty float z\nproperty float temperature\n"
-                        "property float fuel\nproperty uchar flags\nend_header\n", p->n) > 0;
+                        "property float fuel\nproperty uchar flags\n%send_header\n", p->n,
+                     p->vel ? "property float vx\nproperty float vy\nproperty float vz\n" : "") > 0;
     for (uint32_t i = 0; ok && i < p->n; i++) {
-        uint8_t rec[21];
-        float v[5] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], p->fuel[i] };
-        for (int c = 0; c < 5; c++) {
+        uint8_t rec[33];
+        float v[8] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], p->fuel[i], 0, 0, 0 };
+        if (p->vel) memcpy(v + 5, p->vel + 3 * (size_t)i, 12);
+        for (int c = 0; c < (p->vel ? 8 : 5); c++) { /* the flags byte sits between fuel and vx */
             uint32_t u;
             memcpy(&u, &v[c], 4);
-            fxs_put_u32(rec + 4 * c, u);
+            fxs_put_u32(rec + 4 * c + (c >= 5), u);
         }
         rec[20] = p->flags[i];
-        ok = fwrite(rec, 1, sizeof rec, f) == sizeof rec;
+        ok = fwrite(rec, 1, size, f) == size;
     }
     if (f && fclose(f)) ok = 0;
     if (!ok) fprintf(stderr, "fxctl: cannot write %s: %s\n", path, strerror(errno));
@@ -464,16 +470,19 @@ static int fxctl_write_lut(const char *base, const struct fxc_msg *m)
     return -1;
 }
 
-/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 1) or .bin,
- * plus one PNG per product of a look-up table (kind 4 codec 1). */
+/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 2, decoded, and
+ * the payload as received in .bin, for other decoders to compare) or .bin, plus one PNG per
+ * product of a look-up table (kind 4 codec 1). */
 static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const struct fxs_particles *p)
 {
     const struct fxs_header *h = &m->header;
     int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
-    char path[4200];
+    char path[4200], raw[4200];
     snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr ? "exr" : "bin");
+    snprintf(raw, sizeof raw, "%s.bin", base);
     if (h->kind == FXS_KIND_LUT && h->codec == FXS_CODEC_LUT_PACK && fxctl_write_lut(base, m)) return -1;
-    return p ? fxctl_write_ply(path, p) : fxctl_write_file(path, m->payload, h->payload_bytes);
+    if (p && fxctl_write_ply(path, p)) return -1;
+    return fxctl_write_file(p ? raw : path, m->payload, h->payload_bytes);
 }
 
 /* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json; a light-rig frame (kind 3) is

@@ -2,16 +2,18 @@
 // (codec 2, protocol/PROTOCOL.md §7.5) and parser of the 64-byte frame header (§7.1).
 //
 // Plain ES module, no dependencies, no build step: the entropy stage is an adaptive
-// binary range coder (LZMA's) that takes a few lines here. Mirrors
-// protocol/fxs_particles.c (the C decoder) value for value: positions, T and F are
-// float32(lo + q * step) computed in double, so both decoders give identical floats
-// (checked against tests/data/particles/).
+// binary range coder (LZMA's) that takes a few lines here (Decoder.bit, the one place a
+// decision is decoded). Mirrors protocol/fxs_particles.c (the C decoder) value for value:
+// positions, T, F and the optional velocities are float32(lo + q * step) or
+// float32(q * step) computed in double, so both decoders give identical floats (checked
+// against tests/data/particles/).
 //
 //   import { parseHeader, decode } from './fxs_particles.js';
 //   const h = parseHeader(msg);                       // throws on a bad frame
 //   if (h.kind === 1 && h.codec === 2) {
 //     const p = decode(new Uint8Array(msg, h.headerBytes, h.payloadBytes));
-//     // p.n, p.xyz (Float32Array 3n), p.temp, p.fuel (Float32Array n), p.flags (Uint8Array n)
+//     // p.n, p.xyz (Float32Array 3n), p.temp, p.fuel (Float32Array n), p.flags (Uint8Array n),
+//     // p.vel (Float32Array 3n, or null when the stream sends no velocities)
 //   }
 
 export const KIND_PARTICLES = 1;
@@ -25,7 +27,8 @@ const ADAPT = 5;
 const TOP = 1 << 24;
 const NEAR = 8, SAME = 16;
 const MAXK = 24;
-const CNT_U = 3, T_U = 2, F_U = 2;
+const CNT_U = 3, T_U = 2, F_U = 2, V_U = 2;
+const HAS_VEL = 0x10, VEL_BLOCK = 16;
 const IPROBS = (u) => u + 2 * MAXK;
 
 function bytesOf(buf) {
@@ -75,9 +78,17 @@ function parsePayloadHeader(b) {
   if (b.length < HEADER_BYTES || b[0] !== 0x46 || b[1] !== 0x58 || b[2] !== 0x50 || b[3] !== 0x32)
     fail('not a codec 2 payload (short or bad magic)');
   if (b[4] !== 2) fail('unsupported version');
-  if (b[11] > 1) fail('unknown attribute mode');
+  if ((b[11] & ~HAS_VEL) > 1) fail('unknown attribute mode');
   const v = new DataView(b.buffer, b.byteOffset, b.byteLength);
-  const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], abits: [b[8], b[9], b[10]], mode: b[11], n: v.getUint32(12, true) };
+  const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], abits: [b[8], b[9], b[10]], mode: b[11] & 15, n: v.getUint32(12, true) };
+  f.vel = (b[11] & HAS_VEL) !== 0;
+  f.headerBytes = HEADER_BYTES + (f.vel ? VEL_BLOCK : 0);
+  if (f.vel) { // the velocity block (§7.5.7)
+    if (b.length < f.headerBytes) fail('not a codec 2 payload (short or bad magic)');
+    if (b[65] || b[66] || b[67]) fail('non-zero reserved bytes in the velocity block');
+    f.velBits = b[64];
+    f.vmax = [v.getFloat32(68, true), v.getFloat32(72, true), v.getFloat32(76, true)];
+  }
   f.lo = [v.getFloat32(16, true), v.getFloat32(20, true), v.getFloat32(24, true), v.getFloat32(40, true), v.getFloat32(48, true)];
   f.hi = [v.getFloat32(28, true), v.getFloat32(32, true), v.getFloat32(36, true), v.getFloat32(44, true), v.getFloat32(52, true)];
   f.rcBytes = v.getUint32(56, true);
@@ -88,23 +99,19 @@ function parsePayloadHeader(b) {
   if (f.n > MAX_PARTICLES) fail('particle count over the limit');
   for (let c = 0; c < 5; c++)
     if (!Number.isFinite(f.lo[c]) || !Number.isFinite(f.hi[c]) || f.lo[c] > f.hi[c]) fail('bad bounds');
+  if (f.vel && (f.velBits < 2 || f.velBits > 16)) fail('bad velocity bits');
+  if (f.vel && !f.vmax.every((m) => Number.isFinite(m) && m >= 0)) fail('bad velocity bounds');
   return f;
 }
 
 const corrupt = () => fail('corrupt particle data');
 
-// Decoder state between the phases: the adaptive binary range decoder (LZMA's, 12-bit
-// probabilities) and the LSB-first raw bits. The hot loops below copy it into locals and
-// decode decisions inline (no method call per decision), then store it back:
-//
-//   const pr = P[i], bound = Math.imul(range >>> 12, pr);      // < 2^32, exact
-//   if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + ((4096 - pr) >> 5); bit 0 }
-//   else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> 5); bit 1 }
-//   if ((range >>> 0) < 2^24) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-//
-// range and code are int32 bit patterns compared unsigned. Raw bits: at most 24 per read
-// (acc holds < 32 bits).
-class State {
+// The decoder of both sections: one adaptive binary range decoder (LZMA's, 12-bit
+// probabilities) for every modelled decision, and the LSB-first raw bits. bit() is the one
+// place a decision is decoded; int() and tree() are the two shapes built on it (§7.5.4).
+// range and code are int32 bit patterns compared unsigned; Math.imul keeps the bound exact
+// (< 2^32). Raw bits: at most 24 per read (acc holds < 32 bits).
+class Decoder {
   constructor(b, rp, rend, bend) {
     if (rend - rp < 5 || b[rp] !== 0) corrupt();
     this.b = b; this.rp = rp + 5; this.rend = rend; this.bp = rend; this.bend = bend;
@@ -112,6 +119,48 @@ class State {
     this.code = (b[rp + 1] << 24) | (b[rp + 2] << 16) | (b[rp + 3] << 8) | b[rp + 4];
     if (this.code === -1) corrupt();
     this.acc = 0; this.cnt = 0;
+  }
+
+  /** One decision with probability P[i] (of a 0), which then adapts; returns the bit. */
+  bit(P, i) {
+    const pr = P[i], bound = Math.imul(this.range >>> PROB_BITS, pr);
+    let bit;
+    if ((this.code >>> 0) < (bound >>> 0)) { this.range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
+    else { this.code = (this.code - bound) | 0; this.range = (this.range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+    if ((this.range >>> 0) < TOP) {
+      if (this.rp >= this.rend) corrupt();
+      this.range <<= 8;
+      this.code = (this.code << 8) | this.b[this.rp++];
+    }
+    return bit;
+  }
+
+  /** m raw bits (m <= 24), low bit first. */
+  raw(m) {
+    let acc = this.acc, cnt = this.cnt;
+    while (cnt < m) { if (this.bp >= this.bend) corrupt(); acc |= this.b[this.bp++] << cnt; cnt += 8; }
+    this.acc = acc >>> m; this.cnt = cnt - m;
+    return acc & ((1 << m) - 1);
+  }
+
+  /** An integer z >= 0 with the model P[o ...] of u + 48 probabilities: u unary decisions,
+   *  the Exp-Golomb class k in unary, the top mantissa bit by class, k - 1 bits raw. */
+  int(P, o, u) {
+    for (let i = 0; i < u; i++) if (!this.bit(P, o + i)) return i;
+    let k = 0;
+    while (this.bit(P, o + u + k)) if (++k === MAXK) corrupt();
+    if (!k) return u;
+    const top = this.bit(P, o + u + MAXK + k);
+    return ((((2 + top) << (k - 1)) | this.raw(k - 1)) >>> 0) + u - 1;
+  }
+
+  /** A value tree of `bits` bits with the model P[o + 1 ... o + 255]: the top min(bits, 8)
+   *  bits high first (m = 1, then 2m + bit), then the low bits - 8 raw. */
+  tree(P, o, bits) {
+    const low = bits > 8 ? bits - 8 : 0, end = 1 << (bits - low);
+    let m = 1;
+    while (m < end) m = 2 * m + this.bit(P, o + m);
+    return low ? ((m - end) << low) | this.raw(low) : m - end;
   }
 }
 
@@ -126,6 +175,7 @@ function cclass(c) {
 }
 const CCLASS = new Uint8Array(257);
 for (let c = 2; c <= 256; c++) CCLASS[c] = cclass(c);
+const models = (n) => new Uint16Array(n).fill(PROB_INIT);
 
 // Splits from the top bit down; at each bit x, then y, then z (axes that have it).
 function schedule(abits) {
@@ -144,91 +194,41 @@ function schedule(abits) {
 
 // The position tree, depth first without recursion: the upper child of a split waits on
 // an explicit stack (at most one entry per depth) while the lower one is decoded. Counts
-// are integers (§7.5.4) with U = 3. The coordinates (< 2^24) go to X, Y, Z in tree order.
-function decodeTree(f, st, X, Y, Z) {
+// are integers with U = 3. The coordinates (< 2^24) go to X, Y, Z in tree order.
+function decodeTree(f, d, X, Y, Z) {
   const { axis, left, depth } = schedule(f.abits);
-  const CP = IPROBS(CNT_U);
-  const P = new Uint16Array(14 * 3 * CP).fill(PROB_INIT);
-  const bitOf = new Int32Array(depth), lx = new Int32Array(depth + 1), ly = new Int32Array(depth + 1), lz = new Int32Array(depth + 1);
-  for (let d = 0; d < depth; d++) bitOf[d] = 1 << (left[d][axis[d]] - 1);
-  for (let d = 0; d <= depth; d++) { lx[d] = left[d][0]; ly[d] = left[d][1]; lz[d] = left[d][2]; }
-  const ax = Int32Array.from(axis);
+  const CP = IPROBS(CNT_U), P = models(14 * 3 * CP);
+  const bitOf = new Int32Array(depth);
+  for (let k = 0; k < depth; k++) bitOf[k] = 1 << (left[k][axis[k]] - 1);
   const sc = new Int32Array(depth + 1), sd = new Int32Array(depth + 1);
   const sx = new Int32Array(depth + 1), sy = new Int32Array(depth + 1), sz = new Int32Array(depth + 1);
-  const b = st.b, rend = st.rend, bend = st.bend, n = f.n;
-  let range = st.range, code = st.code, rp = st.rp, acc = st.acc, cnt = st.cnt, bp = st.bp;
-  let sp = 0, out = 0, c = n, d = 0, bx = 0, by = 0, bz = 0;
+  const n = f.n;
+  let sp = 0, out = 0, c = n, k = 0, bx = 0, by = 0, bz = 0;
   for (;;) {
-    while (c >= 2 && d < depth) {
-      const a = ax[d], o = ((c <= 256 ? CCLASS[c] : 13) * 3 + a) * CP;
-      // integer z: unary prefix of 3, then the Exp-Golomb class, top mantissa bit modelled
-      let z = 0, i = o, bit = 1;
-      for (;;) {
-        const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-        if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-        else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-        if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-        if (!bit) break;
-        if (++z === CNT_U) break;
-        i++;
-      }
-      if (bit) {
-        let k = 0;
-        for (;;) {
-          i = o + CNT_U + k;
-          const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-          if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-          else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-          if (!bit) break;
-          if (++k === MAXK) corrupt();
-        }
-        let e = 1;
-        if (k) {
-          i = o + CNT_U + MAXK + k;
-          const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-          if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-          else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-          const m = k - 1;
-          while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-          e = (((2 + bit) << m) | (acc & ((1 << m) - 1))) >>> 0;
-          acc >>>= m; cnt -= m;
-        }
-        z = e + CNT_U - 1;
-      }
-      const lo = (c >>> 1) + (z % 2 ? -(z + 1) / 2 : z / 2);
+    while (c >= 2 && k < depth) {
+      const a = axis[k], lo = (c >>> 1) + unzigzag(d.int(P, ((c <= 256 ? CCLASS[c] : 13) * 3 + a) * CP, CNT_U));
       if (lo < 0 || lo > c) corrupt();
-      const bit2 = bitOf[d];
-      d++;
+      const bit = bitOf[k++];
       if (lo && lo < c) {
-        sc[sp] = c - lo; sd[sp] = d;
-        sx[sp] = a === 0 ? bx + bit2 : bx; sy[sp] = a === 1 ? by + bit2 : by; sz[sp] = a === 2 ? bz + bit2 : bz;
+        sc[sp] = c - lo; sd[sp] = k;
+        sx[sp] = a === 0 ? bx + bit : bx; sy[sp] = a === 1 ? by + bit : by; sz[sp] = a === 2 ? bz + bit : bz;
         sp++;
         c = lo;
       } else if (!lo) {
-        if (a === 0) bx += bit2; else if (a === 1) by += bit2; else bz += bit2;
+        if (a === 0) bx += bit; else if (a === 1) by += bit; else bz += bit;
       }
     }
     if (c === 1) {
-      let m = lx[d];
-      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-      bx += acc & ((1 << m) - 1); acc >>>= m; cnt -= m;
-      m = ly[d];
-      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-      by += acc & ((1 << m) - 1); acc >>>= m; cnt -= m;
-      m = lz[d];
-      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-      bz += acc & ((1 << m) - 1); acc >>>= m; cnt -= m;
+      const l = left[k];
+      bx += d.raw(l[0]); by += d.raw(l[1]); bz += d.raw(l[2]);
     }
     if (out + c > n) corrupt();
-    for (let k = 0; k < c; k++, out++) { X[out] = bx; Y[out] = by; Z[out] = bz; }
+    for (let i = 0; i < c; i++, out++) { X[out] = bx; Y[out] = by; Z[out] = bz; }
     if (sp === 0) break;
     sp--;
-    c = sc[sp]; d = sd[sp]; bx = sx[sp]; by = sy[sp]; bz = sz[sp];
+    c = sc[sp]; k = sd[sp]; bx = sx[sp]; by = sy[sp]; bz = sz[sp];
   }
   if (out !== n) corrupt();
-  st.range = range; st.code = code; st.rp = rp; st.acc = acc; st.cnt = cnt; st.bp = bp;
 }
 
 function outputs(f) {
@@ -240,156 +240,75 @@ function outputs(f) {
   };
 }
 
-// An integer of attribute mode 0 (U = 2) with the model at P[o ...]; the decoder state
-// comes in and goes out through s (range, code, rp, acc, cnt, bp) to keep it monomorphic.
-function int2(s, P, o) {
-  const b = s.b, rend = s.rend, bend = s.bend;
-  let range = s.range, code = s.code, rp = s.rp, bit = 1, z = 0, i = o;
-  for (;;) {
-    const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-    if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-    else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-    if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-    if (!bit || ++z === 2) break;
-    i++;
+// The nearest of particles j - 1 ... j - NEAR (the latest on ties; -1 for j = 0); squares
+// of the quantised distances (< 2^50) are exact in doubles. The first kmax squared
+// distances go to dist[k - 1] for mode 1's same-flags search.
+function nearest(X, Y, Z, j, dist) {
+  const cx = X[j], cy = Y[j], cz = Z[j], kn = j < NEAR ? j : NEAR;
+  let nb = -1, bd = Infinity;
+  for (let k = 1; k <= kn; k++) {
+    const i = j - k, dx = cx - X[i], dy = cy - Y[i], dz = cz - Z[i], dd = dx * dx + dy * dy + dz * dz;
+    dist[k - 1] = dd;
+    if (dd < bd) { bd = dd; nb = i; }
   }
-  if (bit) {
-    let k = 0;
-    for (;;) {
-      i = o + 2 + k;
-      const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-      if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-      else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-      if (!bit) break;
-      if (++k === MAXK) corrupt();
-    }
-    let e = 1;
-    if (k) {
-      i = o + 2 + MAXK + k;
-      const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-      if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-      else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-      const m = k - 1;
-      let acc = s.acc, cnt = s.cnt, bp = s.bp;
-      while (cnt < m) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-      e = (((2 + bit) << m) | (acc & ((1 << m) - 1))) >>> 0;
-      s.acc = acc >>> m; s.cnt = cnt - m; s.bp = bp;
-    }
-    z = e + 1;
-  }
-  s.range = range; s.code = code; s.rp = rp;
-  return z;
+  return nb;
 }
 
 // Attribute mode 0: flags, T and F predicted from the nearest of the 8 particles before.
-function decodeAttrs0(f, s, X, Y, Z, out) {
+function decodeAttrs0(f, d, X, Y, Z, NB, out) {
   const n = f.n, TP = IPROBS(T_U), FP = IPROBS(F_U);
-  const pt = new Uint16Array(7 * 8 * 2 * TP).fill(PROB_INIT), pf = new Uint16Array(7 * 2 * 2 * FP).fill(PROB_INIT);
-  const same = new Uint16Array(16).fill(PROB_INIT), tree = new Uint16Array(256).fill(PROB_INIT);
-  const qt = new Int32Array(n), qf = new Int32Array(n);
+  const pt = models(7 * 8 * 2 * TP), pf = models(7 * 2 * 2 * FP), same = models(16), tree = models(256);
+  const qt = new Int32Array(n), qf = new Int32Array(n), dist = new Float64Array(NEAR);
   const { sp, st, sf } = outputs(f);
   const tlim = 2 ** f.tempBits, flim = 2 ** f.fuelBits;
   const [lx, ly, lz, lt, lf] = f.lo;
   const { xyz, temp, fuel, flags } = out;
-  const b = s.b, rend = s.rend;
   let zt = 0, zf = 0;
   for (let j = 0; j < n; j++) {
-    // nearest of the NEAR particles before j (the latest on ties); squares < 2^50 are exact
-    let nb = -1, bd = Infinity;
-    const cx = X[j], cy = Y[j], cz = Z[j];
-    for (let k = 1; k <= NEAR && k <= j; k++) {
-      const i = j - k, dx = cx - X[i], dy = cy - Y[i], dz = cz - Z[i];
-      const dd = dx * dx + dy * dy + dz * dz;
-      if (dd < bd) { bd = dd; nb = i; }
-    }
-    const nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb], nfl = nb < 0 ? 0 : flags[nb];
-    const f0 = nf === 0 ? 1 : 0;
+    const nb = NB[j] = nearest(X, Y, Z, j, dist);
+    const nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb], nfl = nb < 0 ? 0 : flags[nb], f0 = nf === 0 ? 1 : 0;
     let v = nfl;
-    {
-      let range = s.range, code = s.code, rp = s.rp, m = 0, i = (nfl & 7) * 2 + f0, P = same;
-      for (;;) {
-        const pr = P[i], bound = Math.imul(range >>> PROB_BITS, pr);
-        let bit;
-        if ((code >>> 0) < (bound >>> 0)) { range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-        else { code = (code - bound) | 0; range = (range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
-        if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-        if (m === 0) { if (!bit) break; m = 1; P = tree; }
-        else { m = 2 * m + bit; if (m >= 256) break; }
-        i = m;
-      }
-      s.range = range; s.code = code; s.rp = rp;
-      if (m) { v = m - 256; if (v === nfl) corrupt(); }
+    if (d.bit(same, (nfl & 7) * 2 + f0)) {
+      v = d.tree(tree, 0, 8);
+      if (v === nfl) corrupt();
     }
-    const ot = ((rclass(zt) * 8 + (v & 7)) * 2 + f0) * TP, of = ((rclass(zf) * 2 + f0) * 2 + ((v >> 2) & 1)) * FP;
-    zt = int2(s, pt, ot);
-    zf = int2(s, pf, of);
+    zt = d.int(pt, ((rclass(zt) * 8 + (v & 7)) * 2 + f0) * TP, T_U);
+    zf = d.int(pf, ((rclass(zf) * 2 + f0) * 2 + ((v >> 2) & 1)) * FP, F_U);
     const t = nt + unzigzag(zt), fu = nf + unzigzag(zf);
     if (t < 0 || t >= tlim || fu < 0 || fu >= flim) corrupt();
     qt[j] = t; qf[j] = fu; flags[j] = v;
-    xyz[3 * j] = lx + cx * sp;
-    xyz[3 * j + 1] = ly + cy * sp;
-    xyz[3 * j + 2] = lz + cz * sp;
+    xyz[3 * j] = lx + X[j] * sp;
+    xyz[3 * j + 1] = ly + Y[j] * sp;
+    xyz[3 * j + 2] = lz + Z[j] * sp;
     temp[j] = lt + t * st;
     fuel[j] = lf + fu * sf;
   }
 }
 
-// Attribute mode 1: flags, T and F as values in contexts of the neighbours' values. Value
-// trees (§7.5.4) are decoded inline: the top min(bits, 8) bits with P[o + m], then the
-// low bits - 8 raw.
-function decodeAttrs1(f, s, X, Y, Z, out) {
+// Attribute mode 1: flags, T and F as value trees in contexts of the neighbours' values.
+function decodeAttrs1(f, d, X, Y, Z, NB, out) {
   const n = f.n, tb = f.tempBits, fb = f.fuelBits;
-  const vsame = new Uint16Array(18).fill(PROB_INIT), vfl = new Uint16Array(9 * 256).fill(PROB_INIT);
-  const vt = new Uint16Array(72 * 256).fill(PROB_INIT), vf0 = new Uint16Array(256).fill(PROB_INIT);
-  const vf = new Uint16Array(64 * 256).fill(PROB_INIT);
+  const vsame = models(18), vfl = models(9 * 256), vt = models(72 * 256), vf0 = models(256), vf = models(64 * 256);
   const qt = new Int32Array(n), qf = new Int32Array(n), last = new Int32Array(256).fill(-1);
-  const dist = new Float64Array(SAME);
+  const dist = new Float64Array(NEAR);
   const { sp, st, sf } = outputs(f);
-  const flim = 2 ** fb;
-  const t3 = tb > 3 ? tb - 3 : 0, t4 = tb > 4 ? tb - 4 : 0;
-  const tlow = tb > 8 ? tb - 8 : 0, tend = 1 << (tb - tlow), flow = fb > 8 ? fb - 8 : 0, fend = 1 << (fb - flow);
+  const flim = 2 ** fb, t3 = tb > 3 ? tb - 3 : 0, t4 = tb > 4 ? tb - 4 : 0;
   const [lx, ly, lz, lt, lf] = f.lo;
   const { xyz, temp, fuel, flags } = out;
-  const b = s.b, rend = s.rend, bend = s.bend;
-  let range = s.range, code = s.code, rp = s.rp, acc = s.acc, cnt = s.cnt, bp = s.bp;
   for (let j = 0; j < n; j++) {
-    const cx = X[j], cy = Y[j], cz = Z[j], kmax = j < SAME ? j : SAME, knear = j < NEAR ? j : NEAR;
-    let nb = -1, bd = Infinity;
-    for (let k = 1; k <= knear; k++) {
-      const i = j - k, dx = cx - X[i], dy = cy - Y[i], dz = cz - Z[i];
-      const dd = dx * dx + dy * dy + dz * dz;
-      dist[k - 1] = dd;
-      if (dd < bd) { bd = dd; nb = i; }
-    }
+    const nb = NB[j] = nearest(X, Y, Z, j, dist);
     const nfl = nb < 0 ? 0 : flags[nb], nc = nb < 0 ? 8 : nfl & 7, nf0 = nb < 0 || qf[nb] === 0 ? 1 : 0;
     let v = nfl;
-    // flags: "differs from nfl", then the 8-bit value tree vfl[nc]
-    {
-      const i = nc * 2 + nf0, pr = vsame[i], bound = Math.imul(range >>> PROB_BITS, pr);
-      let bit;
-      if ((code >>> 0) < (bound >>> 0)) { range = bound; vsame[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-      else { code = (code - bound) | 0; range = (range - bound) | 0; vsame[i] = pr - (pr >> ADAPT); bit = 1; }
-      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-      if (bit) {
-        const o = nc * 256;
-        let m = 1;
-        while (m < 256) {
-          const i = o + m, pr = vfl[i], bound = Math.imul(range >>> PROB_BITS, pr);
-          if ((code >>> 0) < (bound >>> 0)) { range = bound; vfl[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); m = 2 * m; }
-          else { code = (code - bound) | 0; range = (range - bound) | 0; vfl[i] = pr - (pr >> ADAPT); m = 2 * m + 1; }
-          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-        }
-        v = m - 256;
-        if (v === nfl) corrupt();
-      }
+    if (d.bit(vsame, nc * 2 + nf0)) {
+      v = d.tree(vfl, nc * 256, 8);
+      if (v === nfl) corrupt();
     }
     const c = v & 7;
     flags[j] = v;
-    let sb = -1;
-    bd = Infinity;
-    for (let k = 1; k <= knear; k++) if (flags[j - k] === v && dist[k - 1] < bd) { bd = dist[k - 1]; sb = j - k; }
+    // the same-flags neighbour: the nearest of j - 1 ... j - SAME with flags v, else last[v]
+    const cx = X[j], cy = Y[j], cz = Z[j], kn = j < NEAR ? j : NEAR, kmax = j < SAME ? j : SAME;
+    let sb = -1, bd = Infinity;
+    for (let k = 1; k <= kn; k++) if (flags[j - k] === v && dist[k - 1] < bd) { bd = dist[k - 1]; sb = j - k; }
     for (let k = NEAR + 1; k <= kmax; k++) {
       const i = j - k;
       if (flags[i] !== v) continue;
@@ -397,48 +316,11 @@ function decodeAttrs1(f, s, X, Y, Z, out) {
       if (dd < bd) { bd = dd; sb = i; }
     }
     if (sb < 0) sb = last[v];
-    // T: the value tree vt[c * 9 + top3 of the same-flags neighbour's T]
-    let t;
-    {
-      const o = (c * 9 + (sb < 0 ? 8 : qt[sb] >>> t3)) * 256;
-      let m = 1;
-      while (m < tend) {
-        const i = o + m, pr = vt[i], bound = Math.imul(range >>> PROB_BITS, pr);
-        if ((code >>> 0) < (bound >>> 0)) { range = bound; vt[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); m = 2 * m; }
-        else { code = (code - bound) | 0; range = (range - bound) | 0; vt[i] = pr - (pr >> ADAPT); m = 2 * m + 1; }
-        if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-      }
-      t = m - tend;
-      if (tlow) {
-        while (cnt < tlow) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-        t = (t << tlow) | (acc & ((1 << tlow) - 1)); acc >>>= tlow; cnt -= tlow;
-      }
-    }
-    // F: "qF != 0" by vf0, then qF - 1 with the value tree vf
+    const t = d.tree(vt, (c * 9 + (sb < 0 ? 8 : qt[sb] >>> t3)) * 256, tb);
     let fu = 0;
-    {
-      const i = (c * 16 + (t >>> t4)) * 2 + nf0, pr = vf0[i], bound = Math.imul(range >>> PROB_BITS, pr);
-      let bit;
-      if ((code >>> 0) < (bound >>> 0)) { range = bound; vf0[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-      else { code = (code - bound) | 0; range = (range - bound) | 0; vf0[i] = pr - (pr >> ADAPT); bit = 1; }
-      if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-      if (bit) {
-        const o = (c * 8 + (t >>> t3)) * 256;
-        let m = 1;
-        while (m < fend) {
-          const i = o + m, pr = vf[i], bound = Math.imul(range >>> PROB_BITS, pr);
-          if ((code >>> 0) < (bound >>> 0)) { range = bound; vf[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); m = 2 * m; }
-          else { code = (code - bound) | 0; range = (range - bound) | 0; vf[i] = pr - (pr >> ADAPT); m = 2 * m + 1; }
-          if ((range >>> 0) < TOP) { if (rp >= rend) corrupt(); range <<= 8; code = (code << 8) | b[rp++]; }
-        }
-        fu = m - fend;
-        if (flow) {
-          while (cnt < flow) { if (bp >= bend) corrupt(); acc |= b[bp++] << cnt; cnt += 8; }
-          fu = (fu << flow) | (acc & ((1 << flow) - 1)); acc >>>= flow; cnt -= flow;
-        }
-        fu += 1;
-        if (fu >= flim) corrupt();
-      }
+    if (d.bit(vf0, (c * 16 + (t >>> t4)) * 2 + nf0)) {
+      fu = d.tree(vf, (c * 8 + (t >>> t3)) * 256, fb) + 1;
+      if (fu >= flim) corrupt();
     }
     qt[j] = t; qf[j] = fu; last[v] = j;
     xyz[3 * j] = lx + cx * sp;
@@ -447,30 +329,55 @@ function decodeAttrs1(f, s, X, Y, Z, out) {
     temp[j] = lt + t * st;
     fuel[j] = lf + fu * sf;
   }
-  s.range = range; s.code = code; s.rp = rp; s.acc = acc; s.cnt = cnt; s.bp = bp;
+}
+
+// Velocities (§7.5.7), after the attributes: per particle and axis the residual against
+// the neighbour NB[j], in contexts of the residual decoded just before (x: the previous
+// particle's x; y, z: this particle's x, y) and the particle's type.
+function decodeVel(f, d, NB, out) {
+  const n = f.n, VP = IPROBS(V_U), P = models(3 * 7 * 4 * VP), qv = new Int32Array(3 * n);
+  const qmax = 2 ** (f.velBits - 1) - 1, step = f.vmax.map((m) => m / qmax);
+  const { flags, vel } = out;
+  let zx = 0;
+  for (let j = 0; j < n; j++) {
+    const nb = NB[j], type = flags[j] & 3;
+    let zb = zx;
+    for (let a = 0; a < 3; a++) {
+      const z = d.int(P, ((a * 7 + rclass(zb)) * 4 + type) * VP, V_U);
+      const q = (nb < 0 ? 0 : qv[3 * nb + a]) + unzigzag(z);
+      if (q < -qmax || q > qmax) corrupt();
+      qv[3 * j + a] = q;
+      vel[3 * j + a] = q * step[a];
+      zb = z;
+      if (a === 0) zx = z;
+    }
+  }
 }
 
 /**
  * Decodes a codec 2 payload (the bytes after the frame header).
- * Returns {n, xyz: Float32Array(3n), temp: Float32Array(n), fuel: Float32Array(n), flags: Uint8Array(n)}.
+ * Returns {n, xyz: Float32Array(3n), temp: Float32Array(n), fuel: Float32Array(n), flags: Uint8Array(n),
+ * vel: Float32Array(3n) (vx, vy, vz) when the payload carries velocities (§7.5.7), else null}.
  * Throws Error('particles: ...') on truncated, corrupt or oversized input.
  */
 export function decode(buf) {
   const b = bytesOf(buf);
-  const f = parsePayloadHeader(b);
-  if (HEADER_BYTES + f.rcBytes + f.bitsBytes !== b.length) fail('section sizes do not match the payload length');
-  const out = { n: f.n, xyz: new Float32Array(3 * f.n), temp: new Float32Array(f.n), fuel: new Float32Array(f.n), flags: new Uint8Array(f.n) };
-  if (f.n === 0) {
+  const f = parsePayloadHeader(b), n = f.n;
+  if (f.headerBytes + f.rcBytes + f.bitsBytes !== b.length) fail('section sizes do not match the payload length');
+  const out = { n, xyz: new Float32Array(3 * n), temp: new Float32Array(n), fuel: new Float32Array(n), flags: new Uint8Array(n),
+    vel: f.vel ? new Float32Array(3 * n) : null };
+  if (n === 0) {
     if (f.rcBytes || f.bitsBytes) fail('bad sizes');
     return out;
   }
-  const rend = HEADER_BYTES + f.rcBytes;
-  const rd = new State(b, HEADER_BYTES, rend, rend + f.bitsBytes);
-  const X = new Float64Array(f.n), Y = new Float64Array(f.n), Z = new Float64Array(f.n);
-  decodeTree(f, rd, X, Y, Z);
-  (f.mode ? decodeAttrs1 : decodeAttrs0)(f, rd, X, Y, Z, out);
-  if (rd.rp !== rd.rend) fail('corrupt particle data (range coder section not consumed exactly)');
-  if (rd.bp !== rd.bend || rd.acc !== 0) fail('corrupt particle data (raw bits not consumed exactly)');
+  const rend = f.headerBytes + f.rcBytes;
+  const d = new Decoder(b, f.headerBytes, rend, rend + f.bitsBytes);
+  const X = new Float64Array(n), Y = new Float64Array(n), Z = new Float64Array(n), NB = new Int32Array(n);
+  decodeTree(f, d, X, Y, Z);
+  (f.mode ? decodeAttrs1 : decodeAttrs0)(f, d, X, Y, Z, NB, out);
+  if (f.vel) decodeVel(f, d, NB, out);
+  if (d.rp !== d.rend) fail('corrupt particle data (range coder section not consumed exactly)');
+  if (d.bp !== d.bend || d.acc !== 0) fail('corrupt particle data (raw bits not consumed exactly)');
   return out;
 }
 

@@ -173,6 +173,11 @@ const struct param_def flame_params[] = {
     FL_F("time_scale", "1", 0, 10, "", "simulated seconds per wall second (0 pauses)", 0, .group = "output"),
     FL_F("space_scale", "1", 0.001, 1000, "", "world units per simulated metre in the frames", 0, .group = "output"),
     FL_I("pos_bits", "16", 8, 24, "bits", "position quantisation of the particle codec", 0, .group = "output"),
+    {.name = "velocities", .group = "output", .type = PARAM_BOOL, .def = "false", .unit = "",
+     .doc = "send each particle's velocity (x space_scale, for velocity lines; PROTOCOL.md §7.5.7); off leaves the "
+            "payload as without it"},
+    FL_I("vel_bits", "8", 4, 12, "bits", "velocity quantisation per component, sign included (with velocities)", 0,
+         .group = "output"),
     {0},
 };
 
@@ -236,10 +241,11 @@ struct flame {
     double h, d, dt, time_scale, space_scale, t_amb, period_ms;
     double emit_ms; /* wall time of the last frame's read-back and encoding */
     double step_ms; /* recent wall time per substep (moving average; 0 = not measured yet) */
-    int interval, max_substeps, max_particles, pos_bits;
+    int interval, max_substeps, max_particles, pos_bits, vel_bits;
+    int velocities;
     double up[3];
     /* frame buffers */
-    float *h_pos, *h_vel, *xyz, *temp, *fuel;
+    float *h_pos, *h_vel, *xyz, *temp, *fuel, *vel; /* vel: 3 per particle, the frame's velocities */
     uint32_t *h_flags;
     uint8_t *flags8;
     int h_cap;
@@ -740,6 +746,8 @@ static int fl_read_params(struct flame *fl, const cJSON *p)
     fl->interval = (int)params_num(p, "resample_interval");
     fl->max_substeps = (int)params_num(p, "max_substeps");
     fl->pos_bits = (int)params_num(p, "pos_bits");
+    fl->velocities = params_bool(p, "velocities");
+    fl->vel_bits = (int)params_num(p, "vel_bits");
     params_vec3(p, "up", fl->up);
     fl_unit(fl->up);
     fl_pack(fl, p);
@@ -849,6 +857,7 @@ void flame_free(struct flame *fl)
     free(fl->xyz);
     free(fl->temp);
     free(fl->fuel);
+    free(fl->vel);
     free(fl->flags8);
     free(fl);
 }
@@ -921,9 +930,9 @@ static int fl_frame_buffers(struct flame *fl, int n)
 {
     if (n <= fl->h_cap) return 0;
     int cap = n + n / 2 + 1024;
-    float **f[] = {&fl->h_pos, &fl->h_vel, &fl->xyz, &fl->temp, &fl->fuel};
-    size_t fs[] = {4, 4, 3, 1, 1};
-    for (int i = 0; i < 5; i++) {
+    float **f[] = {&fl->h_pos, &fl->h_vel, &fl->xyz, &fl->temp, &fl->fuel, &fl->vel};
+    size_t fs[] = {4, 4, 3, 1, 1, 3};
+    for (int i = 0; i < 6; i++) {
         free(*f[i]);
         *f[i] = malloc(fs[i] * sizeof(float) * (size_t)cap);
     }
@@ -932,7 +941,8 @@ static int fl_frame_buffers(struct flame *fl, int n)
     fl->h_flags = malloc(sizeof(uint32_t) * (size_t)cap);
     fl->flags8 = malloc((size_t)cap);
     fl->h_cap = 0;
-    if (!fl->h_pos || !fl->h_vel || !fl->xyz || !fl->temp || !fl->fuel || !fl->h_flags || !fl->flags8) return -1;
+    if (!fl->h_pos || !fl->h_vel || !fl->xyz || !fl->temp || !fl->fuel || !fl->vel || !fl->h_flags || !fl->flags8)
+        return -1;
     fl->h_cap = cap;
     return 0;
 }
@@ -958,12 +968,13 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
     float s = (float)fl->space_scale;
     for (int i = 0; i < n; i++) {
         for (int k = 0; k < 3; k++) fl->xyz[3 * i + k] = s * fl->h_pos[4 * i + k];
+        for (int k = 0; k < 3 && fl->velocities; k++) fl->vel[3 * i + k] = s * fl->h_vel[4 * i + k];
         fl->temp[i] = fl->h_pos[4 * i + 3];
         fl->fuel[i] = fl->h_vel[4 * i + 3];
         fl->flags8[i] = (uint8_t)fl->h_flags[i];
     }
-    struct fxs_particles fp = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8};
-    struct fxs_particles_opts opts = {.pos_bits = fl->pos_bits};
+    struct fxs_particles fp = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8, fl->velocities ? fl->vel : NULL};
+    struct fxs_particles_opts opts = {.pos_bits = fl->pos_bits, .vel_bits = fl->vel_bits};
     uint8_t *payload = NULL;
     size_t len = 0;
     char msg[160];
@@ -1049,7 +1060,8 @@ const struct effect_ops flame_effect = {
     .params = flame_params,
     .presets = flame_presets,
     .outputs_json = "[{\"kind\":1,\"codec\":\"particles\",\"fields\":\"xyz (x space_scale), T, F, flags "
-                    "(type bits 0-1, flame bit 2)\",\"count\":\"particles\",\"rate\":\"fps\"}]",
+                    "(type bits 0-1, flame bit 2), with velocities on vx vy vz (x space_scale)\",\"count\":"
+                    "\"particles\",\"rate\":\"fps\"}]",
     .create = fl_create,
     .apply = fl_apply,
     .step = fl_step,

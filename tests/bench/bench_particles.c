@@ -5,7 +5,9 @@
  *   (a) codec 2 (protocol/fxs_particles.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
  *       12/16/20 bits with T and F at 8 bits: the quantisation given to Draco (equal
  *       quantisation: codec 2's position step is Draco's -qp step, largest extent /
- *       (2^B - 1) for all axes; T and F 8 bits over their range in both);
+ *       (2^B - 1) for all axes; T and F 8 bits over their range in both); then the wire
+ *       cost of velocities (§7.5.7): the default without them, and with them at vel_bits
+ *       4/6/8/10/12 (synthetic frames get pgen_velocities' field);
  *   (b) Draco point cloud (draco_encoder/draco_decoder, -qp = pos bits, cl 7 and 10),
  *       fed a PLY with x, y, z and T, F, flags as red, green, blue (uchar: T and F
  *       quantised to 8 bits over their range, flags exact), because Draco's PLY reader
@@ -15,7 +17,8 @@
  *       the entropy stage of an ordered scheme, for comparison.
  * Frames: synthetic SPH-like flames (tests/unit/particles_gen.h: 10k, 50k, 200k),
  * plus every DIR/<stream>-<seq>.ply that `fxctl subscribe flame --out DIR` wrote when
- * FXS_BENCH_PLY_DIR=DIR is set (real flame frames). Each line says which. */
+ * FXS_BENCH_PLY_DIR=DIR is set (real flame frames; with velocities when the stream sent
+ * them). Each line says which. FXS_BENCH_VEL_ONLY=1 prints only the velocity lines. */
 #include <dirent.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,14 +46,16 @@ static void bp_line(const char *frame, uint32_t n, const char *what, double byte
 
 /* ---- (a) codec 2 ------------------------------------------------------------------------ */
 
-static void bp_ours(const char *frame, const struct fxs_particles *p, int pb, int tb, int fb)
+/* Codec 2 at pos/T/F bits pb/tb/fb; with the frame's velocities at vb bits, without for vb 0. */
+static void bp_ours(const char *frame, const struct fxs_particles *pv, int pb, int tb, int fb, int vb)
 {
-    struct fxs_particles_opts o = { pb, tb, fb };
-    struct fxs_particles d;
+    struct fxs_particles_opts o = { pb, tb, fb, vb };
+    struct fxs_particles d, copy = *pv, *p = &copy;
     uint8_t *enc = NULL;
     size_t len = 0;
     char err[200], what[64];
     double te = 1e9, td = 1e9;
+    if (!vb) copy.vel = NULL;
     for (int r = 0; r < bp_reps(p->n); r++) {
         double t0 = bp_now();
         free(enc);
@@ -64,8 +69,9 @@ static void bp_ours(const char *frame, const struct fxs_particles *p, int pb, in
         fxs_particles_free(&d);
         te = fmin(te, t1 - t0), td = fmin(td, t2 - t1);
     }
-    snprintf(what, sizeof what, "fxs codec 2 pos %d T %d F %d", pb, tb ? tb : FXS_PARTICLES_DEFAULT_TEMP_BITS,
-             fb ? fb : FXS_PARTICLES_DEFAULT_FUEL_BITS);
+    snprintf(what, sizeof what, "fxs codec 2 pos %d T %d F %d%s", pb, tb ? tb : FXS_PARTICLES_DEFAULT_TEMP_BITS,
+             fb ? fb : FXS_PARTICLES_DEFAULT_FUEL_BITS, vb ? "" : pv->vel ? " no vel" : "");
+    if (vb) snprintf(what + strlen(what), sizeof what - strlen(what), " vel %d", vb);
     bp_line(frame, p->n, what, (double)len, te, td);
     free(enc);
 }
@@ -265,11 +271,24 @@ static void bp_zstd_transform(const char *frame, const struct fxs_particles *p, 
 
 /* ---- frames ---------------------------------------------------------------------------------- */
 
+/* The wire cost of velocities: the default payload without them, then with them. */
+static void bp_vel(const char *name, const struct fxs_particles *p)
+{
+    bp_ours(name, p, 16, 0, 0, 0);
+    for (int vb = 4; vb <= 12; vb += 2) bp_ours(name, p, 16, 0, 0, vb);
+}
+
 static void bp_frame(const char *name, const struct fxs_particles *p)
 {
     static const int bits[] = { 12, 16, 20 };
-    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 0, 0);
-    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 8, 8);
+    const char *vel_only = getenv("FXS_BENCH_VEL_ONLY");
+    if (p->vel) bp_vel(name, p);
+    if (vel_only && *vel_only == '1') {
+        printf("\n");
+        return;
+    }
+    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 0, 0, 0);
+    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 8, 8, 0);
     for (int b = 0; b < 3; b++) bp_draco(name, p, bits[b], 7);
     bp_draco(name, p, 16, 10);
     bp_zstd_raw(name, p, 1);
@@ -315,7 +334,7 @@ int main(void)
     for (size_t s = 0; s < sizeof sizes / sizeof sizes[0]; s++) {
         struct fxs_particles p = { 0 };
         char name[64];
-        if (pgen_flame(&p, sizes[s])) return 1;
+        if (pgen_flame(&p, sizes[s]) || pgen_velocities(&p)) return 1;
         snprintf(name, sizeof name, "synthetic-flame-%uk", sizes[s] / 1000);
         bp_frame(name, &p);
         fxs_particles_free(&p);

@@ -1,6 +1,7 @@
 /* fuzz_particles.c — libFuzzer target: the particle decoder (protocol/fxs_particles.c) on
  * raw payloads. Whatever decodes must re-encode and decode to the same count, with every
- * value finite (the decoder reconstructs from finite bounds). */
+ * position and velocity finite (the decoder reconstructs from finite bounds) and velocities
+ * after the round trip exactly when the input had them. */
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -13,12 +14,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char msg[256];
     if (fxs_particles_decode(data, size, &p, msg, sizeof msg)) return 0;
     for (uint32_t i = 0; i < 3 * p.n; i++)
-        if (!isfinite(p.xyz[i])) abort();
+        if (!isfinite(p.xyz[i]) || (p.vel && !isfinite(p.vel[i]))) abort();
     uint8_t *buf;
     size_t len;
     struct fxs_particles_opts o = {0};
     if (fxs_particles_encode(&p, &o, &buf, &len, msg, sizeof msg)) abort();
-    if (fxs_particles_decode(buf, len, &q, msg, sizeof msg) || q.n != p.n) abort();
+    if (fxs_particles_decode(buf, len, &q, msg, sizeof msg) || q.n != p.n || !q.vel != !p.vel) abort();
     fxs_particles_free(&q);
     free(buf);
     fxs_particles_free(&p);

@@ -1,7 +1,7 @@
 // particles_js_check.mjs — decodes the C encoder's codec 2 test vectors (tests/data/particles/*.bin)
 // with clients/web/fxs_particles.js and compares with what the C decoder gave (*.json):
 // every float bit for bit (both decoders compute float32(lo + q * step) in double), flags
-// exactly. Also: a frame header round trip, and truncated/corrupt payloads must throw a
+// exactly, velocities (§7.5.7) exactly where the C decoder gave them and none elsewhere. Also: a frame header round trip, and truncated/corrupt payloads must throw a
 // "particles:" error, never return garbage silently or crash. Prints
 // "test_particles_js: N passed, M failed" last; exit status 1 on any failure.
 import { readFileSync, readdirSync } from 'node:fs';
@@ -27,11 +27,12 @@ function check(name, fn) {
 
 function compare(got, want) {
   if (got.n !== want.n) return `n ${got.n} vs ${want.n}`;
-  for (const key of ['xyz', 'temp', 'fuel', 'flags']) {
+  if (!want.vel !== !got.vel) return `velocities: ${got.vel ? 'decoded' : 'none'}, C gave ${want.vel ? 'them' : 'none'}`;
+  for (const key of ['xyz', 'temp', 'fuel', 'flags', ...(want.vel ? ['vel'] : [])]) {
     if (got[key].length !== want[key].length) return `${key}: length ${got[key].length} vs ${want[key].length}`;
     for (let i = 0; i < want[key].length; i++) {
       const w = key === 'flags' ? want[key][i] : Math.fround(want[key][i]);
-      if (got[key][i] !== w) return `${key}[${i}] = ${got[key][i]}, C gave ${w}`;
+      if (!Object.is(got[key][i], w)) return `${key}[${i}] = ${got[key][i]}, C gave ${w}`;
     }
   }
   return null;
@@ -102,6 +103,24 @@ check('unknown attribute mode rejected', () => {
   } catch (e) {
     return e.message.startsWith('particles: ') ? null : e.message;
   }
+});
+check('velocity vectors present', () => (names.filter((n) => n.includes('vel')).length >= 3 ? null : 'fewer than 3'));
+check('velocity block: bad flags, bits, reserved bytes and bounds rejected', () => {
+  const bin = new Uint8Array(readFileSync(join(dir, 'flame64_vel.bin')));
+  if (!(bin[11] & 0x10)) return `flame64_vel has attr_mode ${bin[11]}`;
+  const cases = [[11, 0x30], [11, bin[11] & 15], [64, 1], [64, 17], [65, 1], [67, 128], [71, 0xff], [79, 0x7f]];
+  for (const [at, val] of cases) {
+    const bad = bin.slice();
+    bad[at] = val;
+    if (at === 79) bad[78] = 0x80; // vmax z = +inf (0x7f800000)
+    try {
+      decode(bad);
+      return `byte ${at} = ${val} accepted`;
+    } catch (e) {
+      if (!e.message.startsWith('particles: ')) return e.message;
+    }
+  }
+  return null;
 });
 check('codec 1 payload rejected', () => {
   const bin = new Uint8Array(readFileSync(join(dir, 'flame64.bin')));

@@ -2,7 +2,8 @@
 frames (header, codec 2 payload), growth from the burning source, live parameter changes
 and reset reaching the frames, and `fxctl subscribe --out` writing readable binary PLY
 whose particles are physically plausible (sources hold T_init/F_init, nothing below
-ambient)."""
+ambient); the opt-in velocities (PROTOCOL.md §7.5.7): off by default with no velocity block,
+on with the block and vel_bits, PLY velocities plausible (sources at rest, hot gas rising)."""
 import os
 import struct
 import subprocess
@@ -106,10 +107,62 @@ async def test_fxctl_ply(t):
             "flame-flagged particles are above T_ign within the codec's bound (%.2f K)" % half_step)
 
 
+def payload_layout(p):
+    """(attr_mode byte, velocity block present, vel_bits or None, sizes consistent)."""
+    rc, bits = struct.unpack_from("<II", p, 56)
+    vel = bool(p[11] & 0x10)
+    head = 80 if vel else 64
+    return p[11], vel, (p[64] if vel else None), head + rc + bits == len(p)
+
+
+async def wait_rev(c, rev, timeout=30):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        f = await c.frame()
+        if f["param_rev"] == rev:
+            return f
+    return None
+
+
+async def test_velocities(t):
+    c = await Client.connect(D)
+    g = await c.request("get", stream="flame")
+    t.check(g["params"]["velocities"] is False and g["params"]["vel_bits"] == 8, "velocities off by default, vel_bits 8")
+    await c.request("subscribe", stream="flame")
+    f = await c.frame()
+    mode, vel, _, sizes = payload_layout(f["payload"])
+    t.check(mode in (0, 1) and not vel and sizes, "off: attr_mode %d, no velocity block, 64 + sections" % mode)
+    r = await c.request("set", stream="flame", params={"velocities": True, "vel_bits": 6})
+    f = await wait_rev(c, r["rev"])
+    t.check(f is not None, "frames with velocities arrive")
+    if f is not None:
+        mode, vel, vb, sizes = payload_layout(f["payload"])
+        t.check(vel and vb == 6 and (mode & 15) in (0, 1) and sizes, "on: bit 4, vel_bits 6 in the block, 80 + sections")
+        vmax = struct.unpack_from("<3f", f["payload"], 68)
+        t.check(all(0 <= v < 50 for v in vmax) and vmax[2] > 0, "vmax per axis plausible %s m/s" % (vmax,))
+    out = tempfile.mkdtemp(prefix="fxs-vel-")
+    p = subprocess.run([FXCTL, "--url", D.url, "subscribe", "flame", "--frames", "3", "--out", out],
+                       capture_output=True, text=True, timeout=60)
+    t.check(p.returncode == 0, "fxctl subscribe flame --out with velocities (%s)" % p.stderr.strip()[:200])
+    plys = sorted((f for f in os.listdir(out) if f.endswith(".ply")), key=lambda f: int(f.split("-")[1].split(".")[0]))
+    if plys:
+        names, rows = read_ply(os.path.join(out, plys[-1]))
+        t.check(names == ["x", "y", "z", "temperature", "fuel", "flags", "vx", "vy", "vz"], "PLY properties %s" % names)
+        src = [r for r in rows if r[5] & 3 == 1]
+        t.check(len(src) > 0 and all(r[6:9] == (0.0, 0.0, 0.0) for r in src), "sources are at rest (exact zeros)")
+        hot = [r for r in rows if r[5] & 4]
+        mean_vz = sum(r[8] for r in hot) / max(1, len(hot))
+        t.check(len(hot) > 0 and mean_vz > 0.05, "burning gas rises: mean vz %.3f m/s over %d" % (mean_vz, len(hot)))
+    r = await c.request("set", stream="flame", params={"velocities": False})
+    f = await wait_rev(c, r["rev"])
+    t.check(f is not None and not payload_layout(f["payload"])[1], "off again: no velocity block")
+    await c.close()
+
+
 if __name__ == "__main__":
     D = Daemon()
     s = Suite("test_flame_stream")
     try:
-        s.run([test_particle_frames, test_live_set_and_reset, test_fxctl_ply], timeout=120)
+        s.run([test_particle_frames, test_live_set_and_reset, test_fxctl_ply, test_velocities], timeout=120)
     finally:
         D.stop()

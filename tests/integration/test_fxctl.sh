@@ -107,6 +107,29 @@ check_subscribe_rig() {
     fx subscribe energy --frames 1 --kind 5; check "--kind 5 is a usage error" 2 "" "--kind needs a frame kind"
 }
 
+# Particle frames to PLY: x y z temperature fuel flags, and vx vy vz after them once the
+# flame sends velocities (its `velocities` parameter); the header's count matches the file.
+check_subscribe_ply() {
+    for vel in true false; do
+        out=$tmp/ply-$vel
+        fx set flame velocities=$vel; check "set flame velocities=$vel" 0 '"velocities":'"$vel"
+        fx subscribe flame --frames 3 --out "$out"; check "subscribe flame --frames 3 --out (velocities $vel)" 0 '"kind":1'
+        last=$(ls "$out"/flame-*.ply 2>/dev/null | sort -t- -k2 -n | tail -n 1)
+        n=$(sed -n 's/^element vertex \([0-9]*\)$/\1/p' "$last" 2>/dev/null | head -n 1)
+        hdr=$(grep -a -c '^property float v[xyz]$' "$last" 2>/dev/null)
+        size=$(wc -c <"$last" 2>/dev/null || echo 0)
+        head_bytes=$(grep -a -b -m 1 '^end_header$' "$last" 2>/dev/null | cut -d: -f1)
+        rec=21
+        want=0
+        if [ "$vel" = true ]; then rec=33; want=3; fi
+        if [ -n "$n" ] && [ "$n" -gt 0 ] && [ "$hdr" -eq "$want" ] && [ "$size" -eq $((head_bytes + 11 + n * rec)) ]; then
+            pass "PLY of $n particles, $rec-byte records (velocities $vel)"
+        else
+            fail "PLY records (velocities $vel): n=$n, $hdr velocity properties, $size bytes"
+        fi
+    done
+}
+
 # A subscriber prints its stream's params broadcasts and fails clearly when the
 # stream is destroyed under it.
 check_destroyed() {
@@ -189,6 +212,7 @@ check_params
 check_streams
 check_subscribe
 check_subscribe_rig
+check_subscribe_ply
 check_destroyed
 check_watch
 check_presets

@@ -39,6 +39,10 @@ ls "$tmp"/frames/energy-*-rig.bin >/dev/null 2>&1; rc=$?; check "subscribe --out
 get ring; check "create ring: a torus of R 3 alone (no default curves)" 0 '"axis":\[0,1,1\],"R":3,"coef":7.4}\],"curves":\[\]'
 get flame; check "set flame: the wind" 0 '"wind_velocity":\[2,0,0\]'
 test "$(ls "$tmp"/flame/flame-*.ply | wc -l)" -eq 5; rc=$?; check "subscribe flame --out: 5 PLY files" 0
+get flame; check "set flame velocities=true" 0 '"velocities":true'
+grep -a -q '^property float vx$' "$(ls "$tmp"/flame/flame-*.ply | sort -t- -k2 -n | tail -n 1)"; rc=$?
+check "subscribe flame --out after velocities=true: PLY with vx vy vz" 0
+test "$(ls "$tmp"/flame/flame-*.bin | wc -l)" -eq 5; rc=$?; check "subscribe flame --out: the payloads in .bin too" 0
 out_of "presets flame"; check "presets flame lists the thesis scene" 0 '"name":"thesis-table3.1"'
 get energy; check "preset load energy thesis-fig5.2: its torus" 0 '"tori":\[{"center":\[0,0,0\],"axis":\[0,1,1\],"R":3,'
 out_of "preset save flame"; check "preset save: saved" 0 '"op":"preset_saved"'

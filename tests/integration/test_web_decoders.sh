@@ -4,7 +4,8 @@
 # with the values they must decode to), kind 3 payloads captured by fxctl from a real
 # daemon on a random loopback port, and kind 4 look-up tables of compound_eye streams
 # (square and hex) with the PNGs fxctl wrote from them through the C decoder
-# (protocol/fxs_lut.c). Runs web_decoders_check.mjs; its last line is
+# (protocol/fxs_lut.c), and flame particle payloads with velocities with the PLY the C
+# decoder made of them. Runs web_decoders_check.mjs; its last line is
 # "test_web_decoders: N passed, M failed". Run from the repo root.
 cd "$(dirname "$0")/../.." || exit 1
 summary_fail() { echo "test_web_decoders: $1"; echo "test_web_decoders: 0 passed, 1 failed"; exit 1; }
@@ -14,7 +15,7 @@ tmp=$(mktemp -d)
 pid=""
 cleanup() { [ -n "$pid" ] && kill "$pid" 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
-mkdir -p "$tmp/vec" "$tmp/real" "$tmp/eye"
+mkdir -p "$tmp/vec" "$tmp/real" "$tmp/eye" "$tmp/flame"
 build/tests/test_light_rig --dump "$tmp/vec" >/dev/null || summary_fail "dump failed"
 
 # A real daemon: energy with the light rig on, 6 frames (3 of each kind) captured by fxctl.
@@ -35,4 +36,8 @@ for spec in "eyesq lattice=square lut_cells=12 lut_dirs=10" "eyehex lattice=hex 
     timeout 30 build/fxctl --url "$url" subscribe "$1" --frames 1 --out "$tmp/eye" >>"$tmp/eye/lines.txt" 2>>"$tmp/eye/err.txt" \
         || summary_fail "subscribe $1 failed: $(cat "$tmp/eye/err.txt")"
 done
-node tests/integration/web_decoders_check.mjs "$tmp/vec" "$tmp/real" "$tmp/eye"
+# The flame with velocities on (10 bits): payloads (.bin) and the C decoder's PLY of each.
+timeout 20 build/fxctl --url "$url" set flame velocities=true vel_bits=10 >/dev/null || summary_fail "set velocities failed"
+timeout 30 build/fxctl --url "$url" subscribe flame --frames 3 --out "$tmp/flame" >"$tmp/flame/lines.txt" 2>"$tmp/flame/err.txt" \
+    || summary_fail "subscribe flame failed: $(cat "$tmp/flame/err.txt")"
+node tests/integration/web_decoders_check.mjs "$tmp/vec" "$tmp/real" "$tmp/eye" "$tmp/flame"

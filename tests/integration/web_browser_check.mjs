@@ -8,8 +8,10 @@
 // to its field; compound eyes (created here, mode lut and bake) show a lattice of facets
 // with pigment, the look-up-table view agrees with the server's bake from the same eye, and
 // the lattice follows the client-side density; the flame view alone (PBVR by default, not
-// blown out, hotter at the base, moving; orbit drag and double-click home; the hdr mode);
-// the page reconnects after a daemon restart.
+// blown out, hotter at the base, moving; orbit drag and double-click home; the hdr mode;
+// velocity lines: the view toggle turns the stream's velocities on, lines are drawn and
+// change the picture, and a view-only page is told instead); the page reconnects after a
+// daemon restart.
 // Screenshots go to build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
 import { chromium } from 'playwright-core';
 import { spawn, execFileSync } from 'node:child_process';
@@ -404,8 +406,13 @@ async function panelChecks(ctx, page, port, url) {
 // The flame view alone (issue 13): PBVR by default, not blown out (of the flame's pixels
 // brighter than 10%, at most 15% have every channel >= 0.98), hotter at the base than at the
 // top, moving; the orbit camera turns with a mouse drag and a double-click brings it home;
-// the hdr mode keeps the hot core under white too. Screenshots of both modes.
-async function flameChecks(ctx, port) {
+// the hdr mode keeps the hot core under white too. Screenshots of both modes. Velocity
+// lines: the "pbvr: velocity lines" toggle sets the stream's velocities (the page has the
+// admin role of a daemon without tokens); frames then carry velocities, line vertices are
+// drawn, and on a paused stream (time_scale 0: the same particles every frame) the picture
+// with lines differs from the one without and has more lit pixels; toggling off sets
+// velocities back.
+async function flameChecks(ctx, port, fxctl) {
   const page = await ctx.newPage();
   await page.setViewportSize({ width: 600, height: 400 });
   await page.goto(`http://127.0.0.1:${port}/?streams=flame&grid=1x1&aa=0&drawfps=2&rl=2`, { timeout: 20000 });
@@ -440,6 +447,27 @@ async function flameChecks(ctx, port) {
   const h = await page.evaluate(() => window.fxs.flameLook());
   await page.screenshot({ path: join(ART, 'web-flame-hdr.png') });
   check(h && h.bright > 0.005 && h.white <= 0.15, 'hdr: lit, and at most 15% of the bright flame pixels are white', JSON.stringify(h));
+  await page.evaluate(() => { window.fxs.flameSettings.mode = 'pbvr'; });
+  const toggle = async () => page.evaluate(() => [...document.querySelectorAll('.lil-gui .controller')]
+    .find((e) => e.textContent.includes('pbvr: velocity lines')).querySelector('input').click());
+  await toggle();
+  const lines = await until(async () => { const f = await page.evaluate(() => window.fxs.flame()); return f?.velocities && f.lineVertices > 0 ? f : null; }, 20000, 300);
+  const velocities = () => JSON.parse(fxctl('get', 'flame').toString()).params.velocities;
+  check(velocities() === true && !!lines,
+    'velocity lines toggle: the stream sends velocities and line vertices are drawn', JSON.stringify(lines));
+  fxctl('set', 'flame', 'time_scale=0'); // no new frames: the view redraws the last one (drawfps=2)
+  await sleep(1500);
+  const on = await page.evaluate(() => window.fxs.flameLook());
+  await page.evaluate(() => { window.fxs.flameSettings.velLines = false; }); // the view only: same frame, no lines
+  await sleep(1200);
+  const off = await page.evaluate(() => window.fxs.flameLook());
+  check(on && off && on.hash !== off.hash && on.bright > off.bright, 'velocity lines change the picture of the same frame (more lit pixels)',
+    JSON.stringify({ on: on?.bright, off: off?.bright }));
+  await page.evaluate(() => { window.fxs.flameSettings.velLines = true; });
+  await toggle(); // off through the control: this page turned velocities on, so it turns them off
+  check(await until(async () => velocities() === false, 10000, 300),
+    'toggling the lines off sets the stream\'s velocities back');
+  fxctl('set', 'flame', 'time_scale=1');
   await page.close();
 }
 
@@ -546,7 +574,7 @@ try {
   await page2.close();
 
   await panelChecks(ctx, page, port, url);
-  await flameChecks(ctx, port);
+  await flameChecks(ctx, port, fxctl);
   await waveChecks(ctx, port, fxctl, page);
   await eyeChecks(ctx, port, fxctl, url);
 
@@ -567,12 +595,19 @@ try {
   const token = 'web-view-token-0123456789';
   daemon = await startDaemon(port, { FXSTREAMD_TOKENS: `view:${token}` });
   const p3 = await ctx.newPage();
+  const revView = await healthRev(port, 'flame');
   await p3.goto(`http://127.0.0.1:${port}/`);
   const refused = await until(() => p3.evaluate(() => document.body.dataset.conn === 'unauthorized'), 15000);
   check(refused, 'without a token the page says the daemon needs one');
   await p3.goto(`http://127.0.0.1:${port}/?token=${token}`);
   const authed = await until(() => p3.evaluate(() => document.body.dataset.conn === 'connected'), 15000);
   check(authed && !p3.url().includes('token'), 'with ?token= it authenticates and drops the token from the URL', p3.url());
+  await until(() => p3.evaluate(() => window.fxs.streams.get('flame')?.params), 10000);
+  await p3.evaluate(() => [...document.querySelectorAll('.lil-gui .controller')]
+    .find((e) => e.textContent.includes('pbvr: velocity lines')).querySelector('input').click());
+  const note = await until(() => p3.evaluate(() => document.body.dataset.velNote), 5000);
+  check(/role \(view\) may not change/.test(note || '') && (await healthRev(port, 'flame')) === revView,
+    'a view-only page turning velocity lines on is told to ask for a tune token, and sends no set', String(note));
   await p3.close();
 } catch (e) {
   check(false, 'browser session', e.stack || String(e));

@@ -3,16 +3,18 @@
 // view's stale-table rule) and the frame header parser of clients/web/fxs_particles.js
 // against the C side's output. argv: VECDIR (rig-N.bin whole frames + rig-N.json expected
 // values from test_light_rig --dump), REALDIR (fxctl --out of a real daemon: energy-SEQ-rig.bin
-// payloads of kind 3 and lines.txt) and EYEDIR (fxctl --out of compound_eye streams eyesq
+// payloads of kind 3 and lines.txt), EYEDIR (fxctl --out of compound_eye streams eyesq
 // and eyehex: NAME-SEQ.bin kind 4 payloads, NAME-SEQ-PROD.png decoded by protocol/fxs_lut.c,
-// lines.txt). Prints "test_web_decoders: N passed, M failed".
-import { readFileSync, existsSync } from 'node:fs';
+// lines.txt) and FLAMEDIR (fxctl --out of the flame with velocities on: flame-SEQ.bin kind 1
+// payloads and flame-SEQ.ply, what the C decoder gave). Prints "test_web_decoders: N passed,
+// M failed".
+import { readFileSync, existsSync, readdirSync } from 'node:fs';
 import { inflateSync } from 'node:zlib';
-import { parseHeader, payloadOf } from '../../clients/web/fxs_particles.js';
+import { decode, parseHeader, payloadOf } from '../../clients/web/fxs_particles.js';
 import { decodeRig, RigState, pointLight, shadeM, rampColor, shadowDir, SEG_FLOATS } from '../../clients/web/src/rig.js';
 import { decodeLutPack, EyeView } from '../../clients/web/src/eye.js';
 
-const [vecDir, realDir, eyeDir] = process.argv.slice(2);
+const [vecDir, realDir, eyeDir, flameDir] = process.argv.slice(2);
 let passed = 0, failed = 0;
 function check(ok, name, detail = '') {
   if (ok) { passed++; console.log('ok   ' + name); } else { failed++; console.log('FAIL ' + name + (detail ? ': ' + detail : '')); }
@@ -244,6 +246,36 @@ if (eyePayload.eyesq) {
   let threw = '';
   try { feed(frame(7, line.width + 2)); } catch (e) { threw = e.message; }
   check(/frame says/.test(threw) && v.info().lutRev === 6, 'EyeView: a table whose size differs from the frame header is refused', threw);
+}
+
+// Live flame frames with velocities: the JS decoder against the C decoder's PLY (x y z
+// temperature fuel as f32, flags u8, then vx vy vz f32), every value bit for bit.
+function readPly(path) {
+  const b = readFileSync(path), end = b.indexOf('end_header\n') + 11, head = b.subarray(0, end).toString();
+  const n = Number(/element vertex (\d+)/.exec(head)[1]), vel = head.includes('property float vx'), size = vel ? 33 : 21;
+  const dv = new DataView(b.buffer, b.byteOffset + end, n * size), f32 = (o) => dv.getFloat32(o, true);
+  const p = { n, xyz: [], temp: [], fuel: [], flags: [], vel: vel ? [] : null };
+  for (let i = 0; i < n; i++) {
+    const o = i * size;
+    p.xyz.push(f32(o), f32(o + 4), f32(o + 8)); p.temp.push(f32(o + 12)); p.fuel.push(f32(o + 16)); p.flags.push(dv.getUint8(o + 20));
+    if (vel) p.vel.push(f32(o + 21), f32(o + 25), f32(o + 29));
+  }
+  return p;
+}
+{
+  const bins = flameDir && existsSync(flameDir) ? readdirSync(flameDir).filter((f) => /^flame-\d+\.bin$/.test(f)) : [];
+  let withVel = 0, bad = [];
+  for (const f of bins) {
+    const want = readPly(`${flameDir}/${f.replace('.bin', '.ply')}`), b = readFileSync(`${flameDir}/${f}`);
+    const got = decode(new Uint8Array(b.buffer, b.byteOffset, b.byteLength));
+    if (got.n !== want.n || !got.vel !== !want.vel) { bad.push(`${f}: n ${got.n}/${want.n}, vel ${!!got.vel}/${!!want.vel}`); continue; }
+    withVel += got.vel ? 1 : 0;
+    for (const k of ['xyz', 'temp', 'fuel', 'flags', ...(got.vel ? ['vel'] : [])])
+      for (let i = 0; i < want[k].length; i++)
+        if (!Object.is(got[k][i], want[k][i])) { bad.push(`${f} ${k}[${i}] ${got[k][i]} vs C ${want[k][i]}`); break; }
+  }
+  check(bins.length >= 2 && withVel >= 1, 'live flame frames captured, some with velocities', `${bins.length} frames, ${withVel} with velocities`);
+  check(bad.length === 0, 'live flame frames: JS decodes what the C decoder gave, velocities included', bad.slice(0, 3).join('; '));
 }
 
 console.log(`test_web_decoders: ${passed} passed, ${failed} failed`);

@@ -132,28 +132,52 @@ static inline int pgen_flame(struct fxs_particles *p, uint32_t n)
     return pgen_sort_cells(p);
 }
 
-/* Reads a binary PLY as fxctl writes it (x y z temperature fuel flags, little endian) into p
- * (allocated; free with fxs_particles_free). 0, or -1 when it cannot be read. */
+/* Velocities for p (p->vel, 3n, allocated; freed by fxs_particles_free) like an SPH flame's:
+ * hot gas rises with its heat (up to ~2 m/s), spreads and swirls around the axis, with some
+ * noise; sources (type 1) are at rest. Deterministic (pgen_rand). */
+static inline int pgen_velocities(struct fxs_particles *p)
+{
+    p->vel = calloc(3 * (size_t)(p->n ? p->n : 1), sizeof *p->vel);
+    if (!p->vel) return -1;
+    for (uint32_t i = 0; i < p->n; i++) {
+        const float *r = p->xyz + 3 * (size_t)i;
+        double heat = (p->temp[i] - 300.0) / 1900.0, noise = 0.05 + 0.1 * heat;
+        if ((p->flags[i] & 3u) == 1u) continue;
+        p->vel[3 * i] = (float)(0.8 * r[0] - 3.0 * r[1] + noise * (pgen_rand() - 0.5));
+        p->vel[3 * i + 1] = (float)(0.8 * r[1] + 3.0 * r[0] + noise * (pgen_rand() - 0.5));
+        p->vel[3 * i + 2] = (float)(0.1 + 1.9 * heat + 2 * r[2] + noise * (pgen_rand() - 0.5));
+    }
+    return 0;
+}
+
+/* Reads a binary PLY as fxctl writes it (x y z temperature fuel flags, then vx vy vz when
+ * the frame had velocities; little endian) into p (allocated, p->vel only with velocities;
+ * free with fxs_particles_free). 0, or -1 when it cannot be read. */
 static inline int pgen_read_ply(const char *path, struct fxs_particles *p)
 {
     FILE *f = fopen(path, "rb");
     char line[256];
     unsigned n = 0;
-    int ok = 0;
+    int ok = 0, vel = 0;
+    size_t size;
     if (!f) return -1;
     while (fgets(line, sizeof line, f)) {
         if (sscanf(line, "element vertex %u", &n) == 1) continue;
+        if (!strcmp(line, "property float vx\n")) vel = 1;
         if (!strcmp(line, "end_header\n")) {
             ok = 1;
             break;
         }
     }
     if (ok) ok = !pgen_alloc(p, n);
+    if (ok && vel) ok = (p->vel = malloc(12 * (size_t)(n ? n : 1))) != NULL;
+    size = vel ? 33 : 21;
     for (uint32_t i = 0; i < n && ok; i++) {
-        uint8_t rec[21];
-        ok = fread(rec, 1, 21, f) == 21;
+        uint8_t rec[33];
+        ok = fread(rec, 1, size, f) == size;
         memcpy(p->xyz + 3 * i, rec, 12), memcpy(p->temp + i, rec + 12, 4), memcpy(p->fuel + i, rec + 16, 4);
         p->flags[i] = rec[20];
+        if (vel) memcpy(p->vel + 3 * i, rec + 21, 12);
     }
     fclose(f);
     return ok ? 0 : -1;

@@ -3,8 +3,10 @@
  * Round trips of random, SPH-like and real flame sets (n = 0, 1, 2, 1e6, all particles
  * identical, degenerate and extreme bounds, every pos_bits 8..24, every T/F width) checked
  * particle by particle against the order the spec prescribes (Morton order, ties in
- * input order), within the documented quantisation bounds; corrupt, truncated and
- * codec 1 payloads are rejected without reading out of bounds (build with
+ * input order), within the documented quantisation bounds; the optional velocities
+ * (§7.5.7: every vel_bits 2..16 within half a step, empty frames, all-zero and extreme
+ * magnitudes, the other attributes unchanged by them, off = no velocity block); corrupt,
+ * truncated and codec 1 payloads are rejected without reading out of bounds (build with
  * -fsanitize=address,undefined or run under valgrind too).
  * Test vectors: tests/data/particles/NAME.bin with NAME.json (what decoding gives) are
  * checked here and by the JavaScript decoder; `test_particles --write-vectors`
@@ -83,6 +85,9 @@ static uint32_t *spec_order(const struct fxs_particles *p, const uint8_t *enc)
 /* 600 particles of a real flame frame (fxctl subscribe flame --out, the first 600 in the
  * file), the input of the real_flame600 vectors. */
 #define REAL_PLY VEC_DIR "/real_flame600.ply"
+/* 600 particles of a real flame frame with velocities (fxctl subscribe flame --out with the
+ * stream's velocities on), the input of the real_vel600 vector. */
+#define REAL_VEL_PLY VEC_DIR "/real_vel600.ply"
 
 /* ---- round trips ------------------------------------------------------------------------ */
 
@@ -90,6 +95,30 @@ static double tol(float lo, float hi, int bits)
 {
     double step = ((double)hi - lo) / ((1u << bits) - 1u), mag = fmax(fabs(lo), fabs(hi));
     return step / 2 * (1 + 1e-9) + mag * FLT_EPSILON;
+}
+
+/* Velocity bound of axis a of a payload with velocities: half a step (largest |v| of the
+ * axis / (2^(vel_bits-1) - 1)) plus float32 rounding. */
+static double vel_tol(const uint8_t *enc, int a)
+{
+    double vmax = getf(enc + 64 + 4 + 4 * a);
+    return vmax / ((1u << (enc[64] - 1)) - 1u) / 2 * (1 + 1e-9) + vmax * FLT_EPSILON;
+}
+
+/* Counts particles whose velocity is outside the bounds (in: input order, out: decoded). */
+static int compare_vel(const struct fxs_particles *in, const struct fxs_particles *out, const uint8_t *enc,
+                       const uint32_t *idx)
+{
+    int bad = 0;
+    if (!in->vel || !out->vel) return in->vel || out->vel ? (int)in->n + 1 : 0;
+    if (!(enc[11] & 0x10)) return (int)in->n + 1;
+    for (uint32_t j = 0; j < in->n; j++)
+        for (int a = 0; a < 3; a++) {
+            double e = (double)in->vel[3 * idx[j] + a] - out->vel[3 * j + a];
+            if (fabs(e) <= vel_tol(enc, a)) continue;
+            if (bad++ < 3) fprintf(stderr, "  particle %u (input %u): velocity %d error %g\n", j, idx[j], a, e);
+        }
+    return bad;
 }
 
 /* Counts particles outside the bounds; prints the first few. */
@@ -111,32 +140,39 @@ static int compare(const struct fxs_particles *in, const struct fxs_particles *o
             fprintf(stderr, "  particle %u (input %u): errors %g %g %g T %g F %g flags %u/%u\n", j, i, e[0], e[1], e[2],
                     e[3], e[4], in->flags[i], out->flags[j]);
     }
+    if (idx) bad += compare_vel(in, out, enc, idx);
     free(idx);
     return idx ? bad : -1;
 }
 
-/* Encodes, decodes and compares; returns the payload size or -1. */
-static long round_trip(const struct fxs_particles *in, int pos_bits, int temp_bits, int fuel_bits)
+/* Encodes with o, decodes and compares; returns the payload size or -1. */
+static long round_trip_opts(const struct fxs_particles *in, const struct fxs_particles_opts *o)
 {
-    struct fxs_particles_opts o = { pos_bits, temp_bits, fuel_bits };
     struct fxs_particles out;
     uint8_t *enc = NULL;
     size_t len = 0;
     char err[200] = "";
     long r = -1;
     int bad;
-    CHECK(fxs_particles_encode(in, &o, &enc, &len, err, sizeof err) == 0, "encode: %s", err);
+    CHECK(fxs_particles_encode(in, o, &enc, &len, err, sizeof err) == 0, "encode: %s", err);
     if (!enc) return -1;
     CHECK(fxs_particles_decode(enc, len, &out, err, sizeof err) == 0, "decode: %s", err);
     CHECK(out.n == in->n, "n %u vs %u", out.n, in->n);
     if (out.n == in->n) {
         bad = compare(in, &out, enc);
-        CHECK(bad == 0, "%d of %u particles outside the bounds (pos_bits %d)", bad, in->n, pos_bits);
+        CHECK(bad == 0, "%d of %u particles outside the bounds (pos_bits %d, vel_bits %d)", bad, in->n, o->pos_bits,
+              o->vel_bits);
         r = (long)len;
     }
     free(enc);
     fxs_particles_free(&out);
     return r;
+}
+
+static long round_trip(const struct fxs_particles *in, int pos_bits, int temp_bits, int fuel_bits)
+{
+    struct fxs_particles_opts o = { pos_bits, temp_bits, fuel_bits, 0 };
+    return round_trip_opts(in, &o);
 }
 
 static void test_empty_and_tiny(void)
@@ -230,7 +266,7 @@ static void test_real_frame(void)
     for (int b = 8; b <= 24; b += 4) CHECK(round_trip(&p, b, 0, 0) > 0, "real frame, pos_bits %d", b);
     CHECK(round_trip(&p, 16, 8, 8) > 0, "real frame, T and F 8 bits");
     {   /* mixed burning and cold particles: the encoder picks attribute mode 1 (values) */
-        struct fxs_particles_opts o = { 16, 8, 8 };
+        struct fxs_particles_opts o = { 16, 8, 8, 0 };
         uint8_t *enc = NULL;
         size_t len = 0;
         char err[200];
@@ -240,7 +276,7 @@ static void test_real_frame(void)
     }
     free_set(&p);
     {   /* a smooth synthetic flame: mode 0 (residuals) */
-        struct fxs_particles_opts o = { 16, 8, 8 };
+        struct fxs_particles_opts o = { 16, 8, 8, 0 };
         uint8_t *enc = NULL;
         size_t len = 0;
         char err[200];
@@ -265,10 +301,160 @@ static void test_large(void)
     free_set(&p);
 }
 
+/* ---- velocities (§7.5.7) ---------------------------------------------------------------- */
+
+/* Encodes p with o into *enc (the caller frees it); the payload length, 0 on failure. */
+static size_t encode(const struct fxs_particles *p, const struct fxs_particles_opts *o, uint8_t **enc)
+{
+    size_t len = 0;
+    char err[200] = "";
+    *enc = NULL;
+    CHECK(fxs_particles_encode(p, o, enc, &len, err, sizeof err) == 0, "encode: %s", err);
+    return *enc ? len : 0;
+}
+
+static void test_vel_bits(void)
+{
+    struct fxs_particles p = { 0 };
+    pgen_flame(&p, 5000);
+    pgen_velocities(&p);
+    for (int b = 2; b <= 16; b++) {
+        struct fxs_particles_opts o = { 16, 0, 0, b };
+        CHECK(round_trip_opts(&p, &o) > 0, "vel_bits %d", b);
+    }
+    for (int b = 8; b <= 24; b += 8) {
+        struct fxs_particles_opts o = { b, 16, 2, 8 };
+        CHECK(round_trip_opts(&p, &o) > 0, "pos_bits %d with velocities", b);
+    }
+    free_set(&p);
+    pgen_random(&p, 3000, 1.0); /* random velocities: nothing to predict */
+    pgen_velocities(&p);
+    for (uint32_t i = 0; i < 3 * p.n; i++) p.vel[i] = (float)((pgen_rand() - 0.5) * 10);
+    for (int b = 4; b <= 12; b += 4) {
+        struct fxs_particles_opts o = { 16, 0, 0, b };
+        CHECK(round_trip_opts(&p, &o) > 0, "random velocities, vel_bits %d", b);
+    }
+    free_set(&p);
+}
+
+/* Off: no velocity block, and vel_bits has no effect; on: the other attributes decode to
+ * exactly what they decode to without velocities, and the payload grows by the block. */
+static void test_vel_off_on(void)
+{
+    struct fxs_particles p = { 0 }, a, b;
+    struct fxs_particles_opts o8 = { 16, 0, 0, 8 }, o12 = { 16, 0, 0, 12 }, o0 = { 16, 0, 0, 0 };
+    uint8_t *e0, *e1, *ev;
+    char err[200];
+    pgen_flame(&p, 3000);
+    size_t l0 = encode(&p, &o0, &e0), l1 = encode(&p, &o12, &e1);
+    CHECK(l0 && l0 == l1 && !memcmp(e0, e1, l0) && !(e0[11] & 0x10), "without velocities vel_bits changes the payload");
+    pgen_velocities(&p);
+    size_t lv = encode(&p, &o8, &ev);
+    CHECK(lv > l0 + 16 && ev && (ev[11] & 0x10) && (ev[11] & 0x0f) == (e0[11] & 0x0f), "with velocities: %zu vs %zu bytes", lv, l0);
+    if (e0 && ev && !fxs_particles_decode(e0, l0, &a, err, sizeof err)) {
+        if (!fxs_particles_decode(ev, lv, &b, err, sizeof err)) {
+            CHECK(a.vel == NULL && b.vel != NULL, "vel pointer set only with velocities");
+            CHECK(a.n == b.n && !memcmp(a.xyz, b.xyz, 12 * (size_t)a.n) && !memcmp(a.temp, b.temp, 4 * (size_t)a.n) &&
+                  !memcmp(a.fuel, b.fuel, 4 * (size_t)a.n) && !memcmp(a.flags, b.flags, a.n),
+                  "velocities change the other attributes");
+            CHECK(!memcmp(e0 + 12, ev + 12, 44), "header fields differ");
+            fxs_particles_free(&b);
+        } else {
+            CHECK(0, "decode with velocities: %s", err);
+        }
+        fxs_particles_free(&a);
+    }
+    printf("  3k synthetic flame: %.3f B/particle, %.3f with velocities at 8 bits\n", (double)l0 / p.n, (double)lv / p.n);
+    free(e0), free(e1), free(ev);
+    free_set(&p);
+}
+
+static void test_vel_empty_zero(void)
+{
+    struct fxs_particles p = { 0 }, d;
+    struct fxs_particles_opts o = { 16, 0, 0, 8 };
+    uint8_t *enc;
+    char err[200];
+    size_t len, l0;
+    pgen_random(&p, 0, 1.0);
+    pgen_velocities(&p);
+    len = encode(&p, &o, &enc);
+    CHECK(len == 80 && (enc[11] & 0x10), "empty frame with velocities: %zu bytes", len);
+    CHECK(enc && !fxs_particles_decode(enc, len, &d, err, sizeof err) && d.n == 0 && d.vel != NULL, "empty: %s", err);
+    if (enc && d.vel) fxs_particles_free(&d);
+    free(enc);
+    free_set(&p);
+    /* all zero: decoded exactly, at almost no cost */
+    pgen_flame(&p, 5000);
+    l0 = encode(&p, &o, &enc);
+    free(enc);
+    p.vel = calloc(3 * (size_t)p.n, sizeof *p.vel);
+    len = encode(&p, &o, &enc);
+    CHECK(len > l0 && len < l0 + 16 + p.n / 40, "all-zero velocities cost %zu bytes over %zu", len - l0, l0);
+    if (enc && !fxs_particles_decode(enc, len, &d, err, sizeof err)) {
+        int nz = 0;
+        for (uint32_t i = 0; i < 3 * d.n; i++) nz += d.vel[i] != 0 || signbit(d.vel[i]);
+        CHECK(nz == 0, "%d non-zero components", nz);
+        for (int a = 0; a < 3; a++) CHECK(getf(enc + 68 + 4 * a) == 0, "vmax %d", a);
+        fxs_particles_free(&d);
+    } else {
+        CHECK(0, "decode all-zero: %s", err);
+    }
+    free(enc);
+    free_set(&p);
+}
+
+/* The largest magnitudes: components at +-vmax (exact), near FLT_MAX, one axis zero. */
+static void test_vel_extremes(void)
+{
+    struct fxs_particles p = { 0 }, d;
+    struct fxs_particles_opts o = { 16, 0, 0, 8 };
+    uint8_t *enc;
+    char err[200];
+    size_t len;
+    pgen_flame(&p, 2000);
+    pgen_velocities(&p);
+    for (uint32_t i = 0; i < p.n; i++) {
+        p.vel[3 * i] = i % 3 == 0 ? 2.5f : i % 3 == 1 ? -2.5f : p.vel[3 * i];
+        p.vel[3 * i + 1] = 0;
+    }
+    len = encode(&p, &o, &enc);
+    if (enc && !fxs_particles_decode(enc, len, &d, err, sizeof err)) {
+        int exact = 0, zero = 0;
+        for (uint32_t i = 0; i < d.n; i++) {
+            exact += fabsf(d.vel[3 * i]) == 2.5f;
+            zero += d.vel[3 * i + 1] == 0;
+        }
+        CHECK(exact >= (int)(2 * d.n / 3), "only %d of %u at +-vmax decode exactly", exact, d.n);
+        CHECK(zero == (int)d.n && getf(enc + 68) == 2.5f && getf(enc + 72) == 0, "zero axis, vmax");
+        fxs_particles_free(&d);
+    } else {
+        CHECK(0, "decode: %s", err);
+    }
+    free(enc);
+    CHECK(round_trip_opts(&p, &o) > 0, "+-vmax");
+    for (uint32_t i = 0; i < 3 * p.n; i++) p.vel[i] = (float)((pgen_rand() - 0.5) * 6.8e38);
+    p.vel[5] = FLT_MAX, p.vel[7] = -FLT_MAX;
+    for (int b = 2; b <= 16; b += 7) {
+        o.vel_bits = b;
+        CHECK(round_trip_opts(&p, &o) > 0, "magnitudes near FLT_MAX, vel_bits %d", b);
+    }
+    p.vel[3] = INFINITY;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1 && strstr(err, "non-finite"), "inf velocity");
+    p.vel[3] = NAN;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "NaN velocity");
+    p.vel[3] = 0;
+    o.vel_bits = 1;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "vel_bits 1");
+    o.vel_bits = 17;
+    CHECK(fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err) == -1, "vel_bits 17");
+    free_set(&p);
+}
+
 static void test_bad_input(void)
 {
     struct fxs_particles p = { 0 };
-    struct fxs_particles_opts o = { 7, 0, 0 };
+    struct fxs_particles_opts o = { 7, 0, 0, 0 };
     uint8_t *enc = NULL;
     size_t len;
     char err[200];
@@ -292,13 +478,14 @@ static void test_bad_input(void)
     free_set(&p);
 }
 
-/* Encodes a small flame; the caller frees *enc. */
-static size_t small_payload(uint8_t **enc, uint32_t n)
+/* Encodes the first n particles of a small flame, with velocities if vel; the caller frees *enc. */
+static size_t small_payload(uint8_t **enc, uint32_t n, int vel)
 {
     struct fxs_particles p = { 0 };
     size_t len = 0;
     char err[200];
     pgen_flame(&p, 3000);
+    if (vel) pgen_velocities(&p);
     if (p.n > n) p.n = n;
     if (fxs_particles_encode(&p, NULL, enc, &len, err, sizeof err)) *enc = NULL;
     free_set(&p);
@@ -321,17 +508,20 @@ static int try_decode(const uint8_t *buf, size_t len)
 
 static void test_truncated(void)
 {
-    uint8_t *enc;
-    size_t len = small_payload(&enc, 200);
-    CHECK(enc && try_decode(enc, len) == 0, "intact payload decodes");
-    for (size_t l = 0; enc && l < len; l++) CHECK(try_decode(enc, l) == -1, "truncated to %zu of %zu decodes", l, len);
-    free(enc);
+    for (int vel = 0; vel <= 1; vel++) {
+        uint8_t *enc;
+        size_t len = small_payload(&enc, 200, vel);
+        CHECK(enc && try_decode(enc, len) == 0, "intact payload decodes");
+        for (size_t l = 0; enc && l < len; l++)
+            CHECK(try_decode(enc, l) == -1, "truncated to %zu of %zu decodes (velocities %d)", l, len, vel);
+        free(enc);
+    }
 }
 
-static void test_corrupt(void)
+static void test_corrupt_one(int vel)
 {
     uint8_t *enc, *bad;
-    size_t len = small_payload(&enc, 200);
+    size_t len = small_payload(&enc, 200, vel);
     int rejected = 0, trials = 3000;
     if (!enc) {
         CHECK(0, "encode");
@@ -345,10 +535,17 @@ static void test_corrupt(void)
         if (pgen_rand() < 0.3) bad[(size_t)(pgen_rand() * len)] = (uint8_t)(pgen_rand() * 256);
         rejected += try_decode(bad, len) == -1;
     }
-    printf("  corrupt: %d of %d rejected, the rest decode to other valid particles\n", rejected, trials);
+    printf("  corrupt%s: %d of %d rejected, the rest decode to other valid particles\n", vel ? " (velocities)" : "",
+           rejected, trials);
     CHECK(rejected > trials / 2, "only %d rejected", rejected);
     free(bad);
     free(enc);
+}
+
+static void test_corrupt(void)
+{
+    test_corrupt_one(0);
+    test_corrupt_one(1);
 }
 
 static void put32(uint8_t *p, uint32_t v)
@@ -359,9 +556,14 @@ static void put32(uint8_t *p, uint32_t v)
 static void test_header_limits(void)
 {
     uint8_t *enc, *bad;
-    size_t len = small_payload(&enc, 50);
+    size_t len = small_payload(&enc, 50, 0);
     static const struct { int at; uint8_t v; } byte_cases[] = {
         { 0, 'X' }, { 3, '1' }, { 4, 1 }, { 5, 7 }, { 5, 25 }, { 6, 1 }, { 7, 17 }, { 8, 17 }, { 10, 25 }, { 11, 2 }, { 11, 255 },
+        { 11, 0x20 }, { 11, 0x80 }, { 11, 0x10 }, { 11, 0x11 },
+    };
+    /* with velocities: mode bits, vel_bits, reserved bytes (64 + ...) */
+    static const struct { int at; uint8_t v; } vel_cases[] = {
+        { 11, 0x30 }, { 11, 0x00 }, { 11, 0x01 }, { 64, 1 }, { 64, 17 }, { 64, 0 }, { 65, 1 }, { 67, 0x80 },
     };
     if (!enc) {
         CHECK(0, "encode");
@@ -384,6 +586,27 @@ static void test_header_limits(void)
     CHECK(try_decode(bad, len) == -1, "huge rans_bytes");
     free(bad);
     free(enc);
+    len = small_payload(&enc, 50, 1);
+    if (!enc) {
+        CHECK(0, "encode");
+        return;
+    }
+    bad = malloc(len);
+    CHECK(try_decode(enc, len) == 0, "intact velocity payload");
+    for (size_t c = 0; c < sizeof vel_cases / sizeof vel_cases[0]; c++) {
+        memcpy(bad, enc, len);
+        bad[vel_cases[c].at] = vel_cases[c].v;
+        CHECK(try_decode(bad, len) == -1, "velocity payload: byte %d = %u accepted", vel_cases[c].at, vel_cases[c].v);
+    }
+    static const uint32_t vmax_bad[] = { 0x7fc00000u, 0x7f800000u, 0xbf800000u }; /* NaN, inf, -1 */
+    for (int a = 0; a < 3; a++)
+        for (int k = 0; k < 3; k++) {
+            memcpy(bad, enc, len);
+            put32(bad + 68 + 4 * a, vmax_bad[k]);
+            CHECK(try_decode(bad, len) == -1, "vmax[%d] = %08x accepted", a, vmax_bad[k]);
+        }
+    free(bad);
+    free(enc);
 }
 
 /* ---- test vectors ------------------------------------------------------------------------ */
@@ -391,14 +614,14 @@ static void test_header_limits(void)
 static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts *o)
 {
     pgen_rng = 12345 + (uint64_t)v;
-    *o = (struct fxs_particles_opts){ 16, 0, 0 };
+    *o = (struct fxs_particles_opts){ 16, 0, 0, 0 };
     if (v == 0) pgen_random(p, 0, 1.0);
     if (v == 1) pgen_random(p, 1, 1.0);
     if (v == 2) pgen_random(p, 7, 3.0), o->pos_bits = 8;
     if (v == 3 || v == 4) {
         pgen_flame(p, 3000);
         p->n = 64;
-        if (v == 4) *o = (struct fxs_particles_opts){ 24, 16, 16 };
+        if (v == 4) *o = (struct fxs_particles_opts){ 24, 16, 16, 0 };
     }
     if (v == 5) {
         pgen_random(p, 5, 1.0);
@@ -406,7 +629,7 @@ static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts 
     }
     if (v == 6 || v == 7) {
         CHECK(pgen_read_ply(REAL_PLY, p) == 0, "read %s", REAL_PLY);
-        if (v == 7) *o = (struct fxs_particles_opts){ 12, 8, 8 };
+        if (v == 7) *o = (struct fxs_particles_opts){ 12, 8, 8, 0 };
     }
     if (v == 8) { /* all identical */
         pgen_random(p, 9, 1.0);
@@ -415,16 +638,36 @@ static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts 
             p->temp[i] = p->temp[0], p->fuel[i] = p->fuel[0], p->flags[i] = p->flags[0];
         }
     }
+    if (v == 9) { /* velocities, default 8 bits */
+        pgen_flame(p, 3000);
+        p->n = 64;
+        pgen_velocities(p);
+    }
+    if (v == 10) { /* velocities at 4 bits, one axis at rest, random set */
+        pgen_random(p, 7, 3.0);
+        pgen_velocities(p);
+        for (int i = 0; i < 7; i++) p->vel[3 * i] = (float)(pgen_rand() - 0.5), p->vel[3 * i + 1] = 0;
+        o->vel_bits = 4;
+    }
+    if (v == 11) { /* empty, with velocities */
+        pgen_random(p, 0, 1.0);
+        pgen_velocities(p);
+    }
+    if (v == 12) { /* a real frame with velocities, 12-bit */
+        CHECK(pgen_read_ply(REAL_VEL_PLY, p) == 0 && p->vel, "read %s", REAL_VEL_PLY);
+        o->vel_bits = 12;
+    }
 }
 
 static const char *const vec_names[] = { "empty", "one", "seven_8bit", "flame64", "flame64_24bit", "flat_y",
-                                         "real_flame600", "real_flame600_12bit", "identical9" };
-#define NVEC 9
+                                         "real_flame600", "real_flame600_12bit", "identical9", "flame64_vel",
+                                         "seven_vel_4bit", "empty_vel", "real_vel600_12bit" };
+#define NVEC 13
 
 /* The JSON the decoder must produce: floats as %.9g (float32 round trips exactly). */
 static char *vec_json(const struct fxs_particles *d)
 {
-    size_t cap = 256 + (size_t)d->n * 100, o = 0;
+    size_t cap = 256 + (size_t)d->n * 150, o = 0;
     char *s = malloc(cap);
     const float *arr[3] = { d->xyz, d->temp, d->fuel };
     const char *names[3] = { "xyz", "temp", "fuel" };
@@ -437,7 +680,13 @@ static char *vec_json(const struct fxs_particles *d)
     }
     o += (size_t)snprintf(s + o, cap - o, ",\n\"flags\":[");
     for (uint32_t i = 0; i < d->n; i++) o += (size_t)snprintf(s + o, cap - o, "%s%u", i ? "," : "", d->flags[i]);
-    snprintf(s + o, cap - o, "]}\n");
+    o += (size_t)snprintf(s + o, cap - o, "]");
+    if (d->vel) {
+        o += (size_t)snprintf(s + o, cap - o, ",\n\"vel\":[");
+        for (uint32_t i = 0; i < 3 * d->n; i++) o += (size_t)snprintf(s + o, cap - o, "%s%.9g", i ? "," : "", d->vel[i]);
+        o += (size_t)snprintf(s + o, cap - o, "]");
+    }
+    snprintf(s + o, cap - o, "}\n");
     return s;
 }
 
@@ -505,6 +754,10 @@ int main(int argc, char **argv)
     RUN(test_degenerate);
     RUN(test_real_frame);
     RUN(test_large);
+    RUN(test_vel_bits);
+    RUN(test_vel_off_on);
+    RUN(test_vel_empty_zero);
+    RUN(test_vel_extremes);
     RUN(test_bad_input);
     RUN(test_truncated);
     RUN(test_corrupt);

@@ -2,7 +2,8 @@
 // answered by promises, events and binary frames to callbacks, reconnection with
 // exponential backoff (0.5 s doubling to 10 s) after the daemon restarts or the link drops.
 // When the daemon requires a token (hello.auth.required, PROTOCOL.md §3.11) and one is given,
-// it is sent with the `auth` op before the connection counts as open.
+// it is sent with the `auth` op before the connection counts as open; `role` is the
+// connection's role (hello.auth.role, then the auth reply's).
 export class Conn {
   constructor(url, { onOpen, onEvent, onFrame, onState, token }) {
     Object.assign(this, { url, onOpen, onEvent, onFrame, onState, token });
@@ -11,6 +12,7 @@ export class Conn {
     this.delay = 500;
     this.state = 'connecting';
     this.hello = null;
+    this.role = 'none';
     this.connect();
   }
 
@@ -59,9 +61,10 @@ export class Conn {
   }
 
   async authenticate(hello) {
+    this.role = hello.auth?.role ?? 'none';
     if (hello.auth?.required && this.token) {
       try {
-        await this.request('auth', { token: this.token });
+        this.role = (await this.request('auth', { token: this.token })).role;
       } catch (e) {
         this.setState('unauthorized', e.message || 'invalid token');
         return;
@@ -81,6 +84,9 @@ export class Conn {
     clearTimeout(this.retryTimer);
     this.retryTimer = setTimeout(() => this.connect(), d);
   }
+
+  /** Whether the connection's role may `set` and `reset` (tune and admin, PROTOCOL.md §3.11). */
+  canTune() { return this.role === 'tune' || this.role === 'admin'; }
 
   /** Sends op with fields; resolves with the reply, rejects with an error message. */
   request(op, fields = {}, timeoutMs = 20000) {

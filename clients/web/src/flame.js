@@ -10,7 +10,12 @@
 //   below the threshold), depth test and depth write; RL passes averaged with weight 1/RL
 //   (the accumulation buffer), times an intensity scale. Colour from the chromaticity-
 //   normalised blackbody table; particles cooler than the smoke threshold drawn the same way
-//   in a user grey (§4.4 "smoke"), so the hot core is not a blown-out white.
+//   in a user grey (§4.4 "smoke"), so the hot core is not a blown-out white. Optional
+//   velocity lines (§4.4, "a line per render element ... from r to r + s·v") when the stream
+//   sends velocities (its `velocities` parameter, PROTOCOL.md §7.5.7): one segment per
+//   physics particle over the composited picture, additive, in the particle's colour (grey
+//   for smoke) fading from the particle to the tip, fainter for cooler particles, so the
+//   flow reads as streaks rather than a hairball.
 // hdr: soft round additive sprites whose emission is the blackbody colour times a luminance
 //   that grows with heat, in linear HDR, tone-mapped with three's ACES filmic curve and an
 //   exposure control: a hot core is bright but rolls off instead of clipping.
@@ -27,8 +32,9 @@ const BB_RGB = [[1, 0.059, 0], [1, 0.116, 0], [1, 0.189, 0], [1, 0.314, 0.009], 
 
 export const FLAME_DEFAULTS = {
   mode: 'pbvr', rl: 15, threshold: 0.3, intensity: 1.0, smoke: true, smokeT: 1000, smokeColor: '#595959',
-  whiteT: 4000, exposure: 1.0,
+  whiteT: 4000, exposure: 1.0, velLines: false, velScale: 0.005,
 };
+const LINE_ALPHA = 0.3; // a hot particle's segment at the particle; × (0.35 + 0.65 heat), fading to the tip
 
 function mulberry32(seed) {
   return () => {
@@ -129,6 +135,29 @@ void main() {
   gl_FragColor = vec4(vColor, 1.0);                                         // opaque
 }`;
 
+// A velocity line: vertex `end` 0 at the particle, 1 at ipos + velScale · ivel (world units).
+const LINE_VERT = /* glsl */ `${COMMON_VERT}
+attribute float end;
+attribute vec3 ivel;
+uniform float velScale, smokeT, smokeOn, lineAlpha;
+uniform vec3 smokeColor;
+varying float vA;
+void main() {
+  bool hot = itemp >= smokeT;
+  float a = hot ? lineAlpha * (0.35 + 0.65 * heatOf(itemp)) : smokeOn * 0.35 * lineAlpha;
+  if (a <= 0.0) { hide(); return; }
+  gl_Position = projectionMatrix * modelViewMatrix * vec4(ipos + end * velScale * ivel, 1.0);
+  vColor = hot ? blackbody(itemp) : smokeColor;
+  vA = a * (1.0 - 0.8 * end);
+}`;
+
+const LINE_FRAG = /* glsl */ `
+varying vec3 vColor;
+varying float vA;
+${SRGB_GLSL}
+void main() { gl_FragColor = vec4(linearToSRGB(vColor) * vA, 1.0); }  // additive over the picture
+`;
+
 const HDR_VERT = /* glsl */ `${COMMON_VERT}
 void main() {
   float heat = heatOf(itemp);
@@ -190,10 +219,24 @@ export class FlameView {
       uniforms: { ...common, alphaTex: { value: spriteTexture(false) }, gain: { value: 0.08 } },
       depthTest: true, depthWrite: false, blending: THREE.AdditiveBlending, transparent: true,
     });
-    this.geoms = { pbvr: null, hdr: null };
+    this.lineMat = new THREE.ShaderMaterial({
+      vertexShader: LINE_VERT, fragmentShader: LINE_FRAG,
+      uniforms: {
+        ...common, velScale: { value: 0.005 }, smokeT: { value: 1000 }, smokeOn: { value: 1 }, lineAlpha: { value: LINE_ALPHA },
+        smokeColor: { value: new THREE.Color(0.35, 0.35, 0.35) },
+      },
+      depthTest: false, depthWrite: false, blending: THREE.AdditiveBlending, transparent: true,
+    });
+    this.geoms = { pbvr: null, hdr: null, lines: null };
     this.points = new THREE.Points(new THREE.BufferGeometry(), this.pbvr);
     this.points.frustumCulled = false;
     this.scene.add(this.points);
+    this.lines = new THREE.LineSegments(new THREE.BufferGeometry(), this.lineMat);
+    this.lines.frustumCulled = false;
+    this.lineScene = new THREE.Scene();
+    this.lineScene.add(this.lines);
+    this.hasVel = false;     // the latest frame carried velocities
+    this.lineVertices = 0;   // vertices of velocity lines in the latest draw (three's renderer.info)
     this.targets = {};
     this.accumulate = fullscreenQuad(/* glsl */ `
       uniform sampler2D src; uniform float weight; varying vec2 vUv;
@@ -267,6 +310,14 @@ export class FlameView {
     return g;
   }
 
+  // The velocity lines: two vertices (end 0, 1) per particle, instanced like the sprites.
+  lineGeometry() {
+    const g = this.geometry(2);
+    g.setAttribute('end', new THREE.BufferAttribute(new Float32Array([0, 1]), 1));
+    g.setAttribute('ivel', this.ivel);
+    return g;
+  }
+
   onFrame(h, buf) {
     if (h.kind !== 1 || h.codec !== 2) return false;
     const p = decode(payloadOf(buf, h));
@@ -276,17 +327,22 @@ export class FlameView {
       this.capacity = Math.max(p.n, 2 * this.capacity, 1024);
       this.ipos = new THREE.InstancedBufferAttribute(new Float32Array(3 * this.capacity), 3);
       this.itemp = new THREE.InstancedBufferAttribute(new Float32Array(this.capacity), 1);
-      this.ipos.setUsage(THREE.DynamicDrawUsage);
-      this.itemp.setUsage(THREE.DynamicDrawUsage);
-      this.geoms.pbvr?.dispose();
-      this.geoms.hdr?.dispose();
-      this.geoms = { pbvr: this.geometry(NMAX), hdr: this.geometry(1) };
+      this.ivel = new THREE.InstancedBufferAttribute(new Float32Array(3 * this.capacity), 3);
+      for (const a of [this.ipos, this.itemp, this.ivel]) a.setUsage(THREE.DynamicDrawUsage);
+      for (const g of Object.values(this.geoms)) g?.dispose();
+      this.geoms = { pbvr: this.geometry(NMAX), hdr: this.geometry(1), lines: this.lineGeometry() };
+      this.lines.geometry = this.geoms.lines;
     }
     this.ipos.array.set(p.xyz);
     this.itemp.array.set(p.temp);
     this.ipos.needsUpdate = this.itemp.needsUpdate = true;
+    this.hasVel = p.vel !== null;
+    if (this.hasVel) {
+      this.ivel.array.set(p.vel);
+      this.ivel.needsUpdate = true;
+    }
     this.count = p.n;
-    this.geoms.pbvr.instanceCount = this.geoms.hdr.instanceCount = p.n;
+    this.geoms.pbvr.instanceCount = this.geoms.hdr.instanceCount = this.geoms.lines.instanceCount = p.n;
     this.newFrame = true;
     return true;
   }
@@ -308,11 +364,14 @@ export class FlameView {
       m.uniforms.radius.value = d;
       m.uniforms.pointScale.value = h / (2 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
     }
-    const u = this.pbvr.uniforms;
+    const u = this.pbvr.uniforms, lu = this.lineMat.uniforms;
     u.threshold.value = s.threshold;
-    u.smokeOn.value = s.smoke ? 1 : 0;
-    u.smokeT.value = s.smokeT;
-    u.smokeColor.value.set(s.smokeColor).convertSRGBToLinear();
+    lu.velScale.value = s.velScale; // tAmb, tMax and the table: the uniforms all three materials share
+    for (const m of [u, lu]) {
+      m.smokeOn.value = s.smoke ? 1 : 0;
+      m.smokeT.value = s.smokeT;
+      m.smokeColor.value.set(s.smokeColor).convertSRGBToLinear();
+    }
     this.camera.aspect = w / h;
     this.camera.near = 0.002 * scale;
     this.camera.far = 20 * scale;
@@ -360,21 +419,29 @@ export class FlameView {
     cu.scale.value = hdr ? s.exposure : s.intensity;
     cu.aces.value = hdr ? 1 : 0;
     renderer.render(this.composite.scene, this.composite.camera);
+    this.lineVertices = 0;
+    if (!hdr && s.velLines && this.hasVel) { // over the picture, in this view's rectangle
+      renderer.render(this.lineScene, this.camera);
+      this.lineVertices = 2 * renderer.info.render.lines;
+    }
     const drew = this.newFrame;
     this.newFrame = false;
     return drew;
   }
 
   info() {
-    return { mode: this.settings.mode, count: this.count, cam: this.camera.position.toArray(), target: this.orbit?.target?.toArray() };
+    return {
+      mode: this.settings.mode, count: this.count, cam: this.camera.position.toArray(), target: this.orbit?.target?.toArray(),
+      velocities: this.hasVel, lineVertices: this.lineVertices,
+    };
   }
 
   dispose() {
     for (const t of Object.values(this.targets)) t.dispose();
-    this.geoms.pbvr?.dispose();
-    this.geoms.hdr?.dispose();
+    for (const g of Object.values(this.geoms)) g?.dispose();
     this.pbvr.dispose();
     this.hdr.dispose();
+    this.lineMat.dispose();
     this.orbit?.dispose();
   }
 }

@@ -50,6 +50,10 @@ ff.add(flameSettings, 'intensity', 0.2, 4, 0.01).name('pbvr: intensity scale');
 ff.add(flameSettings, 'smoke').name('pbvr: smoke');
 ff.add(flameSettings, 'smokeT', 300, 3000, 10).name('pbvr: smoke below T (K)');
 ff.addColor(flameSettings, 'smokeColor').name('pbvr: smoke colour');
+const velCtl = ff.add(flameSettings, 'velLines').name('pbvr: velocity lines').onChange(velocityLines);
+const velNote = Object.assign(document.createElement('div'), { className: 'fxs-doc fxs-vel-note' });
+velCtl.domElement.after(velNote);
+ff.add(flameSettings, 'velScale', 0.001, 0.05, 0.001).name('pbvr: velocity-line scale (s)');
 ff.add(flameSettings, 'whiteT', 1500, 8000, 50).name('white point T_max (K)');
 ff.add(flameSettings, 'exposure', 0.05, 8, 0.01).name('hdr: exposure');
 vf.add(waveSettings, 'bloom', 0, 3, 0.01).name('wave bloom');
@@ -118,6 +122,42 @@ function applyParams(st, params, rev) {
   st.params = params;
   st.rev = rev;
   for (const v of st.views) v.setParams(params);
+  if (st.effect === 'flame') velocityNote();
+}
+
+// Velocity lines need the flame stream's velocities (its `velocities` parameter, off by
+// default so frames cost no more). Turning the lines on sets it on every shown flame stream
+// that lacks it, when this page's role may `set` (tune, admin); otherwise the note says who
+// can. Turning them off sets it back on the streams this page turned it on for.
+const velTurnedOn = new Set(); // flame streams whose velocities this page switched on
+const velPending = new Set();  // ... and whose set is in flight
+let velError = '';             // the last refused set
+function velocityLines(on) {
+  velError = '';
+  for (const st of streams.values()) {
+    if (st.effect !== 'flame' || !st.params) continue;
+    const want = on ? true : velTurnedOn.has(st.name) ? false : null;
+    if (want === null || st.params.velocities === want || !conn.canTune()) continue;
+    if (on) velTurnedOn.add(st.name); else velTurnedOn.delete(st.name);
+    velPending.add(st.name);
+    conn.request('set', { stream: st.name, params: { velocities: want } })
+      .then((m) => { applyParams(st, m.params, m.rev); st.panel?.update(m.params, m.rev); },
+        (e) => { velError = `${st.name}: ${e.code}: ${e.message}`; })
+      .finally(() => { velPending.delete(st.name); velocityNote(); });
+  }
+  velocityNote();
+}
+
+function velocityNote() {
+  const without = [...streams.values()].filter((st) => st.effect === 'flame' && st.params && !st.params.velocities);
+  const names = without.map((st) => st.name).join(', ');
+  if (!without.length) velError = ''; // a refused or late set that has taken effect after all
+  velNote.textContent = velError || !flameSettings.velLines || !without.length ? velError
+    : without.every((st) => velPending.has(st.name)) ? `turning velocities on for ${names}…`
+      : conn.canTune() ? `${names} sends no velocities: set velocities=true in its output folder (or toggle the lines again)`
+        : `${names} sends no velocities, and this page's role (${conn.role}) may not change that: ask someone with a ` +
+          'tune token to set velocities=true, or open the page with ?token= of one';
+  document.body.dataset.velNote = velNote.textContent;
 }
 
 async function attach(info) {
