@@ -27,54 +27,11 @@
  * pair arithmetic, so it runs once a step: fl_density records the accepted j != i in gather
  * order and fl_forces reads them back (bench_flame: the forces pass 3.5x faster), 8 neighbours
  * at a time as float8 lanes (another 1.6x), the rest one by one through fl_pair.
- * Parameters live in one __constant float array (indices FP_* shared with flame.c). */
-
-#define FP_H 0
-#define FP_H2 1
-#define FP_INV_CELL 2
-#define FP_MASS 3
-#define FP_POLY6 4      /* m * 315/(64 pi h^9) */
-#define FP_SPIKY 5      /* 45/(pi h^6): spiky gradient and viscosity Laplacian magnitude */
-#define FP_GPOLY6 6     /* m * 945/(32 pi h^9): colour-field normal */
-#define FP_KSTIFF 7
-#define FP_RHO0 8
-#define FP_KVISC 9
-#define FP_KBUO 10
-#define FP_UP 11        /* 11..13 */
-#define FP_WIND 14      /* 14..16 */
-#define FP_TAMB 17
-#define FP_TIGN 18
-#define FP_KRS 19
-#define FP_KCF 20
-#define FP_KPT 21
-#define FP_KH 22
-#define FP_KF 23
-#define FP_OMEGA 24
-#define FP_KCOOL 25
-#define FP_FEPS 26
-#define FP_DT 27
-#define FP_DIAM 28
-#define FP_VMAX 29
-#define FP_SYMMETRIC 30 /* 1: Mueller's symmetric pressure form (§9 #3) */
-#define FP_LITERAL 31   /* 1: diffusion as printed (§9 #4 literal mode) */
-#define FP_NBR_INS 32   /* insertion neighbour threshold (§9 #8) */
-#define FP_SEED 33
-#define FP_INV_CELLX 34 /* cells are h/K wide along x (K = FL_XCELLS), h along y and z */
-#define FP_WINDV 35     /* 35..37: wind_velocity */
-#define FP_DRAG 38      /* 1 - exp(-wind_drag dt) */
-#define FP_COUNT 39
-
-#define FL_GAS 0u
-#define FL_SOURCE 1u
-#define FL_OBSTACLE 2u
-#define FL_TYPE 3u
-#define FL_FLAME 4u
+ * Parameters live in one __constant float array; its indices FP_*, the particle flags FL_* and
+ * the error bits come from flame_layout.h, which the build prepends and flame.c includes. */
 
 #define FL_HP1 0x9E3779B1u
 #define FL_HP2 0x85EBCA77u
-
-#define FL_ERR_NAN 1
-#define FL_ERR_SPEED 2
 
 typedef __constant const float *prm_t;
 

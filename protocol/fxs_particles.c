@@ -37,6 +37,8 @@
 #define FXS_PT_AVX2 1
 #endif
 
+#include "fxs_bytes.h"
+
 #define FXS_PT_MAGIC "FXP2"
 #define FXS_PT_VERSION 2u
 #define FXS_PT_PROB_BITS 12
@@ -91,29 +93,7 @@ static int fxs_pt_fail(char *err, size_t errlen, const char *msg)
     return -1;
 }
 
-/* ---- little-endian helpers ---------------------------------------------------------- */
-
-static void fxs_pt_put32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++) p[i] = (uint8_t)(v >> (8 * i));
-}
-static uint32_t fxs_pt_get32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-static void fxs_pt_putf(uint8_t *p, float f)
-{
-    uint32_t v;
-    memcpy(&v, &f, 4);
-    fxs_pt_put32(p, v);
-}
-static float fxs_pt_getf(const uint8_t *p)
-{
-    uint32_t v = fxs_pt_get32(p);
-    float f;
-    memcpy(&f, &v, 4);
-    return f;
-}
+/* ---- zigzag ------------------------------------------------------------------------- */
 
 static inline uint32_t fxs_pt_zigzag(int32_t d) { return ((uint32_t)d << 1) ^ (uint32_t)(d >> 31); }
 static inline int32_t fxs_pt_unzigzag(uint32_t z) { return (int32_t)(z >> 1) ^ -(int32_t)(z & 1); }
@@ -277,7 +257,7 @@ static inline void fxs_pt_bits_put(struct fxs_pt_ew *w, uint32_t v, int nbits)
     w->acc |= (uint64_t)(v & (uint32_t)((1ull << nbits) - 1u)) << w->cnt;
     w->cnt += nbits;
     if (w->cnt >= 32) {
-        fxs_pt_put32(w->bp, (uint32_t)w->acc);
+        fxs_put_u32(w->bp, (uint32_t)w->acc);
         w->bp += 4;
         w->acc >>= 32;
         w->cnt -= 32;
@@ -294,8 +274,8 @@ static inline void fxs_pt_bits_put64(struct fxs_pt_ew *w, uint64_t v, int nbits)
 {
     w->acc |= (v & ((1ull << nbits) - 1u)) << w->cnt;
     w->cnt += nbits;
-    fxs_pt_put32(w->bp, (uint32_t)w->acc);
-    fxs_pt_put32(w->bp + 4, (uint32_t)(w->acc >> 32));
+    fxs_put_u32(w->bp, (uint32_t)w->acc);
+    fxs_put_u32(w->bp + 4, (uint32_t)(w->acc >> 32));
     w->bp += w->cnt >> 3;
     w->acc >>= w->cnt & ~7;
     w->cnt &= 7;
@@ -1019,22 +999,22 @@ static void fxs_pt_header(const struct fxs_pt_frame *f, uint8_t *out, uint32_t r
     out[7] = (uint8_t)f->fuel_bits;
     for (int a = 0; a < 3; a++) out[8 + a] = (uint8_t)f->abits[a];
     out[11] = (uint8_t)(f->mode | (f->vel ? FXS_PT_HAS_VEL : 0u));
-    fxs_pt_put32(out + 12, f->n);
+    fxs_put_u32(out + 12, f->n);
     for (int c = 0; c < 3; c++) {
-        fxs_pt_putf(out + 16 + 4 * c, f->lo[c]);
-        fxs_pt_putf(out + 28 + 4 * c, f->hi[c]);
+        fxs_put_f32(out + 16 + 4 * c, f->lo[c]);
+        fxs_put_f32(out + 28 + 4 * c, f->hi[c]);
     }
-    fxs_pt_putf(out + 40, f->lo[3]);
-    fxs_pt_putf(out + 44, f->hi[3]);
-    fxs_pt_putf(out + 48, f->lo[4]);
-    fxs_pt_putf(out + 52, f->hi[4]);
-    fxs_pt_put32(out + 56, rc_len);
-    fxs_pt_put32(out + 60, bits_len);
+    fxs_put_f32(out + 40, f->lo[3]);
+    fxs_put_f32(out + 44, f->hi[3]);
+    fxs_put_f32(out + 48, f->lo[4]);
+    fxs_put_f32(out + 52, f->hi[4]);
+    fxs_put_u32(out + 56, rc_len);
+    fxs_put_u32(out + 60, bits_len);
     if (f->vel) {
         uint8_t *vb = out + FXS_PARTICLES_HEADER_BYTES;
         memset(vb, 0, FXS_PARTICLES_VEL_BLOCK_BYTES);
         vb[0] = (uint8_t)f->vel_bits;
-        for (int a = 0; a < 3; a++) fxs_pt_putf(vb + 4 + 4 * a, f->vmax[a]);
+        for (int a = 0; a < 3; a++) fxs_put_f32(vb + 4 + 4 * a, f->vmax[a]);
     }
 }
 
@@ -1287,24 +1267,24 @@ static int fxs_pt_parse_header(const uint8_t *buf, size_t len, struct fxs_pt_fra
     for (int a = 0; a < 3; a++) f->abits[a] = buf[8 + a];
     f->mode = buf[11] & 0x0Fu;
     f->vel = (buf[11] & FXS_PT_HAS_VEL) != 0;
-    f->n = fxs_pt_get32(buf + 12);
+    f->n = fxs_get_u32(buf + 12);
     for (int c = 0; c < 3; c++) {
-        f->lo[c] = fxs_pt_getf(buf + 16 + 4 * c);
-        f->hi[c] = fxs_pt_getf(buf + 28 + 4 * c);
+        f->lo[c] = fxs_get_f32(buf + 16 + 4 * c);
+        f->hi[c] = fxs_get_f32(buf + 28 + 4 * c);
     }
-    f->lo[3] = fxs_pt_getf(buf + 40);
-    f->hi[3] = fxs_pt_getf(buf + 44);
-    f->lo[4] = fxs_pt_getf(buf + 48);
-    f->hi[4] = fxs_pt_getf(buf + 52);
-    *rl = fxs_pt_get32(buf + 56);
-    *bl = fxs_pt_get32(buf + 60);
+    f->lo[3] = fxs_get_f32(buf + 40);
+    f->hi[3] = fxs_get_f32(buf + 44);
+    f->lo[4] = fxs_get_f32(buf + 48);
+    f->hi[4] = fxs_get_f32(buf + 52);
+    *rl = fxs_get_u32(buf + 56);
+    *bl = fxs_get_u32(buf + 60);
     if ((buf[11] & ~FXS_PT_HAS_VEL) > 1) return -3;
     if (f->vel) {
         const uint8_t *vb = buf + FXS_PARTICLES_HEADER_BYTES;
         if (len < FXS_PARTICLES_HEADER_BYTES + FXS_PARTICLES_VEL_BLOCK_BYTES) return -1;
         if (vb[1] || vb[2] || vb[3]) return -4;
         f->vel_bits = vb[0];
-        for (int a = 0; a < 3; a++) f->vmax[a] = fxs_pt_getf(vb + 4 + 4 * a);
+        for (int a = 0; a < 3; a++) f->vmax[a] = fxs_get_f32(vb + 4 + 4 * a);
     }
     return 0;
 }

@@ -19,8 +19,8 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
+#include "../clock.h"
 #include "../ocl.h"
 #include "fxs_frame.h"
 #include "fxs_particles.h"
@@ -48,13 +48,6 @@
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
 #define FL_VMAX 200.0      /* |v| beyond this (m/s) is a runaway */
-
-/* Indices of the parameter array; must match kernels/flame.cl. */
-enum {
-    FP_H, FP_H2, FP_INV_CELL, FP_MASS, FP_POLY6, FP_SPIKY, FP_GPOLY6, FP_KSTIFF, FP_RHO0, FP_KVISC, FP_KBUO,
-    FP_UP, FP_WIND = FP_UP + 3, FP_TAMB = FP_WIND + 3, FP_TIGN, FP_KRS, FP_KCF, FP_KPT, FP_KH, FP_KF, FP_OMEGA,
-    FP_KCOOL, FP_FEPS, FP_DT, FP_DIAM, FP_VMAX, FP_SYMMETRIC, FP_LITERAL, FP_NBR_INS, FP_SEED, FP_INV_CELLX, FP_WINDV, FP_DRAG = FP_WINDV + 3, FP_COUNT
-};
 
 /* ---- parameters -------------------------------------------------------------------- */
 
@@ -252,13 +245,6 @@ struct flame {
 };
 
 static const size_t fl_sizes[8] = {16, 16, 4, 4, 8, 4, 16, 8}; /* bytes per particle of struct fl_set */
-
-static double fl_now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 static int fl_clfail(struct fx_err *err, const char *what, cl_int rc)
 {
@@ -652,10 +638,10 @@ static int fl_read_totals(struct flame *fl, cl_uint tot[3], cl_int *errflag, str
 
 static int fl_check(const struct flame *fl, cl_int errflag, struct fx_err *err)
 {
-    if (errflag & 1)
+    if (errflag & FL_ERR_NAN)
         return fx_fail(err, "internal", "", "flame: non-finite particle state (NaN/Inf) after step %llu",
                        (unsigned long long)fl->steps);
-    if (errflag & 2)
+    if (errflag & FL_ERR_SPEED)
         return fx_fail(err, "internal", "", "flame: runaway particle speed above %g m/s after step %llu", FL_VMAX,
                        (unsigned long long)fl->steps);
     return 0;
@@ -952,7 +938,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
 {
     int n = fl->n;
     if (fl_frame_buffers(fl, n)) return fx_fail(err, "internal", "", "out of memory for %d particles", n);
-    double t_read = fl_now_ms();
+    double t_read = clock_now() * 1e3;
     struct fl_set *S = &fl->st[fl->cur];
     void *dst[3] = {fl->h_pos, fl->h_vel, fl->h_flags};
     cl_int ef = 0, rc = CL_SUCCESS;
@@ -964,7 +950,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         return fl_clfail(err, "reading the frame", rc);
     }
     if (fl_read_totals(fl, NULL, &ef, err) || fl_check(fl, ef, err)) return -1;
-    double t0 = fl_now_ms();
+    double t0 = clock_now() * 1e3;
     float s = (float)fl->space_scale;
     for (int i = 0; i < n; i++) {
         for (int k = 0; k < 3; k++) fl->xyz[3 * i + k] = s * fl->h_pos[4 * i + k];
@@ -987,7 +973,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         .payload = payload,
         .payload_bytes = len,
     };
-    double t1 = fl_now_ms();
+    double t1 = clock_now() * 1e3;
     fr.encode_ms = t1 - t0;
     fl->emit_ms = t1 - t_read;
     int ret = emit(ctx, &fr);
@@ -1017,7 +1003,7 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
      * (resampling steps, which cost more than the others): deciding there, all or nothing per
      * 5-step interval, left a quarter of each frame's period idle (real-time factor 0.73
      * instead of about 0.9 on the default scene). A frame still stops once it is over budget. */
-    double t0 = fl_now_ms(), budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
+    double t0 = clock_now() * 1e3, budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
     int fit = fl->step_ms > 0 ? (int)(budget / fl->step_ms) : n;
     if (n > fit) {
         n = fit > 1 ? fit : 1;
@@ -1028,14 +1014,14 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         int synced = fl->steps % (uint64_t)fl->interval == 0;
         if (fl_step_once(fl, err)) return -1;
         done++;
-        if (synced && done < n && fl_now_ms() - t0 > budget) {
+        if (synced && done < n && clock_now() * 1e3 - t0 > budget) {
             fl->carry = 0;
             break;
         }
     }
     if (done > 0) {
         if (fl_finish(fl, err)) return -1;
-        double per = (fl_now_ms() - t0) / done;
+        double per = (clock_now() * 1e3 - t0) / done;
         fl->step_ms = fl->step_ms > 0 ? 0.7 * fl->step_ms + 0.3 * per : per;
     }
     return fl_emit_frame(fl, emit, ctx, err);

@@ -12,6 +12,7 @@
 #include <cjson/cJSON.h>
 
 #include "../effect.h"
+#include "flame_layout.h" /* kernels/: FP_* indices, FL_* flags */
 
 struct ocl;
 struct flame;
@@ -21,11 +22,11 @@ extern const struct param_def flame_params[]; /* {0}-terminated */
 
 /* Particle flags (bits of flame_particles.flags, and of the codec's flag byte). */
 enum flame_flag {
-    FLAME_GAS = 0u,        /* type in bits 0-1 */
-    FLAME_SOURCE = 1u,     /* burning solid: fixed, holds T_init/F_init (digest §2.13) */
-    FLAME_OBSTACLE = 2u,   /* non-burning solid moved kinematically (digest §9 #16) */
-    FLAME_TYPE_MASK = 3u,
-    FLAME_IS_FLAME = 1u << 2, /* T > T_ign and F > fuel_eps (digest §9 #12) */
+    FLAME_GAS = FL_GAS,            /* type in bits 0-1 */
+    FLAME_SOURCE = FL_SOURCE,      /* burning solid: fixed, holds T_init/F_init (digest §2.13) */
+    FLAME_OBSTACLE = FL_OBSTACLE,  /* non-burning solid moved kinematically (digest §9 #16) */
+    FLAME_TYPE_MASK = FL_TYPE,
+    FLAME_IS_FLAME = FL_FLAME,     /* T > T_ign and F > fuel_eps (digest §9 #12) */
 };
 
 /* Host copy of the particle state, structure of arrays, n particles. */
