@@ -123,9 +123,11 @@ class Client:
 
     @classmethod
     async def connect(cls, daemon, path="/v1/ws", timeout=10):
+        # No keepalive pings: every wait in the suites has its own bound, and the library's
+        # 20 s ping timeout dropped connections to a daemon busy building a kernel under valgrind.
         ws = await asyncio.wait_for(websockets.connect(
             "ws://127.0.0.1:%d%s" % (daemon.port, path), subprotocols=["fxstream.v1"],
-            max_size=64 << 20), timeout)
+            max_size=64 << 20, ping_interval=None), timeout)
         c = cls(ws)
         c.hello = await c.text(timeout)
         return c
