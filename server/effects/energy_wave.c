@@ -1,10 +1,11 @@
 /* energy_wave.c — effect `energy_wave` (seed 000, Watanabe 2016; spec: digest 000).
  *
- * Owns the parameter table, the host side of kernels/energy_wave.cl (packing sources
- * into fixed-size device buffers, the camera, the eq. (5.1) animation of the curve
- * weights), the colour map and the EXR frame. Everything per frame is small uploads
- * plus one kernel and one read-back; big buffers (device output, host image, RGBA,
- * EXR bytes) are allocated once per texture size and reused. */
+ * Owns the parameter table, the host side of kernels/energy_wave.cl (packing the sources
+ * wave_sources.c unpacked, and each frame's curve weights, into the device buffers of
+ * energy_wave_layout.h; the camera), the colour map, the EXR frame, and handing the same
+ * sources and weights to the light rig (light_rig.c). Everything per frame is small uploads
+ * plus one kernel and one read-back; big buffers (device output, host image, RGBA, EXR
+ * bytes) are allocated once per texture size and reused. */
 #include "energy_wave.h"
 
 #include <math.h>
@@ -12,9 +13,9 @@
 #include <string.h>
 
 #include "../buf.h"
+#include "../clock.h"
 #include "../codec/exr.h"
 #include "../ocl.h"
-#include "../clock.h"
 #include "../vec3.h"
 #include "energy_wave_layout.h" /* kernels/: record strides, camera block */
 #include "fxs_frame.h"
