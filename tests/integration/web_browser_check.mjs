@@ -558,7 +558,7 @@ try {
   const page2 = await ctx.newPage();
   await page2.setViewportSize({ width: 560, height: 420 });
   await page2.goto(url.replace("drawfps=1", "drawfps=0.5"), { timeout: 20000 });
-  await until(() => page2.evaluate(() => document.body.dataset.subscribed === 'energy,flame'), 30000);
+  await until(() => page2.evaluate(() => document.body.dataset.subscribed?.split(',').includes('energy')), 30000);
   await openFolder(page2, 'energy');
   await setNumber(page2, 'energy', 'beta', 2.5);
   const seen = await until(() => page.evaluate(() => {
