@@ -7,4 +7,4 @@ command -v node >/dev/null 2>&1 || summary_fail "node not found"
 [ -x /usr/bin/chromium ] || summary_fail "/usr/bin/chromium missing (deploy/install-deps.sh)"
 [ -f clients/web/dist/app.js ] || summary_fail "clients/web/dist/app.js missing (make web)"
 [ -d node_modules/playwright-core ] || summary_fail "node_modules missing (npm ci)"
-timeout 320 node tests/integration/web_browser_check.mjs
+timeout 440 node tests/integration/web_browser_check.mjs

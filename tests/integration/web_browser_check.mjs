@@ -37,8 +37,9 @@ async function until(fn, ms, step = 200) { // bounded polling; returns the last 
   while (Date.now() < end) { try { v = await fn(); if (v) return v; } catch { /* retry */ } await sleep(step); }
   return v;
 }
-// Bounded: about 100 s on an idle 2-core machine; the limit leaves room for a loaded one.
-const hardStop = setTimeout(() => { console.log('FAIL overall time limit (300 s)'); finish(1); }, 300000);
+// Bounded: about 210 s on an idle 2-core machine (SwiftShader renders every view); the limit
+// leaves room for a loaded one.
+const hardStop = setTimeout(() => { console.log('FAIL overall time limit (420 s)'); finish(1); }, 420000);
 
 const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
