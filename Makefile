@@ -9,7 +9,7 @@
 
 CC      ?= cc
 BUILD   := build
-PKGS    := libwebsockets libcjson OpenCL libzstd
+PKGS    := libwebsockets libcjson OpenCL libzstd hiredis
 EXRLIB  := $(filter -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null))
 # CFLAGS/LDFLAGS are the user's (e.g. make CFLAGS="-O1 -g -fsanitize=address"); what the
 # build needs regardless lives in FX_CFLAGS/FX_LDLIBS so a command line cannot drop it.

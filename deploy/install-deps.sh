@@ -3,12 +3,14 @@
 #
 # Idempotent and quick when everything is present (no apt-get update then). Runs apt-get
 # as root, or through sudo when available. With --check (or FXS_NO_INSTALL=1) it only names
-# what is missing and exits 1 if anything is.
+# what is missing and exits 1 if anything is. redis-server is for the cluster tests, which start
+# their own on a free loopback port (the package's system service is not used).
 set -eu
 
 PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo gnuplot-nox
 libwebsockets-dev libopenexr-dev openexr libcjson-dev libzstd-dev zstd draco nodejs python3 python3-websockets python3-numpy python3-jsonschema python3-prometheus-client
-chromium clang valgrind openssl nginx systemd strace python3-kubernetes"
+chromium clang valgrind openssl nginx systemd strace python3-kubernetes
+libhiredis-dev redis-server"
 
 missing=""
 for p in $PKGS; do
