@@ -28,6 +28,10 @@ void config_usage(FILE *out)
           "  --tls-cert FILE    PEM certificate (chain): serve only TLS (https://, wss://)\n"
           "  --tls-key FILE     PEM private key of --tls-cert\n"
           "  --log-level LEVEL  error, warn, info (default) or debug\n"
+          "  --cluster URL      cluster mode: streams and parameters live in Redis at\n"
+          "                     redis://HOST[:PORT][/DB], shared with the other daemons there\n"
+          "                     (password: environment FXS_REDIS_PASSWORD)\n"
+          "  --node-id NAME     this daemon's name in the cluster (default: the host name)\n"
           "  --help             this text\n"
           "\n"
           "Endpoints: GET /healthz (JSON), GET /metrics (Prometheus), WebSocket /v1/ws\n"
@@ -183,7 +187,7 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
         return 0;
     }
     static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "assets_dir",
-                                              "tls_cert", "tls_key", "log_level", NULL};
+                                              "tls_cert", "tls_key", "cluster", "node_id", "log_level", NULL};
     bool known = false;
     for (const char *const *n = string_keys; *n && !known; n++) known = !strcmp(*n, k);
     if (!known) return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
@@ -196,6 +200,8 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
     if (!strcmp(k, "assets_dir")) return config_str(cfg->assets_dir, sizeof cfg->assets_dir, v, k, err);
     if (!strcmp(k, "tls_cert")) return config_str(cfg->tls_cert, sizeof cfg->tls_cert, v, k, err);
     if (!strcmp(k, "tls_key")) return config_str(cfg->tls_key, sizeof cfg->tls_key, v, k, err);
+    if (!strcmp(k, "cluster")) return cluster_parse_url(v, &cfg->cluster, err);
+    if (!strcmp(k, "node_id")) return config_str(cfg->cluster.node_id, sizeof cfg->cluster.node_id, v, k, err);
     int lv = log_parse_level(v); /* the last string key: log_level */
     if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
     cfg->log_level = lv;
@@ -222,7 +228,7 @@ static int config_load_file(struct config *cfg, const char *path, struct fx_err 
 
 enum {
     OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP, OPT_ASSETS, OPT_CERT,
-    OPT_KEY
+    OPT_KEY, OPT_CLUSTER, OPT_NODE
 };
 
 static const struct option config_options[] = {
@@ -231,7 +237,8 @@ static const struct option config_options[] = {
     {"device", required_argument, NULL, OPT_DEVICE},   {"web-root", required_argument, NULL, OPT_WEB},
     {"log-level", required_argument, NULL, OPT_LOG},   {"help", no_argument, NULL, OPT_HELP},
     {"assets-dir", required_argument, NULL, OPT_ASSETS}, {"tls-cert", required_argument, NULL, OPT_CERT},
-    {"tls-key", required_argument, NULL, OPT_KEY},
+    {"tls-key", required_argument, NULL, OPT_KEY},     {"cluster", required_argument, NULL, OPT_CLUSTER},
+    {"node-id", required_argument, NULL, OPT_NODE},
     {NULL, 0, NULL, 0},
 };
 
@@ -249,6 +256,8 @@ static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_e
     case OPT_ASSETS: return config_str(cfg->assets_dir, sizeof cfg->assets_dir, arg, "--assets-dir", err);
     case OPT_CERT: return config_str(cfg->tls_cert, sizeof cfg->tls_cert, arg, "--tls-cert", err);
     case OPT_KEY: return config_str(cfg->tls_key, sizeof cfg->tls_key, arg, "--tls-key", err);
+    case OPT_CLUSTER: return cluster_parse_url(arg, &cfg->cluster, err);
+    case OPT_NODE: return config_str(cfg->cluster.node_id, sizeof cfg->cluster.node_id, arg, "--node-id", err);
     case OPT_LOG:
         if ((cfg->log_level = log_parse_level(arg)) < 0)
             return fx_fail(err, "bad_request", "log-level", "--log-level: expected error, warn, info or debug");
@@ -262,6 +271,27 @@ static bool config_is_loopback(const char *addr)
     struct in_addr a;
     if (!strcmp(addr, "localhost")) return true;
     return inet_pton(AF_INET, addr, &a) == 1 && (ntohl(a.s_addr) >> 24) == 127;
+}
+
+/* Cluster mode: the node id (default: the host name) and the password from the environment. */
+static int config_cluster(struct cluster_config *c, struct fx_err *err)
+{
+    if (!c->url[0]) {
+        if (c->node_id[0]) return fx_fail(err, "bad_request", "node-id", "--node-id needs --cluster");
+        return 0;
+    }
+    bool named = c->node_id[0];
+    if (!named && gethostname(c->node_id, sizeof c->node_id - 1))
+        return fx_fail(err, "bad_request", "node-id", "cannot read the host name for the node id: set --node-id");
+    if (!hub_valid_name(c->node_id))
+        return fx_fail(err, "bad_request", "node-id", "node id \"%.63s\"%s must be 1-%d characters of A-Z a-z 0-9 _ . -%s",
+                       c->node_id, named ? "" : " (the host name)", STREAM_NAME_MAX - 1, named ? "" : ": set --node-id");
+    const char *pw = getenv("FXS_REDIS_PASSWORD");
+    if (pw && strlen(pw) >= sizeof c->password)
+        return fx_fail(err, "bad_request", "FXS_REDIS_PASSWORD", "FXS_REDIS_PASSWORD is too long (at most %zu bytes)",
+                       sizeof c->password - 1);
+    snprintf(c->password, sizeof c->password, "%s", pw ? pw : "");
+    return 0;
 }
 
 /* Rules across keys, and files that must exist. */
@@ -314,7 +344,7 @@ enum config_result config_parse(int argc, char **argv, struct config *cfg, struc
         if (config_flag(cfg, opt, optarg, err)) return CONFIG_ERROR;
     const char *env = getenv("FXSTREAMD_TOKENS");
     if (env && access_add_env(&cfg->access, env, err)) return CONFIG_ERROR;
-    return config_check(cfg, err) ? CONFIG_ERROR : CONFIG_OK;
+    return config_cluster(&cfg->cluster, err) || config_check(cfg, err) ? CONFIG_ERROR : CONFIG_OK;
 }
 
 void config_free(struct config *cfg)

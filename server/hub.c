@@ -152,16 +152,15 @@ void stream_unref(struct stream *s)
     free(s);
 }
 
-uint64_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc)
+void hub_set_params(struct hub *hub, struct stream *s, cJSON *doc, uint64_t rev)
 {
     pthread_mutex_lock(&hub->mu);
     cJSON_Delete(s->params);
     s->params = doc;
     s->fps = params_num(doc, "fps");
-    uint64_t rev = ++s->rev;
+    s->rev = rev;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
-    return rev;
 }
 
 cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev)

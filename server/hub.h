@@ -37,7 +37,7 @@ struct stream {
     /* Guarded by hub.mu; read outside hub.c through hub_status. */
     cJSON *params;    /* complete, validated */
     double fps;       /* params' "fps", read once per change (the engine's tick needs it) */
-    uint64_t rev;     /* +1 per accepted change, starts at 1; below HUB_REV_MAX */
+    uint64_t rev;     /* +1 per accepted change, starts at 1; below HUB_REV_MAX (cluster mode: Redis's) */
     uint64_t reset_gen;
     bool destroyed;
     int subscribers;
@@ -106,8 +106,9 @@ void hub_set_realtime(struct hub *hub, struct stream *s, double factor);
 /* The hub's change generation, and whether it is stopping. */
 uint64_t hub_generation(struct hub *hub, bool *stopping);
 
-/* Replaces the parameters (takes ownership of doc); returns the new revision. */
-uint64_t hub_set_params(struct hub *hub, struct stream *s, cJSON *doc);
+/* Replaces the parameters (takes ownership of doc) and the revision (the change's: the stored
+ * one, store.h; in cluster mode Redis's, which may jump, or go back when Redis's state wins). */
+void hub_set_params(struct hub *hub, struct stream *s, cJSON *doc, uint64_t rev);
 /* A copy of the parameters and their revision. */
 cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev);
 void hub_request_reset(struct hub *hub, struct stream *s);

@@ -17,6 +17,7 @@
 #include "log.h"
 #include "net.h"
 #include "ocl.h"
+#include "replica.h"
 #include "store.h"
 
 /* The embedded default: one stream per implemented effect, so `make run` shows something. */
@@ -102,6 +103,17 @@ static int main_prepare_state_dir(const char *dir, struct fx_err *err)
     return 0;
 }
 
+/* Cluster mode: follows Redis, seeds it with the streams just made if it was never seeded,
+ * and takes its state (replica.h), before anything is served or computed. */
+static int main_join_cluster(struct server *srv, struct fx_err *err)
+{
+    if (cluster_open(&srv->cluster, &srv->cfg.cluster, err) ||
+        cluster_follow(srv->cluster, net_notify, main_net, err) || replica_poll(srv, err))
+        return -1;
+    log_info("cluster: node %s on %s", srv->cfg.cluster.node_id, srv->cfg.cluster.url);
+    return 0;
+}
+
 static void main_signals(void)
 {
     struct sigaction sa;
@@ -122,6 +134,7 @@ static int main_serve(struct server *srv, struct fx_err *err)
     int rc = presets_load(&srv->presets, srv->cfg.state_dir, err);
     if (!rc) rc = main_create_streams(srv, err);
     if (!rc) rc = net_open(&main_net, srv, err);
+    if (!rc && srv->cfg.cluster.url[0]) rc = main_join_cluster(srv, err);
     if (!rc) rc = engine_start(&srv->engine, &srv->hub, srv->ocl, srv->cfg.pause_idle, err);
     if (!rc) {
         int port = net_port(main_net);
@@ -137,6 +150,8 @@ static int main_serve(struct server *srv, struct fx_err *err)
         log_info("stopped serving");
     }
     engine_stop(&srv->engine);
+    cluster_close(srv->cluster); /* its follower wakes the network loop: stopped first */
+    srv->cluster = NULL;
     net_close(main_net);
     main_net = NULL;
     hub_free(&srv->hub);

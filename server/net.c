@@ -30,6 +30,7 @@
 #include "log.h"
 #include "metrics.h"
 #include "net.h"
+#include "replica.h"
 #include "session.h"
 #include "store.h"
 
@@ -472,13 +473,15 @@ static void net_check_stall(struct net *net, struct session *ss, double now)
     lws_set_timeout(net_conn_of(ss)->wsi, PENDING_TIMEOUT_USER_OK, LWS_TO_KILL_ASYNC);
 }
 
-/* The engine published frames or errors, or a stop was requested. */
+/* The engine published frames or errors, the cluster's follower queued changes, or a stop
+ * was requested. */
 static void net_on_wake(struct net *net)
 {
     if (net->stop_requested && !net->stopping) {
         net->stopping = true;
         log_info("shutting down: closing %d connections", net->srv->nsessions);
     }
+    replica_poll(net->srv, &(struct fx_err){0}); /* a failed reload is logged and retried */
     double now = clock_now();
     for (struct session *ss = net->srv->sessions; ss; ss = ss->next) {
         net_check_stall(net, ss, now);
@@ -516,7 +519,8 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
     case LWS_CALLBACK_ESTABLISHED:
         net_pending_drop(net, wsi);
         return net_established(net, ss, wsi);
-    case LWS_CALLBACK_RECEIVE:
+    case LWS_CALLBACK_RECEIVE: /* other daemons' changes first: the request is checked against them */
+        replica_poll(net->srv, &(struct fx_err){0});
         session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
         break;
     case LWS_CALLBACK_SERVER_WRITEABLE:
@@ -545,7 +549,7 @@ static void net_lws_log(int level, const char *line)
     log_msg(level == LLL_ERR ? LOG_ERROR : LOG_WARN, "lws: %.*s", (int)n, line);
 }
 
-static void net_notify(void *ctx)
+void net_notify(void *ctx)
 {
     struct net *net = ctx;
     lws_cancel_service(net->ctx);

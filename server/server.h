@@ -11,6 +11,7 @@
 #include <stdint.h>
 
 #include "access.h"
+#include "cluster.h"
 #include "engine.h"
 #include "hub.h"
 #include "presets.h"
@@ -44,6 +45,7 @@ struct config {
     char tls_cert[PATH_MAX]; /* PEM files; both set: the daemon speaks only TLS (https, wss) */
     char tls_key[PATH_MAX];
     struct cJSON *streams; /* streams to create at start ([{effect, stream, params}]), NULL = built-in */
+    struct cluster_config cluster; /* --cluster, --node-id (cluster.h); url "" = single node */
 };
 
 struct counters {
@@ -52,6 +54,10 @@ struct counters {
     atomic_uint_fast64_t state_writes;   /* streams.json writes tried (one per accepted change, store.h) */
     atomic_uint_fast64_t state_write_failures; /* state writes the disk refused (streams.json, presets.json) */
     atomic_uint_fast64_t handshakes_evicted; /* pending connections dropped for newer ones (net.c) */
+    /* Cluster mode (store.c, replica.c): changes this daemon made in Redis, and those refused
+     * there (unavailable, or Redis's state said no); sets re-made on a newer document; other
+     * daemons' changes applied here; reloads of the whole state from Redis. */
+    atomic_uint_fast64_t cluster_changes, cluster_failures, cluster_rebases, cluster_applied, cluster_reloads;
 };
 
 struct session;
@@ -63,11 +69,13 @@ struct server {
     struct presets presets;   /* network thread only (presets.h) */
     struct engine engine;
     struct ocl *ocl;
+    struct cluster *cluster;  /* cluster mode's Redis link (cluster.h), NULL on a single node */
     struct counters counters;
     struct session *sessions; /* network thread only */
     int nsessions;
     int quarantined;          /* stored streams moved to streams.quarantine.json at start */
     char state_error[320];    /* network thread only: why the last state write failed, "" once one succeeds */
+    double cluster_retry_at;  /* network thread only (replica.c): no reload from Redis before this */
     double start_time;        /* CLOCK_MONOTONIC seconds */
     /* Called by the session layer when a session has output queued (net.c asks the
      * socket for a writable callback). */

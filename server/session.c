@@ -269,14 +269,31 @@ static int session_op_describe(struct session *ss, const cJSON *req, const cJSON
     return 0;
 }
 
-/* Sends a copy of the reply r, without its id, as an event to every connection but ss that may
- * list streams, so their stream lists follow creates and destroys made elsewhere (PROTOCOL.md §4). */
-static void session_announce(struct session *ss, const cJSON *r)
+/* Sends a copy of the reply r, without its id, as an event to every connection but `except`
+ * that may list streams, so their stream lists follow creates and destroys made elsewhere
+ * (PROTOCOL.md §4). */
+static void session_announce(struct server *srv, const struct session *except, const cJSON *r)
 {
     cJSON *ev = cJSON_Duplicate(r, 1);
     cJSON_DeleteItemFromObjectCaseSensitive(ev, "id");
-    for (struct session *o = ss->srv->sessions; o; o = o->next)
-        if (o != ss && o->role >= ACCESS_VIEW) session_send(o, cJSON_Duplicate(ev, 1));
+    for (struct session *o = srv->sessions; o; o = o->next)
+        if (o != except && o->role >= ACCESS_VIEW) session_send(o, cJSON_Duplicate(ev, 1));
+    cJSON_Delete(ev);
+}
+
+static cJSON *session_created_msg(const struct stream *s, const cJSON *id, uint64_t rev)
+{
+    cJSON *r = session_reply("created", id);
+    cJSON_AddStringToObject(r, "stream", s->name);
+    cJSON_AddStringToObject(r, "effect", s->effect->name);
+    cJSON_AddNumberToObject(r, "rev", (double)rev);
+    return r;
+}
+
+void session_event_created(struct server *srv, const struct session *except, const struct stream *s, uint64_t rev)
+{
+    cJSON *ev = session_created_msg(s, NULL, rev);
+    session_announce(srv, except, ev);
     cJSON_Delete(ev);
 }
 
@@ -289,45 +306,28 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
     if (!name) return -1;
     cJSON *doc = effect_params(ops, NULL, cJSON_GetObjectItemCaseSensitive(req, "params"), err);
     if (!doc) return -1;
+    cJSON *stored = cJSON_Duplicate(doc, 1); /* doc goes to the hub */
     if (hub_create(&ss->srv->hub, ops, name, doc, 1, err)) {
         cJSON_Delete(doc);
+        cJSON_Delete(stored);
         return -1;
     }
-    if (store_commit(ss->srv, NULL, err)) { /* not yet announced nor subscribed: undone cleanly */
-        stream_unref(hub_destroy(&ss->srv->hub, name, &(struct fx_err){0}));
+    int rc = store_commit(ss->srv, &(struct store_change){.op = STORE_CREATE, .stream = name, .effect = ops->name,
+                                                          .params = stored}, err);
+    cJSON_Delete(stored);
+    struct stream *s = rc ? hub_destroy(&ss->srv->hub, name, &(struct fx_err){0}) : hub_find(&ss->srv->hub, name);
+    if (rc) { /* not yet announced nor subscribed: undone cleanly */
+        stream_unref(s);
         return -1;
     }
     log_info("stream %s created (effect %s)", name, ops->name);
-    cJSON *r = session_reply("created", id);
-    cJSON_AddStringToObject(r, "stream", name);
-    cJSON_AddStringToObject(r, "effect", ops->name);
-    cJSON_AddNumberToObject(r, "rev", 1);
-    session_announce(ss, r);
-    session_send(ss, r);
+    session_event_created(ss->srv, ss, s, 1);
+    session_send(ss, session_created_msg(s, id, 1));
+    stream_unref(s);
     return 0;
 }
 
-static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
-{
-    static const char *const allowed[] = {"stream", NULL};
-    if (session_only(req, "destroy", allowed, err)) return -1;
-    struct stream *s = session_stream(ss, req, err);
-    if (!s) return -1;
-    int rc = store_commit(ss->srv, &(struct store_change){.stream = s->name}, err);
-    stream_unref(s);
-    const char *name = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring;
-    if (rc || !(s = hub_destroy(&ss->srv->hub, name, err))) return -1;
-    session_stream_gone(ss->srv, s);
-    stream_unref(s);
-    log_info("stream %s destroyed", name);
-    cJSON *r = session_reply("destroyed", id);
-    cJSON_AddStringToObject(r, "stream", name);
-    session_announce(ss, r);
-    session_send(ss, r);
-    return 0;
-}
-
-void session_stream_gone(struct server *srv, struct stream *s)
+static void session_stream_gone(struct server *srv, struct stream *s)
 {
     for (struct session *o = srv->sessions; o; o = o->next) {
         int i = session_find_sub(o, s);
@@ -338,6 +338,34 @@ void session_stream_gone(struct server *srv, struct stream *s)
         cJSON_AddStringToObject(ev, "reason", "destroyed");
         session_send(o, ev);
     }
+}
+
+void session_event_destroyed(struct server *srv, const struct session *except, struct stream *s)
+{
+    session_stream_gone(srv, s);
+    cJSON *ev = session_reply("destroyed", NULL);
+    cJSON_AddStringToObject(ev, "stream", s->name);
+    session_announce(srv, except, ev);
+    cJSON_Delete(ev);
+}
+
+static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
+{
+    static const char *const allowed[] = {"stream", NULL};
+    if (session_only(req, "destroy", allowed, err)) return -1;
+    struct stream *s = session_stream(ss, req, err);
+    if (!s) return -1;
+    int rc = store_commit(ss->srv, &(struct store_change){.op = STORE_DESTROY, .stream = s->name}, err);
+    stream_unref(s);
+    const char *name = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring;
+    if (rc || !(s = hub_destroy(&ss->srv->hub, name, err))) return -1;
+    session_event_destroyed(ss->srv, ss, s);
+    stream_unref(s);
+    log_info("stream %s destroyed", name);
+    cJSON *r = session_reply("destroyed", id);
+    cJSON_AddStringToObject(r, "stream", name);
+    session_send(ss, r);
+    return 0;
 }
 
 static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
@@ -427,21 +455,48 @@ static int session_rev_ok(const struct stream *s, uint64_t rev, struct fx_err *e
     return fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
 }
 
-/* Installs an accepted complete document at revision rev + 1: stored first (store.h), then
- * applied, broadcast to the stream's other subscribers and sent to the requester (PROTOCOL.md
- * §3.8). Takes doc; -1 with err (unavailable) when it could not be stored. */
-static int session_accept_params(struct session *ss, struct stream *s, uint64_t rev, const cJSON *id, cJSON *doc,
-                                 struct fx_err *err)
+void session_event_params(struct server *srv, const struct session *except, struct stream *s, uint64_t rev,
+                          const cJSON *doc)
 {
-    if (store_commit(ss->srv, &(struct store_change){s->name, s->effect->name, rev + 1, doc}, err)) {
+    for (struct session *o = srv->sessions; o; o = o->next)
+        if (o != except && session_find_sub(o, s) >= 0)
+            session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));
+}
+
+/* A set's partial document, made again on another document (store.h: rebase). */
+struct session_partial {
+    const struct effect_ops *effect;
+    const cJSON *partial;
+};
+
+static cJSON *session_rebase(const void *ctx, const cJSON *current, struct fx_err *err)
+{
+    const struct session_partial *p = ctx;
+    return effect_params(p->effect, current, p->partial, err);
+}
+
+/* Installs an accepted complete document, validated at revision rev: stored first (store.h),
+ * then applied at the stored revision (rev + 1, or later when it was re-made on a newer
+ * document: partial, NULL for a whole document), broadcast to the stream's other subscribers
+ * and sent to the requester (PROTOCOL.md §3.8). Takes doc; -1 with err when it could not be
+ * stored. */
+static int session_accept_params(struct session *ss, struct stream *s, uint64_t rev, const cJSON *id, cJSON *doc,
+                                 const cJSON *partial, struct fx_err *err)
+{
+    struct session_partial p = {s->effect, partial};
+    struct store_change c = {.op = STORE_SET, .stream = s->name, .effect = s->effect->name, .params = doc,
+                             .rev = rev, .rebase = partial ? session_rebase : NULL, .rebase_ctx = &p};
+    if (store_commit(ss->srv, &c, err)) {
         cJSON_Delete(doc);
         return -1;
     }
-    rev = hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1));
-    for (struct session *o = ss->srv->sessions; o; o = o->next)
-        if (o != ss && session_find_sub(o, s) >= 0)
-            session_send(o, session_params_msg(s, NULL, rev, cJSON_Duplicate(doc, 1)));
-    session_send(ss, session_params_msg(s, id, rev, doc));
+    if (c.rebased) {
+        cJSON_Delete(doc);
+        doc = c.rebased;
+    }
+    hub_set_params(&ss->srv->hub, s, cJSON_Duplicate(doc, 1), c.rev);
+    session_event_params(ss->srv, ss, s, c.rev, doc);
+    session_send(ss, session_params_msg(s, id, c.rev, doc));
     return 0;
 }
 
@@ -457,7 +512,7 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
     cJSON *doc = session_rev_ok(s, rev, err) ? NULL : effect_params(s->effect, cur, partial, err);
     cJSON_Delete(cur);
-    int rc = doc ? session_accept_params(ss, s, rev, id, doc, err) : -1;
+    int rc = doc ? session_accept_params(ss, s, rev, id, doc, partial, err) : -1;
     stream_unref(s);
     return rc;
 }
@@ -468,6 +523,10 @@ static int session_op_reset(struct session *ss, const cJSON *req, const cJSON *i
     if (session_only(req, "reset", allowed, err)) return -1;
     struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
+    if (store_commit(ss->srv, &(struct store_change){.op = STORE_RESET, .stream = s->name}, err)) {
+        stream_unref(s);
+        return -1;
+    }
     hub_request_reset(&ss->srv->hub, s);
     cJSON *r = session_reply("reset", id);
     cJSON_AddStringToObject(r, "stream", s->name);
@@ -518,7 +577,7 @@ static int session_op_preset_save(struct session *ss, const cJSON *req, const cJ
         cJSON_AddStringToObject(r, "effect", s->effect->name);
         cJSON_AddStringToObject(r, "name", name);
         cJSON_AddBoolToObject(r, "replaced", replaced);
-        session_announce(ss, r);
+        session_announce(ss->srv, ss, r);
         session_send(ss, r);
     }
     stream_unref(s);
@@ -537,7 +596,7 @@ static int session_op_preset_load(struct session *ss, const cJSON *req, const cJ
     cJSON *preset = session_rev_ok(s, rev, err) ? NULL : presets_params(&ss->srv->presets, s->effect, name, err);
     cJSON *doc = preset ? effect_params(s->effect, NULL, preset, err) : NULL;
     cJSON_Delete(preset);
-    int rc = doc ? session_accept_params(ss, s, rev, id, doc, err) : -1;
+    int rc = doc ? session_accept_params(ss, s, rev, id, doc, NULL, err) : -1;
     stream_unref(s);
     return rc;
 }
@@ -556,7 +615,7 @@ static int session_op_preset_delete(struct session *ss, const cJSON *req, const 
     cJSON *r = session_reply("preset_deleted", id);
     cJSON_AddStringToObject(r, "effect", ops->name);
     cJSON_AddStringToObject(r, "name", name);
-    session_announce(ss, r);
+    session_announce(ss->srv, ss, r);
     session_send(ss, r);
     return 0;
 }

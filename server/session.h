@@ -66,8 +66,15 @@ void session_handle(struct session *ss, const char *text, size_t len);
 void session_send(struct session *ss, cJSON *msg);
 /* Pops the next queued text message (caller frees), or NULL. */
 struct outmsg *session_pop(struct session *ss);
-/* Drops subscriptions to a destroyed stream in every session, telling each subscriber. */
-void session_stream_gone(struct server *srv, struct stream *s);
+/* The events of a change to a stream, sent to every connection but `except` (NULL: to all)
+ * exactly as for a change made on one of them (PROTOCOL.md §4): `created` and `destroyed` to
+ * each connection that may list streams (destroyed first drops the stream's subscriptions,
+ * telling each subscriber: `unsubscribed`), `params` to the stream's subscribers. The
+ * replica (cluster mode) sends other daemons' changes through them. */
+void session_event_created(struct server *srv, const struct session *except, const struct stream *s, uint64_t rev);
+void session_event_destroyed(struct server *srv, const struct session *except, struct stream *s);
+void session_event_params(struct server *srv, const struct session *except, struct stream *s, uint64_t rev,
+                          const cJSON *doc);
 /* Queues error events for stream errors published since the last call. */
 void session_poll_errors(struct session *ss);
 

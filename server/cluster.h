@@ -1,0 +1,125 @@
+/* cluster.h — the Redis link of cluster mode (--cluster redis://HOST[:PORT][/DB]).
+ *
+ * Redis is then the system of record of the stream definitions, in the configured database:
+ *   fxs:stream:NAME   hash {effect, rev, params (the complete document as JSON text)}
+ *   fxs:streams       sorted set of the names, scored by their creation's change number
+ *   fxs:seq           the change counter: +1 per change, whichever daemon made it
+ *   fxs:seeded        set once, by the daemon that first filled an empty database
+ * and the channel fxs:events:DB (pub/sub is server-wide, hence the database in its name)
+ * carries one message per change, "SEQ JSON": the change's number, then {op, node, stream,
+ * effect, rev, params} (op created, params, destroyed or reset; destroyed and reset carry
+ * only the stream). Each change is one Lua script that checks (the stream exists or not, its
+ * effect and rev are those the change was validated against), writes, counts and publishes,
+ * so Redis holds every change or none, and the messages come in the changes' order.
+ *
+ * Threads. Everything here runs on the network thread except the follower: a thread with
+ * its own connection SUBSCRIBEd to the channel, which queues each message as it comes, a
+ * LINK_UP item after each (re)subscription and a LINK_DOWN item when the link is lost
+ * (then it reconnects with backoff), and wakes the network thread through the callback given
+ * to cluster_follow. The queue, the link state and the last error are guarded by a mutex
+ * inside cluster.c; the command connection, the scripts' hashes and the change number the
+ * local copy has reached belong to the network thread. The follower never touches the hub.
+ *
+ * The local copy (replica.c applies what is queued) follows Redis exactly while `in sync`:
+ * it has applied every change up to `seq`. A write of this daemon, or a message, numbered
+ * seq + 1 keeps it in sync; anything else (a gap, a reconnection, a write whose answer was
+ * lost) marks it stale, and replica.c reloads the whole state from Redis (Redis wins). */
+#ifndef FX_CLUSTER_H
+#define FX_CLUSTER_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include <cjson/cJSON.h>
+
+#include "err.h"
+
+struct cluster_config {
+    char url[256];  /* as given, for messages ("" = single node); it never holds a password */
+    char host[256];
+    int port, db;
+    char node_id[64];   /* in every message this daemon publishes; default: the host name */
+    char password[512]; /* FXS_REDIS_PASSWORD; never logged nor reported */
+};
+
+/* Parses redis://HOST[:PORT][/DB] (port 6379 and database 0 by default; HOST a name, an
+ * IPv4 address or [IPv6]) into cfg's url, host, port and db. */
+int cluster_parse_url(const char *url, struct cluster_config *cfg, struct fx_err *err);
+
+struct cluster;
+
+/* Allocates the link (no connection yet). */
+int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct fx_err *err);
+/* Starts the follower and waits for its first subscription: -1 with err (unavailable,
+ * naming the URL and the reason) when Redis cannot be reached or refuses it. wake(ctx) is
+ * called from the follower whenever it queued something. */
+int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void *ctx, struct fx_err *err);
+/* Stops the follower (within the connect timeout) and frees everything; NULL is a no-op. */
+void cluster_close(struct cluster *cl);
+
+enum cluster_item_kind { CLUSTER_EVENT, CLUSTER_LINK_UP, CLUSTER_LINK_DOWN };
+struct cluster_item {
+    struct cluster_item *next;
+    enum cluster_item_kind kind;
+    uint64_t seq; /* EVENT: the change's number */
+    cJSON *doc;   /* EVENT: the message's JSON, NULL when it could not be read */
+};
+/* The oldest queued item (the caller frees it with cluster_item_free), or NULL. A LINK_DOWN
+ * or LINK_UP marks the local copy stale. */
+struct cluster_item *cluster_next(struct cluster *cl);
+void cluster_item_free(struct cluster_item *it);
+
+/* What the local copy does with a change numbered seq (a message, or a write of this daemon
+ * that the caller applies): */
+enum cluster_fit {
+    CLUSTER_APPLY, /* the next change: apply it; the copy stays in sync at seq */
+    CLUSTER_SKIP,  /* already in the copy, or the copy is stale (a reload will bring it) */
+    CLUSTER_GAP,   /* changes were missed: the copy is now stale */
+};
+enum cluster_fit cluster_fit(struct cluster *cl, uint64_t seq);
+bool cluster_in_sync(const struct cluster *cl);
+/* Whether the follower is subscribed (any thread). */
+bool cluster_link_up(struct cluster *cl);
+/* Marks the copy stale (an event that does not fit what it holds). */
+void cluster_stale(struct cluster *cl);
+
+/* Seeds an empty, never seeded database with `streams` ([{stream, effect, rev, params}]),
+ * atomically and at most once per database (fxs:seeded); *seeded tells whether this call did. */
+int cluster_seed(struct cluster *cl, const cJSON *streams, bool *seeded, struct fx_err *err);
+/* The whole state, atomically: [{stream, effect, rev, params}] in creation order, and the
+ * number of the last change it includes. The copy is in sync at that number once the caller
+ * has applied it (cluster_loaded). */
+int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_err *err);
+void cluster_loaded(struct cluster *cl, uint64_t seq);
+
+/* The changes. Each fails with unavailable (the link is down, or Redis did not answer or
+ * refused: the message names the URL; when the answer to a sent change was lost the message
+ * says the outcome is unknown, and the copy is reloaded), or with what Redis's state says:
+ * exists and limit (create, limit = max_streams), unknown_stream (set, destroy, reset: no
+ * longer in Redis). */
+int cluster_create(struct cluster *cl, const char *stream, const char *effect, const cJSON *params, int max_streams,
+                   struct fx_err *err);
+/* The document as Redis holds it when a set finds that the stream moved on. */
+struct cluster_current {
+    char effect[64];
+    uint64_t rev;
+    cJSON *params; /* the caller's to delete */
+};
+/* Stores params at rev base + 1 if the stream is still at `base` with this effect: 0; 1 when
+ * it is not (cur filled: the caller re-makes the change on it, or gives up); -1 with err. */
+int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint64_t base, const cJSON *params,
+                struct cluster_current *cur, struct fx_err *err);
+int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err);
+/* Tells every daemon to restart the stream's simulation (no state changes). */
+int cluster_reset(struct cluster *cl, const char *stream, struct fx_err *err);
+
+/* For /healthz and /metrics (network thread). */
+struct cluster_status {
+    const char *node, *url;
+    bool link_up, in_sync;
+    uint64_t seq;          /* the change the local copy has reached */
+    uint64_t link_losses;  /* times the follower lost its subscription */
+    char last_error[320];  /* the latest failure to reach Redis or of a change sent to it ("" if none) */
+};
+void cluster_status(struct cluster *cl, struct cluster_status *out);
+
+#endif
