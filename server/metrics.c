@@ -7,6 +7,7 @@
 #include <time.h>
 
 #include "clock.h"
+#include "cluster.h"
 #include "metrics.h"
 #include "ocl.h"
 #include "session.h"
@@ -115,6 +116,45 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_printf(out, "fxs_bytes_sent_total %llu\n", (unsigned long long)atomic_load(&c->bytes_sent));
     metrics_head(out, "fxs_streams", "gauge", "Streams defined.");
     metrics_printf(out, "fxs_streams %d\n", nstreams);
+}
+
+/* Cluster mode only: the Redis link and the changes that went through it. */
+static void metrics_cluster(struct server *srv, struct fx_buf *out)
+{
+    if (!srv->cluster) return;
+    const struct counters *c = &srv->counters;
+    struct cluster_status st;
+    cluster_status(srv->cluster, &st);
+    metrics_head(out, "fxs_cluster_link_up", "gauge",
+                 "1 while this daemon is subscribed to the cluster's Redis (changes are refused with unavailable otherwise).");
+    metrics_printf(out, "fxs_cluster_link_up{node=\"%s\"} %d\n", st.node, st.link_up);
+    metrics_head(out, "fxs_cluster_in_sync", "gauge",
+                 "1 while the local copy of the streams has every change of Redis's counter up to fxs_cluster_change.");
+    metrics_printf(out, "fxs_cluster_in_sync %d\n", st.in_sync);
+    metrics_head(out, "fxs_cluster_change", "gauge", "The number of the last Redis change the local copy has applied.");
+    metrics_printf(out, "fxs_cluster_change %llu\n", (unsigned long long)st.seq);
+    metrics_head(out, "fxs_cluster_link_losses_total", "counter", "Times the subscription to Redis was lost.");
+    metrics_printf(out, "fxs_cluster_link_losses_total %llu\n", (unsigned long long)st.link_losses);
+    static const struct {
+        const char *name, *help;
+        size_t off;
+    } k[] = {
+        {"fxs_cluster_changes_total", "Creates, destroys, sets and resets this daemon made in Redis.",
+         offsetof(struct counters, cluster_changes)},
+        {"fxs_cluster_change_failures_total", "Changes Redis did not take (unreachable, or its state said no); none applied.",
+         offsetof(struct counters, cluster_failures)},
+        {"fxs_cluster_rebases_total", "Sets made again on a newer document another daemon had stored first.",
+         offsetof(struct counters, cluster_rebases)},
+        {"fxs_cluster_applied_total", "Other daemons' changes applied to the local copy.",
+         offsetof(struct counters, cluster_applied)},
+        {"fxs_cluster_reloads_total", "Reloads of the whole state from Redis (start, reconnection, missed change).",
+         offsetof(struct counters, cluster_reloads)},
+    };
+    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        metrics_head(out, k[i].name, "counter", k[i].help);
+        metrics_printf(out, "%s %llu\n", k[i].name,
+                       (unsigned long long)atomic_load((const atomic_uint_fast64_t *)((const char *)c + k[i].off)));
+    }
 }
 
 static void metrics_kernels(struct server *srv, struct fx_buf *out)
@@ -227,8 +267,23 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     free(rows);
     hub_release_all(all, n);
     metrics_queues(srv, out);
+    metrics_cluster(srv, out);
     metrics_kernels(srv, out);
     return 0;
+}
+
+/* Cluster mode: {node, redis, link, in_sync, change[, last_error]}. */
+static void metrics_health_cluster(struct server *srv, cJSON *h)
+{
+    struct cluster_status st;
+    cluster_status(srv->cluster, &st);
+    cJSON *o = cJSON_AddObjectToObject(h, "cluster");
+    cJSON_AddStringToObject(o, "node", st.node);
+    cJSON_AddStringToObject(o, "redis", st.url);
+    cJSON_AddStringToObject(o, "link", st.link_up ? "up" : "down");
+    cJSON_AddBoolToObject(o, "in_sync", st.in_sync);
+    cJSON_AddNumberToObject(o, "change", (double)st.seq);
+    if (st.last_error[0]) cJSON_AddStringToObject(o, "last_error", st.last_error);
 }
 
 int metrics_health(struct server *srv, struct fx_buf *out)
@@ -236,7 +291,8 @@ int metrics_health(struct server *srv, struct fx_buf *out)
     int n;
     struct stream **all = hub_snapshot(&srv->hub, &n);
     cJSON *h = cJSON_CreateObject();
-    cJSON_AddStringToObject(h, "status", srv->state_error[0] ? "degraded" : "ok");
+    bool linked = !srv->cluster || cluster_link_up(srv->cluster);
+    cJSON_AddStringToObject(h, "status", srv->state_error[0] || !linked ? "degraded" : "ok");
     cJSON_AddStringToObject(h, "version", FX_VERSION);
     cJSON_AddNumberToObject(h, "uptime_s", metrics_uptime(srv));
     cJSON_AddStringToObject(h, "device", srv->ocl ? ocl_device_name(srv->ocl) : "none");
@@ -246,6 +302,7 @@ int metrics_health(struct server *srv, struct fx_buf *out)
     cJSON *state = cJSON_AddObjectToObject(h, "state"); /* store.h: the last state write's outcome */
     cJSON_AddBoolToObject(state, "writable", !srv->state_error[0]);
     if (srv->state_error[0]) cJSON_AddStringToObject(state, "last_error", srv->state_error);
+    if (srv->cluster) metrics_health_cluster(srv, h);
     cJSON *arr = cJSON_AddArrayToObject(h, "streams");
     for (int i = 0; i < n; i++) {
         struct stream_status st;

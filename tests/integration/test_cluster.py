@@ -1,0 +1,533 @@
+"""test_cluster.py — cluster mode (--cluster, first part: shared state). Three fxstreamd daemons
+on one redis-server (Debian's, started here on a free loopback port, as the current user, in a
+temp dir, without persistence, killed at the end), plus a second Redis with AOF (appendfsync
+always) for one daemon, and a third with a password.
+
+Checks: the first daemon seeds the empty database once and all list the same streams; a create
+on A, a set through B and a get through C give the same params and rev, the same as Redis
+holds; C's subscriber gets the params event of B's set, A's clients the created/destroyed events
+of B's and C's changes; concurrent sets through two daemons all succeed with distinct
+consecutive revs and lose no update; a set whose daemon is behind Redis is made again on
+Redis's document; racing creates: one wins, everywhere; a reset through B restarts A's stream;
+Redis killed: changes answer unavailable naming the cluster, /healthz and /metrics say the link
+is down, streams keep sending frames and reads keep working; Redis back empty: changes are
+accepted again within seconds and the state the daemons had is in Redis again (re-seeded);
+Redis back from its AOF in an older state: Redis wins, the daemon goes back to it and tells its
+subscribers; a kill -9 of Redis with appendfsync always loses no acknowledged change; flags and
+configuration errors; a password from FXS_REDIS_PASSWORD. Every wait is bounded; a missing
+redis-server fails the suite with a message. About 30 s."""
+import asyncio
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from fxtest import DAEMON, Client, Daemon, Suite  # noqa: E402
+
+REDIS = shutil.which("redis-server") or "/usr/bin/redis-server"
+SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: several daemons share 2 cores
+R = None  # the shared Redis
+A = B = C = None  # its daemons, node ids a, b, c
+
+
+def free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def resp_read(f):
+    """One RESP2 reply from a binary file object."""
+    line = f.readline()
+    if not line:
+        raise ConnectionError("redis closed the connection")
+    kind, rest = line[:1], line[1:-2]
+    if kind == b"+":
+        return rest.decode()
+    if kind == b"-":
+        raise RuntimeError("redis error: " + rest.decode())
+    if kind == b":":
+        return int(rest)
+    if kind == b"$":
+        n = int(rest)
+        if n < 0:
+            return None
+        data = f.read(n + 2)
+        return data[:-2].decode()
+    if kind == b"*":
+        n = int(rest)
+        return None if n < 0 else [resp_read(f) for _ in range(n)]
+    raise RuntimeError("unexpected RESP %r" % line)
+
+
+class Redis:
+    """A redis-server on 127.0.0.1:port (free by default), data in dir (a temp dir by default)."""
+
+    def __init__(self, port=None, data_dir=None, aof=False, password=None):
+        self.port = port or free_port()
+        self.dir = data_dir or tempfile.mkdtemp(prefix="fxs-redis-")
+        self.password = password
+        self.url = "redis://127.0.0.1:%d" % self.port
+        args = [REDIS, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir, "--save", "",
+                "--daemonize", "no", "--logfile", os.path.join(self.dir, "redis.log")]
+        args += ["--appendonly", "yes", "--appendfsync", "always"] if aof else ["--appendonly", "no"]
+        if password:
+            args += ["--requirepass", password]
+        self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=self.dir)
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                if self.cmd("PING") == "PONG":
+                    return
+            except (OSError, ConnectionError):
+                pass
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                self.proc.kill()
+                raise RuntimeError("redis-server did not start on port %d (%s/redis.log)" % (self.port, self.dir))
+            time.sleep(0.05)
+
+    def cmd(self, *args):
+        with socket.create_connection(("127.0.0.1", self.port), timeout=5) as s:
+            f = s.makefile("rb")
+            cmds = ([["AUTH", self.password]] if self.password else []) + [list(args)]
+            for c in cmds:
+                s.sendall(("*%d\r\n" % len(c) + "".join("$%d\r\n%s\r\n" % (len(str(a).encode()), a) for a in c))
+                          .encode())
+                reply = resp_read(f)
+            return reply
+
+    def kill(self):
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(10)
+
+    def stream(self, name):
+        """Redis's copy of a stream: (effect, rev, params) or None."""
+        h = self.cmd("HMGET", "fxs:stream:" + name, "effect", "rev", "params")
+        return None if h[0] is None else (h[0], int(h[1]), json.loads(h[2]))
+
+
+def cluster_daemon(redis, node, *args, env=None):
+    return Daemon("--cluster", redis.url, "--node-id", node, *args, env=env)
+
+
+def http_json(d, path):
+    with urllib.request.urlopen(d.http + path, timeout=10) as r:
+        return json.loads(r.read().decode())
+
+
+def http_text(d, path):
+    with urllib.request.urlopen(d.http + path, timeout=10) as r:
+        return r.read().decode()
+
+
+def metric(d, name):
+    """The value of a metric line (with its labels, if any) in d's /metrics, or None."""
+    for line in http_text(d, "/metrics").splitlines():
+        if line.split(" ")[0] == name:
+            return float(line.split(" ")[1])
+    return None
+
+
+async def until(fn, timeout=8.0, step=0.05):
+    """Calls fn (sync or async) until it returns something true; returns its last value."""
+    deadline = time.monotonic() + timeout
+    while True:
+        v = fn()
+        if asyncio.iscoroutine(v):
+            v = await v
+        if v or time.monotonic() > deadline:
+            return v
+        await asyncio.sleep(step)
+
+
+async def names(d):
+    c = await Client.connect(d)
+    r = await c.request("list")
+    await c.close()
+    return [s["stream"] for s in r["streams"]]
+
+
+async def get(d, stream):
+    c = await Client.connect(d)
+    r = await c.request("get", stream=stream)
+    await c.close()
+    return r
+
+
+async def get_at(d, stream, rev, timeout=8.0):
+    """d's get of stream once it is at rev (or the last answer after timeout)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        g = await get(d, stream)
+        if g.get("rev") == rev or time.monotonic() > deadline:
+            return g
+        await asyncio.sleep(0.05)
+
+
+async def event(c, op, stream, timeout=8.0, **match):
+    """The next event (no id) of op for stream on c with the given members, or None."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            m = await c.text(deadline - time.monotonic())
+        except asyncio.TimeoutError:
+            return None
+        if m.get("op") == op and m.get("stream") == stream and "id" not in m and \
+                all(m.get(k) == v for k, v in match.items()):
+            return m
+    return None
+
+
+# ---- one Redis, three daemons ----
+
+async def test_seeded(t):
+    """The first daemon seeds the empty database with the built-in streams, once."""
+    lists = [await names(d) for d in (A, B, C)]
+    t.check(lists[0] == ["energy", "flame", "eye"] and lists[0] == lists[1] == lists[2],
+            "the three daemons list the same seeded streams %s" % lists)
+    t.check(R.cmd("ZRANGE", "fxs:streams", "0", "-1") == ["energy", "flame", "eye"] and
+            R.cmd("GET", "fxs:seeded") in ("a", "b", "c"),
+            "Redis holds them, seeded once by one daemon (fxs:seeded = %s)" % R.cmd("GET", "fxs:seeded"))
+    for d, node in ((A, "a"), (B, "b"), (C, "c")):
+        h = http_json(d, "/healthz")
+        cl = h.get("cluster", {})
+        t.check(h["status"] == "ok" and cl.get("node") == node and cl.get("link") == "up" and cl.get("in_sync") and
+                cl.get("redis") == R.url, "/healthz of %s: cluster %s" % (node, cl))
+
+
+async def test_shared_state(t):
+    """Create on A, set through B, get through C: the same params and rev, as Redis holds them."""
+    a = await Client.connect(A)
+    r = await a.request("create", effect="energy_wave", stream="c1", params=SMALL)
+    t.check(r.get("op") == "created" and r.get("rev") == 1, "create c1 on A (%s)" % r)
+    t.check(R.stream("c1") is not None and R.stream("c1")[:2] == ("energy_wave", 1), "Redis has c1 at rev 1")
+    async def listed():
+        return "c1" in await names(B) and "c1" in await names(C)
+
+    t.check(await until(listed), "B and C list c1")
+    b = await Client.connect(B)
+    s = await b.request("set", stream="c1", params={"alpha": 1.5})
+    t.check(s.get("op") == "params" and s.get("rev") == 2 and s["params"]["alpha"] == 1.5, "set alpha through B: rev 2")
+    g = await get_at(C, "c1", 2)
+    t.check(g.get("rev") == 2 and g.get("params") == s.get("params"), "get through C: rev 2 and B's params")
+    ga = await get(A, "c1")
+    t.check(ga.get("rev") == 2 and ga.get("params") == s.get("params"), "get through A: the same")
+    t.check(R.stream("c1") == ("energy_wave", 2, s["params"]), "Redis holds the same document at rev 2")
+    await a.close()
+    await b.close()
+
+
+async def test_events(t):
+    """Events of changes made elsewhere reach local clients as for local changes."""
+    c = await Client.connect(C)
+    await c.request("subscribe", stream="c1")
+    b = await Client.connect(B)
+    s = await b.request("set", stream="c1", params={"beta": 2})
+    ev = await event(c, "params", "c1", rev=s.get("rev"))
+    t.check(ev is not None and ev["params"] == s["params"], "C's subscriber gets the params event of B's set (%s)"
+            % (ev and ev.get("rev")))
+    a = await Client.connect(A)  # A's client: created and destroyed events of other daemons' changes
+    r = await b.request("create", effect="energy_wave", stream="c2", params=SMALL)
+    ev = await event(a, "created", "c2")
+    t.check(r.get("op") == "created" and ev is not None and ev.get("effect") == "energy_wave" and ev.get("rev") == 1,
+            "A's client gets the created event of B's create (%s)" % ev)
+    await a.request("subscribe", stream="c2")
+    d = await c.request("destroy", stream="c2")
+    gone = await event(a, "unsubscribed", "c2", reason="destroyed")
+    ev = await event(a, "destroyed", "c2")
+    t.check(d.get("op") == "destroyed" and gone is not None and ev is not None,
+            "destroy on C: A's subscriber is unsubscribed (destroyed) and gets the destroyed event")
+    t.check("c2" not in await names(A) and "c2" not in await names(B), "c2 is gone from A's and B's lists")
+    t.check(R.stream("c2") is None and "c2" not in R.cmd("ZRANGE", "fxs:streams", "0", "-1"), "and from Redis")
+    for x in (a, b, c):
+        await x.close()
+
+
+async def test_concurrent_sets(t):
+    """Sets through two daemons at once: all succeed, distinct consecutive revs, no update lost."""
+    base = (await get(A, "c1"))["rev"]
+    a, b = await Client.connect(A), await Client.connect(B)
+    n = 12
+
+    async def run(cl, name, values):
+        return [await cl.request("set", stream="c1", params={name: v}) for v in values]
+
+    ra, rb = await asyncio.gather(run(a, "alpha", [1 + i / 10 for i in range(n)]),
+                                  run(b, "beta", [1 + i / 8 for i in range(n)]))
+    replies = ra + rb
+    revs = sorted(r.get("rev", -1) for r in replies)
+    t.check(all(r.get("op") == "params" for r in replies), "every set through A and B succeeded %s" %
+            [r.get("message") for r in replies if r.get("op") != "params"][:2])
+    t.check(revs == list(range(base + 1, base + 1 + 2 * n)), "distinct consecutive revs %d..%d (%s)" %
+            (base + 1, base + 2 * n, revs))
+    want = (1 + (n - 1) / 10, 1 + (n - 1) / 8)
+    g = await get_at(C, "c1", base + 2 * n)
+    t.check(g.get("rev") == base + 2 * n and (g["params"]["alpha"], g["params"]["beta"]) == want,
+            "C ends with both last values, nothing lost (alpha, beta = %s at rev %s)" %
+            ((g["params"]["alpha"], g["params"]["beta"]), g.get("rev")))
+    red = R.stream("c1")
+    t.check(red[1] == base + 2 * n and (red[2]["alpha"], red[2]["beta"]) == want, "Redis holds the same")
+    await a.close()
+    await b.close()
+
+
+async def test_rebase(t):
+    """A set validated on a document older than Redis's is made again on Redis's document."""
+    effect, rev, params = R.stream("c1")
+    newer = dict(params, alpha=7.0)
+    R.cmd("HSET", "fxs:stream:c1", "rev", str(rev + 5), "params", json.dumps(newer))  # behind every daemon's back
+    before = metric(A, "fxs_cluster_rebases_total")
+    a = await Client.connect(A)
+    s = await a.request("set", stream="c1", params={"beta": 3})
+    t.check(s.get("rev") == rev + 6 and s["params"]["alpha"] == 7.0 and s["params"]["beta"] == 3,
+            "A's set is made on Redis's document: rev %s, alpha %s, beta %s" %
+            (s.get("rev"), s.get("params", {}).get("alpha"), s.get("params", {}).get("beta")))
+    t.check(metric(A, "fxs_cluster_rebases_total") == before + 1, "and counted in fxs_cluster_rebases_total")
+    g = await get_at(C, "c1", rev + 6)
+    t.check(g.get("params") == s.get("params"), "C follows (rev %s)" % g.get("rev"))
+    await a.close()
+
+
+async def test_create_race(t):
+    """Two daemons create the same name at once: one wins, and every daemon has the winner's."""
+    a, b = await Client.connect(A), await Client.connect(B)
+    ra, rb = await asyncio.gather(a.request("create", effect="energy_wave", stream="race", params=SMALL),
+                                  b.request("create", effect="flame", stream="race"))
+    ops = sorted([ra.get("op"), rb.get("op")])
+    loser = ra if ra.get("op") == "error" else rb
+    t.check(ops == ["created", "error"] and loser.get("code") == "exists",
+            "one created, one exists (%s, %s)" % (ra.get("op"), rb.get("code") or rb.get("op")))
+    winner = "energy_wave" if ra.get("op") == "created" else "flame"
+
+    async def effects():
+        out = []
+        for d in (A, B, C):
+            c = await Client.connect(d)
+            out.append([s["effect"] for s in (await c.request("list"))["streams"] if s["stream"] == "race"])
+            await c.close()
+        return out if all(e == [winner] for e in out) else None
+
+    t.check(await until(effects) is not None and R.stream("race")[0] == winner,
+            "A, B, C and Redis all have the winner's race (%s)" % winner)
+    da, dc = await asyncio.gather(a.request("destroy", stream="race"), b.request("destroy", stream="race"))
+    t.check(sorted([da.get("op"), dc.get("op")]) == ["destroyed", "error"], "racing destroys: exactly one destroyed")
+    await a.close()
+    await b.close()
+
+
+async def test_reset(t):
+    """A reset through B restarts the stream computed on A."""
+    a = await Client.connect(A)
+    await a.request("subscribe", stream="c1")
+    last = 0
+    deadline = time.monotonic() + 15
+    while last < 1.0 and time.monotonic() < deadline:
+        last = (await a.frame(kind=2))["sim_time"]
+    b = await Client.connect(B)
+    r = await b.request("reset", stream="c1")
+    back = None
+    deadline = time.monotonic() + 8
+    while back is None and time.monotonic() < deadline:
+        f = await a.frame(kind=2)
+        if f["sim_time"] < last - 0.5:
+            back = f["sim_time"]
+    t.check(r.get("op") == "reset" and last >= 1.0 and back is not None,
+            "reset through B: A's frames go back from sim_time %.2f to %s" % (last, back))
+    await a.close()
+    await b.close()
+
+
+async def test_metrics(t):
+    from prometheus_client.parser import text_string_to_metric_families
+    fams = {f.name: f for f in text_string_to_metric_families(http_text(B, "/metrics"))}
+    up = [s for s in fams["fxs_cluster_link_up"].samples] if "fxs_cluster_link_up" in fams else []
+    t.check(up and up[0].labels == {"node": "b"} and up[0].value == 1, "fxs_cluster_link_up{node=\"b\"} 1")
+    val = {n: fams[n].samples[0].value for n in ("fxs_cluster_changes", "fxs_cluster_applied", "fxs_cluster_reloads",
+                                                 "fxs_cluster_in_sync") if n in fams}
+    t.check(val.get("fxs_cluster_changes", 0) >= 3 and val.get("fxs_cluster_applied", 0) >= 3 and
+            val.get("fxs_cluster_reloads", 0) >= 1 and val.get("fxs_cluster_in_sync") == 1,
+            "B's cluster counters: %s" % val)
+
+
+async def test_redis_down(t):
+    """Redis killed: changes are refused with unavailable naming the cluster, nothing changes,
+    streams keep sending frames and reads keep working."""
+    a = await Client.connect(A)
+    await a.request("subscribe", stream="c1")
+    await a.frame(kind=2)
+    before = await get(C, "c1")
+    R.kill()
+
+    async def refused():
+        r = await a.request("set", stream="c1", params={"alpha": 9})
+        return r if r.get("op") == "error" else None
+
+    r = await until(refused, timeout=5)
+    t.check(r is not None and r.get("code") == "unavailable" and R.url in r.get("message", ""),
+            "a set answers unavailable naming %s (%s)" % (R.url, r and r.get("message")))
+    b = await Client.connect(B)
+    codes = [(await b.request(op, **kw)).get("code") for op, kw in
+             (("create", dict(effect="flame", stream="x")), ("destroy", dict(stream="c1")), ("reset", dict(stream="c1")))]
+    t.check(codes == ["unavailable"] * 3, "create, destroy and reset through B too (%s)" % codes)
+    h = http_json(A, "/healthz")
+    t.check(h["status"] == "degraded" and h["cluster"]["link"] == "down" and
+            R.url in h["cluster"].get("last_error", ""), "/healthz: degraded, link down, last_error %s" %
+            h["cluster"].get("last_error"))
+    t.check(metric(A, 'fxs_cluster_link_up{node="a"}') == 0, "fxs_cluster_link_up 0")
+    seqs = [(await a.frame(kind=2))["seq"] for _ in range(3)]
+    t.check(seqs == sorted(seqs) and len(set(seqs)) == 3, "the stream keeps sending frames (seq %s)" % seqs)
+    g = await get(C, "c1")
+    t.check(g.get("rev") == before["rev"] and g.get("params") == before["params"] and "c1" in await names(B),
+            "get and list still answer, nothing changed (rev %s)" % g.get("rev"))
+    await a.close()
+    await b.close()
+
+
+async def test_redis_back_empty(t):
+    """Redis back on the same port with nothing (no persistence): the first daemon to reconnect
+    seeds it with the state they had, and changes are accepted again within seconds."""
+    global R
+    before = {s: (await get(A, s)) for s in ("c1", "energy")}
+    listed = await names(A)
+    R = Redis(port=R.port)
+    start = time.monotonic()
+    a = await Client.connect(A)
+
+    async def accepted():
+        r = await a.request("set", stream="c1", params={"alpha": 4})
+        return r if r.get("op") == "params" else None
+
+    r = await until(accepted, timeout=10, step=0.1)
+    t.check(r is not None and r.get("rev") == before["c1"]["rev"] + 1,
+            "a set is accepted again after %.1f s, at rev %s" % (time.monotonic() - start, r and r.get("rev")))
+    red = R.stream("c1")
+    t.check(R.cmd("ZRANGE", "fxs:streams", "0", "-1") == listed and red and red[1] == before["c1"]["rev"] + 1 and
+            R.stream("energy")[1:] == (before["energy"]["rev"], before["energy"]["params"]),
+            "Redis holds the daemons' state again (re-seeded by %s)" % R.cmd("GET", "fxs:seeded"))
+    ok = True
+    for d in (B, C):
+        g = await get_at(d, "c1", r.get("rev"))
+        ok = ok and g.get("params") == r.get("params") and await names(d) == listed
+    t.check(ok, "B and C follow again")
+    t.check(all(http_json(d, "/healthz")["cluster"]["link"] == "up" for d in (A, B, C)), "/healthz: link up everywhere")
+    await a.close()
+
+
+# ---- a Redis with AOF (appendfsync always), one daemon ----
+
+async def test_redis_wins(t):
+    """Redis with AOF restarted from an older copy of its files: Redis wins, the daemon goes
+    back to its state and tells its subscribers; a kill -9 loses no acknowledged change."""
+    p = Redis(aof=True)
+    d = cluster_daemon(p, "d")
+    try:
+        c = await Client.connect(d)
+        await c.request("create", effect="energy_wave", stream="p1", params=SMALL)
+        s2 = await c.request("set", stream="p1", params={"alpha": 2})
+        older = tempfile.mkdtemp(prefix="fxs-redis-older-")
+        shutil.copytree(os.path.join(p.dir, "appendonlydir"), os.path.join(older, "appendonlydir"))
+        s3 = await c.request("set", stream="p1", params={"alpha": 3})
+        t.check(s2.get("rev") == 2 and s3.get("rev") == 3, "p1 at rev 3 on a Redis with AOF")
+        p.kill()
+        p.proc.wait()
+        p = Redis(port=p.port, data_dir=older, aof=True)
+        sub = await Client.connect(d)
+        await sub.request("subscribe", stream="p1")
+        ev = await event(sub, "params", "p1", timeout=10)
+        g = await get(d, "p1")
+        t.check(ev is not None and ev.get("rev") == 2 and ev["params"]["alpha"] == 2 and g.get("rev") == 2,
+                "Redis back with rev 2: the daemon goes back to it, its subscriber gets the event (%s)" %
+                (ev and ev.get("rev")))
+        s = await c.request("set", stream="p1", params={"alpha": 5})
+        t.check(s.get("rev") == 3 and s["params"]["alpha"] == 5, "and changes go on from there (rev %s)" % s.get("rev"))
+        p.kill()
+        p = Redis(port=p.port, data_dir=older, aof=True)
+        t.check(p.stream("p1") is not None and p.stream("p1")[1:] == (3, s["params"]),
+                "kill -9 of Redis: the acknowledged rev 3 is in its AOF")
+    finally:
+        d.stop()
+        p.kill()
+
+
+# ---- flags, configuration, password ----
+
+def run_daemon(*args, env=None, timeout=30):
+    p = subprocess.run([DAEMON, "--port", "0", *args], capture_output=True, text=True, timeout=timeout,
+                       env=dict(os.environ, **(env or {})))
+    return p.returncode, p.stdout + p.stderr
+
+
+async def test_flags(t):
+    for args, word, what in ((["--cluster", "http://127.0.0.1:6379"], "redis://", "a URL that is not redis://"),
+                             (["--cluster", "redis://:pw@127.0.0.1"], "FXS_REDIS_PASSWORD", "a password in the URL"),
+                             (["--cluster", "redis://127.0.0.1:99999"], "port", "a bad port"),
+                             (["--cluster", "redis://127.0.0.1/x"], "database", "a bad database"),
+                             (["--cluster", "rediss://127.0.0.1"], "TLS", "rediss://"),
+                             (["--node-id", "a"], "--cluster", "--node-id without --cluster"),
+                             (["--cluster", R.url, "--node-id", "a b"], "node id", "a bad node id")):
+        code, out = run_daemon(*args)
+        t.check(code == 2 and word in out, "%s: exit 2 naming it (%s)" % (what, out.strip()[-120:]))
+    cfg = os.path.join(tempfile.mkdtemp(prefix="fxs-cfg-"), "c.json")
+    with open(cfg, "w") as f:
+        json.dump({"cluster": "redis:/x"}, f)
+    code, out = run_daemon("--config", cfg)
+    t.check(code == 2 and "redis://" in out, "config key cluster is checked the same way (%s)" % out.strip()[-100:])
+    nobody = "redis://127.0.0.1:%d" % free_port()
+    start = time.monotonic()
+    code, out = run_daemon("--cluster", nobody)
+    t.check(code == 1 and "cannot reach " + nobody in out and time.monotonic() - start < 20,
+            "an unreachable Redis at start: exit 1 naming it (%s)" % out.strip()[-120:])
+    with open(cfg, "w") as f:
+        json.dump({"cluster": R.url, "node_id": "cfg"}, f)
+    with Daemon("--config", cfg) as d:
+        cl = http_json(d, "/healthz").get("cluster", {})
+        t.check(cl.get("node") == "cfg" and cl.get("redis") == R.url and cl.get("link") == "up",
+                "config keys cluster and node_id (%s)" % cl)
+    with Daemon("--cluster", R.url) as d:
+        t.check(http_json(d, "/healthz")["cluster"]["node"] == socket.gethostname()[:63],
+                "the node id defaults to the host name")
+
+
+async def test_password(t):
+    q = Redis(password="s3cret-pass")
+    try:
+        with cluster_daemon(q, "p", env={"FXS_REDIS_PASSWORD": "s3cret-pass"}) as d:
+            c = await Client.connect(d)
+            r = await c.request("create", effect="flame", stream="pw")
+            t.check(r.get("op") == "created" and q.stream("pw") is not None, "FXS_REDIS_PASSWORD authenticates")
+            await c.close()
+        code, out = run_daemon("--cluster", q.url, env={"FXS_REDIS_PASSWORD": "wrong"})
+        t.check(code == 1 and "AUTH" in out and "s3cret" not in out, "a wrong password: exit 1, AUTH named (%s)" %
+                out.strip()[-120:])
+    finally:
+        q.kill()
+
+
+if __name__ == "__main__":
+    s = Suite("test_cluster")
+    if not os.access(REDIS, os.X_OK):
+        s.check(False, "redis-server is installed (%s missing: deploy/install-deps.sh installs it)" % REDIS)
+        s.run([])
+    R = Redis()
+    try:
+        A = cluster_daemon(R, "a")
+        B = cluster_daemon(R, "b")
+        C = cluster_daemon(R, "c")
+        s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_create_race,
+               test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_wins, test_flags,
+               test_password])
+    finally:
+        for d in (A, B, C):
+            if d:
+                d.stop(signal.SIGKILL)
+        R.kill()
