@@ -513,6 +513,13 @@ async def test_password(t):
         q.kill()
 
 
+async def test_shutdown(t):
+    """SIGTERM: each daemon stops its follower and exits 0, with Redis up (A) or down (B)."""
+    t.check(A.stop() == 0, "A exits 0")
+    R.kill()
+    t.check(B.stop() == 0, "B exits 0 while its follower retries a dead Redis")
+
+
 if __name__ == "__main__":
     s = Suite("test_cluster")
     if not os.access(REDIS, os.X_OK):
@@ -525,9 +532,9 @@ if __name__ == "__main__":
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_create_race,
                test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_wins, test_flags,
-               test_password])
+               test_password, test_shutdown])
     finally:
         for d in (A, B, C):
-            if d:
+            if d and d.proc.poll() is None:
                 d.stop(signal.SIGKILL)
         R.kill()
