@@ -107,9 +107,10 @@ struct cluster {
 
 /* ---- configuration ---- */
 
-static int cluster_url_fail(const char *url, const char *why, struct fx_err *err)
+static int cluster_url_fail(const char *what, const char *url, const char *why, struct fx_err *err)
 {
-    return fx_fail(err, "bad_request", "cluster", "--cluster: %s, got \"%.200s\" (expected redis://HOST[:PORT][/DB])", why, url);
+    return fx_fail(err, "bad_request", "cluster", "%s: %s, got \"%.200s\" (expected redis://HOST[:PORT][/DB])", what, why,
+                   url);
 }
 
 /* "[v6]" or a name / IPv4 address of [A-Za-z0-9.-]; returns the rest of s, or NULL. */
@@ -141,22 +142,23 @@ static const char *cluster_url_num(const char *s, long min, long max, int *out)
     return s + n;
 }
 
-int cluster_parse_url(const char *url, struct cluster_config *cfg, struct fx_err *err)
+int cluster_parse_url(const char *what, const char *url, struct cluster_config *cfg, struct fx_err *err)
 {
-    if (!strncmp(url, "rediss://", 9)) return cluster_url_fail(url, "TLS to Redis (rediss://) is not supported", err);
-    if (strncmp(url, "redis://", 8)) return cluster_url_fail(url, "not a redis:// URL", err);
-    if (strchr(url, '@'))
-        return cluster_url_fail(url, "credentials do not go in the URL (the password comes from FXS_REDIS_PASSWORD)", err);
-    if (strlen(url) >= sizeof cfg->url) return cluster_url_fail(url, "too long", err);
+    if (strchr(url, '@')) /* not echoed: it may hold a password */
+        return fx_fail(err, "bad_request", "cluster", "%s: credentials do not go in the URL (the password comes from "
+                       "FXS_REDIS_PASSWORD)", what);
+    if (!strncmp(url, "rediss://", 9)) return cluster_url_fail(what, url, "TLS to Redis (rediss://) is not supported", err);
+    if (strncmp(url, "redis://", 8)) return cluster_url_fail(what, url, "not a redis:// URL", err);
+    if (strlen(url) >= sizeof cfg->url) return cluster_url_fail(what, url, "too long", err);
     const char *p = cluster_url_host(url + 8, cfg->host, sizeof cfg->host);
-    if (!p) return cluster_url_fail(url, "bad host", err);
+    if (!p) return cluster_url_fail(what, url, "bad host", err);
     cfg->port = 6379;
     cfg->db = 0;
     if (*p == ':' && !(p = cluster_url_num(p + 1, 1, 65535, &cfg->port)))
-        return cluster_url_fail(url, "the port must be 1-65535", err);
+        return cluster_url_fail(what, url, "the port must be 1-65535", err);
     if (*p == '/' && !(p = cluster_url_num(p + 1, 0, 9999, &cfg->db)))
-        return cluster_url_fail(url, "the database must be a number from 0 to 9999", err);
-    if (*p) return cluster_url_fail(url, "unexpected text after the host, port and database", err);
+        return cluster_url_fail(what, url, "the database must be a number from 0 to 9999", err);
+    if (*p) return cluster_url_fail(what, url, "unexpected text after the host, port and database", err);
     snprintf(cfg->url, sizeof cfg->url, "%s", url);
     return 0;
 }
@@ -516,6 +518,19 @@ static int cluster_cmd(struct cluster *cl, struct fx_err *err)
     return 0;
 }
 
+/* Changes are made only while the local copy follows Redis (the caller's request was checked
+ * against it; replica_poll reloads a stale copy before each request). */
+static int cluster_writable(struct cluster *cl, struct fx_err *err)
+{
+    if (cl->in_sync || !cluster_link_up(cl)) return 0; /* a link down: cluster_cmd says so */
+    char why[320];
+    pthread_mutex_lock(&cl->mu);
+    snprintf(why, sizeof why, "%s", cl->last_error);
+    pthread_mutex_unlock(&cl->mu);
+    return fx_fail(err, "unavailable", NULL, "cluster: this daemon's copy of the streams in %s is being reloaded%s%s "
+                   "(nothing changed)", cl->cfg.url, why[0] ? ": " : "", why);
+}
+
 /* Runs script s with keys then args (argc of them, lens NULL: C strings): its reply, or NULL
  * with err. A reply lost after sending leaves the outcome unknown: the copy goes stale. */
 static redisReply *cluster_eval(struct cluster *cl, int s, int nkeys, int argc, const char *const *argv,
@@ -603,6 +618,7 @@ static void cluster_key(char *key, size_t cap, const char *stream)
 int cluster_create(struct cluster *cl, const char *stream, const char *effect, const cJSON *params, int max_streams,
                    struct fx_err *err)
 {
+    if (cluster_writable(cl, err)) return -1;
     char key[128], max[16];
     cluster_key(key, sizeof key, stream);
     snprintf(max, sizeof max, "%d", max_streams);
@@ -654,6 +670,7 @@ static int cluster_moved(const struct cluster *cl, const redisReply *r, struct c
 int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint64_t base, const cJSON *params,
                 struct cluster_current *cur, struct fx_err *err)
 {
+    if (cluster_writable(cl, err)) return -1;
     char key[128], from[24], to[24];
     cluster_key(key, sizeof key, stream);
     snprintf(from, sizeof from, "%llu", (unsigned long long)base);
@@ -676,6 +693,7 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
 
 int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err)
 {
+    if (cluster_writable(cl, err)) return -1;
     char key[128], *ev = cluster_event(cl, "destroyed", stream, NULL, 0, NULL);
     cluster_key(key, sizeof key, stream);
     redisReply *r = ev ? cluster_eval(cl, CS_DESTROY, 3, 6,
@@ -692,6 +710,7 @@ int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err)
 
 int cluster_reset(struct cluster *cl, const char *stream, struct fx_err *err)
 {
+    if (cluster_writable(cl, err)) return -1;
     char key[128], *ev = cluster_event(cl, "reset", stream, NULL, 0, NULL);
     cluster_key(key, sizeof key, stream);
     redisReply *r = ev ? cluster_eval(cl, CS_RESET, 2, 4, (const char *[]){key, CLUSTER_KEY "seq", ev, cl->channel}, err)

@@ -42,8 +42,9 @@ struct cluster_config {
 };
 
 /* Parses redis://HOST[:PORT][/DB] (port 6379 and database 0 by default; HOST a name, an
- * IPv4 address or [IPv6]) into cfg's url, host, port and db. */
-int cluster_parse_url(const char *url, struct cluster_config *cfg, struct fx_err *err);
+ * IPv4 address or [IPv6]) into cfg's url, host, port and db; errors name `what` (the flag or
+ * the configuration key). */
+int cluster_parse_url(const char *what, const char *url, struct cluster_config *cfg, struct fx_err *err);
 
 struct cluster;
 
@@ -91,9 +92,10 @@ int cluster_seed(struct cluster *cl, const cJSON *streams, bool *seeded, struct 
 int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_err *err);
 void cluster_loaded(struct cluster *cl, uint64_t seq);
 
-/* The changes. Each fails with unavailable (the link is down, or Redis did not answer or
- * refused: the message names the URL; when the answer to a sent change was lost the message
- * says the outcome is unknown, and the copy is reloaded), or with what Redis's state says:
+/* The changes. Each fails with unavailable (the link is down, the local copy is stale, or
+ * Redis did not answer or refused: the message names the URL; when the answer to a sent change
+ * was lost the message says the outcome is unknown, and the copy is reloaded), or with what
+ * Redis's state says:
  * exists and limit (create, limit = max_streams), unknown_stream (set, destroy, reset: no
  * longer in Redis). */
 int cluster_create(struct cluster *cl, const char *stream, const char *effect, const cJSON *params, int max_streams,

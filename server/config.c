@@ -200,7 +200,7 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
     if (!strcmp(k, "assets_dir")) return config_str(cfg->assets_dir, sizeof cfg->assets_dir, v, k, err);
     if (!strcmp(k, "tls_cert")) return config_str(cfg->tls_cert, sizeof cfg->tls_cert, v, k, err);
     if (!strcmp(k, "tls_key")) return config_str(cfg->tls_key, sizeof cfg->tls_key, v, k, err);
-    if (!strcmp(k, "cluster")) return cluster_parse_url(v, &cfg->cluster, err);
+    if (!strcmp(k, "cluster")) return cluster_parse_url(k, v, &cfg->cluster, err);
     if (!strcmp(k, "node_id")) return config_str(cfg->cluster.node_id, sizeof cfg->cluster.node_id, v, k, err);
     int lv = log_parse_level(v); /* the last string key: log_level */
     if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
@@ -256,7 +256,7 @@ static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_e
     case OPT_ASSETS: return config_str(cfg->assets_dir, sizeof cfg->assets_dir, arg, "--assets-dir", err);
     case OPT_CERT: return config_str(cfg->tls_cert, sizeof cfg->tls_cert, arg, "--tls-cert", err);
     case OPT_KEY: return config_str(cfg->tls_key, sizeof cfg->tls_key, arg, "--tls-key", err);
-    case OPT_CLUSTER: return cluster_parse_url(arg, &cfg->cluster, err);
+    case OPT_CLUSTER: return cluster_parse_url("--cluster", arg, &cfg->cluster, err);
     case OPT_NODE: return config_str(cfg->cluster.node_id, sizeof cfg->cluster.node_id, arg, "--node-id", err);
     case OPT_LOG:
         if ((cfg->log_level = log_parse_level(arg)) < 0)

@@ -1,6 +1,7 @@
 /* main.c — fxstreamd: wires configuration, OpenCL, hub, engine and network together,
- * creates the start-up streams, serves until SIGINT/SIGTERM, then shuts down in order
- * (close WebSockets with 1001, stop the engine, free everything) and exits 0. */
+ * creates the start-up streams (in cluster mode: takes Redis's, seeding an empty database with
+ * them), serves until SIGINT/SIGTERM, then shuts down in order (close WebSockets with 1001,
+ * stop the engine and the cluster's follower, free everything) and exits 0. */
 #include <math.h>
 #include <errno.h>
 #include <signal.h>

@@ -154,10 +154,8 @@ int replica_poll(struct server *srv, struct fx_err *err)
     if (!cl) return 0;
     struct cluster_item *it;
     while ((it = cluster_next(cl))) {
-        if (it->kind == CLUSTER_EVENT && cluster_fit(cl, it->seq) == CLUSTER_APPLY) {
-            if (it->doc) replica_event(srv, it->doc);
-            else cluster_stale(cl);
-        }
+        if (it->kind == CLUSTER_EVENT && !it->doc) cluster_stale(cl); /* unreadable: reload */
+        else if (it->kind == CLUSTER_EVENT && cluster_fit(cl, it->seq) == CLUSTER_APPLY) replica_event(srv, it->doc);
         cluster_item_free(it);
     }
     double now = clock_now();

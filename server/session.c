@@ -315,11 +315,11 @@ static int session_op_create(struct session *ss, const cJSON *req, const cJSON *
     int rc = store_commit(ss->srv, &(struct store_change){.op = STORE_CREATE, .stream = name, .effect = ops->name,
                                                           .params = stored}, err);
     cJSON_Delete(stored);
-    struct stream *s = rc ? hub_destroy(&ss->srv->hub, name, &(struct fx_err){0}) : hub_find(&ss->srv->hub, name);
     if (rc) { /* not yet announced nor subscribed: undone cleanly */
-        stream_unref(s);
+        stream_unref(hub_destroy(&ss->srv->hub, name, &(struct fx_err){0}));
         return -1;
     }
+    struct stream *s = hub_find(&ss->srv->hub, name); /* only this thread adds and removes streams */
     log_info("stream %s created (effect %s)", name, ops->name);
     session_event_created(ss->srv, ss, s, 1);
     session_send(ss, session_created_msg(s, id, 1));

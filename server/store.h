@@ -9,9 +9,10 @@
  * Write before apply: an accepted create, destroy or parameter change is first written as
  * the file will be after it, or made in Redis (store_commit); only when that succeeds is it
  * applied and acknowledged. A write that fails leaves the change unapplied, the request gets
- * `unavailable`, and the condition shows in /healthz ("state") and /metrics
- * (fxs_state_writable 0, fxs_state_write_failures_total) until a write succeeds. One write
- * per change: 0.5 ms on this machine's disk (README "Configuration"). */
+ * `unavailable`, and the condition shows in /healthz ("state"; in cluster mode "cluster") and
+ * /metrics (fxs_state_writable 0, fxs_state_write_failures_total; fxs_cluster_*) until a write
+ * succeeds. One write per change: 0.5 ms on this machine's disk (README "Configuration").
+ * Network thread only. */
 #ifndef FX_STORE_H
 #define FX_STORE_H
 
