@@ -23,7 +23,10 @@
  * The local copy (replica.c applies what is queued) follows Redis exactly while `in sync`:
  * it has applied every change up to `seq`. A write of this daemon, or a message, numbered
  * seq + 1 keeps it in sync; anything else (a gap, a reconnection, a write whose answer was
- * lost) marks it stale, and replica.c reloads the whole state from Redis (Redis wins). */
+ * lost) marks it stale, and replica.c reloads the whole state from Redis (Redis wins). A
+ * daemon's own messages come back to it too and are skipped by their number (its write
+ * already moved the copy there), which also holds when two daemons were given the same node
+ * id: `node` names the author, for logs and for people reading the channel. */
 #ifndef FX_CLUSTER_H
 #define FX_CLUSTER_H
 
