@@ -438,11 +438,10 @@ async def test_redis_wins(t):
         shutil.copytree(os.path.join(p.dir, "appendonlydir"), os.path.join(older, "appendonlydir"))
         s3 = await c.request("set", stream="p1", params={"alpha": 3})
         t.check(s2.get("rev") == 2 and s3.get("rev") == 3, "p1 at rev 3 on a Redis with AOF")
-        p.kill()
-        p.proc.wait()
-        p = Redis(port=p.port, data_dir=older, aof=True)
         sub = await Client.connect(d)
         await sub.request("subscribe", stream="p1")
+        p.kill()
+        p = Redis(port=p.port, data_dir=older, aof=True)
         ev = await event(sub, "params", "p1", timeout=10)
         g = await get(d, "p1")
         t.check(ev is not None and ev.get("rev") == 2 and ev["params"]["alpha"] == 2 and g.get("rev") == 2,
