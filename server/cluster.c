@@ -82,10 +82,11 @@ struct cluster {
     struct cluster_config cfg;
     char channel[48];
 
-    /* Network thread only. */
+    /* Network thread only (in_sync is also read by the follower, which wakes the network thread
+     * every CLUSTER_PING_S while the copy is stale, so a failed reload is retried when idle). */
     redisContext *cmd;
     char sha[CS_COUNT][48]; /* SCRIPT LOAD's answers on cmd */
-    bool in_sync;
+    atomic_bool in_sync;
     uint64_t seq;
 
     /* The follower. */
@@ -307,6 +308,7 @@ static void cluster_listen(struct cluster *cl, redisContext *c, char *why, size_
             snprintf(why, cap, "no answer to PING for %.0f s", CLUSTER_PING_TIMEOUT_S);
             return;
         }
+        if (n == 0 && !atomic_load(&cl->in_sync) && cl->wake) cl->wake(cl->wake_ctx); /* reload to retry */
         if (n == 0 && !ping) {
             ping = clock_now();
             if (cluster_send_ping(c)) break;
@@ -455,7 +457,7 @@ enum cluster_fit cluster_fit(struct cluster *cl, uint64_t seq)
     return CLUSTER_GAP;
 }
 
-bool cluster_in_sync(const struct cluster *cl) { return cl->in_sync; }
+bool cluster_in_sync(struct cluster *cl) { return atomic_load(&cl->in_sync); }
 bool cluster_link_up(struct cluster *cl) { return atomic_load(&cl->link_up); }
 void cluster_stale(struct cluster *cl) { cl->in_sync = false; }
 
@@ -468,7 +470,7 @@ void cluster_loaded(struct cluster *cl, uint64_t seq)
 void cluster_status(struct cluster *cl, struct cluster_status *out)
 {
     *out = (struct cluster_status){.node = cl->cfg.node_id, .url = cl->cfg.url, .link_up = cluster_link_up(cl),
-                                   .in_sync = cl->in_sync, .seq = cl->seq,
+                                   .in_sync = cluster_in_sync(cl), .seq = cl->seq,
                                    .link_losses = atomic_load(&cl->link_losses)};
     pthread_mutex_lock(&cl->mu);
     snprintf(out->last_error, sizeof out->last_error, "%s", cl->last_error);

@@ -80,7 +80,7 @@ enum cluster_fit {
     CLUSTER_GAP,   /* changes were missed: the copy is now stale */
 };
 enum cluster_fit cluster_fit(struct cluster *cl, uint64_t seq);
-bool cluster_in_sync(const struct cluster *cl);
+bool cluster_in_sync(struct cluster *cl);
 /* Whether the follower is subscribed (any thread). */
 bool cluster_link_up(struct cluster *cl);
 /* Marks the copy stale (an event that does not fit what it holds). */

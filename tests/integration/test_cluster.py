@@ -86,9 +86,9 @@ class Redis:
         deadline = time.monotonic() + 10
         while True:
             try:
-                if self.cmd("PING") == "PONG":
+                if isinstance(self.cmd("DBSIZE"), int):  # refused (LOADING) while an AOF is read back
                     return
-            except (OSError, ConnectionError):
+            except (OSError, ConnectionError, RuntimeError):
                 pass
             if self.proc.poll() is not None or time.monotonic() > deadline:
                 self.proc.kill()
