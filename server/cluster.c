@@ -94,7 +94,8 @@ struct cluster {
     bool started;
     int stop_fd; /* eventfd: cluster_close wakes the follower's polls through it */
     atomic_bool stopping, link_up;
-    atomic_bool cmd_stale; /* the link was lost since the command connection was made */
+    atomic_bool cmd_stale;   /* the link was lost since the command connection was made */
+    atomic_bool cmd_suspect; /* a command got no answer: none is sent until the subscription hears Redis again */
     atomic_uint_fast64_t link_losses;
     void (*wake)(void *ctx);
     void *wake_ctx;
@@ -193,8 +194,9 @@ static int cluster_expect_ok(redisContext *c, char *why, size_t cap, const char 
 /* A new connection, authenticated and on the configured database; NULL with why. */
 static redisContext *cluster_connect(const struct cluster *cl, char *why, size_t cap)
 {
-    redisContext *c = redisConnectWithTimeout(cl->cfg.host, cl->cfg.port, (struct timeval){CLUSTER_TIMEOUT_S, 0});
-    if (!c || c->err) {
+    struct timeval tv = {CLUSTER_TIMEOUT_S, 0};
+    redisContext *c = redisConnectWithTimeout(cl->cfg.host, cl->cfg.port, tv);
+    if (!c || c->err || redisSetTimeout(c, tv) != REDIS_OK) { /* the timeout bounds every command too */
         snprintf(why, cap, "%s", c ? c->errstr : "out of memory");
         redisFree(c);
         return NULL;
@@ -294,6 +296,7 @@ static void cluster_listen(struct cluster *cl, redisContext *c, char *why, size_
         void *reply = NULL;
         if (redisGetReplyFromReader(c, &reply) != REDIS_OK) break;
         if (reply) {
+            atomic_store(&cl->cmd_suspect, false); /* Redis answers again */
             cluster_on_reply(cl, reply, &ping);
             freeReplyObject(reply);
             continue;
@@ -329,6 +332,7 @@ static void cluster_link(struct cluster *cl, bool up, const char *why)
 {
     bool was = atomic_exchange(&cl->link_up, up);
     if (up) {
+        atomic_store(&cl->cmd_suspect, false);
         cluster_clear_error(cl);
         log_info("cluster: subscribed to %s on %s", cl->channel, cl->cfg.url);
         cluster_push(cl, CLUSTER_LINK_UP, 0, NULL);
@@ -498,18 +502,24 @@ static int cluster_cmd(struct cluster *cl, struct fx_err *err)
         pthread_mutex_unlock(&cl->mu);
         return fx_fail(err, "unavailable", NULL, "cluster: %s (nothing changed)", why);
     }
+    if (atomic_load(&cl->cmd_suspect)) /* a hung Redis would hold the network thread a timeout per request */
+        return fx_fail(err, "unavailable", NULL, "cluster: %s did not answer the last command within %d s; changes "
+                       "wait until it answers again (nothing changed)", cl->cfg.url, CLUSTER_TIMEOUT_S);
     if (atomic_exchange(&cl->cmd_stale, false)) { /* Redis went away since: this socket is dead */
         redisFree(cl->cmd);
         cl->cmd = NULL;
     }
     if (cl->cmd) return 0;
-    if (!(cl->cmd = cluster_connect(cl, why, sizeof why)))
+    if (!(cl->cmd = cluster_connect(cl, why, sizeof why))) {
+        atomic_store(&cl->cmd_suspect, true);
         return cluster_unavailable(cl, err, "cannot reach %s: %s (nothing changed)", why);
+    }
     for (int i = 0; i < CS_COUNT; i++) {
         redisReply *r = redisCommand(cl->cmd, "SCRIPT LOAD %s", cluster_scripts[i]);
         bool ok = r && r->type == REDIS_REPLY_STRING && r->len < sizeof cl->sha[i];
         if (ok) snprintf(cl->sha[i], sizeof cl->sha[i], "%s", r->str);
         else snprintf(why, sizeof why, "SCRIPT LOAD: %s", r ? (r->str ? r->str : "unexpected answer") : cl->cmd->errstr);
+        if (!r) atomic_store(&cl->cmd_suspect, true);
         freeReplyObject(r);
         if (!ok) {
             redisFree(cl->cmd);
@@ -557,14 +567,17 @@ static redisReply *cluster_eval(struct cluster *cl, int s, int nkeys, int argc, 
         v[1] = cluster_scripts[s];
         r = redisCommandArgv(cl->cmd, argc + 3, v, NULL);
     }
+    int e = errno;
     free(v);
     if (!r) {
         char why[256];
-        snprintf(why, sizeof why, "%s", cl->cmd->errstr);
+        if (e == EAGAIN || e == EWOULDBLOCK) snprintf(why, sizeof why, "no answer within %d s", CLUSTER_TIMEOUT_S);
+        else snprintf(why, sizeof why, "%s", cl->cmd->errstr);
         redisFree(cl->cmd);
         cl->cmd = NULL;
         cl->in_sync = false;
-        cluster_unavailable(cl, err, "lost %s during the change (%s): it may or may not have been made; "
+        atomic_store(&cl->cmd_suspect, true);
+        cluster_unavailable(cl, err, "lost %s during the command (%s): a change may or may not have been made; "
                             "this daemon reloads the state from Redis", why);
         return NULL;
     }

@@ -423,6 +423,42 @@ async def test_redis_back_empty(t):
     await a.close()
 
 
+async def test_redis_hung(t):
+    """Redis stopped (SIGSTOP: connections open, no answers): a set waits at most the command
+    timeout, the link is given up within seconds, frames keep coming; SIGCONT: back to normal."""
+    a = await Client.connect(A)
+    await a.request("subscribe", stream="c1")
+    await a.frame(kind=2)
+    R.proc.send_signal(signal.SIGSTOP)
+    try:
+        start = time.monotonic()
+        r = await a.request("set", stream="c1", params={"alpha": 6})
+        took = time.monotonic() - start
+        t.check(r.get("code") == "unavailable" and took < 2.5, "a set answers unavailable in %.1f s (%s)" %
+                (took, r.get("message")))
+        start2 = time.monotonic()
+        r = await a.request("set", stream="c1", params={"alpha": 6})
+        t.check(r.get("code") == "unavailable" and time.monotonic() - start2 < 0.5,
+                "the next one at once, without waiting for Redis again (%s)" % r.get("message"))
+        down = await until(lambda: http_json(A, "/healthz")["cluster"]["link"] == "down", timeout=10)
+        t.check(down, "the link is given up (no answer to PING) after %.1f s" % (time.monotonic() - start))
+        times = []
+        for _ in range(5):
+            await a.frame(kind=2)
+            times.append(time.monotonic())
+        gap = max(b - x for x, b in zip(times, times[1:]))
+        t.check(gap < 1.5, "frames keep coming (largest gap %.2f s)" % gap)
+    finally:
+        R.proc.send_signal(signal.SIGCONT)
+
+    async def accepted():
+        r = await a.request("set", stream="c1", params={"alpha": 6})
+        return r if r.get("op") == "params" else None
+
+    t.check(await until(accepted, timeout=10, step=0.1) is not None, "SIGCONT: changes are accepted again")
+    await a.close()
+
+
 # ---- a Redis with AOF (appendfsync always), one daemon ----
 
 async def test_redis_wins(t):
@@ -532,7 +568,7 @@ if __name__ == "__main__":
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_create_race,
-               test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_wins, test_flags,
+               test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
         for d in (A, B, C):
