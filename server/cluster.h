@@ -16,9 +16,9 @@
  * its own connection SUBSCRIBEd to the channel, which queues each message as it comes, a
  * LINK_UP item after each (re)subscription and a LINK_DOWN item when the link is lost
  * (then it reconnects with backoff), and wakes the network thread through the callback given
- * to cluster_follow. The queue, the link state and the last error are guarded by a mutex
- * inside cluster.c; the command connection, the scripts' hashes and the change number the
- * local copy has reached belong to the network thread. The follower never touches the hub.
+ * to cluster_follow. The queue and the last error are guarded by a mutex inside cluster.c,
+ * the link state is atomic; the command connection, the scripts' hashes and the change number
+ * the local copy has reached belong to the network thread. The follower never touches the hub.
  *
  * The local copy (replica.c applies what is queued) follows Redis exactly while `in sync`:
  * it has applied every change up to `seq`. A write of this daemon, or a message, numbered
