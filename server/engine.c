@@ -23,13 +23,14 @@ struct engine_slot {
     struct stream *s;
     void *state;         /* effect state, NULL until created (or after a failure) */
     cJSON *params;       /* the document state was created/updated with */
-    uint64_t rev;        /* its revision */
-    uint32_t failed_rev; /* creation failed at this revision: wait for a change */
+    uint64_t rev;        /* its revision (for the frames' param_rev) */
+    uint64_t gen;        /* its hub params_gen: what tells a change (a cluster's rev may repeat) */
+    uint64_t failed_gen; /* creation failed at this params_gen: wait for a change */
     uint64_t reset_gen;
     uint64_t seq[FXS_KIND_MAX + 1];
     bool running;
     int fails;           /* consecutive failures (steps, creations): the pause after the last */
-    uint32_t fail_rev;   /* revision and reset request seen by the last failure: */
+    uint64_t fail_gen;   /* params_gen and reset request seen by the last failure: */
     uint64_t fail_reset; /* a change of either ends the pause */
     double next_due, last_wall, sim_time;
     double rt_wall, rt_sim; /* start of the current real-time factor window */
@@ -67,9 +68,9 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
     struct stream *s = sl->s;
     struct stream_status st;
     hub_status(eng->hub, s, &st);
-    uint64_t rev = st.rev;
-    if (sl->state && rev == sl->rev) return 0;
-    if (!sl->state && rev == sl->failed_rev) return 1;
+    uint64_t rev, gen = st.params_gen;
+    if (sl->state && gen == sl->gen) return 0;
+    if (!sl->state && gen == sl->failed_gen) return 1;
 
     cJSON *doc = hub_get_params(eng->hub, s, &rev);
     struct fx_err err = {0};
@@ -85,12 +86,13 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
         if (!sl->state) {
             engine_fail(eng, sl, &err, "waiting for a parameter change");
             cJSON_Delete(doc);
-            sl->failed_rev = rev;
+            sl->failed_gen = gen;
             return -1;
         }
     }
     sl->params = doc;
     sl->rev = rev;
+    sl->gen = gen;
     return 0;
 }
 
@@ -228,10 +230,10 @@ static void engine_sync_slots(struct engine *eng)
     hub_release_all(live, n);
 }
 
-/* Pauses a stream after a failure; a later change of rev or reset_gen ends the pause. */
-static void engine_pause(struct engine_slot *sl, uint64_t rev, uint64_t reset_gen, double now)
+/* Pauses a stream after a failure; a later parameter change or reset ends the pause. */
+static void engine_pause(struct engine_slot *sl, uint64_t gen, uint64_t reset_gen, double now)
 {
-    sl->fail_rev = rev;
+    sl->fail_gen = gen;
     sl->fail_reset = reset_gen;
     sl->next_due = fmax(sl->next_due, now + engine_backoff(sl->fails));
 }
@@ -246,7 +248,7 @@ static double engine_run_due(struct engine *eng)
         hub_status(eng->hub, sl->s, &st);
         int subs = st.subscribers;
         double fps = st.fps;
-        uint64_t rev = st.rev, reset_gen = st.reset_gen;
+        uint64_t gen = st.params_gen, reset_gen = st.reset_gen;
         if (eng->pause_idle && subs == 0) {
             sl->running = false;
             sl->rt_wall = 0; /* a pause is not slowness */
@@ -256,7 +258,7 @@ static double engine_run_due(struct engine *eng)
             sl->running = true;
             sl->next_due = sl->last_wall = now;
         }
-        if (sl->fails && (rev != sl->fail_rev || reset_gen != sl->fail_reset))
+        if (sl->fails && (gen != sl->fail_gen || reset_gen != sl->fail_reset))
             sl->next_due = now; /* a set or reset retries at once */
         if (now >= sl->next_due) {
             bool failed = engine_step(eng, sl, now) != 0;
@@ -264,7 +266,7 @@ static double engine_run_due(struct engine *eng)
             sl->next_due += period;
             now = clock_now();
             if (sl->next_due < now) sl->next_due = now; /* overrun: no catch-up burst */
-            if (failed) engine_pause(sl, rev, reset_gen, now);
+            if (failed) engine_pause(sl, gen, reset_gen, now);
         }
         if (sl->next_due < next) next = sl->next_due;
     }

@@ -85,6 +85,7 @@ int hub_create(struct hub *hub, const struct effect_ops *effect, const char *nam
         s->params = params;
         s->fps = params_num(params, "fps");
         s->rev = rev;
+        s->params_gen = 1;
         hist_init(&s->step_time, hist_step_bounds, hist_step_nb);
         hist_init(&s->encode_time, hist_step_bounds, hist_step_nb);
         hist_init(&s->frame_age, hist_age_bounds, hist_age_nb);
@@ -159,6 +160,7 @@ void hub_set_params(struct hub *hub, struct stream *s, cJSON *doc, uint64_t rev)
     s->params = doc;
     s->fps = params_num(doc, "fps");
     s->rev = rev;
+    s->params_gen++;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
 }
@@ -175,7 +177,8 @@ cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev)
 void hub_status(struct hub *hub, struct stream *s, struct stream_status *out)
 {
     pthread_mutex_lock(&hub->mu);
-    *out = (struct stream_status){.rev = s->rev, .reset_gen = s->reset_gen, .error_gen = s->error_gen,
+    *out = (struct stream_status){.rev = s->rev, .params_gen = s->params_gen, .reset_gen = s->reset_gen,
+                                  .error_gen = s->error_gen,
                                   .subscribers = s->subscribers, .fps = s->fps, .realtime = s->realtime,
                                   .failing = s->failing};
     memcpy(out->error, s->error, sizeof out->error);

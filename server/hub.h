@@ -38,6 +38,8 @@ struct stream {
     cJSON *params;    /* complete, validated */
     double fps;       /* params' "fps", read once per change (the engine's tick needs it) */
     uint64_t rev;     /* +1 per accepted change, starts at 1; below HUB_REV_MAX (cluster mode: Redis's) */
+    uint64_t params_gen; /* +1 per hub_set_params, from 1: how the engine tells a change (in cluster
+                            mode rev is Redis's, and a reload can bring other params at the same rev) */
     uint64_t reset_gen;
     bool destroyed;
     int subscribers;
@@ -94,7 +96,7 @@ void stream_unref(struct stream *s);
 
 /* The guarded fields of a stream at one instant. */
 struct stream_status {
-    uint64_t rev, reset_gen, error_gen;
+    uint64_t rev, params_gen, reset_gen, error_gen;
     int subscribers;
     double fps, realtime;
     bool failing;

@@ -298,6 +298,26 @@ async def test_rebase(t):
     await a.close()
 
 
+async def test_reload_same_rev(t):
+    """A reload that finds other params at the same rev (Redis's history differs from the
+    daemon's) takes them: the engine re-creates the effect, frames change size."""
+    a = await Client.connect(A)
+    await a.request("subscribe", stream="c1")
+    f = await a.frame(kind=2)
+    effect, rev, params = R.stream("c1")
+    R.cmd("HSET", "fxs:stream:c1", "params", json.dumps(dict(params, width=48)))  # same rev, no message
+    killed = R.cmd("CLIENT", "KILL", "TYPE", "pubsub")  # every follower loses its link, reconnects, reloads
+    width = None
+    deadline = time.monotonic() + 10
+    while width != 48 and time.monotonic() < deadline:
+        width = (await a.frame(kind=2))["width"]
+    g = await get(A, "c1")
+    t.check(f["width"] == 32 and killed >= 3 and width == 48 and g.get("rev") == rev and g["params"]["width"] == 48,
+            "after the reload A's frames are 48 wide (were %s), rev still %s" % (f["width"], g.get("rev")))
+    await a.request("unsubscribe", stream="c1")
+    await a.close()
+
+
 async def test_create_race(t):
     """Two daemons create the same name at once: one wins, and every daemon has the winner's."""
     a, b = await Client.connect(A), await Client.connect(B)
@@ -567,7 +587,7 @@ if __name__ == "__main__":
         A = cluster_daemon(R, "a")
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
-        s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_create_race,
+        s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
                test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
