@@ -740,7 +740,7 @@ int cluster_reset(struct cluster *cl, const char *stream, struct fx_err *err)
 
 /* ---- the whole state ---- */
 
-int cluster_seed(struct cluster *cl, const cJSON *streams, bool *seeded, struct fx_err *err)
+int cluster_seed(struct cluster *cl, const cJSON *streams, struct fx_err *err)
 {
     int n = cJSON_GetArraySize(streams), argc = 7 + 4 * n, i = 0;
     const char **v = calloc((size_t)argc, sizeof *v);
@@ -769,8 +769,7 @@ int cluster_seed(struct cluster *cl, const cJSON *streams, bool *seeded, struct 
     free(v);
     cJSON_free(ev);
     if (!r) return -1;
-    *seeded = r->type == REDIS_REPLY_INTEGER && r->integer > 0;
-    if (*seeded) log_info("cluster: %s was never seeded: seeded it with %lld streams", cl->cfg.url, r->integer - 1);
+    if (r->type == REDIS_REPLY_INTEGER && r->integer > 0) log_info("cluster: %s was never seeded: seeded it with %lld streams", cl->cfg.url, r->integer - 1);
     freeReplyObject(r);
     return 0;
 }

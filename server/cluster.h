@@ -86,9 +86,9 @@ bool cluster_link_up(struct cluster *cl);
 /* Marks the copy stale (an event that does not fit what it holds). */
 void cluster_stale(struct cluster *cl);
 
-/* Seeds an empty, never seeded database with `streams` ([{stream, effect, rev, params}]),
- * atomically and at most once per database (fxs:seeded); *seeded tells whether this call did. */
-int cluster_seed(struct cluster *cl, const cJSON *streams, bool *seeded, struct fx_err *err);
+/* Seeds a database never seeded with `streams` ([{stream, effect, rev, params}]), atomically
+ * and at most once per database (fxs:seeded; logged when this call did it). */
+int cluster_seed(struct cluster *cl, const cJSON *streams, struct fx_err *err);
 /* The whole state, atomically: [{stream, effect, rev, params}] in creation order, and the
  * number of the last change it includes. The copy is in sync at that number once the caller
  * has applied it (cluster_loaded). */

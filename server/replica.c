@@ -127,9 +127,8 @@ static int replica_reload(struct server *srv, struct fx_err *err)
 {
     struct cluster *cl = srv->cluster;
     cJSON *mine = store_streams(srv), *all = NULL;
-    bool seeded;
     uint64_t seq;
-    int rc = cluster_seed(cl, mine, &seeded, err);
+    int rc = cluster_seed(cl, mine, err);
     cJSON_Delete(mine);
     if (rc || cluster_load(cl, &all, &seq, err)) return -1;
     int n;
