@@ -34,6 +34,7 @@ from fxtest import DAEMON, Client, Daemon, Suite  # noqa: E402
 REDIS = shutil.which("redis-server") or "/usr/bin/redis-server"
 SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: several daemons share 2 cores
 R = None  # the shared Redis
+TEMP_DIRS = []  # Redis data dirs, removed at the end
 A = B = C = None  # its daemons, node ids a, b, c
 
 
@@ -75,6 +76,7 @@ class Redis:
     def __init__(self, port=None, data_dir=None, aof=False, password=None):
         self.port = port or free_port()
         self.dir = data_dir or tempfile.mkdtemp(prefix="fxs-redis-")
+        TEMP_DIRS.append(self.dir)
         self.password = password
         self.url = "redis://127.0.0.1:%d" % self.port
         args = [REDIS, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir, "--save", "",
@@ -83,6 +85,13 @@ class Redis:
         if password:
             args += ["--requirepass", password]
         self.proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=self.dir)
+        try:
+            self._wait_ready()
+        except BaseException:
+            self.kill()  # never left running behind a failed start
+            raise
+
+    def _wait_ready(self):
         deadline = time.monotonic() + 10
         while True:
             try:
@@ -91,7 +100,6 @@ class Redis:
             except (OSError, ConnectionError, RuntimeError):
                 pass
             if self.proc.poll() is not None or time.monotonic() > deadline:
-                self.proc.kill()
                 raise RuntimeError("redis-server did not start on port %d (%s/redis.log)" % (self.port, self.dir))
             time.sleep(0.05)
 
@@ -491,6 +499,7 @@ async def test_redis_wins(t):
         await c.request("create", effect="energy_wave", stream="p1", params=SMALL)
         s2 = await c.request("set", stream="p1", params={"alpha": 2})
         older = tempfile.mkdtemp(prefix="fxs-redis-older-")
+        TEMP_DIRS.append(older)
         shutil.copytree(os.path.join(p.dir, "appendonlydir"), os.path.join(older, "appendonlydir"))
         s3 = await c.request("set", stream="p1", params={"alpha": 3})
         t.check(s2.get("rev") == 2 and s3.get("rev") == 3, "p1 at rev 3 on a Redis with AOF")
@@ -595,3 +604,5 @@ if __name__ == "__main__":
             if d and d.proc.poll() is None:
                 d.stop(signal.SIGKILL)
         R.kill()
+        for path in TEMP_DIRS:
+            shutil.rmtree(path, ignore_errors=True)
