@@ -9,13 +9,15 @@ holds; C's subscriber gets the params event of B's set, A's clients the created/
 of B's and C's changes; concurrent sets through two daemons all succeed with distinct
 consecutive revs and lose no update; a set whose daemon is behind Redis is made again on
 Redis's document; racing creates: one wins, everywhere; a reset through B restarts A's stream;
-Redis killed: changes answer unavailable naming the cluster, /healthz and /metrics say the link
-is down, streams keep sending frames and reads keep working; Redis back empty: changes are
-accepted again within seconds and the state the daemons had is in Redis again (re-seeded);
-Redis back from its AOF in an older state: Redis wins, the daemon goes back to it and tells its
-subscribers; a kill -9 of Redis with appendfsync always loses no acknowledged change; flags and
-configuration errors; a password from FXS_REDIS_PASSWORD. Every wait is bounded; a missing
-redis-server fails the suite with a message. About 30 s."""
+a reload that finds other params at the same rev re-creates the effect; Redis killed: changes
+answer unavailable naming the cluster, /healthz and /metrics say the link is down, streams keep
+sending frames and reads keep working; Redis back empty: changes are accepted again within
+seconds and the state the daemons had is in Redis again (re-seeded); Redis hung (SIGSTOP): one
+change waits the 1 s timeout, the next are refused at once, frames go on; Redis back from its AOF
+in an older state: Redis wins, the daemon goes back to it and tells its subscribers; a kill -9 of
+Redis with appendfsync always loses no acknowledged change; flags and configuration errors; a
+password from FXS_REDIS_PASSWORD; SIGTERM with Redis up or down exits 0. Every wait is bounded;
+a missing redis-server fails the suite with a message. About 10 s (more with a cold PoCL cache)."""
 import asyncio
 import json
 import os
