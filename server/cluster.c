@@ -22,7 +22,6 @@
 #define CLUSTER_BACKOFF_MIN_S 0.1   /* reconnection: first pause, doubled per failure... */
 #define CLUSTER_BACKOFF_MAX_S 1.0   /* ...up to this */
 #define CLUSTER_FIRST_WAIT_S 10.0   /* cluster_follow waits this long for the first subscription */
-#define CLUSTER_KEY "fxs:"
 
 /* ---- the scripts (Lua, run atomically by Redis) ---- */
 
@@ -49,6 +48,9 @@ static const char *const cluster_scripts[CS_COUNT] = {
     /* KEYS stream, streams, seq; ARGV name, event, channel */
     [CS_DESTROY] = "if redis.call('DEL', KEYS[1]) == 0 then return {'gone'} end\n"
                    "redis.call('ZREM', KEYS[2], ARGV[1])\n"
+                   "local p = '" CLUSTER_KEY "'\n"
+                   "redis.call('DEL', p .. 'lease:' .. ARGV[1], p .. 'want:' .. ARGV[1], p .. 'frame:' .. ARGV[1] .. ':1',\n"
+                   "           p .. 'frame:' .. ARGV[1] .. ':2', p .. 'frame:' .. ARGV[1] .. ':3', p .. 'frame:' .. ARGV[1] .. ':4')\n"
                    "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n",
     /* KEYS stream, seq; ARGV event, channel */
     [CS_RESET] = "if redis.call('EXISTS', KEYS[1]) == 0 then return {'gone'} end\n"
@@ -165,6 +167,24 @@ int cluster_parse_url(const char *what, const char *url, struct cluster_config *
     return 0;
 }
 
+static const char *const cluster_roles[] = {[CLUSTER_ROLE_BOTH] = "both", [CLUSTER_ROLE_COMPUTE] = "compute",
+                                            [CLUSTER_ROLE_EDGE] = "edge"};
+
+int cluster_parse_role(const char *what, const char *s, struct cluster_config *cfg, struct fx_err *err)
+{
+    for (int r = 0; r < 3; r++)
+        if (!strcmp(s, cluster_roles[r])) {
+            cfg->role = (enum cluster_role)r;
+            cfg->role_set = true;
+            return 0;
+        }
+    return fx_fail(err, "bad_request", "role", "%s: expected compute, edge or both, got \"%.64s\"", what, s);
+}
+
+const char *cluster_role_name(enum cluster_role role) { return cluster_roles[role]; }
+
+const struct cluster_config *cluster_config_of(const struct cluster *cl) { return &cl->cfg; }
+
 /* ---- connections ---- */
 
 static void cluster_note_error(struct cluster *cl, const char *why)
@@ -191,8 +211,7 @@ static int cluster_expect_ok(redisContext *c, char *why, size_t cap, const char 
     return rc;
 }
 
-/* A new connection, authenticated and on the configured database; NULL with why. */
-static redisContext *cluster_connect(const struct cluster *cl, char *why, size_t cap)
+redisContext *cluster_dial(const struct cluster *cl, char *why, size_t cap)
 {
     struct timeval tv = {CLUSTER_TIMEOUT_S, 0};
     redisContext *c = redisConnectWithTimeout(cl->cfg.host, cl->cfg.port, tv);
@@ -244,7 +263,7 @@ static void cluster_first(struct cluster *cl, int outcome)
 /* A connection SUBSCRIBEd to the channel, or NULL with why. */
 static redisContext *cluster_subscribe(struct cluster *cl, char *why, size_t cap)
 {
-    redisContext *c = cluster_connect(cl, why, cap);
+    redisContext *c = cluster_dial(cl, why, cap);
     if (!c) return NULL;
     redisReply *r = redisCommand(c, "SUBSCRIBE %s", cl->channel);
     bool ok = r && r->type == REDIS_REPLY_ARRAY && r->elements == 3;
@@ -510,7 +529,7 @@ static int cluster_cmd(struct cluster *cl, struct fx_err *err)
         cl->cmd = NULL;
     }
     if (cl->cmd) return 0;
-    if (!(cl->cmd = cluster_connect(cl, why, sizeof why))) {
+    if (!(cl->cmd = cluster_dial(cl, why, sizeof why))) {
         atomic_store(&cl->cmd_suspect, true);
         return cluster_unavailable(cl, err, "cannot reach %s: %s (nothing changed)", why);
     }

@@ -31,10 +31,15 @@
 #define FX_CLUSTER_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 #include <cjson/cJSON.h>
 
 #include "err.h"
+
+/* --role: a compute daemon takes leases and computes (it opens an OpenCL device); an edge
+ * computes nothing and only relays frames (lease.h, relay.h); both (the default) does both. */
+enum cluster_role { CLUSTER_ROLE_BOTH, CLUSTER_ROLE_COMPUTE, CLUSTER_ROLE_EDGE };
 
 struct cluster_config {
     char url[256];  /* as given, for messages ("" = single node); it never holds a password */
@@ -42,12 +47,22 @@ struct cluster_config {
     int port, db;
     char node_id[64];   /* in every message this daemon publishes; default: the host name */
     char password[512]; /* FXS_REDIS_PASSWORD; never logged nor reported */
+    enum cluster_role role;
+    bool role_set;      /* --role or "role" given (it needs --cluster) */
 };
 
 /* Parses redis://HOST[:PORT][/DB] (port 6379 and database 0 by default; HOST a name, an
  * IPv4 address or [IPv6]) into cfg's url, host, port and db; errors name `what` (the flag or
  * the configuration key). */
 int cluster_parse_url(const char *what, const char *url, struct cluster_config *cfg, struct fx_err *err);
+
+/* Parses compute, edge or both into cfg->role; errors name `what`. */
+int cluster_parse_role(const char *what, const char *s, struct cluster_config *cfg, struct fx_err *err);
+const char *cluster_role_name(enum cluster_role role);
+
+/* Keys and channels beside fxs:stream:NAME (lease.c, relay.c): */
+#define CLUSTER_KEY "fxs:"
+#define CLUSTER_FRAMES_CHANNEL CLUSTER_KEY "frames:" /* + DB ":" NAME: the stream's frames, as sent to clients */
 
 struct cluster;
 
@@ -57,6 +72,10 @@ int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct 
  * naming the URL and the reason) when Redis cannot be reached or refuses it. wake(ctx) is
  * called from the follower whenever it queued something. */
 int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void *ctx, struct fx_err *err);
+/* A new connection to Redis (authenticated, on the database; every command bounded by the
+ * 1 s timeout), for a thread of its own; NULL with why. Any thread. */
+struct redisContext *cluster_dial(const struct cluster *cl, char *why, size_t cap);
+const struct cluster_config *cluster_config_of(const struct cluster *cl);
 /* Stops the follower (within the connect timeout) and frees everything; NULL is a no-op. */
 void cluster_close(struct cluster *cl);
 

@@ -32,6 +32,8 @@ void config_usage(FILE *out)
           "                     redis://HOST[:PORT][/DB], shared with the other daemons there\n"
           "                     (password: environment FXS_REDIS_PASSWORD)\n"
           "  --node-id NAME     this daemon's name in the cluster (default: the host name)\n"
+          "  --role ROLE        in a cluster: compute (takes streams and computes them), edge\n"
+          "                     (no OpenCL: relays the frames others compute) or both (default)\n"
           "  --help             this text\n"
           "\n"
           "Endpoints: GET /healthz (JSON), GET /metrics (Prometheus), WebSocket /v1/ws\n"
@@ -187,7 +189,7 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
         return 0;
     }
     static const char *const string_keys[] = {"listen", "state_dir", "web_root", "device", "assets_dir",
-                                              "tls_cert", "tls_key", "cluster", "node_id", "log_level", NULL};
+                                              "tls_cert", "tls_key", "cluster", "node_id", "role", "log_level", NULL};
     bool known = false;
     for (const char *const *n = string_keys; *n && !known; n++) known = !strcmp(*n, k);
     if (!known) return fx_fail(err, "bad_request", k, "unknown configuration key \"%s\"", k);
@@ -202,6 +204,7 @@ static int config_file_key(struct config *cfg, const cJSON *e, struct fx_err *er
     if (!strcmp(k, "tls_key")) return config_str(cfg->tls_key, sizeof cfg->tls_key, v, k, err);
     if (!strcmp(k, "cluster")) return cluster_parse_url(k, v, &cfg->cluster, err);
     if (!strcmp(k, "node_id")) return config_str(cfg->cluster.node_id, sizeof cfg->cluster.node_id, v, k, err);
+    if (!strcmp(k, "role")) return cluster_parse_role(k, v, &cfg->cluster, err);
     int lv = log_parse_level(v); /* the last string key: log_level */
     if (lv < 0) return fx_fail(err, "bad_request", k, "log_level: expected error, warn, info or debug");
     cfg->log_level = lv;
@@ -228,7 +231,7 @@ static int config_load_file(struct config *cfg, const char *path, struct fx_err 
 
 enum {
     OPT_PORT = 1, OPT_LISTEN, OPT_CONFIG, OPT_STATE, OPT_DEVICE, OPT_WEB, OPT_LOG, OPT_HELP, OPT_ASSETS, OPT_CERT,
-    OPT_KEY, OPT_CLUSTER, OPT_NODE
+    OPT_KEY, OPT_CLUSTER, OPT_NODE, OPT_ROLE
 };
 
 static const struct option config_options[] = {
@@ -238,7 +241,7 @@ static const struct option config_options[] = {
     {"log-level", required_argument, NULL, OPT_LOG},   {"help", no_argument, NULL, OPT_HELP},
     {"assets-dir", required_argument, NULL, OPT_ASSETS}, {"tls-cert", required_argument, NULL, OPT_CERT},
     {"tls-key", required_argument, NULL, OPT_KEY},     {"cluster", required_argument, NULL, OPT_CLUSTER},
-    {"node-id", required_argument, NULL, OPT_NODE},
+    {"node-id", required_argument, NULL, OPT_NODE},    {"role", required_argument, NULL, OPT_ROLE},
     {NULL, 0, NULL, 0},
 };
 
@@ -258,6 +261,7 @@ static int config_flag(struct config *cfg, int opt, const char *arg, struct fx_e
     case OPT_KEY: return config_str(cfg->tls_key, sizeof cfg->tls_key, arg, "--tls-key", err);
     case OPT_CLUSTER: return cluster_parse_url("--cluster", arg, &cfg->cluster, err);
     case OPT_NODE: return config_str(cfg->cluster.node_id, sizeof cfg->cluster.node_id, arg, "--node-id", err);
+    case OPT_ROLE: return cluster_parse_role("--role", arg, &cfg->cluster, err);
     case OPT_LOG:
         if ((cfg->log_level = log_parse_level(arg)) < 0)
             return fx_fail(err, "bad_request", "log-level", "--log-level: expected error, warn, info or debug");
@@ -278,6 +282,7 @@ static int config_cluster(struct cluster_config *c, struct fx_err *err)
 {
     if (!c->url[0]) {
         if (c->node_id[0]) return fx_fail(err, "bad_request", "node-id", "--node-id needs --cluster");
+        if (c->role_set) return fx_fail(err, "bad_request", "role", "--role needs --cluster");
         return 0;
     }
     bool named = c->node_id[0];

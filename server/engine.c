@@ -28,6 +28,7 @@ struct engine_slot {
     uint64_t failed_gen; /* creation failed at this params_gen: wait for a change */
     uint64_t reset_gen;
     uint64_t seq[FXS_KIND_MAX + 1];
+    uint64_t lease_gen;  /* the lease the slot computes under (cluster mode; 0 on a single node) */
     bool running;
     int fails;           /* consecutive failures (steps, creations): the pause after the last */
     uint64_t fail_gen;   /* params_gen and reset request seen by the last failure: */
@@ -122,6 +123,7 @@ static int engine_emit(void *ctx, const struct effect_frame *ef)
     if (!f) return -1;
     c->encode_ms += ef->encode_ms;
     if (ef->kind == FXS_KIND_PARTICLES) atomic_store(&c->sl->s->particles, ef->count_or_width);
+    if (c->eng->export_frame) c->eng->export_frame(c->eng->export_ctx, c->sl->s, c->sl->lease_gen, frame_ref(f));
     hub_publish(c->eng->hub, c->sl->s, f);
     return 0;
 }
@@ -194,6 +196,7 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
         hub_stream_recovered(eng->hub, s);
     }
     engine_realtime(eng, sl, now);
+    atomic_fetch_add(&eng->busy_ns, (uint_fast64_t)(ms * 1e6));
     atomic_fetch_add(&s->steps, 1);
     hist_observe(&s->step_time, ms * 1e-3);
     hist_observe(&s->encode_time, ctx.encode_ms * 1e-3);
@@ -238,6 +241,23 @@ static void engine_pause(struct engine_slot *sl, uint64_t gen, uint64_t reset_ge
     sl->next_due = fmax(sl->next_due, now + engine_backoff(sl->fails));
 }
 
+/* Whether this daemon computes the stream now (hub.h struct stream_lease). A lease taken
+ * (again) starts the effect afresh, at the previous owner's frame numbers; one lost or run out
+ * drops the effect. */
+static bool engine_holds(struct engine_slot *sl, const struct stream_lease *l, double now)
+{
+    bool mine = l->owned && now < l->until;
+    if (mine && l->gen != sl->lease_gen) {
+        engine_drop_fx(sl);
+        sl->lease_gen = l->gen;
+        sl->running = false;
+        memcpy(sl->seq, l->seq_from, sizeof sl->seq);
+    }
+    if (!mine && sl->state) engine_drop_fx(sl);
+    if (!mine) sl->running = false;
+    return mine;
+}
+
 /* Steps what is due; returns the time of the next deadline. */
 static double engine_run_due(struct engine *eng)
 {
@@ -249,7 +269,8 @@ static double engine_run_due(struct engine *eng)
         int subs = st.subscribers;
         double fps = st.fps;
         uint64_t gen = st.params_gen, reset_gen = st.reset_gen;
-        if (eng->pause_idle && subs == 0) {
+        if (!engine_holds(sl, &st.lease, now)) continue;
+        if (eng->pause_idle && subs == 0 && !st.lease.remote_demand) {
             sl->running = false;
             sl->rt_wall = 0; /* a pause is not slowness */
             continue;
@@ -289,7 +310,11 @@ static void *engine_main(void *arg)
 
 int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool pause_idle, struct fx_err *err)
 {
+    void (*export_frame)(void *, struct stream *, uint64_t, struct frame *) = eng->export_frame;
+    void *export_ctx = eng->export_ctx;
     memset(eng, 0, sizeof *eng);
+    eng->export_frame = export_frame;
+    eng->export_ctx = export_ctx;
     eng->hub = hub;
     eng->ocl = ocl;
     eng->pause_idle = pause_idle;

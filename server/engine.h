@@ -7,11 +7,17 @@
  * once into frames and published to the hub. One thread is enough on purpose: PoCL
  * already spreads every kernel over all cores, and a second stepping thread would only
  * contend for them; streams are scheduled earliest-deadline-first. A stream with no
- * subscribers pauses (its simulated time stops) unless pause_idle is off. */
+ * subscribers pauses (its simulated time stops) unless pause_idle is off.
+ *
+ * In cluster mode the engine computes only the streams whose lease this daemon holds (hub.h
+ * struct stream_lease): a stream taken over starts its effect afresh and continues the previous
+ * owner's frame numbers; one lost is dropped at once. Subscribers on other daemons count as
+ * subscribers. Every frame also goes to `export` (lease.h publishes it through Redis). */
 #ifndef FX_ENGINE_H
 #define FX_ENGINE_H
 
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 
 #include "hub.h"
@@ -27,8 +33,14 @@ struct engine {
     bool started;
     struct engine_slot *slots; /* engine thread only */
     int nslots;
+    atomic_uint_fast64_t busy_ns; /* time spent stepping, for the cluster's load measure (lease.c) */
+    /* Cluster mode: called from the engine thread with each new frame (a reference the callee
+     * owns) and the lease generation it was computed under; NULL on a single node. */
+    void (*export_frame)(void *ctx, struct stream *s, uint64_t lease_gen, struct frame *f);
+    void *export_ctx;
 };
 
+/* Set export_frame and export_ctx before (engine_start keeps them). */
 int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool pause_idle, struct fx_err *err);
 /* Stops the thread (after its current step) and frees every effect. */
 void engine_stop(struct engine *eng);

@@ -6,7 +6,7 @@
 
 #include "hub.h"
 
-int hub_init(struct hub *hub, int max_streams)
+int hub_init(struct hub *hub, int max_streams, bool clustered)
 {
     memset(hub, 0, sizeof *hub);
     pthread_condattr_t ca;
@@ -16,6 +16,7 @@ int hub_init(struct hub *hub, int max_streams)
     pthread_cond_init(&hub->cv, &ca);
     pthread_condattr_destroy(&ca);
     hub->max_streams = max_streams;
+    hub->clustered = clustered;
     hub->next_channel = 1;
     return 0;
 }
@@ -86,6 +87,7 @@ int hub_create(struct hub *hub, const struct effect_ops *effect, const char *nam
         s->fps = params_num(params, "fps");
         s->rev = rev;
         s->params_gen = 1;
+        s->lease = (struct stream_lease){.owned = !hub->clustered, .until = INFINITY};
         hist_init(&s->step_time, hist_step_bounds, hist_step_nb);
         hist_init(&s->encode_time, hist_step_bounds, hist_step_nb);
         hist_init(&s->frame_age, hist_age_bounds, hist_age_nb);
@@ -178,7 +180,7 @@ void hub_status(struct hub *hub, struct stream *s, struct stream_status *out)
 {
     pthread_mutex_lock(&hub->mu);
     *out = (struct stream_status){.rev = s->rev, .params_gen = s->params_gen, .reset_gen = s->reset_gen,
-                                  .error_gen = s->error_gen,
+                                  .error_gen = s->error_gen, .lease = s->lease,
                                   .subscribers = s->subscribers, .fps = s->fps, .realtime = s->realtime,
                                   .failing = s->failing};
     memcpy(out->error, s->error, sizeof out->error);
@@ -205,6 +207,14 @@ void hub_request_reset(struct hub *hub, struct stream *s)
 {
     pthread_mutex_lock(&hub->mu);
     s->reset_gen++;
+    hub_changed(hub);
+    pthread_mutex_unlock(&hub->mu);
+}
+
+void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease *lease)
+{
+    pthread_mutex_lock(&hub->mu);
+    s->lease = *lease;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
 }

@@ -28,6 +28,19 @@
  * no more changes (at a change a millisecond, 31 700 years). */
 #define HUB_REV_MAX 1e15
 
+/* Who computes a stream. On a single node: this daemon, always. In cluster mode (lease.h) the
+ * daemon holding the stream's lease in Redis: owned under lease generation `gen` until `until`
+ * (CLOCK_MONOTONIC seconds; the lease's TTL counted from before its last renewal was sent, so a
+ * daemon that was paused past it stops by itself; INFINITY while Redis is unreachable: the
+ * owner keeps serving its own subscribers), continuing the frame numbers of the previous owner
+ * from seq_from; remote_demand: another daemon has subscribers of it. */
+struct stream_lease {
+    bool owned, remote_demand;
+    uint64_t gen;
+    double until;
+    uint64_t seq_from[FXS_KIND_MAX + 1];
+};
+
 struct stream {
     atomic_int refs;
     char name[STREAM_NAME_MAX];
@@ -41,6 +54,7 @@ struct stream {
     uint64_t params_gen; /* +1 per hub_set_params, from 1: how the engine tells a change (in cluster
                             mode rev is Redis's, and a reload can bring other params at the same rev) */
     uint64_t reset_gen;
+    struct stream_lease lease;
     bool destroyed;
     int subscribers;
     struct frame *latest[FXS_KIND_MAX + 1];
@@ -66,6 +80,7 @@ struct hub {
     pthread_cond_t cv;  /* engine wakes on any change */
     uint64_t gen;       /* bumped on every change the engine must see */
     bool stopping;
+    bool clustered;     /* new streams start without a lease (struct stream_lease) */
     struct stream **streams;
     int n, cap, max_streams;
     uint32_t next_channel;
@@ -73,7 +88,8 @@ struct hub {
     void *notify_ctx;
 };
 
-int hub_init(struct hub *hub, int max_streams);
+/* clustered: cluster mode (streams are computed where their lease is, lease.h). */
+int hub_init(struct hub *hub, int max_streams, bool clustered);
 /* The name rule of streams (and presets): 1-63 characters of [A-Za-z0-9_.-]. */
 bool hub_valid_name(const char *name);
 void hub_free(struct hub *hub);
@@ -97,6 +113,7 @@ void stream_unref(struct stream *s);
 /* The guarded fields of a stream at one instant. */
 struct stream_status {
     uint64_t rev, params_gen, reset_gen, error_gen;
+    struct stream_lease lease;
     int subscribers;
     double fps, realtime;
     bool failing;
@@ -114,6 +131,8 @@ void hub_set_params(struct hub *hub, struct stream *s, cJSON *doc, uint64_t rev)
 /* A copy of the parameters and their revision. */
 cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev);
 void hub_request_reset(struct hub *hub, struct stream *s);
+/* Cluster mode (lease.c): the stream's lease as Redis last said. */
+void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease *lease);
 void hub_add_subscriber(struct hub *hub, struct stream *s, int delta);
 
 /* Engine side: publish a frame (takes the reference), report a stream error. */

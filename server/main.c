@@ -15,9 +15,11 @@
 #include "clock.h"
 #include "config.h"
 #include "effect.h"
+#include "lease.h"
 #include "log.h"
 #include "net.h"
 #include "ocl.h"
+#include "relay.h"
 #include "replica.h"
 #include "store.h"
 
@@ -109,9 +111,15 @@ static int main_prepare_state_dir(const char *dir, struct fx_err *err)
 static int main_join_cluster(struct server *srv, struct fx_err *err)
 {
     if (cluster_open(&srv->cluster, &srv->cfg.cluster, err) ||
-        cluster_follow(srv->cluster, net_notify, main_net, err) || replica_poll(srv, err))
+        cluster_follow(srv->cluster, net_notify, main_net, err) || replica_poll(srv, err) ||
+        lease_start(&srv->lease, srv, err) || relay_start(&srv->relay, srv, err))
         return -1;
-    log_info("cluster: node %s on %s", srv->cfg.cluster.node_id, srv->cfg.cluster.url);
+    if (srv->cfg.cluster.role != CLUSTER_ROLE_EDGE) {
+        srv->engine.export_frame = lease_export;
+        srv->engine.export_ctx = srv->lease;
+    }
+    log_info("cluster: node %s (%s) on %s", srv->cfg.cluster.node_id, cluster_role_name(srv->cfg.cluster.role),
+             srv->cfg.cluster.url);
     return 0;
 }
 
@@ -129,14 +137,19 @@ static int main_serve(struct server *srv, struct fx_err *err)
 {
     srv->start_time = clock_now();
     if (main_prepare_state_dir(srv->cfg.state_dir, err)) return -1;
-    if (ocl_open(&srv->ocl, srv->cfg.device, err)) return -1;
-    log_info("OpenCL device: %s (%s)", ocl_device_name(srv->ocl), ocl_platform_name(srv->ocl));
-    hub_init(&srv->hub, srv->cfg.limits.max_streams);
+    bool clustered = srv->cfg.cluster.url[0], edge = clustered && srv->cfg.cluster.role == CLUSTER_ROLE_EDGE;
+    if (edge) {
+        log_info("cluster edge: no OpenCL device, nothing computed here");
+    } else {
+        if (ocl_open(&srv->ocl, srv->cfg.device, err)) return -1;
+        log_info("OpenCL device: %s (%s)", ocl_device_name(srv->ocl), ocl_platform_name(srv->ocl));
+    }
+    hub_init(&srv->hub, srv->cfg.limits.max_streams, clustered);
     int rc = presets_load(&srv->presets, srv->cfg.state_dir, err);
     if (!rc) rc = main_create_streams(srv, err);
     if (!rc) rc = net_open(&main_net, srv, err);
-    if (!rc && srv->cfg.cluster.url[0]) rc = main_join_cluster(srv, err);
-    if (!rc) rc = engine_start(&srv->engine, &srv->hub, srv->ocl, srv->cfg.pause_idle, err);
+    if (!rc && clustered) rc = main_join_cluster(srv, err);
+    if (!rc && !edge) rc = engine_start(&srv->engine, &srv->hub, srv->ocl, srv->cfg.pause_idle, err);
     if (!rc) {
         int port = net_port(main_net);
         bool tls = srv->cfg.tls_cert[0];
@@ -151,6 +164,10 @@ static int main_serve(struct server *srv, struct fx_err *err)
         log_info("stopped serving");
     }
     engine_stop(&srv->engine);
+    lease_stop(srv->lease); /* after the engine: it gives the leases up */
+    relay_stop(srv->relay);
+    srv->lease = NULL;
+    srv->relay = NULL;
     cluster_close(srv->cluster); /* its follower wakes the network loop: stopped first */
     srv->cluster = NULL;
     net_close(main_net);

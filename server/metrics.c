@@ -10,6 +10,7 @@
 #include "cluster.h"
 #include "metrics.h"
 #include "ocl.h"
+#include "relay.h"
 #include "session.h"
 
 static double metrics_uptime(const struct server *srv)
@@ -118,7 +119,25 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_printf(out, "fxs_streams %d\n", nstreams);
 }
 
-/* Cluster mode only: the Redis link and the changes that went through it. */
+/* Cluster mode: the number of streams this daemon holds the lease of; with names set, their
+ * names go into it, and those it relays into relaying. */
+static int metrics_leases(struct server *srv, cJSON *names, cJSON *relaying)
+{
+    int n, held = 0;
+    struct stream **all = hub_snapshot(&srv->hub, &n);
+    for (int i = 0; i < n; i++) {
+        struct stream_status st;
+        hub_status(&srv->hub, all[i], &st);
+        held += st.lease.owned;
+        if (st.lease.owned && names) cJSON_AddItemToArray(names, cJSON_CreateString(all[i]->name));
+        if (!st.lease.owned && st.subscribers > 0 && relaying)
+            cJSON_AddItemToArray(relaying, cJSON_CreateString(all[i]->name));
+    }
+    hub_release_all(all, n);
+    return held;
+}
+
+/* Cluster mode only: the Redis link, the changes that went through it, leases and frames. */
 static void metrics_cluster(struct server *srv, struct fx_buf *out)
 {
     if (!srv->cluster) return;
@@ -149,12 +168,27 @@ static void metrics_cluster(struct server *srv, struct fx_buf *out)
          offsetof(struct counters, cluster_applied)},
         {"fxs_cluster_reloads_total", "Reloads of the whole state from Redis (start, reconnection, missed change).",
          offsetof(struct counters, cluster_reloads)},
+        {"fxs_cluster_leases_taken_total", "Stream leases this daemon took (new streams, or taken over from a daemon gone).",
+         offsetof(struct counters, cluster_leases_taken)},
+        {"fxs_cluster_leases_lost_total", "Stream leases this daemon lost to another (it was paused or cut off past the TTL).",
+         offsetof(struct counters, cluster_leases_lost)},
+        {"fxs_cluster_frames_published_total", "Frames this daemon computed and published through Redis.",
+         offsetof(struct counters, cluster_frames_published)},
+        {"fxs_cluster_frames_fenced_total", "Frames Redis refused because their lease had been taken over (fencing).",
+         offsetof(struct counters, cluster_frames_fenced)},
+        {"fxs_cluster_frames_relayed_total", "Frames computed by other daemons that came through Redis to subscribers here.",
+         offsetof(struct counters, cluster_frames_relayed)},
     };
     for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
         metrics_head(out, k[i].name, "counter", k[i].help);
         metrics_printf(out, "%s %llu\n", k[i].name,
                        (unsigned long long)atomic_load((const atomic_uint_fast64_t *)((const char *)c + k[i].off)));
     }
+    metrics_head(out, "fxs_cluster_leases", "gauge", "Streams this daemon holds the lease of (computes).");
+    metrics_printf(out, "fxs_cluster_leases %d\n", metrics_leases(srv, NULL, NULL));
+    metrics_head(out, "fxs_cluster_relay_latency_seconds", "histogram",
+                 "From the owner's frame time to the frame's arrival here through Redis (relayed frames).");
+    hist_render(out, relay_latency(srv->relay), "fxs_cluster_relay_latency_seconds", "");
 }
 
 static void metrics_kernels(struct server *srv, struct fx_buf *out)
@@ -272,17 +306,22 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     return 0;
 }
 
-/* Cluster mode: {node, redis, link, in_sync, change[, last_error]}. */
+/* Cluster mode: {node, role, redis, link, in_sync, change, leases, relaying, frames_published,
+ * frames_relayed[, last_error]}. */
 static void metrics_health_cluster(struct server *srv, cJSON *h)
 {
     struct cluster_status st;
     cluster_status(srv->cluster, &st);
     cJSON *o = cJSON_AddObjectToObject(h, "cluster");
     cJSON_AddStringToObject(o, "node", st.node);
+    cJSON_AddStringToObject(o, "role", cluster_role_name(srv->cfg.cluster.role));
     cJSON_AddStringToObject(o, "redis", st.url);
     cJSON_AddStringToObject(o, "link", st.link_up ? "up" : "down");
     cJSON_AddBoolToObject(o, "in_sync", st.in_sync);
     cJSON_AddNumberToObject(o, "change", (double)st.seq);
+    metrics_leases(srv, cJSON_AddArrayToObject(o, "leases"), cJSON_AddArrayToObject(o, "relaying"));
+    cJSON_AddNumberToObject(o, "frames_published", (double)atomic_load(&srv->counters.cluster_frames_published));
+    cJSON_AddNumberToObject(o, "frames_relayed", (double)atomic_load(&srv->counters.cluster_frames_relayed));
     if (st.last_error[0]) cJSON_AddStringToObject(o, "last_error", st.last_error);
 }
 

@@ -58,6 +58,10 @@ struct counters {
      * there (unavailable, or Redis's state said no); sets re-made on a newer document; other
      * daemons' changes applied here; reloads of the whole state from Redis. */
     atomic_uint_fast64_t cluster_changes, cluster_failures, cluster_rebases, cluster_applied, cluster_reloads;
+    /* Cluster mode (lease.c, relay.c): leases taken and lost; frames published through Redis,
+     * refused there (fenced), and relayed from other daemons to subscribers here. */
+    atomic_uint_fast64_t cluster_leases_taken, cluster_leases_lost;
+    atomic_uint_fast64_t cluster_frames_published, cluster_frames_fenced, cluster_frames_relayed;
 };
 
 struct session;
@@ -70,6 +74,8 @@ struct server {
     struct engine engine;
     struct ocl *ocl;
     struct cluster *cluster;  /* cluster mode's Redis link (cluster.h), NULL on a single node */
+    struct lease *lease;      /* cluster mode: leases and frame publishing (lease.h) */
+    struct relay *relay;      /* cluster mode: frames computed elsewhere (relay.h) */
     struct counters counters;
     struct session *sessions; /* network thread only */
     int nsessions;

@@ -31,7 +31,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                                      .max_message_bytes = 1 << 16, .max_json_depth = 32,
                                      .max_control_per_sec = 1 << 20, .max_queued_messages = 1 << 20, .max_queued_bytes = 1 << 30,
                                      .stall_timeout_s = 10};
-    hub_init(&srv.hub, srv.cfg.limits.max_streams);
+    hub_init(&srv.hub, srv.cfg.limits.max_streams, false);
     session_open(&ss, &srv, ACCESS_ADMIN);
     for (size_t i = 0; i < size;) {
         const uint8_t *nl = memchr(data + i, '\n', size - i);

@@ -35,6 +35,7 @@ from fxtest import DAEMON, Client, Daemon, Suite  # noqa: E402
 
 REDIS = shutil.which("redis-server") or "/usr/bin/redis-server"
 SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: several daemons share 2 cores
+LEASE_TTL_S = 3.0  # server/lease.h
 R = None  # the shared Redis
 TEMP_DIRS = []  # Redis data dirs, removed at the end
 A = B = C = None  # its daemons, node ids a, b, c
@@ -196,6 +197,19 @@ async def event(c, op, stream, timeout=8.0, **match):
                 all(m.get(k) == v for k, v in match.items()):
             return m
     return None
+
+
+def leases(d):
+    return http_json(d, "/healthz").get("cluster", {}).get("leases", [])
+
+
+async def owner(stream, daemons, timeout=10.0):
+    """The daemon among daemons holding the stream's lease (computing it), or None."""
+    async def find():
+        held = [d for d in daemons if stream in leases(d)]
+        return held[0] if len(held) == 1 else None
+
+    return await until(find, timeout=timeout, step=0.1)
 
 
 # ---- one Redis, three daemons ----
@@ -391,8 +405,10 @@ async def test_metrics(t):
 
 async def test_redis_down(t):
     """Redis killed: changes are refused with unavailable naming the cluster, nothing changes,
-    streams keep sending frames and reads keep working."""
-    a = await Client.connect(A)
+    the owner of a stream keeps sending its frames to its subscribers, reads keep working."""
+    o = await owner("c1", (A, B, C))
+    t.check(o is not None, "one daemon holds c1's lease")
+    a = await Client.connect(o or A)
     await a.request("subscribe", stream="c1")
     await a.frame(kind=2)
     before = await get(C, "c1")
@@ -415,7 +431,9 @@ async def test_redis_down(t):
             h["cluster"].get("last_error"))
     t.check(metric(A, 'fxs_cluster_link_up{node="a"}') == 0, "fxs_cluster_link_up 0")
     seqs = [(await a.frame(kind=2))["seq"] for _ in range(3)]
-    t.check(seqs == sorted(seqs) and len(set(seqs)) == 3, "the stream keeps sending frames (seq %s)" % seqs)
+    t.check(seqs == sorted(seqs) and len(set(seqs)) == 3, "the owner keeps sending frames (seq %s)" % seqs)
+    await asyncio.sleep(LEASE_TTL_S)
+    t.check("c1" in leases(o or A), "past the lease's TTL it still computes c1 (nobody can take it over)")
     g = await get(C, "c1")
     t.check(g.get("rev") == before["rev"] and g.get("params") == before["params"] and "c1" in await names(B),
             "get and list still answer, nothing changed (rev %s)" % g.get("rev"))
@@ -455,8 +473,9 @@ async def test_redis_back_empty(t):
 
 async def test_redis_hung(t):
     """Redis stopped (SIGSTOP: connections open, no answers): a set waits at most the command
-    timeout, the link is given up within seconds, frames keep coming; SIGCONT: back to normal."""
-    a = await Client.connect(A)
+    timeout, the link is given up within seconds, the owner's frames keep coming; SIGCONT: back to
+    normal."""
+    a = await Client.connect(await owner("c1", (A, B, C)) or A)
     await a.request("subscribe", stream="c1")
     await a.frame(kind=2)
     R.proc.send_signal(signal.SIGSTOP)

@@ -18,7 +18,7 @@ static void t_server_init(void)
                                        .max_message_bytes = 4096, .max_json_depth = 8,
                                        .max_control_per_sec = 1000, .max_queued_messages = 64,
                                        .max_queued_bytes = 1 << 20};
-    hub_init(&t_srv.hub, t_srv.cfg.limits.max_streams);
+    hub_init(&t_srv.hub, t_srv.cfg.limits.max_streams, false);
 }
 
 static void t_server_free(void)
