@@ -702,7 +702,8 @@ def test_nginx_cluster(t):
             return
         proxy = so.Proxy([p for _, p in daemons])
         r = proxy.test_config()
-        t.check(r.returncode == 0, "nginx -t accepts fxstream-cluster.conf" + ("" if not r.returncode else ": " + r.stderr[-300:]))
+        t.check(r.returncode == 0, "nginx -t accepts fxstream-cluster.conf" +
+                ("" if not r.returncode else ": " + r.stderr[-300:]))
         proxy.start()
 
         def gauge(port):
