@@ -278,6 +278,18 @@ def load_manifests(where=K8S):
     return docs
 
 
+def kustomize_check(t, where, ndocs):
+    kust = yaml.safe_load(open(os.path.join(where, "kustomization.yaml")))
+    files = sorted(f for f in os.listdir(where) if f.endswith(".yaml") and f != "kustomization.yaml")
+    t.check(sorted(kust.get("resources", [])) == files, "%s/kustomization.yaml lists every manifest" %
+            os.path.relpath(where, ROOT))
+    kubectl = shutil.which("kubectl")
+    if kubectl:  # not from Debian; used when the machine has it
+        r = subprocess.run([kubectl, "kustomize", where], capture_output=True, text=True, timeout=60)
+        t.check(r.returncode == 0 and len([d for d in yaml.safe_load_all(r.stdout) if d]) == ndocs,
+                "kubectl kustomize renders all %d objects of %s" % (ndocs, os.path.relpath(where, ROOT)))
+
+
 def test_k8s_schema(t):
     docs = load_manifests()
     kinds = sorted(d["kind"] for _, d in docs)
@@ -296,14 +308,7 @@ def test_k8s_schema(t):
     e2 = k8s_errors(broken2)
     t.check(any("paht" in e for e in e1) and any("limits" in e for e in e1) and any("selector" in e for e in e2),
             "the model check catches an unknown field, a wrong type and a missing required field")
-    kust = yaml.safe_load(open(os.path.join(K8S, "kustomization.yaml")))
-    files = sorted(f for f in os.listdir(K8S) if f.endswith(".yaml") and f != "kustomization.yaml")
-    t.check(sorted(kust.get("resources", [])) == files, "kustomization.yaml lists every manifest")
-    kubectl = shutil.which("kubectl")
-    if kubectl:  # not from Debian; used when the machine has it
-        r = subprocess.run([kubectl, "kustomize", K8S], capture_output=True, text=True, timeout=60)
-        t.check(r.returncode == 0 and len([d for d in yaml.safe_load_all(r.stdout) if d]) == len(docs),
-                "kubectl kustomize renders all %d objects" % len(docs))
+    kustomize_check(t, K8S, len(docs))
 
 
 def test_k8s_wiring(t):
@@ -387,18 +392,6 @@ def test_k8s_wiring(t):
 
 
 # ---- Kubernetes, cluster mode -----------------------------------------------------------
-
-def kustomize_check(t, where, ndocs):
-    kust = yaml.safe_load(open(os.path.join(where, "kustomization.yaml")))
-    files = sorted(f for f in os.listdir(where) if f.endswith(".yaml") and f != "kustomization.yaml")
-    t.check(sorted(kust.get("resources", [])) == files, "%s/kustomization.yaml lists every manifest" %
-            os.path.relpath(where, ROOT))
-    kubectl = shutil.which("kubectl")
-    if kubectl:  # not from Debian; used when the machine has it
-        r = subprocess.run([kubectl, "kustomize", where], capture_output=True, text=True, timeout=60)
-        t.check(r.returncode == 0 and len([d for d in yaml.safe_load_all(r.stdout) if d]) == ndocs,
-                "kubectl kustomize renders all %d objects of %s" % (ndocs, os.path.relpath(where, ROOT)))
-
 
 def test_k8s_cluster_schema(t):
     docs = load_manifests(K8S_CLUSTER)
