@@ -13,20 +13,37 @@ a Docker daemon or a cluster.
   Python client (Debian's python3-kubernetes, generated from the Kubernetes OpenAPI spec):
   unknown fields, types, required fields; then the cross-references (selectors, ports,
   probes, volumes, config, annotations), and the ConfigMap's config is started for real.
+- Kubernetes, cluster mode (deploy/k8s/cluster/): the same model check of every object
+  (autoscaling/v2 against the client's v2beta2 models: the same schema), then the wiring:
+  selectors against pod labels (the client Service selects the edge pods only), --role per
+  Deployment, node id from the pod name, the --cluster URL against the Redis Service, the
+  Redis password Secret key everywhere it is used, the autoscaler's target and metrics,
+  probes, security context. The Redis container's own command and configuration are run
+  with this machine's redis-server (password, AOF with fsync always, the probe command).
+  The daemon is not started in cluster mode here (roles are not merged yet): its ConfigMap
+  is checked statically against the single-node one, which is started.
+- systemd drop-in for cluster mode (deploy/fxstreamd-cluster.conf): verified together
+  with the unit, and a copy without the ExecStart= reset is shown to be refused.
+- nginx for cluster mode (deploy/nginx/fxstream-cluster.conf): nginx -t, and run in front
+  of two (single-node) daemons: WebSockets naming one stream spread over both, and the
+  fxs_connections gauge the autoscaler reads counts them.
 - Dockerfile: parsed statically (no Docker daemon here): stages, packages, user, health
   check (whose command is run against a real daemon), volume, port, and every library the
   built binaries link to must come from a package the runtime stage installs.
-Bounded: about 20 s, most of it PoCL compiling one kernel under strace."""
+Bounded: about 25 s, most of it PoCL compiling one kernel under strace."""
 import copy
 import json
 import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
 import time
+import urllib.parse
+import urllib.request
 
 import yaml
 
@@ -35,6 +52,9 @@ from fxtest import ROOT, Suite  # noqa: E402
 
 DEPLOY = os.path.join(ROOT, "deploy")
 K8S = os.path.join(DEPLOY, "k8s")
+K8S_CLUSTER = os.path.join(K8S, "cluster")
+DROPIN = os.path.join(DEPLOY, "fxstreamd-cluster.conf")
+NGINX_CLUSTER = os.path.join(DEPLOY, "nginx", "fxstream-cluster.conf")
 UNIT = os.path.join(DEPLOY, "fxstreamd.service")
 DAEMON = os.path.join(ROOT, "build", "fxstreamd")
 FXCTL = os.path.join(ROOT, "build", "fxctl")
@@ -187,7 +207,10 @@ def test_unit_filters(t):
 
 KINDS = {("v1", "ConfigMap"): "V1ConfigMap", ("v1", "Service"): "V1Service",
          ("apps/v1", "StatefulSet"): "V1StatefulSet", ("policy/v1", "PodDisruptionBudget"): "V1PodDisruptionBudget",
-         ("networking.k8s.io/v1", "Ingress"): "V1Ingress"}
+         ("networking.k8s.io/v1", "Ingress"): "V1Ingress", ("apps/v1", "Deployment"): "V1Deployment",
+         # python3-kubernetes 22.6 predates autoscaling/v2 (Kubernetes 1.23), which promoted
+         # v2beta2 with the same fields: its models check a v2 object.
+         ("autoscaling/v2", "HorizontalPodAutoscaler"): "V2beta2HorizontalPodAutoscaler"}
 
 
 def k8s_errors(obj):
@@ -245,14 +268,26 @@ def k8s_errors(obj):
     return errs
 
 
-def load_manifests():
+def load_manifests(where=K8S):
     docs = []
-    for f in sorted(os.listdir(K8S)):
+    for f in sorted(os.listdir(where)):
         if f.endswith(".yaml") and f != "kustomization.yaml":
-            for doc in yaml.safe_load_all(open(os.path.join(K8S, f))):
+            for doc in yaml.safe_load_all(open(os.path.join(where, f))):
                 if doc:
                     docs.append((f, doc))
     return docs
+
+
+def kustomize_check(t, where, ndocs):
+    kust = yaml.safe_load(open(os.path.join(where, "kustomization.yaml")))
+    files = sorted(f for f in os.listdir(where) if f.endswith(".yaml") and f != "kustomization.yaml")
+    t.check(sorted(kust.get("resources", [])) == files, "%s/kustomization.yaml lists every manifest" %
+            os.path.relpath(where, ROOT))
+    kubectl = shutil.which("kubectl")
+    if kubectl:  # not from Debian; used when the machine has it
+        r = subprocess.run([kubectl, "kustomize", where], capture_output=True, text=True, timeout=60)
+        t.check(r.returncode == 0 and len([d for d in yaml.safe_load_all(r.stdout) if d]) == ndocs,
+                "kubectl kustomize renders all %d objects of %s" % (ndocs, os.path.relpath(where, ROOT)))
 
 
 def test_k8s_schema(t):
@@ -273,14 +308,7 @@ def test_k8s_schema(t):
     e2 = k8s_errors(broken2)
     t.check(any("paht" in e for e in e1) and any("limits" in e for e in e1) and any("selector" in e for e in e2),
             "the model check catches an unknown field, a wrong type and a missing required field")
-    kust = yaml.safe_load(open(os.path.join(K8S, "kustomization.yaml")))
-    files = sorted(f for f in os.listdir(K8S) if f.endswith(".yaml") and f != "kustomization.yaml")
-    t.check(sorted(kust.get("resources", [])) == files, "kustomization.yaml lists every manifest")
-    kubectl = shutil.which("kubectl")
-    if kubectl:  # not from Debian; used when the machine has it
-        r = subprocess.run([kubectl, "kustomize", K8S], capture_output=True, text=True, timeout=60)
-        t.check(r.returncode == 0 and len([d for d in yaml.safe_load_all(r.stdout) if d]) == len(docs),
-                "kubectl kustomize renders all %d objects" % len(docs))
+    kustomize_check(t, K8S, len(docs))
 
 
 def test_k8s_wiring(t):
@@ -361,6 +389,344 @@ def test_k8s_wiring(t):
             t.check(r.returncode == 2 and "token" in r.stderr, "the %s without tokens is refused" % name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+# ---- Kubernetes, cluster mode -----------------------------------------------------------
+
+def test_k8s_cluster_schema(t):
+    docs = load_manifests(K8S_CLUSTER)
+    kinds = sorted(d["kind"] for _, d in docs)
+    want = sorted(["ConfigMap"] * 2 + ["Deployment"] * 2 + ["HorizontalPodAutoscaler", "Ingress"] +
+                  ["PodDisruptionBudget"] * 2 + ["Service"] * 3 + ["StatefulSet"])
+    t.check(kinds == want, "cluster manifests: 2 ConfigMaps, 2 Deployments, HPA, Ingress, 2 PDBs, 3 Services, "
+            "Redis StatefulSet (%s)" % kinds)
+    bad = {"%s %s" % (f, d["kind"]): e for f, d in docs for e in [k8s_errors(d)] if e}
+    t.check(not bad, "every cluster object matches the Kubernetes API models %s" % (bad or ""))
+    hpa = next(d for _, d in docs if d["kind"] == "HorizontalPodAutoscaler")
+    broken = copy.deepcopy(hpa)
+    broken["spec"]["metrics"][0]["pods"]["metrik"] = broken["spec"]["metrics"][0]["pods"].pop("metric")
+    broken2 = copy.deepcopy(hpa)
+    del broken2["spec"]["scaleTargetRef"]
+    t.check(any("metrik" in e for e in k8s_errors(broken)) and any("scale_target_ref" in e or "scaleTargetRef" in e
+                                                                   for e in k8s_errors(broken2)),
+            "the model check catches an unknown field and a missing required field in the HPA")
+    kustomize_check(t, K8S_CLUSTER, len(docs))
+
+
+def pairs(args):
+    """--flag value pairs of a container's args."""
+    return {a: b for a, b in zip(args, args[1:]) if a.startswith("--")}
+
+
+def secret_ref(env, name):
+    r = env.get(name, {}).get("valueFrom", {}).get("secretKeyRef", {})
+    return (r.get("name"), r.get("key")) if r else None
+
+
+def test_k8s_cluster_wiring(t):
+    docs = load_manifests(K8S_CLUSTER)
+    by = {}
+    for _, d in docs:
+        by.setdefault(d["kind"], {})[d["metadata"]["name"]] = d
+    deps, svcs, cms = by.get("Deployment", {}), by.get("Service", {}), by.get("ConfigMap", {})
+    comp, edge = deps.get("fxstreamd-compute"), deps.get("fxstreamd-edge")
+    redis = by.get("StatefulSet", {}).get("fxstream-redis")
+    if not t.check(comp and edge and redis, "Deployments fxstreamd-compute, fxstreamd-edge, StatefulSet fxstream-redis"):
+        return
+    labels = {n: w["spec"]["template"]["metadata"]["labels"] for n, w in
+              (("compute", comp), ("edge", edge), ("redis", redis))}
+    matches = lambda sel, lab: bool(sel) and all(lab.get(k) == v for k, v in sel.items())  # noqa: E731
+    selects = lambda sel: sorted(n for n, lab in labels.items() if matches(sel, lab))  # noqa: E731
+    t.check(selects(comp["spec"]["selector"]["matchLabels"]) == ["compute"] and
+            selects(edge["spec"]["selector"]["matchLabels"]) == ["edge"] and
+            selects(redis["spec"]["selector"]["matchLabels"]) == ["redis"],
+            "each workload's selector matches its own pods and no other's")
+    client = svcs.get("fxstreamd", {})
+    t.check(selects(client.get("spec", {}).get("selector")) == ["edge"] and
+            client["spec"].get("type", "ClusterIP") == "ClusterIP" and "sessionAffinity" not in client["spec"],
+            "Service fxstreamd: plain round robin over the edge pods only")
+    rsvc = svcs.get("fxstream-redis", {})
+    head = svcs.get(redis["spec"]["serviceName"], {})
+    t.check(selects(rsvc.get("spec", {}).get("selector")) == ["redis"] and
+            selects(head.get("spec", {}).get("selector")) == ["redis"] and head["spec"].get("clusterIP") == "None",
+            "Redis Services select the Redis pod; the StatefulSet's serviceName is headless")
+    pdbs = {n: selects(p["spec"]["selector"]["matchLabels"]) for n, p in by.get("PodDisruptionBudget", {}).items()}
+    t.check(sorted(pdbs.values()) == [["compute"], ["edge"]], "one PodDisruptionBudget per Deployment %s" % pdbs)
+
+    ports = {}
+    for n, w in (("compute", comp), ("edge", edge), ("redis", redis)):
+        ports[n] = {p["name"]: p["containerPort"] for p in w["spec"]["template"]["spec"]["containers"][0]["ports"]}
+    t.check(all(p["targetPort"] in ports["edge"] for p in client["spec"]["ports"]) and
+            all(p["targetPort"] in ports["redis"] for s in (rsvc, head) for p in s["spec"]["ports"]),
+            "Service targetPorts name a port of the pods they select")
+
+    cfg_name = "fxstreamd-cluster-config"
+    cfg = json.loads(cms.get(cfg_name, {}).get("data", {}).get("fxstreamd.json", "{}"))
+    single = json.loads(next(d for _, d in load_manifests() if d["kind"] == "ConfigMap")["data"]["fxstreamd.json"])
+    extra = sorted(set(cfg) - set(single) - {"cluster", "node_id", "role"})
+    t.check(cfg and not extra, "the cluster ConfigMap uses only keys the single-node one has (started below) or "
+            "cluster/node_id/role %s" % extra)
+    t.check(cfg.get("limits") == single.get("limits"), "same limits as the single-node set")
+    redis_url = None
+    for role, w in (("compute", comp), ("edge", edge)):
+        pod = w["spec"]["template"]
+        c = pod["spec"]["containers"][0]
+        a = pairs(c.get("args", []))
+        env = {e["name"]: e for e in c.get("env", [])}
+        t.check(a.get("--role") == role and " ".join(c["args"]).count("--role") == 1, "--role %s in %s" %
+                (role, w["metadata"]["name"]))
+        t.check(a.get("--node-id") == "$(POD_NAME)" and
+                env.get("POD_NAME", {}).get("valueFrom", {}).get("fieldRef", {}).get("fieldPath") == "metadata.name",
+                "%s: --node-id is the pod name (downward API)" % role)
+        u = urllib.parse.urlsplit(a.get("--cluster", ""))
+        redis_url = redis_url or a.get("--cluster")
+        rport = next((p["port"] for p in rsvc["spec"]["ports"] if p.get("name") == "redis"), None)
+        t.check(u.scheme == "redis" and u.hostname == "fxstream-redis" and u.port == rport and
+                u.username is None and u.password is None and re.fullmatch(r"/\d+", u.path or "/0"),
+                "%s: --cluster %s names the Redis Service and its port, no credentials" % (role, a.get("--cluster")))
+        t.check(secret_ref(env, "FXS_REDIS_PASSWORD") == ("fxstreamd-redis", "password"),
+                "%s: FXS_REDIS_PASSWORD from Secret fxstreamd-redis key password" % role)
+        t.check(secret_ref(env, "FXSTREAMD_TOKENS") == ("fxstreamd-tokens", "FXSTREAMD_TOKENS"),
+                "%s: tokens from Secret fxstreamd-tokens" % role)
+        mounts = {m["mountPath"]: m["name"] for m in c["volumeMounts"]}
+        vols = {v["name"]: v for v in pod["spec"]["volumes"]}
+        conf = a.get("--config", "")
+        t.check(vols.get(mounts.get(os.path.dirname(conf)), {}).get("configMap", {}).get("name") == cfg_name,
+                "%s: --config is the cluster ConfigMap's file" % role)
+        t.check("emptyDir" in vols.get(mounts.get(cfg.get("state_dir")), {}) and "emptyDir" in vols.get(
+            mounts.get("/tmp"), {}) and c["securityContext"].get("readOnlyRootFilesystem") is True,
+            "%s: read-only root filesystem; state dir (presets) and /tmp on emptyDir" % role)
+        probes = [c.get(p, {}).get("httpGet", {}) for p in ("livenessProbe", "readinessProbe", "startupProbe")]
+        t.check(all(p.get("path") == "/healthz" and p.get("port") == "http" for p in probes) and "http" in ports[role]
+                and ports[role]["http"] == cfg.get("port") and cfg.get("listen") == "0.0.0.0",
+                "%s: liveness, readiness and startup probes ask /healthz on the named port the daemon listens on" % role)
+        ann = pod["metadata"].get("annotations", {})
+        t.check(ann.get("prometheus.io/scrape") == "true" and ann.get("prometheus.io/path") == "/metrics" and
+                int(ann.get("prometheus.io/port", 0)) == cfg.get("port"), "%s: Prometheus scrape annotations" % role)
+        res = c.get("resources", {})
+        t.check(all(k in res.get(x, {}) for x in ("requests", "limits") for k in ("cpu", "memory")),
+                "%s: resource requests and limits" % role)
+    cpu = lambda w: w["spec"]["template"]["spec"]["containers"][0]["resources"]["requests"]["cpu"]  # noqa: E731
+    milli = lambda q: int(q[:-1]) if str(q).endswith("m") else int(float(q) * 1000)  # noqa: E731
+    t.check(milli(cpu(edge)) < milli(cpu(comp)), "edge daemons request less CPU than compute daemons")
+    cenv = {e["name"]: e for e in comp["spec"]["template"]["spec"]["containers"][0]["env"]}
+    cmounts = {m["mountPath"] for m in comp["spec"]["template"]["spec"]["containers"][0]["volumeMounts"]}
+    t.check(cenv.get("POCL_CACHE_DIR", {}).get("value", "").startswith("/var/cache/fxstream") and
+            "/var/cache/fxstream" in cmounts, "compute: PoCL's kernel cache on a writable volume")
+    t.check(comp["spec"].get("replicas") == 2 and "replicas" not in edge["spec"],
+            "2 compute replicas; the edge count is the autoscaler's (no replicas to reset it)")
+    uid = int(re.search(r"--uid (\d+)", open(os.path.join(DEPLOY, "Dockerfile")).read()).group(1))
+    scs = {n: w["spec"]["template"]["spec"].get("securityContext", {}) for n, w in
+           (("compute", comp), ("edge", edge), ("redis", redis))}
+    t.check(all(s.get("runAsNonRoot") is True and s.get("runAsUser") == uid and s.get("fsGroup") == uid
+                for s in scs.values()), "every pod runs as the non-root uid %d" % uid)
+
+    hpa = next(iter(by.get("HorizontalPodAutoscaler", {}).values()), {})
+    ref = hpa.get("spec", {}).get("scaleTargetRef", {})
+    t.check(ref == {"apiVersion": "apps/v1", "kind": "Deployment", "name": "fxstreamd-edge"},
+            "the HPA scales the edge Deployment")
+    mets = hpa.get("spec", {}).get("metrics", [])
+    pm = [m["pods"] for m in mets if m.get("type") == "Pods"]
+    t.check(pm and pm[0]["metric"]["name"] == "fxs_connections" and pm[0]["target"]["type"] == "AverageValue" and
+            int(pm[0]["target"]["averageValue"]) > 0, "HPA: Pods metric fxs_connections, an average value per pod")
+    t.check(any(m.get("type") == "Resource" and m["resource"]["name"] == "cpu" for m in mets),
+            "HPA: a CPU fallback metric")
+    t.check(hpa["spec"].get("minReplicas", 1) >= 2 and hpa["spec"]["maxReplicas"] > hpa["spec"]["minReplicas"],
+            "HPA: at least 2 edge pods")
+
+    ing = next(iter(by.get("Ingress", {}).values()), {})
+    backends = [p["backend"]["service"] for r in ing["spec"]["rules"] for p in r["http"]["paths"]]
+    t.check(backends and all(b["name"] == "fxstreamd" and b["port"].get("name") in
+                             [p["name"] for p in client["spec"]["ports"]] for b in backends) and
+            not any("hash" in k for k in ing["metadata"].get("annotations", {})),
+            "Ingress: to Service fxstreamd by port name, no hashing")
+
+    # Redis: image, persistence, password, probes; then its command, run for real.
+    rpod = redis["spec"]["template"]["spec"]
+    rc = rpod["containers"][0]
+    renv = {e["name"]: e for e in rc.get("env", [])}
+    t.check(rc["image"] == "redis:7.0", "Redis image redis:7.0")
+    t.check(secret_ref(renv, "REDIS_PASSWORD") == secret_ref(renv, "REDISCLI_AUTH") == ("fxstreamd-redis", "password"),
+            "Redis's requirepass and its probes' password: Secret fxstreamd-redis key password, as the daemons'")
+    rconf_cm = cms.get("fxstream-redis-config", {}).get("data", {}).get("redis.conf", "")
+    directives = {}
+    for line in rconf_cm.splitlines():
+        w = line.split(None, 1)
+        if w and not w[0].startswith("#"):
+            directives[w[0]] = w[1].strip() if len(w) > 1 else ""
+    t.check(directives.get("appendonly") == "yes" and directives.get("appendfsync") == "always",
+            "redis.conf: appendonly yes, appendfsync always")
+    rmounts = {m["mountPath"]: m["name"] for m in rc["volumeMounts"]}
+    rvols = {v["name"]: v for v in rpod["volumes"]}
+    claims = {v["metadata"]["name"] for v in redis["spec"].get("volumeClaimTemplates", [])}
+    t.check(rmounts.get(directives.get("dir")) in claims, "Redis's dir is on its PersistentVolumeClaim")
+    script = rc["args"][0] if rc.get("command") == ["sh", "-c"] and len(rc.get("args", [])) == 1 else ""
+    conf_arg = re.search(r"redis-server (\S+)", script)
+    auth = directives.get("include", "")
+    t.check(conf_arg and rvols.get(rmounts.get(os.path.dirname(conf_arg.group(1))), {}).get("configMap", {}).get(
+        "name") == "fxstream-redis-config", "redis-server reads the ConfigMap's redis.conf")
+    t.check(auth and auth in script and rvols.get(rmounts.get(os.path.dirname(auth)), {}).get("emptyDir", {}).get(
+        "medium") == "Memory", "the password file redis.conf includes is written at start, on a memory emptyDir")
+    t.check(rc["securityContext"].get("readOnlyRootFilesystem") is True, "Redis: read-only root filesystem")
+    rprobes = [rc.get(p, {}).get("exec", {}).get("command", []) for p in ("livenessProbe", "readinessProbe",
+                                                                          "startupProbe")]
+    t.check(all(p and "redis-cli ping" in p[-1] and "PONG" in p[-1] for p in rprobes),
+            "Redis probes: redis-cli ping must answer PONG (redis-cli exits 0 on NOAUTH too)")
+    run_redis(t, script, rconf_cm, conf_arg.group(1) if conf_arg else "", auth, directives.get("dir", ""), rprobes[0])
+
+
+def run_redis(t, script, conf, conf_path, auth_path, data_dir, probe):
+    """The container's command with this machine's redis-server, paths moved into a temp dir."""
+    server = shutil.which("redis-server")
+    cli = shutil.which("redis-cli")
+    if not t.check(server and cli and script and probe, "redis-server and redis-cli installed (install-deps.sh)"):
+        return
+    tmp = tempfile.mkdtemp(prefix="fxs-redis-")
+    proc = None
+    try:
+        s = socket.socket()
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        s.close()
+        d = {p: os.path.join(tmp, p.strip("/").replace("/", "_")) for p in
+             (os.path.dirname(conf_path), os.path.dirname(auth_path), data_dir)}
+        for x in d.values():
+            os.makedirs(x, exist_ok=True)
+        moved = lambda text: re.sub("|".join(re.escape(p) for p in sorted(d, key=len, reverse=True)),  # noqa: E731
+                                    lambda m: d[m.group(0)], text)
+        conf = moved(conf)
+        conf = re.sub(r"^port \d+", "port %d" % port, conf, flags=re.M)
+        conf = re.sub(r"^bind .*", "bind 127.0.0.1", conf, flags=re.M)  # loopback only for the test
+        with open(moved(conf_path), "w") as f:
+            f.write(conf)
+        body = moved(script)
+        env = {k: v for k, v in os.environ.items() if not k.startswith("REDIS")}
+        r = subprocess.run(["sh", "-c", body], env=dict(env, REDIS_PASSWORD=""), capture_output=True, text=True,
+                           timeout=20)
+        t.check(r.returncode != 0 and "empty password" in r.stderr, "the Redis command refuses an empty password")
+        pw = "deploy-test-redis-0123456789abcdef"
+        proc = subprocess.Popen(["sh", "-c", body], env=dict(env, REDIS_PASSWORD=pw), stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True)
+        cmd = lambda *a, auth=pw: subprocess.run([cli, "-p", str(port), *a], capture_output=True, text=True,  # noqa
+                                                 timeout=10, env=dict(env, REDISCLI_AUTH=auth) if auth else env)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and "PONG" not in cmd("ping").stdout and proc.poll() is None:
+            time.sleep(0.1)
+        t.check("PONG" in cmd("ping").stdout, "Redis starts with the manifest's command and redis.conf")
+        t.check("NOAUTH" in cmd("ping", auth=None).stdout + cmd("ping", auth=None).stderr,
+                "Redis refuses clients without the password")
+        t.check(cmd("config", "get", "appendonly").stdout.split() == ["appendonly", "yes"] and
+                cmd("config", "get", "appendfsync").stdout.split() == ["appendfsync", "always"] and
+                cmd("config", "get", "maxmemory-policy").stdout.split() == ["maxmemory-policy", "noeviction"],
+                "the running Redis has appendonly yes, appendfsync always, noeviction")
+        cmd("set", "fxs:deploy-test", "1")
+        aof = os.path.join(d[data_dir], "appendonlydir")
+        t.check(os.path.isdir(aof) and any(".incr.aof" in f for f in os.listdir(aof)),
+                "the AOF is written in Redis's dir (the PVC)")
+        st = os.stat(moved(auth_path))
+        t.check(st.st_mode & 0o077 == 0, "the password file is readable by its owner only")
+        probe_sh = probe[-1].replace("redis-cli", "%s -p %d" % (cli, port))
+        ok = subprocess.run([*probe[:-1], probe_sh], env=dict(env, REDISCLI_AUTH=pw), timeout=10).returncode
+        bad = subprocess.run([*probe[:-1], probe_sh], env=dict(env, REDISCLI_AUTH="wrong-password"),
+                             timeout=10, capture_output=True).returncode
+        t.check(ok == 0 and bad != 0, "the probe command passes with the password and fails without it")
+    finally:
+        if proc:
+            try:
+                os.killpg(proc.pid, signal.SIGTERM)
+                proc.wait(timeout=10)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                proc.wait()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def test_cluster_dropin(t):
+    """deploy/fxstreamd-cluster.conf, a drop-in for the unit: verified merged with it."""
+    if not t.check(os.path.exists(DROPIN), "deploy/fxstreamd-cluster.conf exists"):
+        return
+    unit, drop = open(UNIT).read(), open(DROPIN).read()
+    d = unit_directives(drop)
+    starts = d.get("ExecStart", [])
+    t.check(len(starts) == 2 and starts[0] == "", "the drop-in resets ExecStart= before setting its own")
+    exec_start = starts[-1] if starts else ""
+    a = pairs(exec_start.split())
+    base = unit_directives(unit)["ExecStart"][0]
+    t.check(exec_start.startswith(base + " "), "its ExecStart is the unit's plus cluster flags")
+    u = urllib.parse.urlsplit(a.get("--cluster", ""))
+    t.check(u.scheme == "redis" and u.hostname and u.password is None and u.username is None and
+            a.get("--role") in ("compute", "edge", "both") and "--node-id" in a,
+            "--cluster redis://HOST (no credentials), --role and --node-id")
+    t.check(any("FXS_REDIS_PASSWORD" in ln for ln in drop.splitlines() if ln.startswith("#")) and
+            any(f.lstrip("-").endswith(".env") for f in d.get("EnvironmentFile", [])) and
+            "FXS_REDIS_PASSWORD=" not in "".join(d.get("Environment", [])),
+            "the password comes from an EnvironmentFile, not from the drop-in")
+    merged = (unit + "\n" + drop).replace(base.split()[0], DAEMON)
+    rc, out = verify_unit(merged)
+    t.check(rc == 0 and out == "", "systemd-analyze verify: unit + drop-in, no complaint" +
+            ("" if not out else ": " + out[-400:]))
+    rc, out = verify_unit(merged.replace("\nExecStart=\n", "\n", 1))
+    t.check(rc != 0 or "ExecStart" in out, "and a drop-in without the ExecStart= reset is refused")
+
+
+def test_nginx_cluster(t):
+    """deploy/nginx/fxstream-cluster.conf: round robin, run in front of two daemons."""
+    if not t.check(os.path.exists(NGINX_CLUSTER), "deploy/nginx/fxstream-cluster.conf exists"):
+        return
+    text = open(NGINX_CLUSTER).read()
+    t.check(not re.search(r"^\s*(hash|ip_hash|least_conn|random)\b", text, re.M),
+            "fxstream-cluster.conf: plain round robin (no hash)")
+    t.check(re.search(r"proxy_set_header Upgrade \$http_upgrade;", text) and re.search(r"proxy_http_version 1\.1;", text)
+            and re.search(r"proxy_read_timeout\s+1h;", text), "it passes the WebSocket upgrade, 1 h read timeout")
+    t.check(re.search(r"^\s*hash \$arg_stream consistent;", open(os.path.join(DEPLOY, "nginx", "fxstream.conf")).read(),
+                      re.M), "the single-node file keeps its consistent hash")
+    import asyncio
+    import test_scaleout as so
+    so.CONF = NGINX_CLUSTER
+    daemons, proxy = [], None
+    try:
+        for _ in range(2):
+            proc, port = start_daemon([])
+            daemons.append((proc, port))
+        if not t.check(all(p for _, p in daemons), "two daemons start"):
+            return
+        proxy = so.Proxy([p for _, p in daemons])
+        r = proxy.test_config()
+        t.check(r.returncode == 0, "nginx -t accepts fxstream-cluster.conf" +
+                ("" if not r.returncode else ": " + r.stderr[-300:]))
+        proxy.start()
+
+        def gauge(port):
+            body = urllib.request.urlopen("http://127.0.0.1:%d/metrics" % port, timeout=10).read().decode()
+            typ = re.search(r"^# TYPE fxs_connections (\w+)$", body, re.M)
+            val = re.search(r"^fxs_connections (\d+)$", body, re.M)
+            return (typ.group(1) if typ else None), (int(val.group(1)) if val else None)
+
+        async def spread():
+            import websockets
+            conns = [await asyncio.wait_for(websockets.connect(
+                "ws://127.0.0.1:%d/v1/ws?stream=flame" % proxy.port, subprotocols=["fxstream.v1"],
+                ping_interval=None), 10) for _ in range(4)]
+            try:
+                for c in conns:
+                    await asyncio.wait_for(c.recv(), 10)  # the hello: the daemon has the session
+                return [gauge(p) for _, p in daemons]
+            finally:
+                for c in conns:
+                    await c.close()
+        g = asyncio.run(spread())
+        t.check(all(typ == "gauge" for typ, _ in g), "fxs_connections (what the edge HPA reads) is a gauge")
+        t.check([v for _, v in g] == [2, 2], "4 WebSockets naming one stream: 2 on each daemon %s" % g)
+    except Exception as e:
+        t.check(False, "nginx in front of two daemons: %s: %s" % (type(e).__name__, e))
+    finally:
+        if proxy:
+            proxy.stop()
+        for proc, _ in daemons:
+            stop(proc)
 
 
 # ---- Dockerfile -------------------------------------------------------------------------
@@ -476,7 +842,8 @@ def test_dockerfile(t):
 def main():
     t = Suite("test_deploy")
     t0 = time.monotonic()
-    for test in (test_unit, test_unit_filters, test_k8s_schema, test_k8s_wiring, test_dockerfile):
+    for test in (test_unit, test_unit_filters, test_cluster_dropin, test_k8s_schema, test_k8s_wiring,
+                 test_k8s_cluster_schema, test_k8s_cluster_wiring, test_nginx_cluster, test_dockerfile):
         t1 = time.monotonic()
         try:
             test(t)
