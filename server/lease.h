@@ -8,7 +8,8 @@
  *   - renews the leases this daemon holds and says which it lost (taken by another daemon after
  *     this one stopped renewing: it was paused, or cut off from Redis), and for each held one
  *     whether another daemon has subscribers of it;
- *   - on a compute daemon (--role compute or both) that is the least loaded live one, takes
+ *   - on a compute daemon (--role compute or both) that is the least loaded live one and has
+ *     been live for a TTL (after a Redis that lost its data, the owners renew first), takes
  *     the streams nobody holds: a new generation from fxs:leasegen, and the frame numbers the
  *     previous owner reached (from the latest frames, below). Load = the engine's measured busy
  *     fraction (step time per second) + LEASE_STREAM_COST per lease held, kept in the sorted
