@@ -1,6 +1,7 @@
-"""test_cluster.py — cluster mode (--cluster, first part: shared state). Three fxstreamd daemons
-on one redis-server (Debian's, started here on a free loopback port, as the current user, in a
-temp dir, without persistence, killed at the end), plus a second Redis with AOF (appendfsync
+"""test_cluster.py — cluster mode (--cluster), shared state (leases and frames through Redis are
+in test_cluster_fanout.py). Three fxstreamd daemons on one redis-server (Debian's, started here
+on a free loopback port, as the current user, in a temp dir, without persistence, killed at the
+end), plus a second Redis with AOF (appendfsync
 always) for one daemon, and a third with a password.
 
 Checks: the first daemon seeds the empty database once and all list the same streams; a create
@@ -475,7 +476,8 @@ async def test_redis_hung(t):
     """Redis stopped (SIGSTOP: connections open, no answers): a set waits at most the command
     timeout, the link is given up within seconds, the owner's frames keep coming; SIGCONT: back to
     normal."""
-    a = await Client.connect(await owner("c1", (A, B, C)) or A)
+    o = await owner("c1", (A, B, C))
+    a = await Client.connect(o or A)
     await a.request("subscribe", stream="c1")
     await a.frame(kind=2)
     R.proc.send_signal(signal.SIGSTOP)
@@ -559,7 +561,9 @@ async def test_flags(t):
                              (["--cluster", "redis://127.0.0.1/x"], "database", "a bad database"),
                              (["--cluster", "rediss://127.0.0.1"], "TLS", "rediss://"),
                              (["--node-id", "a"], "--cluster", "--node-id without --cluster"),
-                             (["--cluster", R.url, "--node-id", "a b"], "node id", "a bad node id")):
+                             (["--cluster", R.url, "--node-id", "a b"], "node id", "a bad node id"),
+                             (["--role", "edge"], "--cluster", "--role without --cluster"),
+                             (["--cluster", R.url, "--role", "router"], "compute, edge or both", "a bad role")):
         code, out = run_daemon(*args)
         t.check(code == 2 and word in out and "pw-xyz" not in out, "%s: exit 2 naming it (%s)" %
                 (what, out.strip()[-120:]))
@@ -575,11 +579,13 @@ async def test_flags(t):
     t.check(code == 1 and "cannot reach " + nobody in out and time.monotonic() - start < 20,
             "an unreachable Redis at start: exit 1 naming it (%s)" % out.strip()[-120:])
     with open(cfg, "w") as f:
-        json.dump({"cluster": R.url, "node_id": "cfg"}, f)
+        json.dump({"cluster": R.url, "node_id": "cfg", "role": "edge"}, f)
     with Daemon("--config", cfg) as d:
-        cl = http_json(d, "/healthz").get("cluster", {})
-        t.check(cl.get("node") == "cfg" and cl.get("redis") == R.url and cl.get("link") == "up",
-                "config keys cluster and node_id (%s)" % cl)
+        h = http_json(d, "/healthz")
+        cl = h.get("cluster", {})
+        t.check(cl.get("node") == "cfg" and cl.get("redis") == R.url and cl.get("link") == "up" and
+                cl.get("role") == "edge" and h.get("device") == "none",
+                "config keys cluster, node_id and role (%s)" % cl)
     with Daemon("--cluster", R.url) as d:
         t.check(http_json(d, "/healthz")["cluster"]["node"] == socket.gethostname()[:63],
                 "the node id defaults to the host name")

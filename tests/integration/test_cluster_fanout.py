@@ -68,6 +68,16 @@ async def frames_after(c, seq, n=1, timeout=10.0, kind=2):
     return out
 
 
+async def frame_made_after(c, wall, timeout=10.0, kind=2):
+    """The next frame of kind computed after the wall-clock time `wall` (its header's
+    server_time_us; daemons and test share the clock), skipping frames still queued."""
+    deadline = time.monotonic() + timeout
+    while True:
+        f = await c.frame(timeout=max(0.01, deadline - time.monotonic()), kind=kind)
+        if f["server_time_us"] > wall * 1e6:
+            return f
+
+
 class ChannelTap:
     """Reads Redis's frame channel of a stream directly: (arrival time, seq) of every texture frame."""
 
@@ -176,8 +186,8 @@ async def test_failover(t):
     last = [(await frames_after(c, 0))[0]["seq"] for c in subs]
     node = http_json(o, "/healthz")["cluster"]["node"]
     o.stop(signal.SIGKILL)
-    killed = time.monotonic()
-    after = [(await frames_after(c, s, timeout=15))[0] for c, s in zip(subs, last)]
+    killed, killed_wall = time.monotonic(), time.time()
+    after = [await frame_made_after(c, killed_wall, timeout=15) for c in subs]
     took = time.monotonic() - killed
     n = await owner_of(STREAM)
     t.check(n is not None and n is not o, "the other compute daemon holds w now")
@@ -208,7 +218,7 @@ async def test_fencing(t):
         stopped = time.monotonic()
         taken = await until(lambda: STREAM in leases(other), timeout=10, step=0.1)
         t.check(taken, "the other compute daemon takes w over %.1f s after the pause" % (time.monotonic() - stopped))
-        f = await frames_after(e, 0, timeout=10)
+        f = await frame_made_after(e, time.time() - 0.2)
         t.check(bool(f), "the edge's subscriber gets frames of the new owner")
         resumed_from = tap.seen[-1][1] if tap.seen else 0
     finally:
@@ -233,10 +243,11 @@ async def test_handover(t):
     e = await subscriber(E)
     last = (await frames_after(e, 0))[0]["seq"]
     node = http_json(o, "/healthz")["cluster"]["node"]
-    start = time.monotonic()
+    start, start_wall = time.monotonic(), time.time()
     t.check(o.stop() == 0, "the owner exits 0 on SIGTERM")
-    await frames_after(e, last, timeout=10)
+    f = await frame_made_after(e, start_wall)
     took = time.monotonic() - start
+    t.check(f["seq"] > last, "frame numbers go on (%d after %d)" % (f["seq"], last))
     t.check(took < LEASE_TTL_S - 0.5, "frames resume %.1f s after, inside the lease's TTL (%.0f s)" % (took, LEASE_TTL_S))
     if o is P:
         P = compute(node)
