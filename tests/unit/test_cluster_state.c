@@ -1,5 +1,5 @@
 /* test_cluster_state.c — server/cluster.c without a Redis: --cluster URLs (accepted forms,
- * defaults, every refusal, a password never echoed), and the rule that keeps the local copy
+ * defaults, every refusal, a password never echoed), --role values, and the rule that keeps the local copy
  * in step with Redis's change counter (cluster_fit: the next change applies, an old one or
  * one seen while stale is skipped, a gap makes the copy stale until a reload). Talking to
  * Redis is tests/integration/test_cluster.py's part. */
@@ -54,6 +54,26 @@ static void test_urls(void)
           "credentials refused, not echoed, the key named: %s", err.message);
 }
 
+static void test_roles(void)
+{
+    static const struct { const char *s; enum cluster_role r; } ok[] = {
+        {"compute", CLUSTER_ROLE_COMPUTE}, {"edge", CLUSTER_ROLE_EDGE}, {"both", CLUSTER_ROLE_BOTH}};
+    for (size_t i = 0; i < sizeof ok / sizeof ok[0]; i++) {
+        struct cluster_config c = {0};
+        struct fx_err err = {0};
+        CHECK(cluster_parse_role("--role", ok[i].s, &c, &err) == 0 && c.role == ok[i].r && c.role_set &&
+                  !strcmp(cluster_role_name(c.role), ok[i].s), "role %s", ok[i].s);
+    }
+    const char *bad[] = {"", "Edge", "compute,edge", "edge\n"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        struct cluster_config c = {0};
+        struct fx_err err = {0};
+        CHECK(cluster_parse_role("role", bad[i], &c, &err) == -1 && !c.role_set && !strcmp(err.code, "bad_request") &&
+                  strstr(err.message, "compute, edge or both") && !strncmp(err.message, "role:", 5),
+              "role \"%s\" refused: %s", bad[i], err.message);
+    }
+}
+
 static void test_fit(void)
 {
     struct cluster *cl;
@@ -86,6 +106,7 @@ static void test_fit(void)
 int main(void)
 {
     RUN(test_urls);
+    RUN(test_roles);
     RUN(test_fit);
     return CHECK_DONE();
 }
