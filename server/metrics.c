@@ -144,6 +144,8 @@ static void metrics_cluster(struct server *srv, struct fx_buf *out)
     const struct counters *c = &srv->counters;
     struct cluster_status st;
     cluster_status(srv->cluster, &st);
+    metrics_head(out, "fxs_cluster_info", "gauge", "This daemon's node id and role in the cluster (always 1).");
+    metrics_printf(out, "fxs_cluster_info{node=\"%s\",role=\"%s\"} 1\n", st.node, cluster_role_name(srv->cfg.cluster.role));
     metrics_head(out, "fxs_cluster_link_up", "gauge",
                  "1 while this daemon is subscribed to the cluster's Redis (changes are refused with unavailable otherwise).");
     metrics_printf(out, "fxs_cluster_link_up{node=\"%s\"} %d\n", st.node, st.link_up);

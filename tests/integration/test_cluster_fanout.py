@@ -119,6 +119,8 @@ async def test_roles(t):
             "e: role edge, no OpenCL device, no lease (%s)" % h["cluster"])
     t.check([http_json(d, "/healthz")["cluster"]["role"] for d in (P, Q)] == ["compute", "compute"],
             "p and q: role compute")
+    t.check(metric(E, 'fxs_cluster_info{node="e",role="edge"}') == 1 and metric(E, "fxs_cluster_leases") == 0,
+            "/metrics: fxs_cluster_info names node and role, fxs_cluster_leases 0")
 
 
 async def test_fanout(t):
