@@ -5,7 +5,7 @@
  *
  * The run ends by itself after --duration seconds (or earlier when every connection is
  * gone or on SIGINT/SIGTERM). It never targets anything but the default loopback URL or the
- * one given with --url. */
+ * ones given with --url. */
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -26,7 +26,9 @@ static const char ld_help[] =
     "\n"
     "options (also as --opt=VALUE):\n"
     "  --url URL          server (default " LD_DEFAULT_URL "); fxload targets\n"
-    "                     only this loopback default or the URL given here (ws://, wss://)\n"
+    "                     only this loopback default or the URLs given here (ws://, wss://).\n"
+    "                     Repeat it (up to 16) to spread the connections round robin over\n"
+    "                     the daemons of a cluster (README \"Cluster mode\")\n"
     "  --token T          access token for every connection (default $FXSTREAM_TOKEN)\n"
     "  --ca-file F        PEM bundle for a wss:// server (default $FXSTREAM_CA_FILE)\n"
     "  --connections N    connections, 1..10000 (default 10)\n"
@@ -150,7 +152,8 @@ static int ld_prepare(struct ld *ld, struct ld_opts *o, int argc, char **argv)
     int r = ld_parse_args(o, argc, argv, ld_help);
     if (r) return r;
     if ((r = ld_validate(ld, o))) return r;
-    if (fxws_url_parse(&u, o->url, err, sizeof err)) return ld_usage(err, NULL);
+    for (int i = 0; i < (o->nurls ? o->nurls : 1); i++)
+        if (fxws_url_parse(&u, ld_url_for(o, i), err, sizeof err)) return ld_usage(err, NULL);
     if (ld_plan(ld)) {
         fprintf(stderr, "fxload: out of memory\n");
         return LD_FAIL;
@@ -168,7 +171,9 @@ static int ld_finish(struct ld *ld)
     if (ld->o->plot_path && ld_plot(ld)) r = LD_FAIL;
     if (r) return r;
     if (!ld->ever_open) {
-        fprintf(stderr, "fxload: no connection could be established to %s\n", ld->o->url);
+        char urls[1024];
+        ld_urls_text(ld->o, urls, sizeof urls);
+        fprintf(stderr, "fxload: no connection could be established to %s\n", urls);
         return LD_FAIL;
     }
     if (ld->restore_failed) return LD_FAIL;

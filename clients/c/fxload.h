@@ -29,6 +29,7 @@
 
 #define LD_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
 #define LD_MAX_CONNECTIONS 10000
+#define LD_MAX_URLS 16     /* --url repeated: daemons of a cluster */
 #define LD_MAX_STREAMS 64 /* distinct stream names in --streams */
 #define LD_MAX_GROUP 16   /* streams one connection subscribes to (server default limit) */
 #define LD_MAX_GROUPS 64
@@ -61,7 +62,9 @@ struct ld_group {
 };
 
 struct ld_opts {
-    const char *url;
+    const char *url;             /* the first --url (or the default): for messages */
+    const char *urls[LD_MAX_URLS]; /* every --url; connection i goes to urls[i % nurls] */
+    int nurls;
     const char *token, *ca_file; /* --token / $FXSTREAM_TOKEN, --ca-file / $FXSTREAM_CA_FILE */
     long connections;
     enum ld_mode mode;
@@ -223,6 +226,9 @@ struct ld {
 
 /* fxload_opts.c */
 int ld_usage(const char *why, const char *arg);
+/* The URL connection i goes to, and all of them as text for messages ("A" or "A, B (2 daemons)"). */
+const char *ld_url_for(const struct ld_opts *o, long i);
+void ld_urls_text(const struct ld_opts *o, char *out, size_t cap);
 /* Fills o from argv. Returns 0, LD_USAGE, or -1 after printing help_text (--help). */
 int ld_parse_args(struct ld_opts *o, int argc, char **argv, const char *help_text);
 /* Checks combinations, fills defaults and the streams (--streams or --set). */

@@ -105,7 +105,22 @@ static int ld_parse_set(struct ld_setspec *sp, const char *arg)
 
 /* ---- the option table ------------------------------------------------------------ */
 
-static int ld_opt_url(struct ld_opts *o, const char *v) { o->url = v; return 0; }
+static int ld_opt_url(struct ld_opts *o, const char *v)
+{
+    if (o->nurls == LD_MAX_URLS) return ld_usage("--url may be given at most 16 times", v);
+    o->urls[o->nurls++] = v;
+    o->url = o->urls[0];
+    return 0;
+}
+
+const char *ld_url_for(const struct ld_opts *o, long i) { return o->nurls ? o->urls[i % o->nurls] : o->url; }
+
+void ld_urls_text(const struct ld_opts *o, char *out, size_t cap)
+{
+    size_t n = (size_t)snprintf(out, cap, "%s", o->url);
+    for (int i = 1; i < o->nurls && n < cap; i++) n += (size_t)snprintf(out + n, cap - n, ", %s", o->urls[i]);
+    if (o->nurls > 1 && n < cap) snprintf(out + n, cap - n, " (%d daemons)", o->nurls);
+}
 static int ld_opt_token(struct ld_opts *o, const char *v) { o->token = v; return 0; }
 static int ld_opt_ca_file(struct ld_opts *o, const char *v) { o->ca_file = v; return 0; }
 static int ld_opt_streams(struct ld_opts *o, const char *v) { o->streams_spec = v; return 0; }

@@ -154,9 +154,10 @@ static void ld_gp_subscribe(FILE *gp, const struct ld *ld)
 static void ld_gp_plots(FILE *gp, const struct ld *ld)
 {
     const struct ld_opts *o = ld->o;
-    char title[512];
+    char title[1280], urls[1024];
+    ld_urls_text(o, urls, sizeof urls);
     snprintf(title, sizeof title, "fxload %s: %ld connections to %s, %.1f s", o->mode == LD_SET ? "set" : "subscribe",
-             o->connections, o->url, ld->elapsed);
+             o->connections, urls, ld->elapsed);
     fprintf(gp, "set multiplot layout %d,1 title ", o->mode == LD_SET ? 2 : 3);
     ld_gp_quoted(gp, title);
     fputs("\nset grid\nset key top left\nset xlabel 'time (s)'\n", gp);

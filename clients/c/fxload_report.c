@@ -132,10 +132,12 @@ void ld_summary(const struct ld *ld)
 {
     FILE *f = ld->tout;
     const struct ld_opts *o = ld->o;
+    char urls[1024];
+    ld_urls_text(o, urls, sizeof urls);
     fprintf(f, "fxload: %s, %d of %ld connections (peak %d, failed %" PRIu64 ", disconnects %" PRIu64
                ") to %s, %.2f s (%s)\n",
             o->mode == LD_SET ? "set" : "subscribe", ld->ever_open, o->connections, ld->peak, ld->tot.failed,
-            ld->tot.disconnects, o->url, ld->elapsed, ld->end_reason ? ld->end_reason : "");
+            ld->tot.disconnects, urls, ld->elapsed, ld->end_reason ? ld->end_reason : "");
     if (o->mode == LD_SUBSCRIBE) ld_summary_subscribe(ld, f);
     else ld_summary_set(ld, f);
     ld_thresholds_summary(ld, f);
@@ -167,6 +169,8 @@ static cJSON *ld_options_json(const struct ld_opts *o)
 {
     cJSON *opt = cJSON_CreateObject();
     cJSON_AddStringToObject(opt, "url", o->url);
+    cJSON *urls = cJSON_AddArrayToObject(opt, "urls");
+    for (int i = 0; i < (o->nurls ? o->nurls : 1); i++) cJSON_AddItemToArray(urls, cJSON_CreateString(ld_url_for(o, i)));
     cJSON_AddStringToObject(opt, "mode", o->mode == LD_SET ? "set" : "subscribe");
     cJSON_AddNumberToObject(opt, "connections", (double)o->connections);
     cJSON_AddNumberToObject(opt, "duration_s", o->duration);

@@ -271,7 +271,7 @@ static int ld_start_due(struct ld *ld, double now)
         if (due > now) break;
         ld->started++;
         lc->state = LDC_CONNECTING;
-        r = fxp_connect(ld->pool, ld->o->url, lc, &lc->c, err, sizeof err);
+        r = fxp_connect(ld->pool, ld_url_for(ld->o, ld->started - 1), lc, &lc->c, err, sizeof err);
         if (r == -2) {
             fprintf(stderr, "fxload: %s\n", err);
             return LD_USAGE;

@@ -6,30 +6,34 @@ Checks: the edge opens no device and holds no lease; a stream created on the edg
 exactly one compute daemon and its frames reach subscribers on all three daemons (same rev,
 increasing numbers, the edge's own channel number), with the latest frame kept in Redis; a set
 through the edge reaches every subscriber's frames; new streams spread over both compute
-daemons; kill -9 of the owner: frames resume on the other daemons within 5 s through the other
-compute daemon, with the same parameters and rev, nothing re-created, frame numbers going on;
-an owner paused (SIGSTOP) past its lease is replaced, and after SIGCONT no frame of it reaches
-Redis's channel (fencing) and it stops computing the stream; SIGTERM of an owner hands its
-streams over at once (well inside the lease's TTL); Redis killed: the owner's subscribers keep
-getting frames, changes are refused, and after Redis is back (empty) the cluster converges:
-changes accepted, one owner, frames at the edge again. Every wait is bounded."""
+daemons; fxload with three --url spreads its subscribers over the three daemons; kill -9 of the
+owner: frames resume on the other daemons within 5 s through the other compute daemon, with the
+same parameters and rev, nothing re-created, frame numbers going on; an owner paused (SIGSTOP)
+past its lease is replaced, and after SIGCONT no frame of it reaches Redis's channel (fencing)
+and it stops computing the stream; SIGTERM of an owner hands its streams over at once (well
+inside the lease's TTL); Redis killed: the owner's subscribers keep getting frames, changes are
+refused, and after Redis is back (empty) the cluster converges: changes accepted, one owner,
+frames at the edge again. Every wait is bounded."""
 import asyncio
+import json
 import os
 import shutil
 import signal
 import socket
+import subprocess
 import sys
 import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fxtest import Client, Suite, parse_frame  # noqa: E402
+from fxtest import DAEMON, Client, Suite, parse_frame  # noqa: E402
 from test_cluster import (LEASE_TTL_S, REDIS, SMALL, TEMP_DIRS, Redis, cluster_daemon, get, http_json, leases,  # noqa: E402
                           metric, names, until)
 
 R = None
 P = Q = E = None  # compute, compute, edge
 STREAM = "w"
+FXLOAD = os.path.join(os.path.dirname(DAEMON), "fxload")
 
 
 def compute(node):
@@ -179,6 +183,21 @@ async def test_spread(t):
     await e.close()
 
 
+async def test_fxload(t):
+    """fxload --url repeated spreads its subscribers over the daemons; every one serves w."""
+    sent = 'fxs_stream_frames_sent_total{stream="%s",effect="energy_wave"}' % STREAM
+    before = [metric(d, sent) or 0 for d in (E, P, Q)]
+    run = subprocess.run([FXLOAD, "--url", E.url, "--url", P.url, "--url", Q.url, "--connections", "6",
+                          "--streams", STREAM, "--duration", "3", "--json", "-"], capture_output=True, text=True,
+                         timeout=60)
+    rep = json.loads(run.stdout) if run.stdout.startswith("{") else {}
+    grew = [(metric(d, sent) or 0) > b for d, b in zip((E, P, Q), before)]
+    t.check(run.returncode == 0 and rep.get("options", {}).get("urls") == [E.url, P.url, Q.url],
+            "fxload with three --url: exit 0, the report names them (%d%s)" %
+            (run.returncode, run.returncode and run.stderr[-200:] or ""))
+    t.check(all(grew), "each daemon sent w's frames to its share of the subscribers (%s)" % grew)
+
+
 async def test_failover(t):
     """kill -9 of the owner: the other compute daemon takes over with the same params and rev."""
     global P, Q
@@ -310,7 +329,7 @@ if __name__ == "__main__":
     try:
         P, Q = compute("p"), compute("q")
         E = cluster_daemon(R, "e", "--role", "edge")
-        s.run([test_roles, test_fanout, test_spread, test_failover, test_fencing, test_handover, test_redis_restart,
+        s.run([test_roles, test_fanout, test_spread, test_fxload, test_failover, test_fencing, test_handover, test_redis_restart,
                test_shutdown])
     finally:
         for d in (P, Q, E):
