@@ -52,9 +52,9 @@ static const char *const cluster_scripts[CS_COUNT] = {
                    "redis.call('DEL', p .. 'lease:' .. ARGV[1], p .. 'want:' .. ARGV[1], p .. 'frame:' .. ARGV[1] .. ':1',\n"
                    "           p .. 'frame:' .. ARGV[1] .. ':2', p .. 'frame:' .. ARGV[1] .. ':3', p .. 'frame:' .. ARGV[1] .. ':4')\n"
                    "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n",
-    /* KEYS stream, seq; ARGV event, channel */
+    /* KEYS stream, streams, seq; ARGV name, event, channel (as CS_DESTROY's) */
     [CS_RESET] = "if redis.call('EXISTS', KEYS[1]) == 0 then return {'gone'} end\n"
-                 "local seq = redis.call('INCR', KEYS[2])\n" CLUSTER_PUBLISH("1", "2") "return {'ok', seq}\n",
+                 "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n",
     /* KEYS streams, seq; ARGV key prefix. Returns seq, then name, effect, rev, params per stream. */
     [CS_LOAD] = "local out = {redis.call('GET', KEYS[2]) or '0'}\n"
                 "for _, n in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do\n"
@@ -725,12 +725,13 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
     return rc;
 }
 
-int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err)
+/* A destroy or a reset (script s, the event's op): both only need the stream to exist. */
+static int cluster_stream_change(struct cluster *cl, int s, const char *op, const char *stream, struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], *ev = cluster_event(cl, "destroyed", stream, NULL, 0, NULL);
+    char key[128], *ev = cluster_event(cl, op, stream, NULL, 0, NULL);
     cluster_key(key, sizeof key, stream);
-    redisReply *r = ev ? cluster_eval(cl, CS_DESTROY, 3, 6,
+    redisReply *r = ev ? cluster_eval(cl, s, 3, 6,
                                       (const char *[]){key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", stream, ev,
                                                        cl->channel}, err)
                        : NULL;
@@ -742,19 +743,14 @@ int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err)
     return cluster_gone(stream, err);
 }
 
+int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err)
+{
+    return cluster_stream_change(cl, CS_DESTROY, "destroyed", stream, err);
+}
+
 int cluster_reset(struct cluster *cl, const char *stream, struct fx_err *err)
 {
-    if (cluster_writable(cl, err)) return -1;
-    char key[128], *ev = cluster_event(cl, "reset", stream, NULL, 0, NULL);
-    cluster_key(key, sizeof key, stream);
-    redisReply *r = ev ? cluster_eval(cl, CS_RESET, 2, 4, (const char *[]){key, CLUSTER_KEY "seq", ev, cl->channel}, err)
-                       : NULL;
-    if (!ev) fx_fail(err, "internal", NULL, "out of memory");
-    cJSON_free(ev);
-    if (!r) return -1;
-    if (!strcmp(cluster_outcome(r), "ok")) return cluster_done(cl, r, err);
-    freeReplyObject(r);
-    return cluster_gone(stream, err);
+    return cluster_stream_change(cl, CS_RESET, "reset", stream, err);
 }
 
 /* ---- the whole state ---- */

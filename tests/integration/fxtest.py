@@ -6,6 +6,7 @@ import asyncio
 import json
 import os
 import signal
+import socket
 import struct
 import subprocess
 import sys
@@ -28,6 +29,15 @@ def parse_frame(data):
                 seq=seq, sim_time=sim_time, server_time_us=t_us, codec=codec,
                 payload_bytes=nbytes, width=w, height=h, flags=flags,
                 payload=data[hbytes:])
+
+
+def free_port():
+    """A TCP port free on 127.0.0.1 at the moment of asking."""
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
 
 
 def config_file(doc):

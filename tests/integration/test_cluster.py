@@ -32,7 +32,7 @@ import time
 import urllib.request
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fxtest import DAEMON, Client, Daemon, Suite  # noqa: E402
+from fxtest import DAEMON, Client, Daemon, Suite, free_port  # noqa: E402
 
 REDIS = shutil.which("redis-server") or "/usr/bin/redis-server"
 SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: several daemons share 2 cores
@@ -40,14 +40,6 @@ LEASE_TTL_S = 3.0  # server/lease.h
 R = None  # the shared Redis
 TEMP_DIRS = []  # Redis data dirs, removed at the end
 A = B = C = None  # its daemons, node ids a, b, c
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def resp_read(f):

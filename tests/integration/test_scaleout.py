@@ -17,7 +17,6 @@ import pwd
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -27,7 +26,7 @@ import urllib.request
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import websockets  # noqa: E402
 
-from fxtest import ROOT, Client, Daemon, Suite  # noqa: E402
+from fxtest import ROOT, Client, Daemon, Suite, free_port  # noqa: E402
 
 CONF = os.path.join(ROOT, "deploy", "nginx", "fxstream.conf")
 NGINX = shutil.which("nginx") or "/usr/sbin/nginx"
@@ -37,14 +36,6 @@ SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: 3 daemons share 
 DAEMONS = []
 PROXY = None
 OWNER = {}  # stream -> index of the daemon that holds it (from `list`, asked directly)
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def site_config(text, port, backends):
