@@ -19,6 +19,7 @@
 #define LEASE_MARGIN_S 0.5      /* a lease counts as held locally until TTL - this after its renewal was sent */
 #define LEASE_STREAM_COST "0.05" /* load added per lease held (spreads idle streams, breaks ties) */
 #define LEASE_RETRY_S 1.0       /* after a failed connection, the next try waits this long */
+#define LEASE_LOG_S 10.0        /* a script Redis keeps refusing (e.g. out of memory) is logged this often */
 
 enum { LS_TICK, LS_PUBLISH, LS_RELEASE, LS_COUNT };
 
@@ -122,7 +123,7 @@ struct lease {
 
     /* The agent's. */
     redisContext *c;
-    double retry_at, busy_t;
+    double retry_at, busy_t, error_logged; /* error_logged: Redis's refusals are logged every LEASE_LOG_S */
     uint64_t busy_ns;
 
     pthread_mutex_t mu; /* guards what follows */
@@ -175,7 +176,10 @@ static redisReply *lease_eval(struct lease *l, int s, int nkeys, int argc, const
     free(vl);
     if (!r) lease_drop_conn(l, l->c->errstr[0] ? l->c->errstr : "no answer");
     else if (r->type == REDIS_REPLY_ERROR) {
-        log_error("cluster: %s refused a lease script: %s", l->cfg->url, r->str);
+        if (clock_now() - l->error_logged >= LEASE_LOG_S) {
+            log_error("cluster: %s refused a lease script: %s", l->cfg->url, r->str);
+            l->error_logged = clock_now();
+        }
         freeReplyObject(r);
         r = NULL;
     }
