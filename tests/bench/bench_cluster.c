@@ -13,9 +13,11 @@
  * minus the header's server_time_us, which stays the owner's frame time through Redis; one
  * machine, one clock) gives p50/p99 and, between the two setups, Redis's added latency; then
  * the search of trial.h for the largest number of subscribers with >= 95% of the frames and
- * p99 <= 100 ms. Over the cluster's fixed trial, the edges' fxs_cluster_relay_latency_seconds
- * (owner's frame time to arrival at the edge) is read from /metrics before and after, summed
- * over both edges, and its p50/p99 interpolated linearly inside the histogram's buckets (1, 2,
+ * p99 <= 100 ms. Around each fixed trial, the serving daemons' /metrics are read before and
+ * after (the difference is that trial's, summed over the daemons): fxs_stream_frame_age_seconds
+ * (frame time to the start of its sending: on an edge, the owner's publish to the edge's send)
+ * and, on the edges, fxs_cluster_relay_latency_seconds (the owner's frame time to arrival at
+ * the edge); their p50/p99 are interpolated linearly inside the histograms' buckets (1, 2,
  * 5, 10, 20, 50 ms...: coarse). The stream computes all the time (pause_idle false), in both
  * setups alike, so subscribers never wait for a paused stream to start.
  * Every process started here is stopped at exit (atexit, failures included) and is killed when
@@ -52,19 +54,22 @@
 #define CL_MAX_PROCS 4
 #define CL_HIST_MAX 16
 #define CL_STREAM "bench_tex"
+#define CL_AGE_METRIC "fxs_stream_frame_age_seconds_bucket{stream=\"" CL_STREAM "\","
 #define CL_RELAY_METRIC "fxs_cluster_relay_latency_seconds_bucket{"
-
-/* One setup's figures. */
-struct cl_setup {
-    struct trial_result lat;
-    struct trial_search search;
-};
 
 /* A Prometheus histogram as /metrics renders it: cumulative counts per upper bound. */
 struct cl_hist {
     int nb;
     double le[CL_HIST_MAX];
     double cum[CL_HIST_MAX];
+};
+
+/* One setup's figures; the histograms over the fixed trial, summed over the serving daemons. */
+struct cl_setup {
+    struct trial_result lat;
+    struct trial_search search;
+    struct cl_hist age;   /* fxs_stream_frame_age_seconds: frame time to the start of its sending */
+    struct cl_hist relay; /* fxs_cluster_relay_latency_seconds (edges only): frame time to arrival */
 };
 
 static double cl_t0;
@@ -166,31 +171,49 @@ static pid_t cl_redis_start(int *port)
     return -1;
 }
 
-/* ---- the relay latency histogram from /metrics ---------------------------------------- */
+/* ---- histograms from /metrics ------------------------------------------------------------ */
 
-/* Adds the edge's fxs_cluster_relay_latency_seconds buckets to h (same bounds everywhere). */
-static int cl_relay_hist_add(int port, struct cl_hist *h)
+/* Adds the daemon's buckets of the series whose lines start with prefix to h (the same
+ * bounds everywhere); a daemon without the series adds nothing. */
+static int cl_hist_add(int port, const char *prefix, struct cl_hist *h)
 {
     static char body[1 << 20];
     int i = 0;
     if (cl_request(port, "GET /metrics HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n", body, sizeof body))
         return -1;
-    for (char *p = strstr(body, CL_RELAY_METRIC); p && i < CL_HIST_MAX; p = strstr(p + 1, CL_RELAY_METRIC), i++) {
+    for (char *p = strstr(body, prefix); p && i < CL_HIST_MAX; p = strstr(p + 1, prefix), i++) {
         char *le = strstr(p, "le=\""), *val = strchr(p, ' ');
         if (!le || !val) return -1;
         h->le[i] = strncmp(le + 4, "+Inf", 4) ? strtod(le + 4, NULL) : INFINITY;
         h->cum[i] += strtod(val + 1, NULL);
     }
-    h->nb = i;
-    return i ? 0 : -1;
+    if (i) h->nb = i;
+    return 0;
 }
+
+/* The series summed over the daemons at ports; -1 when one cannot be read. */
+static int cl_hist_read(const int *ports, int nports, const char *prefix, struct cl_hist *h)
+{
+    memset(h, 0, sizeof *h);
+    for (int i = 0; i < nports; i++)
+        if (cl_hist_add(ports[i], prefix, h)) return -1;
+    return 0;
+}
+
+/* What was observed between two readings: after - before, into after. */
+static void cl_hist_since(struct cl_hist *after, const struct cl_hist *before)
+{
+    for (int i = 0; i < after->nb && i < before->nb; i++) after->cum[i] -= before->cum[i];
+}
+
+static double cl_hist_count(const struct cl_hist *h) { return h->nb ? h->cum[h->nb - 1] : 0; }
 
 /* The q-quantile in seconds: linear inside the bucket holding rank q * count (Prometheus's
  * histogram_quantile); a rank in the +Inf bucket gives the highest finite bound. */
 static double cl_hist_quantile(const struct cl_hist *h, double q)
 {
-    double total = h->nb ? h->cum[h->nb - 1] : 0, rank = q * total, lo = 0, below = 0;
-    if (total <= 0) return 0;
+    double rank = q * cl_hist_count(h), lo = 0, below = 0;
+    if (rank <= 0) return 0;
     for (int i = 0; i < h->nb; i++) {
         if (h->cum[i] >= rank) {
             if (isinf(h->le[i])) return lo;
@@ -200,15 +223,6 @@ static double cl_hist_quantile(const struct cl_hist *h, double q)
         below = h->cum[i];
     }
     return lo;
-}
-
-/* Both edges' histograms summed; -1 when one cannot be read. */
-static int cl_relay_hist(const int *ports, struct cl_hist *h)
-{
-    memset(h, 0, sizeof *h);
-    for (int i = 0; i < CL_EDGES; i++)
-        if (cl_relay_hist_add(ports[i], h)) return -1;
-    return 0;
 }
 
 /* ---- the two setups ------------------------------------------------------------------- */
@@ -225,6 +239,20 @@ static void cl_write_config(void)
     fclose(f);
 }
 
+/* The fixed trial, with the serving daemons' histograms read before and after it. */
+static int cl_fixed_trial(const struct trial_target *tg, const int *ports, int nports, struct cl_setup *s)
+{
+    struct cl_hist age, relay;
+    if (cl_hist_read(ports, nports, CL_AGE_METRIC, &age) || cl_hist_read(ports, nports, CL_RELAY_METRIC, &relay))
+        return -1;
+    trial_run(tg, CL_LAT_N, &s->lat);
+    if (cl_hist_read(ports, nports, CL_AGE_METRIC, &s->age) || cl_hist_read(ports, nports, CL_RELAY_METRIC, &s->relay))
+        return -1;
+    cl_hist_since(&s->age, &age);
+    cl_hist_since(&s->relay, &relay);
+    return 0;
+}
+
 /* The search, ending after CL_SEARCH_BUDGET_S or at the end of the whole budget. */
 static void cl_search(const struct trial_target *tg, struct cl_setup *s)
 {
@@ -238,8 +266,7 @@ static int cl_single(struct cl_setup *s)
     int port;
     if ((tg.pids[0] = cl_track(trial_daemon(cl_cfg, NULL, &port))) < 0) return -1;
     snprintf(url, sizeof url, "ws://127.0.0.1:%d/v1/ws", port);
-    if (trial_await_frames(&tg, 1, CL_AWAIT_S)) return -1;
-    trial_run(&tg, CL_LAT_N, &s->lat);
+    if (trial_await_frames(&tg, 1, CL_AWAIT_S) || cl_fixed_trial(&tg, &port, 1, s)) return -1;
     cl_search(&tg, s);
     cl_stop_all();
     return 0;
@@ -270,18 +297,13 @@ static int cl_cluster_start(struct trial_target *tg, int *edge_ports)
     return 0;
 }
 
-/* Relay latency over the fixed trial: the edges' histograms before and after it. */
-static int cl_cluster(struct cl_setup *s, struct cl_hist *relay)
+static int cl_cluster(struct cl_setup *s)
 {
     struct trial_target tg = { .stream = CL_STREAM };
-    struct cl_hist before;
     int edge_ports[CL_EDGES];
     if (cl_cluster_start(&tg, edge_ports) || trial_await_frames(&tg, CL_EDGES, CL_AWAIT_S) ||
-        cl_relay_hist(edge_ports, &before))
+        cl_fixed_trial(&tg, edge_ports, CL_EDGES, s))
         return -1;
-    trial_run(&tg, CL_LAT_N, &s->lat);
-    if (cl_relay_hist(edge_ports, relay)) return -1;
-    for (int i = 0; i < relay->nb; i++) relay->cum[i] -= before.cum[i];
     cl_search(&tg, s);
     cl_stop_all();
     return 0;
@@ -295,7 +317,15 @@ static void cl_report_search(const char *name, const struct trial_search *s)
     printf("cluster.%s.failed_at %d\n", name, s->fail.n);
 }
 
-static void cl_report(const struct cl_setup *one, const struct cl_setup *two, const struct cl_hist *relay)
+/* A histogram's count and interpolated p50/p99 in ms. */
+static void cl_report_hist(const char *name, const struct cl_hist *h)
+{
+    printf("cluster.%s.observed %.0f\n", name, cl_hist_count(h));
+    printf("cluster.%s.bucket_interp_p50_ms %.1f\n", name, 1e3 * cl_hist_quantile(h, 0.5));
+    printf("cluster.%s.bucket_interp_p99_ms %.1f\n", name, 1e3 * cl_hist_quantile(h, 0.99));
+}
+
+static void cl_report(const struct cl_setup *one, const struct cl_setup *two)
 {
     cl_report_search("single", &one->search);
     cl_report_search("edges2", &two->search);
@@ -304,9 +334,9 @@ static void cl_report(const struct cl_setup *one, const struct cl_setup *two, co
     printf("cluster.latency.edges2.p50_ms %.1f\ncluster.latency.edges2.p99_ms %.1f\n", two->lat.p50, two->lat.p99);
     printf("cluster.latency.added.p50_ms %.1f\ncluster.latency.added.p99_ms %.1f\n", two->lat.p50 - one->lat.p50,
            two->lat.p99 - one->lat.p99);
-    printf("cluster.relay_latency.frames %.0f\n", relay->nb ? relay->cum[relay->nb - 1] : 0);
-    printf("cluster.relay_latency.bucket_interpolated.p50_ms %.1f\n", 1e3 * cl_hist_quantile(relay, 0.5));
-    printf("cluster.relay_latency.bucket_interpolated.p99_ms %.1f\n", 1e3 * cl_hist_quantile(relay, 0.99));
+    cl_report_hist("frame_age.single", &one->age);
+    cl_report_hist("frame_age.edges2", &two->age);
+    cl_report_hist("relay_latency.edges2", &two->relay);
     printf("cluster.total_s %.0f\ncluster.cpus %ld\n", trial_now() - cl_t0, sysconf(_SC_NPROCESSORS_ONLN));
 }
 
@@ -329,17 +359,16 @@ static int cl_setup_run(void)
 int main(void)
 {
     struct cl_setup one, two;
-    struct cl_hist relay;
     cl_t0 = trial_now();
     if (cl_setup_run()) return 1;
     if (cl_single(&one)) {
         printf("cluster.error cannot start build/fxstreamd or get frames from it (run make all)\n");
         return 1;
     }
-    if (cl_cluster(&two, &relay)) {
+    if (cl_cluster(&two)) {
         printf("cluster.error the cluster (redis-server, 1 compute, %d edges) did not start or relay frames\n", CL_EDGES);
         return 1;
     }
-    cl_report(&one, &two, &relay);
+    cl_report(&one, &two);
     return 0;
 }
