@@ -32,6 +32,8 @@ CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o)
 REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
 UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
 BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))
+# tests/bench/*.c that are not bench_*.c: shared by the benchmarks (the fan-out trial), linked into each.
+BENCH_OBJ   := $(patsubst %.c,$(BUILD)/obj/%.o,$(filter-out tests/bench/bench_%.c,$(wildcard tests/bench/*.c)))
 FUZZ_BIN    := $(patsubst tests/fuzz/%.c,$(BUILD)/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 # libFuzzer targets: clang with ASan/UBSan over sanitized copies of both libraries (BUILD/fz),
 # which also give an ASan/UBSan daemon (BUILD/fz/fxstreamd) for the churn test.
@@ -163,7 +165,7 @@ $(BUILD)/tests/%: $(BUILD)/obj/tests/unit/%.o $(REF_OBJ) $(BUILD)/libfxserver.a 
 	@mkdir -p $(@D)
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
-$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
+$(BUILD)/bench/%: $(BUILD)/obj/tests/bench/%.o $(BENCH_OBJ) $(REF_OBJ) $(BUILD)/libfxserver.a $(BUILD)/libfxclient.a
 	@mkdir -p $(@D)
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
