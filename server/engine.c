@@ -310,11 +310,9 @@ static void *engine_main(void *arg)
 
 int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool pause_idle, struct fx_err *err)
 {
-    void (*export_frame)(void *, struct stream *, uint64_t, struct frame *) = eng->export_frame;
-    void *export_ctx = eng->export_ctx;
-    memset(eng, 0, sizeof *eng);
-    eng->export_frame = export_frame;
-    eng->export_ctx = export_ctx;
+    eng->slots = NULL; /* export_frame and export_ctx are the caller's (engine.h) */
+    eng->nslots = 0;
+    atomic_store(&eng->busy_ns, 0);
     eng->hub = hub;
     eng->ocl = ocl;
     eng->pause_idle = pause_idle;

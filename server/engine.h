@@ -40,7 +40,7 @@ struct engine {
     void *export_ctx;
 };
 
-/* Set export_frame and export_ctx before (engine_start keeps them). */
+/* eng zero-initialized or stopped, with export_frame and export_ctx set (or NULL). */
 int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool pause_idle, struct fx_err *err);
 /* Stops the thread (after its current step) and frees every effect. */
 void engine_stop(struct engine *eng);
