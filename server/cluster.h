@@ -5,6 +5,7 @@
  *   fxs:streams       sorted set of the names, scored by their creation's change number
  *   fxs:seq           the change counter: +1 per change, whichever daemon made it
  *   fxs:seeded        set once, by the daemon that first filled an empty database
+ *   (leases, demand, frames: lease.h and relay.h)
  * and the channel fxs:events:DB (pub/sub is server-wide, hence the database in its name)
  * carries one message per change, "SEQ JSON": the change's number, then {op, node, stream,
  * effect, rev, params} (op created, params, destroyed or reset; destroyed and reset carry

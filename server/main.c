@@ -1,7 +1,8 @@
 /* main.c — fxstreamd: wires configuration, OpenCL, hub, engine and network together,
  * creates the start-up streams (in cluster mode: takes Redis's, seeding an empty database with
  * them), serves until SIGINT/SIGTERM, then shuts down in order (close WebSockets with 1001,
- * stop the engine and the cluster's follower, free everything) and exits 0. */
+ * stop the engine, then the cluster's threads: the lease agent gives the leases up, free
+ * everything) and exits 0. An edge (--role edge) opens no OpenCL device and starts no engine. */
 #include <math.h>
 #include <errno.h>
 #include <signal.h>
