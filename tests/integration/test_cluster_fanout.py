@@ -4,16 +4,17 @@ with --role compute, e with --role edge; subscribers on all three.
 
 Checks: the edge opens no device and holds no lease; a stream created on the edge is computed by
 exactly one compute daemon and its frames reach subscribers on all three daemons (same rev,
-increasing numbers, the edge's own channel number), with the latest frame kept in Redis; a set
-through the edge reaches every subscriber's frames; new streams spread over both compute
-daemons; fxload with three --url spreads its subscribers over the three daemons; kill -9 of the
-owner: frames resume on the other daemons within 5 s through the other compute daemon, with the
-same parameters and rev, nothing re-created, frame numbers going on; an owner paused (SIGSTOP)
-past its lease is replaced, and after SIGCONT no frame of it reaches Redis's channel (fencing)
-and it stops computing the stream; SIGTERM of an owner hands its streams over at once (well
-inside the lease's TTL); Redis killed: the owner's subscribers keep getting frames, changes are
-refused, and after Redis is back (empty) the cluster converges: changes accepted, one owner,
-frames at the edge again. Every wait is bounded."""
+increasing numbers, the edge's own channel number), with the latest frame kept in Redis, which a
+new subscriber on a daemon relaying nothing of the stream yet gets at once; a set through the
+edge reaches every subscriber's frames; new streams spread over both compute daemons; fxload
+with three --url spreads its subscribers over the three daemons; kill -9 of the owner: frames
+resume on the other daemons within 5 s through the other compute daemon, with the same
+parameters and rev, nothing re-created, frame numbers going on; an owner paused (SIGSTOP) past
+its lease is replaced, and after SIGCONT no frame of it reaches Redis's channel (fencing) and it
+stops computing the stream; SIGTERM of an owner hands its streams over at once (well inside the
+lease's TTL); Redis killed: the owner's subscribers keep getting frames, changes are refused,
+and after Redis is back (empty) the cluster converges: changes accepted, one owner, frames at
+the edge again. Every wait is bounded."""
 import asyncio
 import json
 import os
@@ -183,6 +184,28 @@ async def test_spread(t):
     await e.close()
 
 
+async def test_latest_frame(t):
+    """A new subscriber on a daemon that relays nothing of the stream yet gets its latest frame
+    at once, from Redis (a 1 fps stream: the next one is up to a second away)."""
+    e = await Client.connect(E)
+    await e.request("create", effect="energy_wave", stream="slow", params=dict(SMALL, fps=1))
+    first = await subscriber(E, "slow")
+    seen = (await frames_after(first, 0, timeout=15))[0]
+    o = await owner_of("slow")
+    other = Q if o is P else P
+    start, start_wall = time.monotonic(), time.time()
+    c = await subscriber(other, "slow")
+    f = await c.frame(timeout=5, kind=2)
+    took = time.monotonic() - start
+    t.check(took < 0.5 and f["server_time_us"] < start_wall * 1e6 and f["seq"] >= seen["seq"] and
+            f["channel"] == c.channel, "a subscriber on the other compute daemon gets, in %.2f s, the latest frame, "
+            "made before it subscribed (seq %d)" % (took, f["seq"]))
+    for x in (first, c):
+        await x.close()
+    await e.request("destroy", stream="slow")
+    await e.close()
+
+
 async def test_fxload(t):
     """fxload --url repeated spreads its subscribers over the daemons; every one serves w."""
     sent = 'fxs_stream_frames_sent_total{stream="%s",effect="energy_wave"}' % STREAM
@@ -329,7 +352,7 @@ if __name__ == "__main__":
     try:
         P, Q = compute("p"), compute("q")
         E = cluster_daemon(R, "e", "--role", "edge")
-        s.run([test_roles, test_fanout, test_spread, test_fxload, test_failover, test_fencing, test_handover, test_redis_restart,
+        s.run([test_roles, test_fanout, test_spread, test_latest_frame, test_fxload, test_failover, test_fencing, test_handover, test_redis_restart,
                test_shutdown])
     finally:
         for d in (P, Q, E):
