@@ -242,16 +242,21 @@ static void engine_pause(struct engine_slot *sl, uint64_t gen, uint64_t reset_ge
 }
 
 /* Whether this daemon computes the stream now (hub.h struct stream_lease). A lease taken
- * (again) starts the effect afresh, at the previous owner's frame numbers; one lost or run out
- * drops the effect. */
-static bool engine_holds(struct engine_slot *sl, const struct stream_lease *l, double now)
+ * (again) starts the effect afresh, numbering frames on from the previous owner's, from this
+ * daemon's own and from any relayed here, whichever is highest (a Redis that lost its data
+ * knows none); one lost or run out drops the effect. */
+static bool engine_holds(struct engine *eng, struct engine_slot *sl, const struct stream_lease *l, double now)
 {
     bool mine = l->owned && now < l->until;
     if (mine && l->gen != sl->lease_gen) {
         engine_drop_fx(sl);
         sl->lease_gen = l->gen;
         sl->running = false;
-        memcpy(sl->seq, l->seq_from, sizeof sl->seq);
+        for (int k = 1; k <= FXS_KIND_MAX; k++) {
+            uint64_t relayed = hub_latest_seq(eng->hub, sl->s, k);
+            if (l->seq_from[k] > sl->seq[k]) sl->seq[k] = l->seq_from[k];
+            if (relayed > sl->seq[k]) sl->seq[k] = relayed;
+        }
     }
     if (!mine && sl->state) engine_drop_fx(sl);
     if (!mine) sl->running = false;
@@ -269,7 +274,7 @@ static double engine_run_due(struct engine *eng)
         int subs = st.subscribers;
         double fps = st.fps;
         uint64_t gen = st.params_gen, reset_gen = st.reset_gen;
-        if (!engine_holds(sl, &st.lease, now)) continue;
+        if (!engine_holds(eng, sl, &st.lease, now)) continue;
         if (eng->pause_idle && subs == 0 && !st.lease.remote_demand) {
             sl->running = false;
             sl->rt_wall = 0; /* a pause is not slowness */

@@ -263,6 +263,14 @@ struct frame *hub_latest(struct hub *hub, struct stream *s, int kind)
     return f;
 }
 
+uint64_t hub_latest_seq(struct hub *hub, struct stream *s, int kind)
+{
+    pthread_mutex_lock(&hub->mu);
+    uint64_t seq = s->latest[kind] ? s->latest[kind]->hdr.seq : 0;
+    pthread_mutex_unlock(&hub->mu);
+    return seq;
+}
+
 void hub_wait(struct hub *hub, uint64_t seen_gen, double deadline)
 {
     struct timespec ts;

@@ -142,6 +142,9 @@ void hub_stream_error(struct hub *hub, struct stream *s, const char *message);
 void hub_stream_recovered(struct hub *hub, struct stream *s);
 /* Network side: a reference to the newest frame of a kind (NULL if none). */
 struct frame *hub_latest(struct hub *hub, struct stream *s, int kind);
+/* The number (header seq) of the newest frame of a kind, 0 if none. Frames a daemon publishes
+ * must number above it: sessions send a frame only when it is newer than the last they sent. */
+uint64_t hub_latest_seq(struct hub *hub, struct stream *s, int kind);
 
 /* Engine: waits until the hub changes or the absolute CLOCK_MONOTONIC deadline (seconds). */
 void hub_wait(struct hub *hub, uint64_t seen_gen, double deadline);

@@ -25,7 +25,9 @@ enum { LS_TICK, LS_PUBLISH, LS_RELEASE, LS_COUNT };
 
 static const char *const lease_scripts[LS_COUNT] = {
     /* ARGV node, compute (1/0), load, ttl ms, then n + the names wanted here, n + (name, token)
-     * of the leases held, n + the names this daemon could compute. Returns one entry per held
+     * of the leases held, n + the names this daemon could compute. A lease held is kept while
+     * nobody else has taken it; it is written again once its stream exists (a Redis that lost
+     * its data is seeded again by the daemons a moment later: no stream changes owner then). Returns one entry per held
      * or taken lease: {'held', name, token, demand} {'lost', name} {'taken', name, token, demand,
      * seq1, seq2, seq3, seq4} (seqK: the 8 bytes of the latest frame's number, or ""). */
     [LS_TICK] =
@@ -50,8 +52,8 @@ static const char *const lease_scripts[LS_COUNT] = {
         "  i = i + 2\n"
         "  local k = P .. 'lease:' .. name\n"
         "  local v = redis.call('GET', k)\n"
-        "  if v == token or (not v and redis.call('EXISTS', P .. 'stream:' .. name) == 1) then\n"
-        "    redis.call('SET', k, token, 'PX', ttl)\n"
+        "  if v == token or not v then\n"
+        "    if redis.call('EXISTS', P .. 'stream:' .. name) == 1 then redis.call('SET', k, token, 'PX', ttl) end\n"
         "    held = held + 1\n"
         "    out[#out + 1] = {'held', name, token, demand(name)}\n"
         "  else\n"
@@ -91,9 +93,12 @@ static const char *const lease_scripts[LS_COUNT] = {
         "  end\n"
         "end\n"
         "return out\n",
-    /* KEYS lease, latest frame; ARGV token, channel, frame. 1: published; 0: the lease is not
-     * (or no longer) the one the frame was computed under. */
-    [LS_PUBLISH] = "if redis.call('GET', KEYS[1]) ~= ARGV[1] then return 0 end\n"
+    /* KEYS lease, latest frame; ARGV token, channel, frame. 1: published; 0: another daemon
+     * holds the lease now; -1: nobody does (a Redis that lost its data: the next tick writes it
+     * again, or says it was lost). */
+    [LS_PUBLISH] = "local v = redis.call('GET', KEYS[1])\n"
+                   "if not v then return -1 end\n"
+                   "if v ~= ARGV[1] then return 0 end\n"
                    "redis.call('SET', KEYS[2], ARGV[3])\n"
                    "redis.call('PUBLISH', ARGV[2], ARGV[3])\n"
                    "return 1\n",
@@ -362,7 +367,7 @@ static void lease_publish(struct lease *l, const struct lease_out *o)
     size_t lens[] = {strlen(lease_key), strlen(frame_key), strlen(token), strlen(channel), o->f->len};
     redisReply *r = lease_eval(l, LS_PUBLISH, 2, 5, v, lens);
     if (r && r->type == REDIS_REPLY_INTEGER && r->integer == 1) atomic_fetch_add(&l->srv->counters.cluster_frames_published, 1);
-    else if (r && r->type == REDIS_REPLY_INTEGER) lease_fenced(l, o->s, o->gen);
+    else if (r && r->type == REDIS_REPLY_INTEGER && r->integer == 0) lease_fenced(l, o->s, o->gen);
     freeReplyObject(r);
 }
 

@@ -20,9 +20,13 @@
 #define RELAY_BACKOFF_MIN_S 0.1
 #define RELAY_BACKOFF_MAX_S 1.0
 
-/* A stream whose channel this daemon is subscribed to. */
+/* A stream whose channel this daemon is subscribed to, and how its frames are numbered here:
+ * each kind's numbers go on increasing from the newest frame the hub had when the subscription
+ * started (sessions send only frames newer than their last), shifted up when an owner numbers
+ * from lower down (after a Redis that lost its data, the latest frames are gone with it). */
 struct relay_sub {
     char name[STREAM_NAME_MAX];
+    uint64_t last[FXS_KIND_MAX + 1], shift[FXS_KIND_MAX + 1];
 };
 
 struct relay {
@@ -43,14 +47,22 @@ struct relay {
 
 /* ---- frames into the hub ---- */
 
-/* A frame of `s` as its owner sent it: re-headed with this daemon's channel, into the hub. */
-static void relay_deliver(struct relay *r, struct stream *s, const uint8_t *bytes, size_t len, bool latest)
+/* A frame of `s` as its owner sent it: re-headed with this daemon's channel and numbering
+ * (struct relay_sub), into the hub. */
+static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream *s, const uint8_t *bytes, size_t len,
+                          bool latest)
 {
     struct fxs_header h;
     if (fxs_header_unpack(bytes, len, &h) || h.kind < 1 || h.kind > FXS_KIND_MAX) {
         log_warn("cluster: an unreadable frame of stream %s on Redis (%zu bytes), skipped", s->name, len);
         return;
     }
+    if (h.seq + sub->shift[h.kind] <= sub->last[h.kind]) {
+        if (latest) return; /* the hub has it, or newer */
+        sub->shift[h.kind] = sub->last[h.kind] + 1 - h.seq;
+    }
+    h.seq += sub->shift[h.kind];
+    sub->last[h.kind] = h.seq;
     h.channel = s->channel;
     struct frame *f = frame_new(&h, bytes + h.header_bytes, h.payload_bytes);
     if (!f) return;
@@ -71,6 +83,13 @@ static bool relay_wanted(struct relay *r, struct stream *s)
     return st.subscribers > 0 && !st.lease.owned;
 }
 
+static struct relay_sub *relay_find(struct relay *r, const char *name)
+{
+    for (int i = 0; i < r->nsubs; i++)
+        if (!strcmp(r->subs[i].name, name)) return &r->subs[i];
+    return NULL;
+}
+
 static void relay_on_message(struct relay *r, const redisReply *m)
 {
     if (m->type != REDIS_REPLY_ARRAY || m->elements != 3 || m->element[0]->type != REDIS_REPLY_STRING ||
@@ -79,26 +98,24 @@ static void relay_on_message(struct relay *r, const redisReply *m)
         return;
     const char *channel = m->element[1]->str;
     size_t np = strlen(r->prefix);
-    if (strncmp(channel, r->prefix, np)) return;
-    struct stream *s = hub_find(&r->srv->hub, channel + np);
-    if (s && relay_wanted(r, s)) relay_deliver(r, s, (const uint8_t *)m->element[2]->str, m->element[2]->len, false);
+    struct relay_sub *sub = strncmp(channel, r->prefix, np) ? NULL : relay_find(r, channel + np);
+    struct stream *s = sub ? hub_find(&r->srv->hub, sub->name) : NULL;
+    if (s && relay_wanted(r, s))
+        relay_deliver(r, sub, s, (const uint8_t *)m->element[2]->str, m->element[2]->len, false);
     stream_unref(s);
 }
 
-/* The latest frames of a stream just subscribed to. */
-static int relay_fetch_latest(struct relay *r, const char *name)
+/* A stream just subscribed to: its numbering starts above the hub's frames, and its latest
+ * frames come from Redis. */
+static int relay_fetch_latest(struct relay *r, struct relay_sub *sub, struct stream *s)
 {
-    struct stream *s = hub_find(&r->srv->hub, name);
-    for (int k = 1; s && k <= FXS_KIND_MAX; k++) {
-        redisReply *q = redisCommand(r->get, "GET " CLUSTER_KEY "frame:%s:%d", name, k);
-        if (!q) {
-            stream_unref(s);
-            return -1;
-        }
-        if (q->type == REDIS_REPLY_STRING) relay_deliver(r, s, (const uint8_t *)q->str, q->len, true);
+    for (int k = 1; k <= FXS_KIND_MAX; k++) sub->last[k] = hub_latest_seq(&r->srv->hub, s, k);
+    for (int k = 1; k <= FXS_KIND_MAX; k++) {
+        redisReply *q = redisCommand(r->get, "GET " CLUSTER_KEY "frame:%s:%d", sub->name, k);
+        if (!q) return -1;
+        if (q->type == REDIS_REPLY_STRING) relay_deliver(r, sub, s, (const uint8_t *)q->str, q->len, true);
         freeReplyObject(q);
     }
-    stream_unref(s);
     return 0;
 }
 
@@ -137,8 +154,10 @@ static int relay_follow_hub(struct relay *r)
         struct relay_sub *p = realloc(r->subs, (size_t)(r->nsubs + 1) * sizeof *p);
         if (!p) break;
         r->subs = p;
-        snprintf(p[r->nsubs++].name, sizeof p->name, "%s", ss[j]->name);
-        rc = relay_send(r, "SUBSCRIBE", ss[j]->name) || relay_fetch_latest(r, ss[j]->name) ? -1 : 0;
+        struct relay_sub *sub = &p[r->nsubs++];
+        *sub = (struct relay_sub){0};
+        snprintf(sub->name, sizeof sub->name, "%s", ss[j]->name);
+        rc = relay_send(r, "SUBSCRIBE", ss[j]->name) || relay_fetch_latest(r, sub, ss[j]) ? -1 : 0;
     }
     hub_release_all(ss, n);
     return rc;

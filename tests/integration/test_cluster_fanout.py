@@ -307,6 +307,7 @@ async def test_redis_restart(t):
     o = await owner_of(STREAM)
     c, e = await subscriber(o), await subscriber(E)
     last = (await frames_after(c, 0))[0]["seq"]
+    lost = [metric(o, "fxs_cluster_leases_lost_total"), metric(o, "fxs_cluster_frames_fenced_total")]
     R.kill()
     await asyncio.sleep(LEASE_TTL_S + 0.5)
     seqs = [f["seq"] for f in await frames_after(c, 0, n=5)]
@@ -325,6 +326,8 @@ async def test_redis_restart(t):
     t.check(s is not None, "changes are accepted again")
     n = await owner_of(STREAM)
     t.check(n is o, "the owner kept w (it renews before anyone may take streams in the new Redis)")
+    now = [metric(o, "fxs_cluster_leases_lost_total"), metric(o, "fxs_cluster_frames_fenced_total")]
+    t.check(now == lost, "it never let go of it: leases lost and frames fenced unchanged (%s, %s)" % (lost, now))
     ok = False
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline and not ok:
