@@ -14,8 +14,10 @@ start_daemon "$FXCTL"
 FXCTL_URL="ws://127.0.0.1:$port"
 export FXCTL_URL
 
-# The examples, one per line, comments cut, /tmp/ redirected.
-grep '^build/fxctl ' README.md | sed -e 's/  *#.*$//' -e "s|/tmp/|$tmp/|g" >"$tmp/examples"
+# The examples of "The two commands", one per line, comments cut, /tmp/ redirected (other
+# sections' examples need other set-ups: a cluster, tokens).
+awk '/^## The two commands/ { on = 1; next } /^## / { on = 0 } on' README.md | grep '^build/fxctl ' |
+    sed -e 's/  *#.*$//' -e "s|/tmp/|$tmp/|g" >"$tmp/examples"
 n=$(wc -l <"$tmp/examples")
 test "$n" -ge 12; rc=$?; check "README has its fxctl examples ($n)" 0
 
