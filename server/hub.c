@@ -21,6 +21,19 @@ int hub_init(struct hub *hub, int max_streams, bool clustered)
     return 0;
 }
 
+uint64_t hub_rev_from_json(const cJSON *v)
+{
+    bool ok = cJSON_IsNumber(v) && v->valuedouble >= 1 && v->valuedouble < HUB_REV_MAX &&
+              v->valuedouble == floor(v->valuedouble);
+    return ok ? (uint64_t)v->valuedouble : 0;
+}
+
+int hub_rev_check(const char *name, uint64_t rev, struct fx_err *err)
+{
+    if ((double)rev + 1 < HUB_REV_MAX) return 0;
+    return fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", name);
+}
+
 void hub_free(struct hub *hub)
 {
     hub_release_all(hub->streams, hub->n);

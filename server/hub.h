@@ -90,6 +90,11 @@ struct hub {
 
 /* clustered: cluster mode (streams are computed where their lease is, lease.h). */
 int hub_init(struct hub *hub, int max_streams, bool clustered);
+/* A revision given as JSON (a stored or configured stream's "rev"): the integer from 1 to
+ * HUB_REV_MAX - 1 it holds, or 0 when it is not one. */
+uint64_t hub_rev_from_json(const cJSON *v);
+/* Whether a change may follow revision rev of stream `name`: 0, or -1 with err (limit). */
+int hub_rev_check(const char *name, uint64_t rev, struct fx_err *err);
 /* The name rule of streams (and presets): 1-63 characters of [A-Za-z0-9_.-]. */
 bool hub_valid_name(const char *name);
 void hub_free(struct hub *hub);

@@ -3,7 +3,6 @@
  * them), serves until SIGINT/SIGTERM, then shuts down in order (close WebSockets with 1001,
  * stop the engine, then the cluster's threads: the lease agent gives the leases up, free
  * everything) and exits 0. An edge (--role edge) opens no OpenCL device and starts no engine. */
-#include <math.h>
 #include <errno.h>
 #include <signal.h>
 #include <stdio.h>
@@ -52,13 +51,12 @@ static int main_create_stream(struct server *srv, const cJSON *def, struct fx_er
                             effect->valuestring);
     cJSON *doc = effect_params(ops, NULL, params, err);
     if (!doc) return -1;
-    if (rev && !(cJSON_IsNumber(rev) && rev->valuedouble >= 1 && rev->valuedouble < HUB_REV_MAX &&
-                 rev->valuedouble == floor(rev->valuedouble))) {
+    uint64_t r = rev ? hub_rev_from_json(rev) : 1;
+    if (!r) {
         cJSON_Delete(doc);
         return fx_fail(err, "bad_request", "rev", "stream %s: rev must be an integer from 1 to 10^15 - 1",
                        name->valuestring);
     }
-    uint64_t r = rev ? (uint64_t)rev->valuedouble : 1;
     if (hub_create(&srv->hub, ops, name->valuestring, doc, r, err)) {
         cJSON_Delete(doc);
         return -1;

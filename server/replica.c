@@ -1,5 +1,4 @@
 /* replica.c — see replica.h. */
-#include <math.h>
 #include <string.h>
 
 #include "clock.h"
@@ -80,13 +79,8 @@ static const char *replica_str(const cJSON *o, const char *name)
     return cJSON_IsString(v) ? v->valuestring : NULL;
 }
 
-/* A stream definition's revision, or 0 when it is not one (1 to 10^15 - 1). */
-static uint64_t replica_rev(const cJSON *o)
-{
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, "rev");
-    bool ok = cJSON_IsNumber(v) && v->valuedouble >= 1 && v->valuedouble < HUB_REV_MAX && v->valuedouble == floor(v->valuedouble);
-    return ok ? (uint64_t)v->valuedouble : 0;
-}
+/* A stream definition's revision, or 0 when it is not one. */
+static uint64_t replica_rev(const cJSON *o) { return hub_rev_from_json(cJSON_GetObjectItemCaseSensitive(o, "rev")); }
 
 /* Another daemon's change ({op, node, stream[, effect, rev, params]}, cluster.h). One that
  * does not read as a change leaves the copy stale, so the state is reloaded. */

@@ -448,13 +448,6 @@ static int session_op_get(struct session *ss, const cJSON *req, const cJSON *id,
     return 0;
 }
 
-/* The revision check of every change (set, preset_load). */
-static int session_rev_ok(const struct stream *s, uint64_t rev, struct fx_err *err)
-{
-    if ((double)rev + 1 < HUB_REV_MAX) return 0;
-    return fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)", s->name);
-}
-
 void session_event_params(struct server *srv, const struct session *except, struct stream *s, uint64_t rev,
                           const cJSON *doc)
 {
@@ -510,7 +503,7 @@ static int session_op_set(struct session *ss, const cJSON *req, const cJSON *id,
     if (!s) return -1;
     uint64_t rev;
     cJSON *cur = hub_get_params(&ss->srv->hub, s, &rev);
-    cJSON *doc = session_rev_ok(s, rev, err) ? NULL : effect_params(s->effect, cur, partial, err);
+    cJSON *doc = hub_rev_check(s->name, rev, err) ? NULL : effect_params(s->effect, cur, partial, err);
     cJSON_Delete(cur);
     int rc = doc ? session_accept_params(ss, s, rev, id, doc, partial, err) : -1;
     stream_unref(s);
@@ -593,7 +586,7 @@ static int session_op_preset_load(struct session *ss, const cJSON *req, const cJ
     if (!s) return -1;
     uint64_t rev;
     cJSON_Delete(hub_get_params(&ss->srv->hub, s, &rev));
-    cJSON *preset = session_rev_ok(s, rev, err) ? NULL : presets_params(&ss->srv->presets, s->effect, name, err);
+    cJSON *preset = hub_rev_check(s->name, rev, err) ? NULL : presets_params(&ss->srv->presets, s->effect, name, err);
     cJSON *doc = preset ? effect_params(s->effect, NULL, preset, err) : NULL;
     cJSON_Delete(preset);
     int rc = doc ? session_accept_params(ss, s, rev, id, doc, NULL, err) : -1;

@@ -79,9 +79,8 @@ static int store_cluster_set(struct server *srv, struct store_change *c, struct 
         if (strcmp(cur.effect, c->effect))
             rc = fx_fail(err, "unknown_stream", "stream", "stream %s was destroyed and made again (effect %s) on "
                          "another daemon; nothing changed", c->stream, cur.effect);
-        else if ((double)cur.rev + 1 >= HUB_REV_MAX)
-            rc = fx_fail(err, "limit", "stream", "stream %s is at revision 10^15 - 1: no more changes (re-create it)",
-                         c->stream);
+        else if (hub_rev_check(c->stream, cur.rev, err))
+            rc = -1;
         else if (c->rebase && !(next = c->rebase(c->rebase_ctx, cur.params, err)))
             rc = -1;
         else
