@@ -605,11 +605,27 @@ async def test_shutdown(t):
     t.check(B.stop() == 0, "B exits 0 while its follower retries a dead Redis")
 
 
+def require_redis(suite):
+    """Fails the suite at once, naming what is missing, when redis-server is not installed."""
+    if not os.access(REDIS, os.X_OK):
+        suite.check(False, "redis-server is installed (%s missing: deploy/install-deps.sh installs it)" % REDIS)
+        suite.run([])
+
+
+def stop_all(daemons, redis):
+    """Kills what a suite started (a stopped daemon is continued first) and removes Redis's dirs."""
+    for d in daemons:
+        if d and d.proc.poll() is None:
+            d.proc.send_signal(signal.SIGCONT)
+            d.stop(signal.SIGKILL)
+    redis.kill()
+    for path in TEMP_DIRS:
+        shutil.rmtree(path, ignore_errors=True)
+
+
 if __name__ == "__main__":
     s = Suite("test_cluster")
-    if not os.access(REDIS, os.X_OK):
-        s.check(False, "redis-server is installed (%s missing: deploy/install-deps.sh installs it)" % REDIS)
-        s.run([])
+    require_redis(s)
     R = Redis()
     try:
         A = cluster_daemon(R, "a")
@@ -619,9 +635,4 @@ if __name__ == "__main__":
                test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
-        for d in (A, B, C):
-            if d and d.proc.poll() is None:
-                d.stop(signal.SIGKILL)
-        R.kill()
-        for path in TEMP_DIRS:
-            shutil.rmtree(path, ignore_errors=True)
+        stop_all((A, B, C), R)

@@ -18,7 +18,6 @@ the edge again. Every wait is bounded."""
 import asyncio
 import json
 import os
-import shutil
 import signal
 import socket
 import subprocess
@@ -28,8 +27,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fxtest import DAEMON, Client, Suite, parse_frame  # noqa: E402
-from test_cluster import (LEASE_TTL_S, REDIS, SMALL, TEMP_DIRS, Redis, cluster_daemon, get, http_json, leases,  # noqa: E402
-                          metric, names, until)
+from test_cluster import (LEASE_TTL_S, SMALL, Redis, cluster_daemon, get, http_json, leases, metric,  # noqa: E402
+                          names, require_redis, stop_all, until)
 
 R = None
 P = Q = E = None  # compute, compute, edge
@@ -348,20 +347,12 @@ async def test_shutdown(t):
 
 if __name__ == "__main__":
     s = Suite("test_cluster_fanout")
-    if not os.access(REDIS, os.X_OK):
-        s.check(False, "redis-server is installed (%s missing: deploy/install-deps.sh installs it)" % REDIS)
-        s.run([])
+    require_redis(s)
     R = Redis()
     try:
         P, Q = compute("p"), compute("q")
         E = cluster_daemon(R, "e", "--role", "edge")
-        s.run([test_roles, test_fanout, test_spread, test_latest_frame, test_fxload, test_failover, test_fencing, test_handover, test_redis_restart,
-               test_shutdown])
+        s.run([test_roles, test_fanout, test_spread, test_latest_frame, test_fxload, test_failover, test_fencing,
+               test_handover, test_redis_restart, test_shutdown])
     finally:
-        for d in (P, Q, E):
-            if d and d.proc.poll() is None:
-                d.proc.send_signal(signal.SIGCONT)
-                d.stop(signal.SIGKILL)
-        R.kill()
-        for path in TEMP_DIRS:
-            shutil.rmtree(path, ignore_errors=True)
+        stop_all((P, Q, E), R)
