@@ -4,6 +4,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "clock.h"
 #include "hub.h"
 
 int hub_init(struct hub *hub, int max_streams, bool clustered)
@@ -227,8 +228,12 @@ void hub_request_reset(struct hub *hub, struct stream *s)
 void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease *lease)
 {
     pthread_mutex_lock(&hub->mu);
+    const struct stream_lease *was = &s->lease;
+    /* a renewal that only pushes `until` further needs no engine wake-up */
+    bool news = was->owned != lease->owned || was->gen != lease->gen || was->remote_demand != lease->remote_demand ||
+                was->until <= clock_now();
     s->lease = *lease;
-    hub_changed(hub);
+    if (news) hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
 }
 

@@ -191,7 +191,7 @@ static void relay_disconnect(struct relay *r)
 static void *relay_main(void *arg)
 {
     struct relay *r = arg;
-    double backoff = RELAY_BACKOFF_MIN_S;
+    double backoff = RELAY_BACKOFF_MIN_S, followed_at = 0;
     while (!atomic_load(&r->stopping)) {
         char why[256] = "";
         if (!r->sub && (!(r->sub = cluster_dial(r->srv->cluster, why, sizeof why)) ||
@@ -204,9 +204,12 @@ static void *relay_main(void *arg)
             continue;
         }
         backoff = RELAY_BACKOFF_MIN_S;
-        if (relay_follow_hub(r) || relay_read(r)) {
+        bool due = clock_now() >= followed_at + RELAY_POLL_S; /* not after every batch of frames */
+        if (due) followed_at = clock_now();
+        if ((due && relay_follow_hub(r)) || relay_read(r)) {
             log_warn("cluster: relay lost %s: %s", r->cfg->url, r->sub->err ? r->sub->errstr : "a command failed");
             relay_disconnect(r);
+            followed_at = 0;
         }
     }
     relay_disconnect(r);
