@@ -56,6 +56,9 @@ check_usage() {
     ld --frobnicate 3; check "unknown option: usage error" 2 "" "unknown option"
     ld extra; check "positional argument: usage error" 2 "" "unexpected argument"
     ld --url http://127.0.0.1:1/; check "bad URL: usage error" 2 "" "bad URL"
+    ld --url ws://127.0.0.1:1 --url http://x; check "a bad second --url: usage error" 2 "" "bad URL \"http://x\""
+    ld $(for i in $(seq 17); do printf -- '--url ws://127.0.0.1:%d ' "$i"; done)
+    check "17 --url: usage error" 2 "" "at most 16 times"
     ld --mode fire; check "bad --mode: usage error" 2 "" "subscribe or set"
     ld --duration 2 --ramp 2; check "--ramp >= --duration: usage error" 2 "" "ramp must be shorter"
     ld --duration -1; check "negative --duration: usage error" 2 "" "duration needs seconds"
