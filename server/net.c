@@ -33,6 +33,7 @@
 #include "replica.h"
 #include "session.h"
 #include "store.h"
+#include "wsguard.h"
 
 #define NET_CHUNK (64 * 1024)
 #define NET_WS_PATH "/v1/ws"
@@ -179,6 +180,7 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
     struct net_http *h = user;
     switch (reason) {
     case LWS_CALLBACK_SERVER_NEW_CLIENT_INSTANTIATED:
+        wsguard_open(wsi);
         net_pending_add(net, wsi);
         break;
     case LWS_CALLBACK_WSI_DESTROY:
@@ -375,6 +377,7 @@ static int net_writable(struct net *net, struct session *ss)
         lws_close_reason(net_conn_of(ss)->wsi, LWS_CLOSE_STATUS_POLICY_VIOLATION, (uint8_t *)ss->kill, strlen(ss->kill));
         return -1;
     }
+    if (wsguard_close_if_bad(net_conn_of(ss)->wsi)) return -1; /* an unmasked frame: 1002 */
     struct outmsg *m;
     if (ss->cur) {
         if (net_send_chunk(ss)) return -1;
@@ -518,6 +521,7 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
         return net_accept(net, wsi) ? 0 : 1;
     case LWS_CALLBACK_ESTABLISHED:
         net_pending_drop(net, wsi);
+        if (wsguard_close_if_bad(wsi)) return -1; /* an unmasked frame came with the handshake */
         return net_established(net, ss, wsi);
     case LWS_CALLBACK_RECEIVE: /* other daemons' changes first: the request is checked against them */
         replica_poll(net->srv, &(struct fx_err){0});
@@ -625,6 +629,7 @@ void net_request_stop(struct net *net)
 void net_run(struct net *net)
 {
     double deadline = 0;
+    wsguard_start(net->srv->cfg.tls_cert[0] != 0);
     for (;;) {
         if (lws_service(net->ctx, 0) < 0) break;
         if (!net->stopping) continue;
@@ -639,6 +644,7 @@ void net_close(struct net *net)
     net->srv->hub.notify = NULL;
     lws_sul_cancel(&net->retry_sul);
     lws_context_destroy(net->ctx);
+    wsguard_stop();
     net->srv->wake = NULL;
     free(net);
 }

@@ -6,9 +6,7 @@ bounded; `kill -9` during a burst of `set` loses no acknowledged change; a strea
 simulation blows up reports `error` events and resets while the other streams run on.
 Run from the repository root: /usr/bin/python3 tests/integration/test_faults.py"""
 import asyncio
-import base64
 import json
-import os
 import re
 import signal
 import socket
@@ -17,6 +15,7 @@ import time
 import urllib.request
 
 from fxtest import Client, Daemon, Suite, config_file
+from rawws import Conn, frame
 
 
 def metric(d, name):
@@ -33,21 +32,9 @@ def rss_kib(d):
 def stalled_reader(port, stream, rcvbuf=4096):
     """A raw WebSocket client with a small receive buffer that subscribes and reads nothing
     more itself (the caller may read slowly)."""
-    s = socket.socket()
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
-    s.settimeout(10)
-    s.connect(("127.0.0.1", port))
-    key = base64.b64encode(os.urandom(16)).decode()
-    s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-               "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
-               % (port, key)).encode())
-    head = b""
-    while b"\r\n\r\n" not in head:
-        head += s.recv(1)  # byte by byte: nothing after the headers is consumed
-    payload = json.dumps({"op": "subscribe", "stream": stream}).encode()
-    mask = os.urandom(4)
-    s.sendall(bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
-    return s, head
+    c = Conn.connect(port, rcvbuf=rcvbuf)
+    c.send(frame(json.dumps({"op": "subscribe", "stream": stream})))
+    return c.s, c.status
 
 
 def closed_by_peer(s, timeout=10):
@@ -71,8 +58,8 @@ async def test_stalled_reader(t):
         good = await Client.connect(d)
         await good.request("subscribe", stream="big")
         first = await good.frame(30, kind=2)  # the stream runs
-        s, head = stalled_reader(d.port, "big")
-        t.check(b" 101 " in head.split(b"\r\n")[0], "the stalled client's handshake succeeded")
+        s, status = stalled_reader(d.port, "big")
+        t.check(b" 101 " in status, "the stalled client's handshake succeeded")
         rss0 = rss_kib(d)
         seqs, t0 = [first["seq"]], time.monotonic()
         while time.monotonic() - t0 < 6:  # textures only: each step also sends a light-rig frame

@@ -3,9 +3,7 @@ small limits: the `limit` error (with the param the spec names) or the close cod
 says why, and the connection or daemon still usable afterwards.
 Run from the repository root: /usr/bin/python3 tests/integration/test_limits.py"""
 import asyncio
-import base64
 import json
-import os
 import resource
 import socket
 import time
@@ -14,6 +12,7 @@ import urllib.request
 import websockets
 
 from fxtest import Client, Daemon, Suite, config_file
+from rawws import Conn, frame
 
 N_BURST = 100
 N_READERS, ASKS = 100, 120
@@ -86,25 +85,7 @@ async def test_rate_and_size(t):
 
 def raw_ws(port, rcvbuf=4096):
     """A WebSocket on a socket with a small receive buffer that this test never reads from."""
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
-    s.settimeout(10)
-    s.connect(("127.0.0.1", port))
-    s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-               "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
-               % (port, base64.b64encode(os.urandom(16)).decode())).encode())
-    head = b""
-    while b"\r\n\r\n" not in head:
-        head += s.recv(1)
-    return s
-
-
-def ws_text(s, text):
-    """Sends one masked text frame."""
-    data, mask = text.encode(), os.urandom(4)
-    n = len(data)
-    head = bytes([0x81, 0x80 | n]) if n < 126 else bytes([0x81, 0x80 | 126]) + n.to_bytes(2, "big")
-    s.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data)))
+    return Conn.connect(port, rcvbuf=rcvbuf).s
 
 
 def rss_kib(d):
@@ -125,7 +106,7 @@ async def test_queued_bytes(t):
         for _ in range(ASKS):
             for s in socks:
                 try:
-                    ws_text(s, '{"op":"describe","effect":"energy_wave"}')
+                    s.sendall(frame('{"op":"describe","effect":"energy_wave"}'))
                 except OSError:  # closed by the daemon: what this test wants
                     pass
         await asyncio.sleep(1.0)
