@@ -288,7 +288,7 @@ inline void fl_pair(struct fl_acc *a, float4 pi, float4 vi, float2 rpi, float4 p
     a->dF += wf * (vj.w - vi.w);
     a->wF += wf;
     float q = P[FP_H2] - r2;
-    a->nrm -= (vol * q * q) * dx;                       /* Mueller colour normal: points inward */
+    a->nrm -= (q * q / rpj.x) * dx;                     /* Mueller colour normal / mass: points inward */
 }
 
 /* Stabilised explicit diffusion (§9 #4): the weights dt*k*w_ij of one particle sum to W; when
@@ -328,7 +328,8 @@ inline float2 fl_burn(float T, float F, float dTdiff, float dFdiff, int flame, p
     *dF = dFdiff - P[FP_KCF] * S;
     float Tn = T + dt * *dT;
     Tn -= fmin(1.0f, dt * P[FP_KCOOL]) * (Tn - P[FP_TAMB]);
-    return (float2)(Tn, fmax(0.0f, F + dt * *dF));
+    /* all the fuel burned: exactly 0 (F + dt dF rounds to a few 1e-6 with fused multiply-adds) */
+    return (float2)(Tn, burn > Fd ? 0.0f : fmax(0.0f, F + dt * *dF));
 }
 
 /* Pass 2 + integration: reads the sorted state (pos, vel, flags, id), writes the next state
@@ -396,7 +397,7 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
                 float8 wf = wv * 0.5f * (pi.w + TJ);                                 /* eq 3.21 */
                 sF += wf * (FJ - vi.w);
                 sWF += wf;
-                float8 q = h2 - r2, c = vol * q * q;                                  /* colour normal */
+                float8 q = h2 - r2, c = q * q / RJ;                                   /* colour normal / mass */
                 nx -= c * dX;
                 ny -= c * dY;
                 nz -= c * dZ;
@@ -469,8 +470,12 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
     uint ins = (isf && nbr < (uint)P[FP_NBR_INS]) ? 1u : 0u;    /* birth rule (§2.12, §9 #8) */
     keep_ins[i] = (uint2)(keep, ins);
     if (ins) {
+        /* The normal is summed without the mass factor m (~1e-8 kg): with it, its squared length
+         * (~1e-42) is below float's normal range, and a GPU compiler under -cl-unsafe-math
+         * flushes it to 0, so every insertion took the random direction (NVIDIA: a third of
+         * the particles, 13% of the burning gas under the source). */
         float ln = length(a.nrm);
-        float tiny = 1e-4f * (P[FP_MASS] / rho) * P[FP_H2] * P[FP_H2] * P[FP_H];
+        float tiny = 1e-4f * P[FP_H2] * P[FP_H2] * P[FP_H] / rho;
         float3 nh = ln > tiny ? a.nrm / ln : -fl_random_dir(id[i], P); /* §9 #9 */
         nrm_out[i] = (float4)(nh, 0.0f);
     }

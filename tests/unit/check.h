@@ -4,13 +4,17 @@
  * and ends with `return CHECK_DONE();`, which prints "<suite>: N passed, M failed" (the suite
  * is the source file's name, test_foo) for tests/run.sh to add up and exits non-zero on any
  * failure; a set-up that fails first ends with `return CHECK_ABORT("why %s", ...);`. Failed
- * checks print file, line, expression and a message. */
+ * checks print file, line, expression and a message. Kernel tests open CHECK_DEVICE(): the
+ * CPU device (PoCL) unless FX_OCL_DEVICE names another (e.g. "gpu", to check a GPU driver). */
 #ifndef FX_CHECK_H
 #define FX_CHECK_H
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+
+#define CHECK_DEVICE() (getenv("FX_OCL_DEVICE") && *getenv("FX_OCL_DEVICE") ? getenv("FX_OCL_DEVICE") : "cpu")
 
 static int check_fails_in_test;
 static int check_tests_passed, check_tests_failed;

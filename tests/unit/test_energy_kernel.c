@@ -862,7 +862,7 @@ static void test_animation_render(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tek_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
+    if (ocl_open(&tek_ocl, CHECK_DEVICE(), &err)) return CHECK_ABORT("ocl_open(%s): %s: %s", CHECK_DEVICE(), err.code, err.message);
     tek_defaults = params_defaults(energy_wave_params);
     if (!tek_defaults) return CHECK_ABORT("params_defaults(energy_wave_params) failed");
     tek_find_modes();

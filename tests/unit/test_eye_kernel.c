@@ -291,7 +291,7 @@ static void test_atlas_gutters(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tek_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
+    if (ocl_open(&tek_ocl, CHECK_DEVICE(), &err)) return CHECK_ABORT("ocl_open(%s): %s: %s", CHECK_DEVICE(), err.code, err.message);
     RUN(test_kernel_matches_reference);
     RUN(test_no_nan_over_hemisphere);
     RUN(test_lattice_translation);

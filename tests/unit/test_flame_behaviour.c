@@ -466,7 +466,7 @@ static void test_two_flames_merge(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tfb_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
+    if (ocl_open(&tfb_ocl, CHECK_DEVICE(), &err)) return CHECK_ABORT("ocl_open(%s): %s: %s", CHECK_DEVICE(), err.code, err.message);
     tfb_defaults = params_defaults(flame_params);
     tfb_h = params_num(tfb_defaults, "h");
     tfb_dt = params_num(tfb_defaults, "dt");

@@ -85,7 +85,7 @@ static void test_wind_lean(void)
 int main(void)
 {
     struct fx_err err = {0};
-    if (ocl_open(&tfs_ocl, "cpu", &err)) return CHECK_ABORT("ocl_open(cpu): %s: %s", err.code, err.message);
+    if (ocl_open(&tfs_ocl, CHECK_DEVICE(), &err)) return CHECK_ABORT("ocl_open(%s): %s: %s", CHECK_DEVICE(), err.code, err.message);
     RUN(test_default_shape);
     RUN(test_difference_form_rises);
     RUN(test_wind_lean);
