@@ -88,9 +88,9 @@ static int bench_stats(struct ocl *ocl, struct ocl_kernel_stat *s)
     return ocl_stats(ocl, s, BENCH_MAX_STATS);
 }
 
-/* Per-kernel ms per step between two ocl_stats snapshots. */
-static void bench_split(const char *label, struct ocl_kernel_stat *a, int na, struct ocl_kernel_stat *b, int nb,
-                        int steps)
+/* Per-kernel ms per step between two ocl_stats snapshots; returns their total ms. */
+static double bench_split(const char *label, struct ocl_kernel_stat *a, int na, struct ocl_kernel_stat *b, int nb,
+                          int steps)
 {
     double total = 0;
     for (int i = 0; i < nb; i++) {
@@ -104,6 +104,7 @@ static void bench_split(const char *label, struct ocl_kernel_stat *a, int na, st
         if (b[i].total_ms > 0)
             printf("flame %-6s kernel %-16s %8.3f ms/step  %5.1f%%\n", label, b[i].name, b[i].total_ms / steps,
                    100.0 * b[i].total_ms / total);
+    return total;
 }
 
 static void bench_size(struct ocl *ocl, const char *label, int k, int steps)
@@ -170,6 +171,8 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     struct bench_out out = {0, 0};
     double sim0 = flame_effect.sim_seconds(fl);
     uint64_t st0 = flame_steps(fl);
+    struct ocl_kernel_stat ka[BENCH_MAX_STATS], kb[BENCH_MAX_STATS];
+    int nka = bench_stats(ocl, ka);
     t0 = bench_now();
     double c0 = bench_cpu(), nsum = 0;
     double busy = 0;
@@ -183,7 +186,8 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     }
     double wall = bench_now() - t0, sim = flame_effect.sim_seconds(fl) - sim0;
     double cpu = bench_cpu() - c0, ncpu = (double)sysconf(_SC_NPROCESSORS_ONLN);
-    double ps = nsum / frames * (double)(flame_steps(fl) - st0) / busy;
+    int steps = (int)(flame_steps(fl) - st0);
+    double ps = nsum / frames * steps / busy, kernel_ms = bench_split("default", ka, nka, kb, bench_stats(ocl, kb), steps);
     struct flame_particles rb;
     if (flame_read(fl, &rb, &err)) bench_die("read", &err);
     int nflame = 0;
@@ -206,6 +210,8 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
            busy * 1e3 / frames);
     printf("flame default CPU %.2f s for %.3f s simulated: real-time factor %.2f with %.0f cores to itself\n", cpu, sim,
            sim / (cpu / ncpu), ncpu);
+    printf("flame default kernels %.2f ms of the %.2f ms of work per frame (the rest: launches, waits, read-back, "
+           "encoding)\n", kernel_ms / frames, busy * 1e3 / frames);
     flame_effect.destroy(fl);
     cJSON_Delete(doc);
 }
