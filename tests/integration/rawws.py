@@ -10,12 +10,12 @@ import struct
 OP_CONT, OP_TEXT, OP_BINARY, OP_CLOSE, OP_PING, OP_PONG = 0, 1, 2, 8, 9, 10
 
 
-def handshake(port, extra=b""):
+def handshake(port, extra=b"", version="13"):
     """The upgrade request for fxstream.v1 on /v1/ws, with extra bytes sent in the same write."""
     key = base64.b64encode(os.urandom(16)).decode()
     return ("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-            "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
-            % (port, key)).encode() + extra
+            "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: %s\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
+            % (port, key, version)).encode() + extra
 
 
 def frame(payload, op=OP_TEXT, fin=True, masked=True):
@@ -45,12 +45,13 @@ class Conn:
     def __init__(self, sock):
         self.s = sock
         self.buf = b""
-        self.status = b""
+        self.head = b""  # the server's response head
+        self.status = b""  # its first line
 
     @classmethod
-    def connect(cls, port, extra=b"", wrap=None, timeout=10, rcvbuf=None):
+    def connect(cls, port, extra=b"", wrap=None, timeout=10, rcvbuf=None, version="13"):
         """rcvbuf: the socket's receive buffer, set before connecting (a client that reads
-        slowly or never)."""
+        slowly or never); version: Sec-WebSocket-Version."""
         s = socket.socket()
         if rcvbuf:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
@@ -59,14 +60,13 @@ class Conn:
         if wrap:
             s = wrap(s)
         c = cls(s)
-        s.sendall(handshake(port, extra))
-        head = b""
-        while b"\r\n\r\n" not in head:
+        s.sendall(handshake(port, extra, version))
+        while b"\r\n\r\n" not in c.head:
             b = s.recv(1)
             if not b:
                 break
-            head += b
-        c.status = head.split(b"\r\n")[0]
+            c.head += b
+        c.status = c.head.split(b"\r\n")[0]
         return c
 
     def send(self, data):

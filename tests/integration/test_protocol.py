@@ -15,6 +15,7 @@ import urllib.request
 import websockets
 
 from fxtest import DAEMON, ROOT, Client, Daemon, Suite, refusal
+from rawws import Conn
 
 SMALL = {"width": 64, "height": 48, "fps": 30}  # cheap frames keep the suite fast
 D = None
@@ -116,23 +117,11 @@ async def test_static_root(t):
 
 async def test_websocket_version(t):
     """Only Sec-WebSocket-Version 13 is accepted; others get 426 naming 13 (RFC 6455 4.4)."""
-    import base64
-    import socket
     for version, want in (("8", b" 426"), ("12", b" 426"), ("13", b" 101")):
-        s = socket.create_connection(("127.0.0.1", D.port), timeout=10)
-        s.sendall(("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                   "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: %s\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
-                   % (D.port, base64.b64encode(os.urandom(16)).decode(), version)).encode())
-        head = b""
-        while b"\r\n\r\n" not in head:
-            chunk = s.recv(4096)
-            if not chunk:
-                break
-            head += chunk
-        s.close()
-        status = head.split(b"\r\n")[0]
-        t.check(want in status and (version == "13" or b"sec-websocket-version: 13" in head.lower()),
-                "Sec-WebSocket-Version %s: %s" % (version, status.decode(errors="replace")))
+        c = Conn.connect(D.port, version=version)
+        c.close()
+        t.check(want in c.status and (version == "13" or b"sec-websocket-version: 13" in c.head.lower()),
+                "Sec-WebSocket-Version %s: %s" % (version, c.status.decode(errors="replace")))
 
 
 async def test_hello(t):
