@@ -1,10 +1,13 @@
 /* wsguard.c — see wsguard.h.
  *
  * How the reads are seen: the daemon's executable defines recv() and SSL_read() (and
- * SSL_get_error() and SSL_want(), to answer "want read" for a read it withheld), so libwebsockets' calls bind
- * to these, which call the C library's and OpenSSL's own through dlsym(RTLD_NEXT). Only the
- * thread that called wsguard_start looks at the bytes; on every other thread (the engine,
- * the cluster's Redis link, OpenCL's workers) the functions are plain pass-throughs.
+ * SSL_get_error() and SSL_want(), to answer "want read" for a read it withheld), so
+ * libwebsockets' calls bind to these, which call the C library's and OpenSSL's own through
+ * dlsym(RTLD_NEXT). Only the thread that called wsguard_start looks at the bytes; on every
+ * other thread (the engine, the cluster's Redis link, OpenCL's workers) the functions are
+ * plain pass-throughs. On that thread every socket read is lws's, of a connection it
+ * accepted, so an entry left by a closed connection is harmless: wsguard_open resets it
+ * before the descriptor's next connection is read.
  *
  * Per connection, indexed by its socket: first the HTTP request, up to its blank line. A
  * request with a Sec-WebSocket-Key header is an upgrade, so WebSocket frames follow it
