@@ -26,6 +26,7 @@
 #include "fxs_particles.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1085,29 +1086,139 @@ static int fxs_pt_enc_run(struct fxs_pt_enc *e, const struct fxs_particles *p, u
     return 0;
 }
 
-int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particles_opts *opts, uint8_t **out,
-                         size_t *out_len, char *err, size_t errlen)
+/* One block of p on the grid of f (its options and bounds set) into *out. 0, or -1 (out of
+ * memory). */
+static int fxs_pt_encode_block(const struct fxs_particles *p, const struct fxs_pt_frame *f, uint8_t **out,
+                               size_t *out_len)
 {
-    struct fxs_pt_enc *e;
-    int r;
-    if (fxs_pt_check_input(p, err, errlen)) return -1;
-    if (!(e = calloc(1, sizeof *e))) return fxs_pt_fail(err, errlen, "out of memory");
-    if (fxs_pt_opts(opts, &e->f)) {
-        free(e);
-        return fxs_pt_fail(err, errlen, "pos_bits must be 8..24, temp_bits, fuel_bits and vel_bits 2..16");
-    }
+    struct fxs_pt_enc *e = calloc(1, sizeof *e);
+    if (!e) return -1;
+    e->f = *f;
     e->f.n = p->n;
-    if (fxs_pt_bounds(p, &e->f)) {
-        r = fxs_pt_fail(err, errlen, "non-finite position, temperature, fuel or velocity");
-    } else {
-        r = fxs_pt_enc_run(e, p, out, out_len);
-        if (r) fxs_pt_fail(err, errlen, "out of memory");
-    }
+    int r = fxs_pt_enc_run(e, p, out, out_len);
     free(e->scratch);
     free(e->rb.p);
     free(e->bb.p);
     free(e);
     return r;
+}
+
+/* ---- blocks (§7.5.8) ------------------------------------------------------------------- */
+
+#define FXS_PT_SLAB_BINS 1024
+
+/* Cuts p into at most k slabs of about n/k particles along the longest axis of f's box (a
+ * histogram of FXS_PT_SLAB_BINS bins: a bin goes whole to one slab), copied into one
+ * allocation (*mem) that the views b[] point into. Returns the number of non-empty slabs,
+ * or -1 (out of memory). */
+static int fxs_pt_slabs(const struct fxs_particles *p, const struct fxs_pt_frame *f, int k, struct fxs_particles *b,
+                        void **mem)
+{
+    uint32_t n = p->n, hist[FXS_PT_SLAB_BINS] = {0}, at[FXS_PARTICLES_MAX_BLOCKS + 1] = {0};
+    uint8_t slab[FXS_PT_SLAB_BINS];
+    int a = 0;
+    for (int c = 1; c < 3; c++)
+        if ((double)f->hi[c] - f->lo[c] > (double)f->hi[a] - f->lo[a]) a = c;
+    double ext = (double)f->hi[a] - f->lo[a], scale = ext > 0 ? FXS_PT_SLAB_BINS / ext : 0;
+#define FXS_PT_BIN(i) ((int)fmin(FXS_PT_SLAB_BINS - 1, ((double)p->xyz[3 * (size_t)(i) + a] - f->lo[a]) * scale))
+    for (uint32_t i = 0; i < n; i++) hist[FXS_PT_BIN(i)]++;
+    uint64_t before = 0;
+    for (int i = 0; i < FXS_PT_SLAB_BINS; i++) {
+        uint64_t sl = before * (uint64_t)k / n;
+        slab[i] = (uint8_t)(sl < (uint64_t)k ? sl : (uint64_t)k - 1);
+        at[slab[i] + 1] += hist[i];
+        before += hist[i];
+    }
+    for (int s = 0; s < k; s++) at[s + 1] += at[s];
+    size_t per = 12 + 4 + 4 + 1 + (p->vel ? 12 : 0);
+    uint8_t *m = *mem = malloc(per * n);
+    if (!m) return -1;
+    float *xyz = (float *)m, *temp = xyz + 3 * (size_t)n, *fuel = temp + n, *vel = p->vel ? fuel + n : NULL;
+    uint8_t *flags = (uint8_t *)(fuel + n + (p->vel ? 3 * (size_t)n : 0));
+    uint32_t fill[FXS_PARTICLES_MAX_BLOCKS];
+    memcpy(fill, at, sizeof(uint32_t) * (size_t)k);
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t j = fill[slab[FXS_PT_BIN(i)]]++;
+        memcpy(xyz + 3 * (size_t)j, p->xyz + 3 * (size_t)i, 12);
+        temp[j] = p->temp[i];
+        fuel[j] = p->fuel[i];
+        flags[j] = p->flags[i];
+        if (vel) memcpy(vel + 3 * (size_t)j, p->vel + 3 * (size_t)i, 12);
+    }
+#undef FXS_PT_BIN
+    int nb = 0;
+    for (int s = 0; s < k; s++)
+        if (at[s + 1] > at[s])
+            b[nb++] = (struct fxs_particles){at[s + 1] - at[s], xyz + 3 * (size_t)at[s], temp + at[s], fuel + at[s],
+                                             flags + at[s], vel ? vel + 3 * (size_t)at[s] : NULL};
+    return nb;
+}
+
+struct fxs_pt_job {
+    struct fxs_particles p;
+    const struct fxs_pt_frame *f;
+    uint8_t *out;
+    size_t len;
+    int r;
+    pthread_t thread;
+    int started;
+};
+
+static void *fxs_pt_job_run(void *arg)
+{
+    struct fxs_pt_job *j = arg;
+    j->r = fxs_pt_encode_block(&j->p, j->f, &j->out, &j->len);
+    return NULL;
+}
+
+/* p as up to k blocks on f's grid, coded in parallel (the calling thread takes the first;
+ * a thread that cannot be started is run here), concatenated into *out. 0 or -1. */
+static int fxs_pt_encode_blocks(const struct fxs_particles *p, const struct fxs_pt_frame *f, int k, uint8_t **out,
+                                size_t *out_len)
+{
+    struct fxs_particles b[FXS_PARTICLES_MAX_BLOCKS];
+    struct fxs_pt_job jobs[FXS_PARTICLES_MAX_BLOCKS];
+    void *mem = NULL;
+    int nb = fxs_pt_slabs(p, f, k, b, &mem), r = nb < 0 ? -1 : 0;
+    fxs_pt_cclass_init(); /* the shared table, before the threads read it */
+    for (int i = 0; i < nb; i++) {
+        jobs[i] = (struct fxs_pt_job){.p = b[i], .f = f};
+        if (i) jobs[i].started = !pthread_create(&jobs[i].thread, NULL, fxs_pt_job_run, &jobs[i]);
+    }
+    size_t total = 0;
+    for (int i = 0; i < nb; i++) {
+        if (!i || !jobs[i].started) fxs_pt_job_run(&jobs[i]);
+        else pthread_join(jobs[i].thread, NULL);
+        r |= jobs[i].r;
+        total += jobs[i].r ? 0 : jobs[i].len;
+    }
+    uint8_t *o = r ? NULL : malloc(total ? total : 1);
+    if (!o) r = -1;
+    for (size_t i = 0, at = 0; i < (size_t)(nb > 0 ? nb : 0); i++) {
+        if (o) memcpy(o + at, jobs[i].out, jobs[i].len);
+        at += jobs[i].len;
+        free(jobs[i].out);
+    }
+    free(mem);
+    *out = o;
+    *out_len = total;
+    return r;
+}
+
+int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particles_opts *opts, uint8_t **out,
+                         size_t *out_len, char *err, size_t errlen)
+{
+    struct fxs_pt_frame f;
+    memset(&f, 0, sizeof f);
+    if (fxs_pt_check_input(p, err, errlen)) return -1;
+    if (fxs_pt_opts(opts, &f))
+        return fxs_pt_fail(err, errlen, "pos_bits must be 8..24, temp_bits, fuel_bits and vel_bits 2..16");
+    if (fxs_pt_bounds(p, &f)) return fxs_pt_fail(err, errlen, "non-finite position, temperature, fuel or velocity");
+    uint32_t k = opts && opts->threads > 1 ? (uint32_t)opts->threads : 1u;
+    if (k > p->n / FXS_PARTICLES_BLOCK_MIN) k = p->n / FXS_PARTICLES_BLOCK_MIN;
+    if (k > FXS_PARTICLES_MAX_BLOCKS) k = FXS_PARTICLES_MAX_BLOCKS;
+    int r = k > 1 ? fxs_pt_encode_blocks(p, &f, (int)k, out, out_len) : fxs_pt_encode_block(p, &f, out, out_len);
+    return r ? fxs_pt_fail(err, errlen, "out of memory") : 0;
 }
 
 /* ---- decoder --------------------------------------------------------------------------- */
@@ -1351,27 +1462,77 @@ static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, siz
     return why;
 }
 
+/* The block at buf (len bytes left): its frame and section sizes, checked, and its length.
+ * NULL or the reason for rejecting. */
+static const char *fxs_pt_block(const uint8_t *buf, size_t len, struct fxs_pt_frame *f, uint32_t *rl, uint32_t *bl,
+                                size_t *blen)
+{
+    int r = fxs_pt_parse_header(buf, len, f, rl, bl);
+    const char *why = r == -1   ? "not a codec 2 payload (short or bad magic)"
+                      : r == -2 ? "unsupported version"
+                      : r == -3 ? "unknown attribute mode"
+                      : r == -4 ? "non-zero reserved bytes in the velocity block"
+                                : fxs_pt_check_frame(f);
+    *blen = fxs_pt_hdr_bytes(f) + (size_t)*rl + *bl;
+    if (!why && (uint64_t)fxs_pt_hdr_bytes(f) + *rl + *bl > len) why = "section sizes do not match the payload length";
+    return why;
+}
+
+/* Every block's header and length (§7.5.8): the total count and whether they carry
+ * velocities (all or none). NULL or the reason for rejecting. */
+static const char *fxs_pt_blocks(const uint8_t *buf, size_t len, uint32_t *n, int *vel)
+{
+    struct fxs_pt_frame f;
+    uint32_t rl, bl, blocks = 0;
+    uint64_t total = 0;
+    const char *why = NULL;
+    for (size_t at = 0, blen; !why && (at < len || !blocks); at += blen) {
+        memset(&f, 0, sizeof f);
+        if ((why = fxs_pt_block(buf + at, len - at, &f, &rl, &bl, &blen))) break;
+        if (blocks && f.vel != *vel) why = "blocks disagree on velocities";
+        else if (++blocks > FXS_PARTICLES_MAX_BLOCKS) why = "more blocks than allowed";
+        else if ((total += f.n) > FXS_PARTICLES_MAX_N) why = "particle count over the limit";
+        *vel = f.vel;
+    }
+    *n = (uint32_t)total;
+    return why;
+}
+
+uint32_t fxs_particles_codec(const uint8_t *payload, size_t len)
+{
+    struct fxs_pt_frame f;
+    uint32_t rl, bl;
+    size_t blen;
+    memset(&f, 0, sizeof f);
+    return !fxs_pt_block(payload, len, &f, &rl, &bl, &blen) && blen < len ? FXS_CODEC_PARTICLES_BLOCKS
+                                                                           : FXS_CODEC_PARTICLES;
+}
+
 int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p, char *err, size_t errlen)
 {
     struct fxs_pt_dec *d;
-    uint32_t rl, bl;
+    uint32_t n = 0, rl, bl;
+    int vel = 0;
     const char *why;
-    int r;
     if (!p) return fxs_pt_fail(err, errlen, "no output given");
     memset(p, 0, sizeof *p);
     if (!buf) return fxs_pt_fail(err, errlen, "no input");
-    if (!(d = calloc(1, sizeof *d))) return fxs_pt_fail(err, errlen, "out of memory");
-    r = fxs_pt_parse_header(buf, len, &d->f, &rl, &bl);
-    why = r == -1   ? "not a codec 2 payload (short or bad magic)"
-          : r == -2 ? "unsupported version"
-          : r == -3 ? "unknown attribute mode"
-          : r == -4 ? "non-zero reserved bytes in the velocity block"
-                    : NULL;
-    if (!why) why = fxs_pt_check_frame(&d->f);
-    if (!why && (uint64_t)fxs_pt_hdr_bytes(&d->f) + rl + bl != len) why = "section sizes do not match the payload length";
-    if (!why && fxs_pt_alloc_out(p, d->f.n, d->f.vel)) why = "out of memory";
-    if (!why && (why = fxs_pt_dec_body(d, buf, len, rl, bl, p))) fxs_particles_free(p);
-    free(d);
+    if ((why = fxs_pt_blocks(buf, len, &n, &vel))) return fxs_pt_fail(err, errlen, why);
+    if (fxs_pt_alloc_out(p, n, vel)) return fxs_pt_fail(err, errlen, "out of memory");
+    /* each block into its slice of the output, particles in block order */
+    for (size_t at = 0, blen, out = 0; !why && at < len; at += blen) {
+        if (!(d = calloc(1, sizeof *d))) {
+            why = "out of memory";
+            break;
+        }
+        fxs_pt_block(buf + at, len - at, &d->f, &rl, &bl, &blen);
+        struct fxs_particles view = {d->f.n, p->xyz + 3 * out, p->temp + out, p->fuel + out, p->flags + out,
+                                     vel ? p->vel + 3 * out : NULL};
+        why = fxs_pt_dec_body(d, buf + at, blen, rl, bl, &view);
+        out += d->f.n;
+        free(d);
+    }
+    if (why) fxs_particles_free(p);
     return why ? fxs_pt_fail(err, errlen, why) : 0;
 }
 

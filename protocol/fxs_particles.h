@@ -9,8 +9,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Codec id of kind 1 payloads in the frame header. */
+/* Codec ids of kind 1 payloads in the frame header: one block, or several blocks back to
+ * back (PROTOCOL.md §7.5.8), which the decoder reads alike. */
 #define FXS_CODEC_PARTICLES 2u
+#define FXS_CODEC_PARTICLES_BLOCKS 3u
 
 /* Particles as the encoder takes them and the decoder returns them. */
 struct fxs_particles {
@@ -35,6 +37,11 @@ struct fxs_particles_opts {
     /* Bits of each velocity component, sign included, 2..16 (0 = default): one step per axis,
      * (largest |v| of that axis) / (2^(vel_bits-1) - 1). Used only when p->vel is set. */
     int vel_bits;
+    /* Threads to encode on (0 or 1: one). With more, a frame of at least
+     * 2 * FXS_PARTICLES_BLOCK_MIN particles is cut into up to that many blocks of slabs along
+     * its longest axis, quantised on the frame's common grid and coded in parallel (codec 3,
+     * PROTOCOL.md §7.5.8); fxs_particles_codec tells which codec a payload is. */
+    int threads;
 };
 
 #define FXS_PARTICLES_DEFAULT_POS_BITS 16
@@ -43,6 +50,10 @@ struct fxs_particles_opts {
 #define FXS_PARTICLES_DEFAULT_VEL_BITS 8
 /* Most particles one payload may declare; the decoder rejects more (decompression bombs). */
 #define FXS_PARTICLES_MAX_N (1u << 22)
+/* Fewest particles an encoder puts in a block of its own, and most blocks a payload may
+ * hold (decoders reject more, §7.5.8). */
+#define FXS_PARTICLES_BLOCK_MIN 4096u
+#define FXS_PARTICLES_MAX_BLOCKS 64u
 /* Bytes of the payload's own header (PROTOCOL.md §7.5.1), and of the velocity block that
  * follows it in payloads with velocities (§7.5.7). */
 #define FXS_PARTICLES_HEADER_BYTES 64u
@@ -52,8 +63,12 @@ struct fxs_particles_opts {
  * a message in err (errlen bytes). */
 int fxs_particles_encode(const struct fxs_particles *p, const struct fxs_particles_opts *opts, uint8_t **out,
                          size_t *out_len, char *err, size_t errlen);
-/* Decodes a payload into p (arrays allocated; free with fxs_particles_free). Returns 0,
- * or -1 with a message: truncated, corrupt or oversized input never reads out of bounds. */
+/* The codec of an encoded payload: FXS_CODEC_PARTICLES_BLOCKS when it holds more than one
+ * block, else FXS_CODEC_PARTICLES. */
+uint32_t fxs_particles_codec(const uint8_t *payload, size_t len);
+/* Decodes a payload of one or more blocks (codec 2 or 3) into p (arrays allocated; free with
+ * fxs_particles_free). Returns 0, or -1 with a message: truncated, corrupt or oversized input
+ * never reads out of bounds. */
 int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p, char *err, size_t errlen);
 void fxs_particles_free(struct fxs_particles *p);
 

@@ -245,6 +245,7 @@ const char *ocl_platform_name(const struct ocl *ocl) { return ocl->platform_name
 cl_context ocl_context(const struct ocl *ocl) { return ocl->context; }
 cl_device_id ocl_device(const struct ocl *ocl) { return ocl->device; }
 cl_command_queue ocl_queue(const struct ocl *ocl) { return ocl->queue; }
+bool ocl_is_cpu(const struct ocl *ocl) { return (ocl_device_type(ocl->device) & CL_DEVICE_TYPE_CPU) != 0; }
 
 /* Fails with the build log; fx_err keeps its beginning (the first errors). */
 static int ocl_build_failed(struct ocl *ocl, cl_program prog, const char *file, cl_int rc, struct fx_err *err)

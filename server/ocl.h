@@ -11,6 +11,7 @@
 
 #define CL_TARGET_OPENCL_VERSION 120
 #include <CL/cl.h>
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "err.h"
@@ -27,6 +28,8 @@ const char *ocl_platform_name(const struct ocl *ocl);
 cl_context ocl_context(const struct ocl *ocl);
 cl_device_id ocl_device(const struct ocl *ocl);
 cl_command_queue ocl_queue(const struct ocl *ocl);
+/* Whether the device runs on the host's own cores (a CPU device such as PoCL's). */
+bool ocl_is_cpu(const struct ocl *ocl);
 
 /* The built program for an embedded kernel file (e.g. "energy_wave.cl") and options.
  * Cached: the returned program is owned by ocl and valid until ocl_close. */

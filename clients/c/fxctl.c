@@ -430,7 +430,7 @@ static int fxctl_write_ply(const char *path, const struct fxs_particles *p)
 
 static int fxctl_is_particles(const struct fxs_header *h)
 {
-    return h->kind == FXS_KIND_PARTICLES && h->codec == FXS_CODEC_PARTICLES;
+    return h->kind == FXS_KIND_PARTICLES && (h->codec == FXS_CODEC_PARTICLES || h->codec == FXS_CODEC_PARTICLES_BLOCKS);
 }
 
 /* Decodes a particle frame; checks the count against the header. */

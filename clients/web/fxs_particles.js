@@ -1,5 +1,6 @@
 // fxs_particles.js — browser/Node decoder of fxstream.v1 kind 1 particle payloads
-// (codec 2, protocol/PROTOCOL.md §7.5) and parser of the 64-byte frame header (§7.1).
+// (codec 2, one block, and codec 3, blocks back to back: protocol/PROTOCOL.md §7.5) and
+// parser of the 64-byte frame header (§7.1).
 //
 // Plain ES module, no dependencies, no build step: the entropy stage is an adaptive
 // binary range coder (LZMA's) that takes a few lines here (Decoder.bit, the one place a
@@ -10,7 +11,7 @@
 //
 //   import { parseHeader, decode } from './fxs_particles.js';
 //   const h = parseHeader(msg);                       // throws on a bad frame
-//   if (h.kind === 1 && h.codec === 2) {
+//   if (h.kind === 1 && (h.codec === 2 || h.codec === 3)) {
 //     const p = decode(new Uint8Array(msg, h.headerBytes, h.payloadBytes));
 //     // p.n, p.xyz (Float32Array 3n), p.temp, p.fuel (Float32Array n), p.flags (Uint8Array n),
 //     // p.vel (Float32Array 3n, or null when the stream sends no velocities)
@@ -18,7 +19,9 @@
 
 export const KIND_PARTICLES = 1;
 export const CODEC_PARTICLES = 2;
+export const CODEC_PARTICLES_BLOCKS = 3;
 export const MAX_PARTICLES = 1 << 22;
+export const MAX_BLOCKS = 64;
 
 const HEADER_BYTES = 64;
 const PROB_BITS = 12;
@@ -354,21 +357,12 @@ function decodeVel(f, d, NB, out) {
   }
 }
 
-/**
- * Decodes a codec 2 payload (the bytes after the frame header).
- * Returns {n, xyz: Float32Array(3n), temp: Float32Array(n), fuel: Float32Array(n), flags: Uint8Array(n),
- * vel: Float32Array(3n) (vx, vy, vz) when the payload carries velocities (§7.5.7), else null}.
- * Throws Error('particles: ...') on truncated, corrupt or oversized input.
- */
-export function decode(buf) {
-  const b = bytesOf(buf);
-  const f = parsePayloadHeader(b), n = f.n;
-  if (f.headerBytes + f.rcBytes + f.bitsBytes !== b.length) fail('section sizes do not match the payload length');
-  const out = { n, xyz: new Float32Array(3 * n), temp: new Float32Array(n), fuel: new Float32Array(n), flags: new Uint8Array(n),
-    vel: f.vel ? new Float32Array(3 * n) : null };
+// One block (§7.5.1–7.5.7) of b, whose header f was parsed, into out (views of its slice).
+function decodeBlock(f, b, out) {
+  const n = f.n;
   if (n === 0) {
     if (f.rcBytes || f.bitsBytes) fail('bad sizes');
-    return out;
+    return;
   }
   const rend = f.headerBytes + f.rcBytes;
   const d = new Decoder(b, f.headerBytes, rend, rend + f.bitsBytes);
@@ -378,13 +372,51 @@ export function decode(buf) {
   if (f.vel) decodeVel(f, d, NB, out);
   if (d.rp !== d.rend) fail('corrupt particle data (range coder section not consumed exactly)');
   if (d.bp !== d.bend || d.acc !== 0) fail('corrupt particle data (raw bits not consumed exactly)');
+}
+
+// The blocks of a payload (§7.5.8): [{f, at, len}], checked; all carry velocities or none.
+function blocksOf(b) {
+  const blocks = [];
+  let total = 0;
+  for (let at = 0; at < b.length || blocks.length === 0;) {
+    const f = parsePayloadHeader(b.subarray(at));
+    const len = f.headerBytes + f.rcBytes + f.bitsBytes;
+    if (len > b.length - at) fail('section sizes do not match the payload length');
+    if (blocks.length && f.vel !== blocks[0].f.vel) fail('blocks disagree on velocities');
+    if (blocks.length === MAX_BLOCKS) fail('more blocks than allowed');
+    if ((total += f.n) > MAX_PARTICLES) fail('particle count over the limit');
+    blocks.push({ f, at, len });
+    at += len;
+  }
+  return blocks;
+}
+
+/**
+ * Decodes a kind 1 payload of one block (codec 2) or more (codec 3), the bytes after the
+ * frame header; the particles come block after block.
+ * Returns {n, xyz: Float32Array(3n), temp: Float32Array(n), fuel: Float32Array(n), flags: Uint8Array(n),
+ * vel: Float32Array(3n) (vx, vy, vz) when the payload carries velocities (§7.5.7), else null}.
+ * Throws Error('particles: ...') on truncated, corrupt or oversized input.
+ */
+export function decode(buf) {
+  const b = bytesOf(buf), blocks = blocksOf(b);
+  const n = blocks.reduce((s, k) => s + k.f.n, 0), vel = blocks[0].f.vel;
+  const out = { n, xyz: new Float32Array(3 * n), temp: new Float32Array(n), fuel: new Float32Array(n), flags: new Uint8Array(n),
+    vel: vel ? new Float32Array(3 * n) : null };
+  let o = 0;
+  for (const { f, at, len } of blocks) {
+    decodeBlock(f, b.subarray(at, at + len), { xyz: out.xyz.subarray(3 * o), temp: out.temp.subarray(o),
+      fuel: out.fuel.subarray(o), flags: out.flags.subarray(o), vel: vel ? out.vel.subarray(3 * o) : null });
+    o += f.n;
+  }
   return out;
 }
 
 /** Decodes a whole kind 1 frame (header + payload); returns {header, particles}. */
 export function decodeFrame(buf) {
   const header = parseHeader(buf);
-  if (header.kind !== KIND_PARTICLES || header.codec !== CODEC_PARTICLES) throw new Error('frame: not a codec 2 particle frame');
+  if (header.kind !== KIND_PARTICLES || (header.codec !== CODEC_PARTICLES && header.codec !== CODEC_PARTICLES_BLOCKS))
+    throw new Error('frame: not a codec 2 or 3 particle frame');
   const particles = decode(payloadOf(buf, header));
   if (particles.n !== header.count) throw new Error('frame: count does not match the payload');
   return { header, particles };

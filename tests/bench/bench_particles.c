@@ -7,7 +7,8 @@
  *       quantisation: codec 2's position step is Draco's -qp step, largest extent /
  *       (2^B - 1) for all axes; T and F 8 bits over their range in both); then the wire
  *       cost of velocities (§7.5.7): the default without them, and with them at vel_bits
- *       4/6/8/10/12 (synthetic frames get pgen_velocities' field);
+ *       4/6/8/10/12 (synthetic frames get pgen_velocities' field); and codec 3, the
+ *       default as blocks on 2, 4 and 8 threads (§7.5.8);
  *   (b) Draco point cloud (draco_encoder/draco_decoder, -qp = pos bits, cl 7 and 10),
  *       fed a PLY with x, y, z and T, F, flags as red, green, blue (uchar: T and F
  *       quantised to 8 bits over their range, flags exact), because Draco's PLY reader
@@ -46,20 +47,19 @@ static void bp_line(const char *frame, uint32_t n, const char *what, double byte
 
 /* ---- (a) codec 2 ------------------------------------------------------------------------ */
 
-/* Codec 2 at pos/T/F bits pb/tb/fb; with the frame's velocities at vb bits, without for vb 0. */
-static void bp_ours(const char *frame, const struct fxs_particles *pv, int pb, int tb, int fb, int vb)
+/* Codec 2 (or 3) with o; with the frame's velocities when o->vel_bits is set, else without. */
+static void bp_ours(const char *frame, const struct fxs_particles *pv, const struct fxs_particles_opts *o)
 {
-    struct fxs_particles_opts o = { pb, tb, fb, vb };
     struct fxs_particles d, copy = *pv, *p = &copy;
     uint8_t *enc = NULL;
     size_t len = 0;
     char err[200], what[64];
     double te = 1e9, td = 1e9;
-    if (!vb) copy.vel = NULL;
+    if (!o->vel_bits) copy.vel = NULL;
     for (int r = 0; r < bp_reps(p->n); r++) {
         double t0 = bp_now();
         free(enc);
-        if (fxs_particles_encode(p, &o, &enc, &len, err, sizeof err)) {
+        if (fxs_particles_encode(p, o, &enc, &len, err, sizeof err)) {
             printf("%s: encode failed: %s\n", frame, err);
             return;
         }
@@ -69,9 +69,11 @@ static void bp_ours(const char *frame, const struct fxs_particles *pv, int pb, i
         fxs_particles_free(&d);
         te = fmin(te, t1 - t0), td = fmin(td, t2 - t1);
     }
-    snprintf(what, sizeof what, "fxs codec 2 pos %d T %d F %d%s", pb, tb ? tb : FXS_PARTICLES_DEFAULT_TEMP_BITS,
-             fb ? fb : FXS_PARTICLES_DEFAULT_FUEL_BITS, vb ? "" : pv->vel ? " no vel" : "");
-    if (vb) snprintf(what + strlen(what), sizeof what - strlen(what), " vel %d", vb);
+    snprintf(what, sizeof what, "fxs codec %u pos %d T %d F %d%s", fxs_particles_codec(enc, len), o->pos_bits,
+             o->temp_bits ? o->temp_bits : FXS_PARTICLES_DEFAULT_TEMP_BITS,
+             o->fuel_bits ? o->fuel_bits : FXS_PARTICLES_DEFAULT_FUEL_BITS, o->vel_bits ? "" : pv->vel ? " no vel" : "");
+    if (o->vel_bits) snprintf(what + strlen(what), sizeof what - strlen(what), " vel %d", o->vel_bits);
+    if (o->threads > 1) snprintf(what + strlen(what), sizeof what - strlen(what), " %d threads", o->threads);
     bp_line(frame, p->n, what, (double)len, te, td);
     free(enc);
 }
@@ -274,8 +276,8 @@ static void bp_zstd_transform(const char *frame, const struct fxs_particles *p, 
 /* The wire cost of velocities: the default payload without them, then with them. */
 static void bp_vel(const char *name, const struct fxs_particles *p)
 {
-    bp_ours(name, p, 16, 0, 0, 0);
-    for (int vb = 4; vb <= 12; vb += 2) bp_ours(name, p, 16, 0, 0, vb);
+    bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = 16 });
+    for (int vb = 4; vb <= 12; vb += 2) bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = 16, .vel_bits = vb });
 }
 
 static void bp_frame(const char *name, const struct fxs_particles *p)
@@ -287,8 +289,11 @@ static void bp_frame(const char *name, const struct fxs_particles *p)
         printf("\n");
         return;
     }
-    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 0, 0, 0);
-    for (int b = 0; b < 3; b++) bp_ours(name, p, bits[b], 8, 8, 0);
+    for (int b = 0; b < 3; b++) bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = bits[b] });
+    for (int b = 0; b < 3; b++)
+        bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = bits[b], .temp_bits = 8, .fuel_bits = 8 });
+    for (int t = 2; t <= 8; t *= 2) /* blocks on t threads (§7.5.8: a GPU device's frames) */
+        bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = 16, .threads = t });
     for (int b = 0; b < 3; b++) bp_draco(name, p, bits[b], 7);
     bp_draco(name, p, 16, 10);
     bp_zstd_raw(name, p, 1);

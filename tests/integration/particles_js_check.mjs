@@ -1,4 +1,4 @@
-// particles_js_check.mjs — decodes the C encoder's codec 2 test vectors (tests/data/particles/*.bin)
+// particles_js_check.mjs — decodes the C encoder's codec 2 test vectors (tests/data/particles/*.bin), alone and back to back as codec 3 payloads,
 // with clients/web/fxs_particles.js and compares with what the C decoder gave (*.json):
 // every float bit for bit (both decoders compute float32(lo + q * step) in double), flags
 // exactly, velocities (§7.5.7) exactly where the C decoder gave them and none elsewhere. Also: a frame header round trip, and truncated/corrupt payloads must throw a
@@ -92,6 +92,61 @@ for (const name of names) {
     return null;
   });
 }
+// Codec 3 (§7.5.8): blocks back to back decode as the blocks' particles in order.
+const vec = (name) => ({ bin: new Uint8Array(readFileSync(join(dir, `${name}.bin`))),
+  want: JSON.parse(readFileSync(join(dir, `${name}.json`), 'utf8')) });
+function concat(parts) {
+  const out = new Uint8Array(parts.reduce((s, p) => s + p.length, 0));
+  let at = 0;
+  for (const p of parts) { out.set(p, at); at += p.length; }
+  return out;
+}
+function merged(wants) {
+  const m = { n: 0, xyz: [], temp: [], fuel: [], flags: [], vel: wants[0].vel ? [] : undefined };
+  for (const w of wants) {
+    m.n += w.n;
+    for (const key of ['xyz', 'temp', 'fuel', 'flags', ...(m.vel ? ['vel'] : [])]) m[key].push(...w[key]);
+  }
+  return m;
+}
+for (const set of [['flame64', 'seven_8bit', 'real_flame600', 'empty'], ['flame64_vel', 'empty_vel', 'seven_vel_4bit', 'real_vel600_12bit']]) {
+  const vs = set.map(vec), bin = concat(vs.map((v) => v.bin)), want = merged(vs.map((v) => v.want));
+  check(`codec 3: ${set.join(' + ')} back to back`, () => compare(decode(bin), want));
+  check(`codec 3: ${set.join(' + ')} as a frame`, () => {
+    const f = frameOf(bin, want.n);
+    new DataView(f.buffer).setUint32(40, 3, true);
+    return compare(decodeFrame(f.buffer).particles, want);
+  });
+  check(`codec 3: ${set.join(' + ')} cut anywhere is rejected`, () => {
+    for (let l = 1; l < bin.length; l += 7) {
+      if (vs.some((_, k) => l === vs.slice(0, k + 1).reduce((s, v) => s + v.bin.length, 0))) continue; // a block boundary
+      try {
+        decode(bin.subarray(0, l));
+        return `decoded when cut to ${l} of ${bin.length} bytes`;
+      } catch (e) {
+        if (!e.message.startsWith('particles: ')) return `cut to ${l}: ${e.message}`;
+      }
+    }
+    return null;
+  });
+}
+const rejects = (bin, want) => {
+  try {
+    decode(bin);
+    return 'accepted';
+  } catch (e) {
+    return e.message.includes(want) ? null : e.message;
+  }
+};
+check('codec 3: blocks with and without velocities rejected', () =>
+  rejects(concat([vec('flame64').bin, vec('flame64_vel').bin]), 'blocks disagree on velocities'));
+check('codec 3: 64 empty blocks decode, 65 are rejected', () => {
+  const e = vec('empty').bin;
+  if (decode(concat(Array(64).fill(e))).n !== 0) return '64 empty blocks';
+  return rejects(concat(Array(65).fill(e)), 'more blocks than allowed');
+});
+check('codec 3: trailing garbage after a block rejected', () =>
+  rejects(concat([vec('flame64').bin, new TextEncoder().encode('garbage!')]), 'not a codec 2 payload'));
 check('unknown attribute mode rejected', () => {
   const bin = new Uint8Array(readFileSync(join(dir, 'real_flame600.bin')));
   if (bin[11] !== 1) return `real_flame600 uses attribute mode ${bin[11]}, expected 1`;

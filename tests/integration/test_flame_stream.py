@@ -30,7 +30,7 @@ async def test_particle_frames(t):
     t.check(r["op"] == "subscribed", "subscribe flame")
     fs = await frames(c, 4)
     f = fs[0]
-    t.check(f["kind"] == 1 and f["codec"] == 2, "kind 1 frames with codec 2")
+    t.check(f["kind"] == 1 and f["codec"] == 2, "kind 1 frames with codec 2 (one block while small)")
     t.check(f["channel"] == r["channel"] and f["height"] == 0, "channel and height 0")
     t.check(all(x["payload"][:4] == b"FXP2" for x in fs), "payloads are FXP2 particle blocks")
     t.check(all(x["width"] > 0 for x in fs), "frames carry particles (count in the header)")

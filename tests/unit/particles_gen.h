@@ -98,7 +98,7 @@ static int pgen_cmp(const void *a, const void *b)
 static inline int pgen_sort_cells(struct fxs_particles *p)
 {
     struct pgen_sortrec *r = malloc((p->n ? p->n : 1) * sizeof *r);
-    struct fxs_particles q;
+    struct fxs_particles q = { 0 };
     if (!r || pgen_alloc(&q, p->n)) return -1;
     for (uint32_t i = 0; i < p->n; i++) {
         uint64_t c[3];

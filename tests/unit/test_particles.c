@@ -171,7 +171,7 @@ static long round_trip_opts(const struct fxs_particles *in, const struct fxs_par
 
 static long round_trip(const struct fxs_particles *in, int pos_bits, int temp_bits, int fuel_bits)
 {
-    struct fxs_particles_opts o = { pos_bits, temp_bits, fuel_bits, 0 };
+    struct fxs_particles_opts o = { .pos_bits = pos_bits, .temp_bits = temp_bits, .fuel_bits = fuel_bits, .vel_bits = 0 };
     return round_trip_opts(in, &o);
 }
 
@@ -266,7 +266,7 @@ static void test_real_frame(void)
     for (int b = 8; b <= 24; b += 4) CHECK(round_trip(&p, b, 0, 0) > 0, "real frame, pos_bits %d", b);
     CHECK(round_trip(&p, 16, 8, 8) > 0, "real frame, T and F 8 bits");
     {   /* mixed burning and cold particles: the encoder picks attribute mode 1 (values) */
-        struct fxs_particles_opts o = { 16, 8, 8, 0 };
+        struct fxs_particles_opts o = { .pos_bits = 16, .temp_bits = 8, .fuel_bits = 8, .vel_bits = 0 };
         uint8_t *enc = NULL;
         size_t len = 0;
         char err[200];
@@ -276,7 +276,7 @@ static void test_real_frame(void)
     }
     free_set(&p);
     {   /* a smooth synthetic flame: mode 0 (residuals) */
-        struct fxs_particles_opts o = { 16, 8, 8, 0 };
+        struct fxs_particles_opts o = { .pos_bits = 16, .temp_bits = 8, .fuel_bits = 8, .vel_bits = 0 };
         uint8_t *enc = NULL;
         size_t len = 0;
         char err[200];
@@ -319,11 +319,11 @@ static void test_vel_bits(void)
     pgen_flame(&p, 5000);
     pgen_velocities(&p);
     for (int b = 2; b <= 16; b++) {
-        struct fxs_particles_opts o = { 16, 0, 0, b };
+        struct fxs_particles_opts o = { .pos_bits = 16, .temp_bits = 0, .fuel_bits = 0, .vel_bits = b };
         CHECK(round_trip_opts(&p, &o) > 0, "vel_bits %d", b);
     }
     for (int b = 8; b <= 24; b += 8) {
-        struct fxs_particles_opts o = { b, 16, 2, 8 };
+        struct fxs_particles_opts o = { .pos_bits = b, .temp_bits = 16, .fuel_bits = 2, .vel_bits = 8 };
         CHECK(round_trip_opts(&p, &o) > 0, "pos_bits %d with velocities", b);
     }
     free_set(&p);
@@ -331,7 +331,7 @@ static void test_vel_bits(void)
     pgen_velocities(&p);
     for (uint32_t i = 0; i < 3 * p.n; i++) p.vel[i] = (float)((pgen_rand() - 0.5) * 10);
     for (int b = 4; b <= 12; b += 4) {
-        struct fxs_particles_opts o = { 16, 0, 0, b };
+        struct fxs_particles_opts o = { .pos_bits = 16, .temp_bits = 0, .fuel_bits = 0, .vel_bits = b };
         CHECK(round_trip_opts(&p, &o) > 0, "random velocities, vel_bits %d", b);
     }
     free_set(&p);
@@ -342,7 +342,8 @@ static void test_vel_bits(void)
 static void test_vel_off_on(void)
 {
     struct fxs_particles p = { 0 }, a, b;
-    struct fxs_particles_opts o8 = { 16, 0, 0, 8 }, o12 = { 16, 0, 0, 12 }, o0 = { 16, 0, 0, 0 };
+    struct fxs_particles_opts o8 = { .pos_bits = 16, .vel_bits = 8 }, o12 = { .pos_bits = 16, .vel_bits = 12 },
+                              o0 = { .pos_bits = 16 };
     uint8_t *e0, *e1, *ev;
     char err[200];
     pgen_flame(&p, 3000);
@@ -372,7 +373,7 @@ static void test_vel_off_on(void)
 static void test_vel_empty_zero(void)
 {
     struct fxs_particles p = { 0 }, d;
-    struct fxs_particles_opts o = { 16, 0, 0, 8 };
+    struct fxs_particles_opts o = { .pos_bits = 16, .temp_bits = 0, .fuel_bits = 0, .vel_bits = 8 };
     uint8_t *enc;
     char err[200];
     size_t len, l0;
@@ -408,7 +409,7 @@ static void test_vel_empty_zero(void)
 static void test_vel_extremes(void)
 {
     struct fxs_particles p = { 0 }, d;
-    struct fxs_particles_opts o = { 16, 0, 0, 8 };
+    struct fxs_particles_opts o = { .pos_bits = 16, .temp_bits = 0, .fuel_bits = 0, .vel_bits = 8 };
     uint8_t *enc;
     char err[200];
     size_t len;
@@ -454,7 +455,7 @@ static void test_vel_extremes(void)
 static void test_bad_input(void)
 {
     struct fxs_particles p = { 0 };
-    struct fxs_particles_opts o = { 7, 0, 0, 0 };
+    struct fxs_particles_opts o = { .pos_bits = 7, .temp_bits = 0, .fuel_bits = 0, .vel_bits = 0 };
     uint8_t *enc = NULL;
     size_t len;
     char err[200];
@@ -609,19 +610,139 @@ static void test_header_limits(void)
     free(enc);
 }
 
+/* ---- blocks (§7.5.8) --------------------------------------------------------------------- */
+
+/* Blocks in a payload, by their headers' section sizes (0 if they do not add up). */
+static int count_blocks(const uint8_t *enc, size_t len)
+{
+    int k = 0;
+    for (size_t at = 0; at < len; k++) {
+        if (len - at < 64) return 0;
+        const uint8_t *b = enc + at;
+        size_t hb = 64 + ((b[11] & 0x10) ? 16 : 0);
+        at += hb + (b[56] | b[57] << 8 | (uint32_t)b[58] << 16 | (uint32_t)b[59] << 24) +
+              (b[60] | b[61] << 8 | (uint32_t)b[62] << 16 | (uint32_t)b[63] << 24);
+        if (at > len) return 0;
+    }
+    return k;
+}
+
+/* Decoded particles as sortable records: x y z T F flags vx vy vz. */
+static int rec_cmp(const void *a, const void *b) { return memcmp(a, b, 9 * sizeof(float)); }
+static float *records(const struct fxs_particles *d)
+{
+    float *r = calloc((size_t)d->n * 9 + 1, sizeof *r);
+    for (uint32_t i = 0; r && i < d->n; i++) {
+        memcpy(r + 9 * i, d->xyz + 3 * i, 12);
+        r[9 * i + 3] = d->temp[i], r[9 * i + 4] = d->fuel[i], r[9 * i + 5] = d->flags[i];
+        if (d->vel) memcpy(r + 9 * i + 6, d->vel + 3 * i, 12);
+    }
+    if (r) qsort(r, d->n, 9 * sizeof *r, rec_cmp);
+    return r;
+}
+
+/* Threads cut a frame into blocks on the frame's common grid: the decoded set is the one
+ * block's, particle for particle, for 1-2% more bytes; small frames stay one block (codec 2),
+ * byte for byte. */
+static void test_blocks(void)
+{
+    for (int vel = 0; vel < 2; vel++) {
+        struct fxs_particles p = { 0 }, d1, dk;
+        pgen_flame(&p, 20000);
+        if (vel) pgen_velocities(&p);
+        struct fxs_particles_opts o1 = { .threads = 1 };
+        uint8_t *e1 = NULL;
+        size_t l1 = encode(&p, &o1, &e1);
+        char err[200] = "";
+        CHECK(e1 && fxs_particles_codec(e1, l1) == FXS_CODEC_PARTICLES && count_blocks(e1, l1) == 1, "one block");
+        CHECK(e1 && !fxs_particles_decode(e1, l1, &d1, err, sizeof err), "decode one block: %s", err);
+        float *r1 = e1 ? records(&d1) : NULL;
+        const int threads[3] = { 2, 3, 8 }, want[3] = { 2, 3, 4 }; /* 8 threads: n / 4096 = 4 blocks */
+        for (int t = 0; t < 3 && r1; t++) {
+            struct fxs_particles_opts ok = { .threads = threads[t] };
+            uint8_t *ek = NULL;
+            size_t lk = encode(&p, &ok, &ek);
+            CHECK(ek && fxs_particles_codec(ek, lk) == FXS_CODEC_PARTICLES_BLOCKS && count_blocks(ek, lk) == want[t],
+                  "vel %d, %d threads: %d blocks (want %d)", vel, threads[t], ek ? count_blocks(ek, lk) : -1, want[t]);
+            CHECK(lk <= l1 * 1.03, "vel %d, %d threads: %zu bytes against %zu in one block", vel, threads[t], lk, l1);
+            if (ek && !fxs_particles_decode(ek, lk, &dk, err, sizeof err)) {
+                float *rk = records(&dk);
+                CHECK(dk.n == d1.n && !dk.vel == !d1.vel && rk && !memcmp(rk, r1, (size_t)d1.n * 9 * sizeof *rk),
+                      "vel %d, %d threads: the decoded set differs from the one block's", vel, threads[t]);
+                free(rk);
+                fxs_particles_free(&dk);
+            } else {
+                CHECK(0, "decode %d blocks: %s", want[t], err);
+            }
+            free(ek);
+        }
+        if (r1) fxs_particles_free(&d1);
+        free(r1), free(e1);
+        p.n = 2 * FXS_PARTICLES_BLOCK_MIN - 1; /* too few for two blocks */
+        struct fxs_particles_opts o8 = { .threads = 8 };
+        uint8_t *a = NULL, *b = NULL;
+        size_t la = encode(&p, &o1, &a), lb = encode(&p, &o8, &b);
+        CHECK(a && b && la == lb && !memcmp(a, b, la), "vel %d: %u particles, 8 threads: the one-block payload", vel, p.n);
+        free(a), free(b);
+        free_set(&p);
+    }
+}
+
+static void expect_reject(const uint8_t *buf, size_t len, const char *want, const char *what)
+{
+    struct fxs_particles d;
+    char err[200] = "";
+    int r = fxs_particles_decode(buf, len, &d, err, sizeof err);
+    CHECK(r == -1 && strstr(err, want), "%s: rejected with \"%s\" (got %d, \"%s\")", what, want, r, err);
+    if (!r) fxs_particles_free(&d);
+}
+
+static void test_blocks_reject(void)
+{
+    struct fxs_particles p = { 0 }, e = { 0 };
+    pgen_flame(&p, 20000);
+    struct fxs_particles_opts o2 = { .threads = 2 }, o1 = { .threads = 1 };
+    uint8_t *two = NULL, *plain = NULL, *withv = NULL;
+    size_t l2 = encode(&p, &o2, &two), lp = encode(&p, &o1, &plain);
+    pgen_velocities(&p);
+    size_t lv = encode(&p, &o1, &withv);
+    if (!two || !plain || !withv) goto out;
+    expect_reject(two, l2 - 1, "section sizes do not match", "two blocks, the last byte cut");
+    uint8_t *buf = malloc(lp + lv + 64 * 65 + 16);
+    memcpy(buf, plain, lp), memcpy(buf + lp, withv, lv);
+    expect_reject(buf, lp + lv, "blocks disagree on velocities", "a block without velocities, then one with them");
+    memcpy(buf + lp, "garbage!", 8);
+    expect_reject(buf, lp + 8, "not a codec 2 payload", "a block, then 8 bytes of garbage");
+    uint8_t *empty = NULL;
+    size_t le = encode(&e, &o1, &empty); /* 64 bytes, n = 0 */
+    for (int i = 0; empty && i < 65; i++) memcpy(buf + le * (size_t)i, empty, le);
+    struct fxs_particles d;
+    char err[200] = "";
+    CHECK(empty && !fxs_particles_decode(buf, le * 64, &d, err, sizeof err) && d.n == 0, "64 empty blocks: %s", err);
+    if (empty && !err[0]) fxs_particles_free(&d);
+    if (empty) expect_reject(buf, le * 65, "more blocks than allowed", "65 empty blocks");
+    memcpy(buf, empty, le), memcpy(buf + le, empty, le); /* two header-only blocks claiming 2^21 + 1 each */
+    for (int k = 0; k < 2; k++) buf[le * (size_t)k + 12] = 1, buf[le * (size_t)k + 14] = 0x20;
+    expect_reject(buf, 2 * le, "particle count over the limit", "two blocks of 2^21 + 1 particles");
+    free(buf), free(empty);
+out:
+    free(two), free(plain), free(withv);
+    free_set(&p);
+}
+
 /* ---- test vectors ------------------------------------------------------------------------ */
 
 static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts *o)
 {
     pgen_rng = 12345 + (uint64_t)v;
-    *o = (struct fxs_particles_opts){ 16, 0, 0, 0 };
+    *o = (struct fxs_particles_opts){ .pos_bits = 16, .temp_bits = 0, .fuel_bits = 0, .vel_bits = 0 };
     if (v == 0) pgen_random(p, 0, 1.0);
     if (v == 1) pgen_random(p, 1, 1.0);
     if (v == 2) pgen_random(p, 7, 3.0), o->pos_bits = 8;
     if (v == 3 || v == 4) {
         pgen_flame(p, 3000);
         p->n = 64;
-        if (v == 4) *o = (struct fxs_particles_opts){ 24, 16, 16, 0 };
+        if (v == 4) *o = (struct fxs_particles_opts){ .pos_bits = 24, .temp_bits = 16, .fuel_bits = 16, .vel_bits = 0 };
     }
     if (v == 5) {
         pgen_random(p, 5, 1.0);
@@ -629,7 +750,7 @@ static void vec_input(int v, struct fxs_particles *p, struct fxs_particles_opts 
     }
     if (v == 6 || v == 7) {
         CHECK(pgen_read_ply(REAL_PLY, p) == 0, "read %s", REAL_PLY);
-        if (v == 7) *o = (struct fxs_particles_opts){ 12, 8, 8, 0 };
+        if (v == 7) *o = (struct fxs_particles_opts){ .pos_bits = 12, .temp_bits = 8, .fuel_bits = 8, .vel_bits = 0 };
     }
     if (v == 8) { /* all identical */
         pgen_random(p, 9, 1.0);
@@ -758,6 +879,8 @@ int main(int argc, char **argv)
     RUN(test_vel_off_on);
     RUN(test_vel_empty_zero);
     RUN(test_vel_extremes);
+    RUN(test_blocks);
+    RUN(test_blocks_reject);
     RUN(test_bad_input);
     RUN(test_truncated);
     RUN(test_corrupt);

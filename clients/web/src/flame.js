@@ -319,7 +319,7 @@ export class FlameView {
   }
 
   onFrame(h, buf) {
-    if (h.kind !== 1 || h.codec !== 2) return false;
+    if (h.kind !== 1 || (h.codec !== 2 && h.codec !== 3)) return false;
     const p = decode(payloadOf(buf, h));
     if (p.n > this.capacity) {
       // New geometries: three fixes an instanced geometry's largest instance count when it
