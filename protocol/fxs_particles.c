@@ -1467,6 +1467,7 @@ static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, siz
 static const char *fxs_pt_block(const uint8_t *buf, size_t len, struct fxs_pt_frame *f, uint32_t *rl, uint32_t *bl,
                                 size_t *blen)
 {
+    *rl = *bl = 0;
     int r = fxs_pt_parse_header(buf, len, f, rl, bl);
     const char *why = r == -1   ? "not a codec 2 payload (short or bad magic)"
                       : r == -2 ? "unsupported version"
