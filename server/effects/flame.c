@@ -42,7 +42,7 @@
 /* Cells of edge 2h: a particle sets up 4 rows, not 9 (cells of h) or 25 (h/2). The row set-up,
  * not the candidates, is most of fl_density's time on the sparse default flame (~8 neighbours):
  * bench_flame on an AVX2 host (2026-11-26, A/B runs alternating), density pass 2.2-2.6 -> 1.4-1.7
- * ms per step, real-time factor 0.51-0.67 -> 0.71-0.87; the dense lattice blocks gain too
+ * ms per step, real-time factor 0.51-0.67 -> 0.71-0.91; the dense lattice blocks gain too
  * (2.5-2.9 -> 2.9-3.4 M particle-steps/s at 22k particles). Cells of 3h or 2.5h: the same. */
 #define FL_CELLS_PER_H 0.5
 #endif
