@@ -14,7 +14,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-#define CHECK_DEVICE() (getenv("FX_OCL_DEVICE") && *getenv("FX_OCL_DEVICE") ? getenv("FX_OCL_DEVICE") : "cpu")
+static inline const char *CHECK_DEVICE(void)
+{
+    const char *d = getenv("FX_OCL_DEVICE");
+    return d && *d ? d : "cpu";
+}
 
 static int check_fails_in_test;
 static int check_tests_passed, check_tests_failed;
