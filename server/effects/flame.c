@@ -245,9 +245,13 @@ struct flame {
     /* parameters */
     cJSON *doc;
     double h, d, dt, time_scale, space_scale, t_amb, period_ms;
-    double emit_ms; /* wall time of the last frame's read-back and encoding */
+    double emit_ms; /* wall time of the last frame's read-back, encoding and the substep run beside it */
     int enc_threads; /* threads a frame's encoding may use: 1 on a CPU device, else the cores up to FL_ENC_THREADS_MAX */
     double step_ms; /* recent wall time per substep (moving average; 0 = not measured yet) */
+    double fit_frac; /* the fraction of a substep that the budgets of frames cut short left over */
+    int rs_pending;  /* a resampling step's totals are being read into rs_tot and rs_err (fl_step_end) */
+    cl_uint rs_tot[3];
+    cl_int rs_err;
     int interval, max_substeps, max_particles, pos_bits, vel_bits;
     int velocities;
     double up[3];
@@ -635,17 +639,14 @@ static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_er
     return 0;
 }
 
-/* Reads the totals (survivors, insertions, new n) and the error flag: the only host sync
- * inside a run. The queue is finished even when an enqueue failed: no read into the
- * caller's variables may outlive the call. */
-static int fl_read_totals(struct flame *fl, cl_uint tot[3], cl_int *errflag, struct fx_err *err)
+/* Reads the error flag once the queue is done. The queue is finished even when the enqueue
+ * failed: no read into the caller's variable may outlive the call. */
+static int fl_read_errflag(struct flame *fl, cl_int *errflag, struct fx_err *err)
 {
-    cl_command_queue q = ocl_queue(fl->ocl);
-    cl_int rc = clEnqueueReadBuffer(q, fl->errflag, CL_FALSE, 0, sizeof *errflag, errflag, 0, NULL, NULL);
-    if (rc == CL_SUCCESS && tot) rc = clEnqueueReadBuffer(q, fl->tot, CL_FALSE, 0, 3 * sizeof *tot, tot, 0, NULL, NULL);
+    cl_int rc = clEnqueueReadBuffer(ocl_queue(fl->ocl), fl->errflag, CL_FALSE, 0, sizeof *errflag, errflag, 0, NULL, NULL);
     if (rc != CL_SUCCESS) {
         fl_finish(fl, NULL);
-        return fl_clfail(err, "reading totals", rc);
+        return fl_clfail(err, "reading the error flag", rc);
     }
     return fl_finish(fl, err);
 }
@@ -661,8 +662,9 @@ static int fl_check(const struct flame *fl, cl_int errflag, struct fx_err *err)
     return 0;
 }
 
-/* Birth and death (§2.12): count, scan, compact A into B; B becomes current. */
-static int fl_resample(struct flame *fl, struct fx_err *err)
+/* Birth and death (§2.12): count, scan, compact A into B, and the totals read without
+ * waiting; fl_resample_end makes B current. */
+static int fl_resample_begin(struct flame *fl, struct fx_err *err)
 {
     struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
     cl_int n = fl->n, nb = FL_BLOCKS;
@@ -678,19 +680,34 @@ static int fl_resample(struct flame *fl, struct fx_err *err)
         fl_args(fl, K_SCANB, sa, 4, err) || fl_launch(fl, K_SCANB, 1, 1, err) ||
         fl_args(fl, K_COMPACT, xa, 23, err) || fl_launch(fl, K_COMPACT, FL_BLOCKS, 1, err))
         return -1;
-    cl_uint tot[3];
-    cl_int ef = 0;
-    if (fl_read_totals(fl, tot, &ef, err) || fl_check(fl, ef, err)) return -1;
+    cl_command_queue q = ocl_queue(fl->ocl);
+    cl_int rc = clEnqueueReadBuffer(q, fl->errflag, CL_FALSE, 0, sizeof fl->rs_err, &fl->rs_err, 0, NULL, NULL);
+    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, fl->tot, CL_FALSE, 0, sizeof fl->rs_tot, fl->rs_tot, 0, NULL, NULL);
+    if (rc != CL_SUCCESS) {
+        fl_finish(fl, NULL); /* no read into fl may outlive the call */
+        return fl_clfail(err, "reading totals", rc);
+    }
+    fl->rs_pending = 1;
+    return 0;
+}
+
+/* Waits for fl_resample_begin's totals (survivors, insertions, new n) and applies them. */
+static int fl_resample_end(struct flame *fl, struct fx_err *err)
+{
+    fl->rs_pending = 0;
+    if (fl_finish(fl, err) || fl_check(fl, fl->rs_err, err)) return -1;
     fl->cur ^= 1;
-    fl->n = (int)tot[2];
-    fl->next_id += tot[1];
-    if (tot[0] + tot[1] >= (cl_uint)fl->max_particles)
+    fl->n = (int)fl->rs_tot[2];
+    fl->next_id += fl->rs_tot[1];
+    if (fl->rs_tot[0] + fl->rs_tot[1] >= (cl_uint)fl->max_particles)
         return fx_fail(err, "internal", "", "flame: particle count reached max_particles %d (runaway) at step %llu",
                        fl->max_particles, (unsigned long long)fl->steps);
     return fl_table(fl, err);
 }
 
-static int fl_step_once(struct flame *fl, struct fx_err *err)
+/* One substep, enqueued: the device may still be working on it when this returns, and a
+ * resampling step's totals wait for fl_step_end. */
+static int fl_step_begin(struct flame *fl, struct fx_err *err)
 {
     int resample = fl->steps % (uint64_t)fl->interval == 0;
     if (resample) {
@@ -698,11 +715,17 @@ static int fl_step_once(struct flame *fl, struct fx_err *err)
         if (fl_reserve(fl, want, err)) return -1;
     }
     if (fl->n > 0 && (fl_sort(fl, err) || fl_gather(fl, 1, resample, err))) return -1;
-    if (resample && fl->n > 0 && fl_resample(fl, err)) return -1;
+    if (resample && fl->n > 0 && fl_resample_begin(fl, err)) return -1;
     fl->steps++;
     fl->sim_seconds += fl->dt;
     return 0;
 }
+
+/* Completes the substep fl_step_begin enqueued (the particle count after a resampling step
+ * is known only then); nothing to do for the others. */
+static int fl_step_end(struct flame *fl, struct fx_err *err) { return fl->rs_pending ? fl_resample_end(fl, err) : 0; }
+
+static int fl_step_once(struct flame *fl, struct fx_err *err) { return fl_step_begin(fl, err) || fl_step_end(fl, err); }
 
 /* ---- public API ---------------------------------------------------------------------------- */
 
@@ -886,7 +909,7 @@ int flame_run(struct flame *fl, int steps, struct fx_err *err)
     for (int s = 0; s < steps; s++)
         if (fl_step_once(fl, err)) return -1;
     cl_int ef = 0;
-    if (fl_read_totals(fl, NULL, &ef, err)) return -1;
+    if (fl_read_errflag(fl, &ef, err)) return -1;
     return fl_check(fl, ef, err);
 }
 
@@ -949,12 +972,11 @@ static int fl_frame_buffers(struct flame *fl, int n)
     return 0;
 }
 
-/* Reads the particles once (with the error flag) and emits one kind 1 frame. */
-static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struct fx_err *err)
+/* Reads the particles once (with the error flag) into the frame arrays; returns n, or -1. */
+static int fl_read_frame(struct flame *fl, struct fx_err *err)
 {
     int n = fl->n;
     if (fl_frame_buffers(fl, n)) return fx_fail(err, "internal", "", "out of memory for %d particles", n);
-    double t_read = clock_now() * 1e3;
     struct fl_set *S = &fl->st[fl->cur];
     void *dst[3] = {fl->h_pos, fl->h_vel, fl->h_flags};
     cl_int ef = 0, rc = CL_SUCCESS;
@@ -965,8 +987,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         fl_finish(fl, NULL); /* the reads already queued complete before the buffers may change */
         return fl_clfail(err, "reading the frame", rc);
     }
-    if (fl_read_totals(fl, NULL, &ef, err) || fl_check(fl, ef, err)) return -1;
-    double t0 = clock_now() * 1e3;
+    if (fl_read_errflag(fl, &ef, err) || fl_check(fl, ef, err)) return -1;
     float s = (float)fl->space_scale;
     for (int i = 0; i < n; i++) {
         for (int k = 0; k < 3; k++) fl->xyz[3 * i + k] = s * fl->h_pos[4 * i + k];
@@ -975,25 +996,57 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         fl->fuel[i] = fl->h_vel[4 * i + 3];
         fl->flags8[i] = (uint8_t)fl->h_flags[i];
     }
+    return n;
+}
+
+/* Encodes the n particles of the frame arrays into one kind 1 frame, whose payload is *payload
+ * (free()). */
+static int fl_encode(struct flame *fl, int n, struct effect_frame *fr, uint8_t **payload, struct fx_err *err)
+{
     struct fxs_particles fp = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8, fl->velocities ? fl->vel : NULL};
     struct fxs_particles_opts opts = {.pos_bits = fl->pos_bits, .vel_bits = fl->vel_bits, .threads = fl->enc_threads};
-    uint8_t *payload = NULL;
     size_t len = 0;
     char msg[160];
-    if (fxs_particles_encode(&fp, &opts, &payload, &len, msg, sizeof msg))
+    double t0 = clock_now() * 1e3;
+    if (fxs_particles_encode(&fp, &opts, payload, &len, msg, sizeof msg))
         return fx_fail(err, "internal", "", "flame: particle encoding failed: %s", msg);
-    struct effect_frame fr = {
+    *fr = (struct effect_frame){
         .kind = FXS_KIND_PARTICLES,
-        .codec = fxs_particles_codec(payload, len),
+        .codec = fxs_particles_codec(*payload, len),
         .count_or_width = (uint32_t)n,
-        .payload = payload,
+        .payload = *payload,
         .payload_bytes = len,
+        .encode_ms = clock_now() * 1e3 - t0,
     };
-    double t1 = clock_now() * 1e3;
-    fr.encode_ms = t1 - t0;
-    fl->emit_ms = t1 - t_read;
-    int ret = emit(ctx, &fr);
+    return 0;
+}
+
+/* Reads the particles and emits one kind 1 frame. The next frame's first substep is enqueued
+ * before the encoding (when that frame will step at all), so that the device, or PoCL's
+ * workers on the CPU's other cores, compute it while the host encodes: the encoding no longer
+ * leaves the device idle. It completes before this returns, so no work is left in flight
+ * between frames, and its time counts in emit_ms, which the next frame's budget leaves out. */
+static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struct fx_err *err)
+{
+    double t_read = clock_now() * 1e3;
+    int n = fl_read_frame(fl, err);
+    if (n < 0) return -1;
+    int pre = fl->time_scale > 0 && fl->carry + fl->period_ms * 1e-3 * fl->time_scale >= 0.5 * fl->dt;
+    if (pre) {
+        if (fl_step_begin(fl, err)) return -1;
+        fl->carry -= fl->dt;
+    }
+    struct effect_frame fr;
+    uint8_t *payload = NULL;
+    int ret = fl_encode(fl, n, &fr, &payload, err);
+    if (ret == 0) ret = emit(ctx, &fr);
     free(payload);
+    struct fx_err end_err = {0};
+    if (pre && fl_step_end(fl, &end_err) && ret == 0) {
+        *err = end_err;
+        ret = -1;
+    }
+    fl->emit_ms = clock_now() * 1e3 - t_read;
     return ret;
 }
 
@@ -1004,7 +1057,7 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
     struct flame *fl = self;
     (void)sim_time;
     fl->carry += dt * fl->time_scale;
-    int n = (int)floor(fl->carry / fl->dt + 0.5);
+    int n = (int)fmax(floor(fl->carry / fl->dt + 0.5), 0); /* carry < 0: the last frame ran one ahead */
     if (n > fl->max_substeps) {
         n = fl->max_substeps;
         fl->carry = 0;
@@ -1012,18 +1065,26 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         fl->carry -= n * fl->dt;
     }
     /* Wall-clock budget: the substeps get the frame period less the last frame's read-back and
-     * encoding and a margin; as many run as fit at the recent time per substep, and the rest of
-     * the backlog is dropped (carry 0), so a slow scene streams at a steady frame rate and the
-     * real-time factor in /metrics reports the simulated rate. The plan comes from the average
-     * of earlier frames, since the clock can only be read where the host waits for the device
-     * (resampling steps, which cost more than the others): deciding there, all or nothing per
-     * 5-step interval, left a quarter of each frame's period idle (real-time factor 0.73
-     * instead of about 0.9 on the default scene). A frame still stops once it is over budget. */
+     * encoding (with the substep that ran beside it) and a margin; as many run as fit at the
+     * recent time per substep. The plan comes from the average of earlier frames, since the
+     * clock can only be read where the host waits for the device (resampling steps): deciding
+     * there, all or nothing per 5-step interval, left a quarter of each frame's period idle.
+     * The fraction of a substep a cut frame could not use goes to the next frame's budget
+     * (rounding down every frame wasted half a substep a frame), and the simulated time a cut
+     * frame leaves undone is carried up to one frame's worth, so a frame slowed by the host
+     * catches up in the next ones; beyond that it is dropped, and a scene too slow for the
+     * machine streams at a steady frame rate while /metrics reports its real-time factor. A
+     * frame still stops once it is over budget. */
     double t0 = clock_now() * 1e3, budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
-    int fit = fl->step_ms > 0 ? (int)(budget / fl->step_ms) : n;
+    double fitf = fl->step_ms > 0 ? budget / fl->step_ms + fl->fit_frac : n;
+    double backlog = fl->period_ms * 1e-3 * fl->time_scale;
+    int fit = (int)fitf;
+    fl->fit_frac = 0;
     if (n > fit) {
-        n = fit > 1 ? fit : 1;
-        fl->carry = 0;
+        int cut = fit > 1 ? fit : 1;
+        fl->carry = fmin(fl->carry + (n - cut) * fl->dt, backlog);
+        n = cut;
+        fl->fit_frac = fitf - n > 0 && fitf - n < 1 ? fitf - n : 0;
     }
     int done = 0;
     while (done < n) {
@@ -1031,7 +1092,7 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         if (fl_step_once(fl, err)) return -1;
         done++;
         if (synced && done < n && clock_now() * 1e3 - t0 > budget) {
-            fl->carry = 0;
+            fl->carry = fmin(fl->carry + (n - done) * fl->dt, backlog);
             break;
         }
     }
