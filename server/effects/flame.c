@@ -249,6 +249,7 @@ struct flame {
     int enc_threads; /* threads a frame's encoding may use: 1 on a CPU device, else the cores up to FL_ENC_THREADS_MAX */
     double step_ms; /* recent wall time per substep (moving average; 0 = not measured yet) */
     double fit_frac; /* the fraction of a substep that the budgets of frames cut short left over */
+    int ahead;       /* substeps of the coming frame already run beside the last encoding (0 or 1) */
     int rs_pending;  /* a resampling step's totals are being read into rs_tot and rs_err (fl_step_end) */
     cl_uint rs_tot[3];
     cl_int rs_err;
@@ -821,6 +822,7 @@ static int fl_restart(struct flame *fl, struct fx_err *err)
     struct fl_host hp = {0};
     fl->steps = 0;
     fl->sim_seconds = fl->carry = 0;
+    fl->ahead = 0;
     fl->next_id = 0;
     int rc = fl_finish(fl, err) || fl_zero_err(fl, err) || fl_add_solids(fl, &hp, fl->doc, err) ||
              fl_upload(fl, hp.n, hp.pos, hp.vel, hp.flags, hp.id, err);
@@ -892,6 +894,7 @@ int flame_load(struct flame *fl, const struct flame_particles *p, struct fx_err 
     if (fl_finish(fl, err) || fl_zero_err(fl, err)) return -1;
     fl->steps = 0;
     fl->sim_seconds = fl->carry = 0;
+    fl->ahead = 0;
     fl->next_id = 0;
     for (int i = 0; i < p->n; i++)
         if (p->id[i] >= fl->next_id) fl->next_id = p->id[i] + 1;
@@ -1035,6 +1038,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
     if (pre) {
         if (fl_step_begin(fl, err)) return -1;
         fl->carry -= fl->dt;
+        fl->ahead = 1;
     }
     struct effect_frame fr;
     uint8_t *payload = NULL;
@@ -1057,9 +1061,12 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
     struct flame *fl = self;
     (void)sim_time;
     fl->carry += dt * fl->time_scale;
-    int n = (int)fmax(floor(fl->carry / fl->dt + 0.5), 0); /* carry < 0: the last frame ran one ahead */
-    if (n > fl->max_substeps) {
-        n = fl->max_substeps;
+    /* The substeps this frame owes: none when the one run ahead covered them (carry < 0), and
+     * at most max_substeps counting that one. */
+    int n = (int)fmax(floor(fl->carry / fl->dt + 0.5), 0), most = fl->max_substeps - fl->ahead;
+    fl->ahead = 0;
+    if (n > most) {
+        n = most;
         fl->carry = 0;
     } else {
         fl->carry -= n * fl->dt;

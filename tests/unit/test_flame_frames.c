@@ -1,6 +1,6 @@
 /* test_flame_frames.c — the flame effect's frames through its effect_ops, as the engine
  * drives them: one kind 1 frame per step call, real time from the substep plan, a paused
- * stream that does not move, and the substep that runs beside the encoding (flame.c
+ * stream that does not move, max_substeps counting the substep run ahead, and the substep that runs beside the encoding (flame.c
  * fl_emit_frame): the frame shows the state before it, and the simulation afterwards is
  * the one flame_run gives, bit for bit. A coarse scene (Table 3.1's h, a few hundred
  * particles) keeps every frame far inside its wall-clock budget, so the plan is never cut. */
@@ -91,6 +91,19 @@ static void test_paused(void)
     flame_free(fl);
 }
 
+/* max_substeps 2: 2 substeps a frame, the one run ahead of the next frame among them (the
+ * last frame's ahead: 10 frames, 21 substeps). */
+static void test_max_substeps(void)
+{
+    struct flame *fl = tff_new("{\"h\":0.01125,\"max_substeps\":2}");
+    if (!fl) return;
+    struct tff_seen seen = {0};
+    tff_frames(fl, 10, &seen);
+    CHECK(flame_steps(fl) == 21, "%llu substeps in 10 frames at max_substeps 2", (unsigned long long)flame_steps(fl));
+    fxs_particles_free(&seen.last);
+    flame_free(fl);
+}
+
 /* Means of x, y, z and T of a decoded frame or of a read-back state. */
 static void tff_means(int n, const float *xyz, int xyz_stride, const float *t, int t_stride, double m[4])
 {
@@ -150,6 +163,7 @@ int main(void)
     if (ocl_open(&tff_ocl, CHECK_DEVICE(), &err)) return CHECK_ABORT("ocl_open(%s): %s", CHECK_DEVICE(), err.message);
     RUN(test_real_time);
     RUN(test_paused);
+    RUN(test_max_substeps);
     RUN(test_frame_before_prerun);
     ocl_close(tff_ocl);
     return CHECK_DONE();
