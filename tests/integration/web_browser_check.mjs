@@ -242,8 +242,12 @@ async function eyeChecks(ctx, port, fxctl, url) {
   check(li && li.mode === 'lut' && li.lutRev === 1 && li.cells === 32 && li.dirs === 32 && li.atlas === 1088 && li.lattice === 0,
         'a lens table (kind 4) arrives, decodes and is drawn', JSON.stringify(ready));
   check(bi && bi.mode === 'bake' && bi.bake === 512, 'a bake texture (kind 2 EXR) arrives and is drawn', JSON.stringify(bi));
-  const eyeLabel = await until(() => page.evaluate(() => document.querySelector('.label[data-view="eyelut:eye"]')?.textContent), 3000);
-  check(/lens table rev 1 · received \d+ s ago/.test(eyeLabel || ''), 'the lut eye shows its table rev and age, not a dead 0 fps', String(eyeLabel));
+  // The labels' second line is written once a second (main.js): wait for it, not for the
+  // label (a loaded CI host read the first line alone within the old 3 s).
+  const lensRe = /lens table rev 1 · received \d+ s ago/;
+  let eyeLabel = '';
+  await until(async () => lensRe.test(eyeLabel = (await page.evaluate(() => document.querySelector('.label[data-view="eyelut:eye"]')?.textContent)) || ''), 8000);
+  check(lensRe.test(eyeLabel), 'the lut eye shows its table rev and age, not a dead 0 fps', String(eyeLabel));
   await sleep(1200);
   const sq = await eyeImages(page);
   await page.screenshot({ path: join(ART, 'web-eye.png') });
@@ -419,6 +423,18 @@ async function flameChecks(ctx, port, fxctl) {
   await page.goto(`http://127.0.0.1:${port}/?streams=flame&grid=1x1&aa=0&drawfps=2&rl=2`, { timeout: 20000 });
   const drawn = () => page.evaluate(() => window.fxs.stats().flame?.drawn ?? 0);
   const nextDraw = async () => { const d = await drawn(); return until(async () => (await drawn()) > d, 8000, 100); };
+  // The white share of a flickering flame: the mean of five looks 0.5 s apart. One look ranges
+  // 2-17% on the same stream (2026-11-26, 40 looks of each of two builds: medians 6-7%), so a
+  // single look near the 15% bound passed or failed by chance.
+  const whiteMean = async () => {
+    const w = [];
+    for (let i = 0; i < 5; i++) {
+      const l = await page.evaluate(() => window.fxs.flameLook());
+      if (l) w.push(l.white);
+      await sleep(500);
+    }
+    return w.length === 5 ? { mean: w.reduce((s, x) => s + x, 0) / 5, looks: w } : null;
+  };
   check(await until(async () => (await drawn()) > 2, 30000, 500), 'flame view: frames drawn');
   const a = await page.evaluate(() => window.fxs.flameLook());
   await sleep(500);
@@ -427,7 +443,9 @@ async function flameChecks(ctx, port, fxctl) {
   await page.screenshot({ path: join(ART, 'web-flame-pbvr.png') });
   const info = await page.evaluate(() => window.fxs.flame());
   check(info?.mode === 'pbvr', 'the flame view defaults to PBVR', JSON.stringify(info));
-  check(a && a.bright > 0.01 && a.white <= 0.15, 'PBVR: at most 15% of the bright flame pixels are white', JSON.stringify(a));
+  const aw = await whiteMean();
+  check(a && a.bright > 0.01 && aw && aw.mean <= 0.15, 'PBVR: at most 15% of the bright flame pixels are white',
+    JSON.stringify({ a, aw }));
   check(a?.lower && a?.upper && a.lower.gr > a.upper.gr, 'PBVR: the lower third is hotter (yellower) than the upper third',
     JSON.stringify([a?.lower, a?.upper]));
   check(a && b && a.hash !== b.hash, 'PBVR: two looks 0.5 s apart differ');
@@ -447,7 +465,9 @@ async function flameChecks(ctx, port, fxctl) {
   await sleep(1500); // redrawn every display frame (drawfps=2), new stream frame or not
   const h = await page.evaluate(() => window.fxs.flameLook());
   await page.screenshot({ path: join(ART, 'web-flame-hdr.png') });
-  check(h && h.bright > 0.005 && h.white <= 0.15, 'hdr: lit, and at most 15% of the bright flame pixels are white', JSON.stringify(h));
+  const hw = await whiteMean();
+  check(h && h.bright > 0.005 && hw && hw.mean <= 0.15, 'hdr: lit, and at most 15% of the bright flame pixels are white',
+    JSON.stringify({ h, hw }));
   await page.evaluate(() => { window.fxs.flameSettings.mode = 'pbvr'; });
   const toggle = async () => page.evaluate(() => [...document.querySelectorAll('.lil-gui .controller')]
     .find((e) => e.textContent.includes('pbvr: velocity lines')).querySelector('input').click());
