@@ -1046,7 +1046,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
     if (ret == 0) ret = emit(ctx, &fr);
     free(payload);
     struct fx_err end_err = {0};
-    if (pre && fl_step_end(fl, &end_err) && ret == 0) {
+    if (pre && (fl_step_end(fl, &end_err) || fl_finish(fl, &end_err)) && ret == 0) {
         *err = end_err;
         ret = -1;
     }
