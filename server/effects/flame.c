@@ -1082,8 +1082,8 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
      * catches up in the next ones; beyond that it is dropped, and a scene too slow for the
      * machine streams at a steady frame rate while /metrics reports its real-time factor. A
      * frame still stops once it is over budget. Default scene, 2-vCPU AVX2 VM, variants
-     * interleaved in one process (README): real-time factor 0.83 -> 0.89 with this plan, 0.94
-     * with the substep beside the encoding too. */
+     * interleaved in one process (README): real-time factor 0.83-0.85 -> 0.88-0.89 with this
+     * plan, 0.90-0.94 with the substep beside the encoding too. */
     double t0 = clock_now() * 1e3, budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
     double fitf = fl->step_ms > 0 ? budget / fl->step_ms + fl->fit_frac : n;
     double backlog = fl->period_ms * 1e-3 * fl->time_scale;
