@@ -816,14 +816,20 @@ int flame_set(struct flame *fl, const cJSON *params, struct fx_err *err)
     return solids_changed && fl->cap ? fl_rebuild_solids(fl, params, err) : 0;
 }
 
-/* The initial state: the scene's solids only (§2.13). */
-static int fl_restart(struct flame *fl, struct fx_err *err)
+/* Steps, simulated time, the frame plan's carry and ids back to a fresh start. */
+static void fl_clock_reset(struct flame *fl)
 {
-    struct fl_host hp = {0};
     fl->steps = 0;
     fl->sim_seconds = fl->carry = 0;
     fl->ahead = 0;
     fl->next_id = 0;
+}
+
+/* The initial state: the scene's solids only (§2.13). */
+static int fl_restart(struct flame *fl, struct fx_err *err)
+{
+    struct fl_host hp = {0};
+    fl_clock_reset(fl);
     int rc = fl_finish(fl, err) || fl_zero_err(fl, err) || fl_add_solids(fl, &hp, fl->doc, err) ||
              fl_upload(fl, hp.n, hp.pos, hp.vel, hp.flags, hp.id, err);
     fl_host_free(&hp);
@@ -892,10 +898,7 @@ void flame_free(struct flame *fl)
 int flame_load(struct flame *fl, const struct flame_particles *p, struct fx_err *err)
 {
     if (fl_finish(fl, err) || fl_zero_err(fl, err)) return -1;
-    fl->steps = 0;
-    fl->sim_seconds = fl->carry = 0;
-    fl->ahead = 0;
-    fl->next_id = 0;
+    fl_clock_reset(fl);
     for (int i = 0; i < p->n; i++)
         if (p->id[i] >= fl->next_id) fl->next_id = p->id[i] + 1;
     return fl_upload(fl, p->n, p->pos, p->vel, p->flags, p->id, err);
@@ -1093,7 +1096,7 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         int cut = fit > 1 ? fit : 1;
         fl->carry = fmin(fl->carry + (n - cut) * fl->dt, backlog);
         n = cut;
-        fl->fit_frac = fitf - n > 0 && fitf - n < 1 ? fitf - n : 0;
+        fl->fit_frac = fmax(fitf - n, 0); /* < 1: n = floor(fitf), or 1 when fitf < 1 */
     }
     int done = 0;
     while (done < n) {
