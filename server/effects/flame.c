@@ -1027,6 +1027,16 @@ static int fl_encode(struct flame *fl, int n, struct effect_frame *fr, uint8_t *
     return 0;
 }
 
+/* Simulated seconds one frame of the stream covers. */
+static double fl_frame_sim(const struct flame *fl) { return fl->period_ms * 1e-3 * fl->time_scale; }
+
+/* A frame cut short passes its `undone` substeps on to the next frames, up to one frame's
+ * worth of simulated time (beyond that it is dropped: fl_step). */
+static void fl_carry_over(struct flame *fl, int undone)
+{
+    fl->carry = fmin(fl->carry + undone * fl->dt, fl_frame_sim(fl));
+}
+
 /* Reads the particles and emits one kind 1 frame. The next frame's first substep is enqueued
  * before the encoding (when that frame will step at all), so that the device, or PoCL's
  * workers on the CPU's other cores, compute it while the host encodes: the encoding no longer
@@ -1037,7 +1047,7 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
     double t_read = clock_now() * 1e3;
     int n = fl_read_frame(fl, err);
     if (n < 0) return -1;
-    int pre = fl->time_scale > 0 && fl->carry + fl->period_ms * 1e-3 * fl->time_scale >= 0.5 * fl->dt;
+    int pre = fl->time_scale > 0 && fl->carry + fl_frame_sim(fl) >= 0.5 * fl->dt;
     if (pre) {
         if (fl_step_begin(fl, err)) return -1;
         fl->carry -= fl->dt;
@@ -1089,12 +1099,11 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
      * plan, 0.90-0.94 with the substep beside the encoding too. */
     double t0 = clock_now() * 1e3, budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
     double fitf = fl->step_ms > 0 ? budget / fl->step_ms + fl->fit_frac : n;
-    double backlog = fl->period_ms * 1e-3 * fl->time_scale;
     int fit = (int)fitf;
     fl->fit_frac = 0;
     if (n > fit) {
         int cut = fit > 1 ? fit : 1;
-        fl->carry = fmin(fl->carry + (n - cut) * fl->dt, backlog);
+        fl_carry_over(fl, n - cut);
         n = cut;
         fl->fit_frac = fmax(fitf - n, 0); /* < 1: n = floor(fitf), or 1 when fitf < 1 */
     }
@@ -1104,7 +1113,7 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         if (fl_step_once(fl, err)) return -1;
         done++;
         if (synced && done < n && clock_now() * 1e3 - t0 > budget) {
-            fl->carry = fmin(fl->carry + (n - done) * fl->dt, backlog);
+            fl_carry_over(fl, n - done);
             break;
         }
     }
