@@ -24,6 +24,11 @@ enum fxs_kind {
 };
 #define FXS_KIND_MAX 4
 
+/* The range of subscribe's max_fps (PROTOCOL.md §3.5): at least one step every 100 s, so a
+ * subscription's interval always fits the daemon's timers. */
+#define FXS_MAX_FPS_MIN 0.01
+#define FXS_MAX_FPS_MAX 1000.0
+
 /* Codecs of kind 2 (texture) payloads. */
 enum fxs_texture_codec {
     FXS_CODEC_EXR = 1, /* payload is a complete OpenEXR file */

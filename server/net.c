@@ -231,10 +231,16 @@ static void net_retry_unlink(struct net *net, struct net_conn *c)
 
 static void net_retry_fire(lws_sorted_usec_list_t *sul);
 
+/* The delay is clamped to [0, NET_RETRY_MAX_S] before it becomes microseconds, so no interval
+ * (a subscription's 1/max_fps included) can overflow lws's 64-bit timer or schedule it in the past. */
+#define NET_RETRY_MAX_S 3600.0
 static void net_retry_schedule(struct net *net, double at, double now)
 {
-    net->retry_sul_at = at;
-    lws_sul_schedule(net->ctx, 0, &net->retry_sul, net_retry_fire, (lws_usec_t)((at - now) * 1e6) + 1);
+    double delay = at - now;
+    if (!(delay > 0)) delay = 0;
+    if (delay > NET_RETRY_MAX_S) delay = NET_RETRY_MAX_S;
+    net->retry_sul_at = now + delay;
+    lws_sul_schedule(net->ctx, 0, &net->retry_sul, net_retry_fire, (lws_usec_t)(delay * 1e6) + 1);
 }
 
 /* Wakes ss after `delay` seconds (or earlier, when it is already due sooner). */

@@ -373,8 +373,9 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
     static const char *const allowed[] = {"stream", "max_fps", NULL};
     if (session_only(req, "subscribe", allowed, err)) return -1;
     const cJSON *mf = cJSON_GetObjectItemCaseSensitive(req, "max_fps");
-    if (mf && !(cJSON_IsNumber(mf) && isfinite(mf->valuedouble) && mf->valuedouble > 0 && mf->valuedouble <= 1000))
-        return fx_fail(err, "bad_request", "max_fps", "max_fps must be a number in (0, 1000]");
+    if (mf && !(cJSON_IsNumber(mf) && mf->valuedouble >= FXS_MAX_FPS_MIN && mf->valuedouble <= FXS_MAX_FPS_MAX))
+        return fx_fail(err, "bad_request", "max_fps", "max_fps must be a number in [%g, %g]", FXS_MAX_FPS_MIN,
+                       FXS_MAX_FPS_MAX);
     struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
     int i = session_find_sub(ss, s);
@@ -393,6 +394,7 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
         i = ss->nsubs++;
         memset(&p[i], 0, sizeof p[i]);
         p[i].s = s; /* the reference passes to the subscription */
+        p[i].step_time = NAN; /* no step sent yet: the first frame (sim_time 0 too) starts one */
         struct stream_status st;
         hub_status(&ss->srv->hub, s, &st);
         p[i].error_gen = st.error_gen;

@@ -21,7 +21,7 @@ struct sub {
     struct stream *s;
     double min_interval;  /* 1 / max_fps, 0 = unlimited */
     double last_sent;     /* CLOCK_MONOTONIC seconds of the last step's first frame sent */
-    double step_time;     /* that step's sim_time: its other kinds are not held back by max_fps */
+    double step_time;     /* that step's sim_time (NAN before the first): its other kinds are not held back by max_fps */
     uint64_t last_seq[FXS_KIND_MAX + 1];
     uint64_t error_gen;   /* stream errors already reported */
 };

@@ -154,8 +154,8 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
         if (fxctl_parse_long(val, 1, &o->frames)) return fxctl_usage("--frames needs a positive integer", val);
     } else if (!strcmp(name, "--max-fps")) {
         o->max_fps = strtod(val, &end);
-        if (end == val || *end || !(o->max_fps > 0) || !isfinite(o->max_fps))
-            return fxctl_usage("--max-fps needs a positive number", val);
+        if (end == val || *end || !(o->max_fps >= FXS_MAX_FPS_MIN && o->max_fps <= FXS_MAX_FPS_MAX))
+            return fxctl_usage("--max-fps needs a number in [0.01, 1000]", val);
     } else if (!strcmp(name, "--kind")) {
         if (fxctl_parse_long(val, 1, &n) || n > FXS_KIND_MAX) return fxctl_usage("--kind needs a frame kind, 1..4", val);
         o->kind = (int)n;

@@ -38,7 +38,7 @@ static const char ld_help[] =
     "                     every stream of its group); connections are shared among the\n"
     "                     groups in proportion to WEIGHT (default 1).\n"
     "                     Default energy,flame (half each). E.g. flame:3,energy:1\n"
-    "  --max-fps F        subscribe mode: max_fps of each subscription, (0, 1000]\n"
+    "  --max-fps F        subscribe mode: max_fps of each subscription, [0.01, 1000]\n"
     "  --set SPEC         set mode: STREAM.PARAM=LO..HI (uniform random number; integers\n"
     "                     when LO and HI are) or STREAM.PARAM=JSON (fixed value); may be\n"
     "                     repeated, each set message uses the next SPEC in turn.\n"

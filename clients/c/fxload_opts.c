@@ -145,8 +145,8 @@ static int ld_opt_mode(struct ld_opts *o, const char *v)
 
 static int ld_opt_max_fps(struct ld_opts *o, const char *v)
 {
-    if (ld_parse_double(v, &o->max_fps) || !(o->max_fps > 0) || o->max_fps > 1000)
-        return ld_usage("--max-fps needs a number in (0, 1000]", v);
+    if (ld_parse_double(v, &o->max_fps) || !(o->max_fps >= FXS_MAX_FPS_MIN && o->max_fps <= FXS_MAX_FPS_MAX))
+        return ld_usage("--max-fps needs a number in [0.01, 1000]", v);
     return 0;
 }
 

@@ -313,6 +313,36 @@ async def test_destroy_and_max_fps(t):
     await sub.close()
 
 
+async def test_max_fps_range(t):
+    """max_fps is bounded to [0.01, 1000]: a rate like 1e-14 was once accepted and its interval
+    overflowed the daemon's timer, which then spun and ignored healthz, new clients and SIGTERM."""
+    c, slow, other = await Client.connect(D), await Client.connect(D), await Client.connect(D)
+    await c.request("create", effect="energy_wave", stream="rare", params=SMALL)
+    for mf in (1e-14, 1e-300, 5e-324, 0.0099):
+        r = await slow.request("subscribe", stream="rare", max_fps=mf)
+        t.check(r["op"] == "error" and r["code"] == "bad_request" and r.get("param") == "max_fps",
+                "max_fps %g refused (%s)" % (mf, r.get("message")))
+    r = await slow.request("subscribe", stream="rare", max_fps=0.01)
+    t.check(r["op"] == "subscribed", "max_fps 0.01 (the minimum) accepted")
+    await slow.frame(kind=2)
+    status, _, _ = http_get("/healthz")
+    t.check(status == 200, "healthz answers beside a 0.01 fps subscription")
+    r = await other.request("subscribe", stream="rare")
+    n = 0
+    for _ in range(5):
+        await other.frame(kind=2, timeout=5)
+        n += 1
+    t.check(n == 5, "another subscriber of the same stream keeps getting frames")
+    try:
+        f = await slow.frame(kind=2, timeout=1.0)
+        t.check(False, "the 0.01 fps subscriber got a second step within 1 s (seq %d)" % f["seq"])
+    except asyncio.TimeoutError:
+        t.check(True, "the 0.01 fps subscriber waits for its next step")
+    await c.request("destroy", stream="rare")
+    for x in (c, slow, other):
+        await x.close()
+
+
 async def test_persistence(t):
     global D
     c = await Client.connect(D)
@@ -536,7 +566,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_metrics_parse, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_persistence, test_rev_64bit, test_state_write_failure, test_presets_persist, test_quarantine, test_stream_events,
+               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_max_fps_range, test_persistence, test_rev_64bit, test_state_write_failure, test_presets_persist, test_quarantine, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)

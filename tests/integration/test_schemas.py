@@ -268,6 +268,8 @@ INVALID = [
     ({"op": "set", "stream": "energy", "params": "alpha=2"}, "bad_request", "set params not an object"),
     ({"op": "subscribe", "stream": "energy", "max_fps": 0}, "bad_request", "max_fps 0"),
     ({"op": "subscribe", "stream": "energy", "max_fps": 1001}, "bad_request", "max_fps above 1000"),
+    ({"op": "subscribe", "stream": "energy", "max_fps": 1e-14}, "bad_request", "max_fps below 0.01"),
+    ({"op": "subscribe", "stream": "energy", "max_fps": 5e-324}, "bad_request", "max_fps denormal"),
     ({"op": "subscribe", "stream": "energy", "max_fps": "30"}, "bad_request", "max_fps a string"),
     ({"op": "subscribe"}, "bad_request", "subscribe without stream"),
     ({"op": "reset", "stream": ["energy"]}, "bad_request", "stream an array"),
