@@ -7,36 +7,20 @@
 // picture; a change made in a second page appears in the first; a server error shows next
 // to its field; compound eyes (created here, mode lut and bake) show a lattice of facets
 // with pigment, the look-up-table view agrees with the server's bake from the same eye, and
-// the lattice follows the client-side density; the flame view alone (PBVR by default, not
+// the lattice follows the client-side density; the flame view alone (volume by default; PBVR not
 // blown out, hotter at the base, moving; orbit drag and double-click home; the hdr mode;
 // velocity lines: the view toggle turns the stream's velocities on, lines are drawn and
 // change the picture, and a view-only page is told instead); the page reconnects after a
 // daemon restart.
 // Screenshots go to build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
-import { chromium } from 'playwright-core';
-import { spawn, execFileSync } from 'node:child_process';
-import { mkdtempSync, mkdirSync, rmSync } from 'node:fs';
+import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
-import { join, resolve, dirname } from 'node:path';
-import { fileURLToPath } from 'node:url';
+import { join } from 'node:path';
+import { ART, checker, collectErrors, fxctlAt, launchBrowser, sleep, startDaemon as start, stopDaemon, until } from './web_lib.mjs';
 
-const ROOT = resolve(dirname(fileURLToPath(import.meta.url)), '..', '..');
-const ART = join(ROOT, 'build', 'artifacts');
 const LOOK_ONLY = process.argv.includes('--look'); // screenshots only (development)
-mkdirSync(ART, { recursive: true });
-let passed = 0, failed = 0;
-const T0 = Date.now();
-function check(ok, name, detail = '') {
-  name = `${name} [${((Date.now() - T0) / 1000).toFixed(1)} s]`;
-  if (ok) { passed++; console.log('ok   ' + name); } else { failed++; console.log('FAIL ' + name + (detail ? ': ' + detail : '')); }
-}
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-async function until(fn, ms, step = 200) { // bounded polling; returns the last value
-  const end = Date.now() + ms;
-  let v;
-  while (Date.now() < end) { try { v = await fn(); if (v) return v; } catch { /* retry */ } await sleep(step); }
-  return v;
-}
+const checks = checker('test_web_browser');
+const check = checks.check;
 // Bounded: about 210 s on an idle 2-core machine (SwiftShader renders every view); the limit
 // leaves room for a loaded one.
 const hardStop = setTimeout(() => { console.log('FAIL overall time limit (420 s)'); finish(1); }, 420000);
@@ -44,36 +28,16 @@ const hardStop = setTimeout(() => { console.log('FAIL overall time limit (420 s)
 const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
 let daemon = null, ctx = null;
+const startDaemon = (port, env = {}) => start(port, stateDir, env);
 
-function startDaemon(port, env = {}) {
-  return new Promise((res, rej) => {
-    const p = spawn(join(ROOT, 'build', 'fxstreamd'), ['--port', String(port), '--state-dir', stateDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, ...env } });
-    let out = '';
-    const t = setTimeout(() => rej(new Error('daemon did not start: ' + out)), 15000);
-    p.stdout.on('data', (d) => {
-      out += d;
-      const m = out.match(/127\.0\.0\.1:(\d+)\//);
-      if (m) { clearTimeout(t); res({ proc: p, port: Number(m[1]) }); }
-    });
-    p.on('exit', () => rej(new Error('daemon exited: ' + out)));
-  });
-}
-function stopDaemon(d) {
-  return new Promise((res) => {
-    if (!d || d.proc.exitCode !== null) { res(); return; }
-    const t = setTimeout(() => { d.proc.kill('SIGKILL'); res(); }, 5000);
-    d.proc.once('exit', () => { clearTimeout(t); res(); });
-    d.proc.kill('SIGTERM');
-  });
-}
 async function finish(code) {
   clearTimeout(hardStop);
   try { await ctx?.close(); } catch { /* ignore */ }
   await stopDaemon(daemon);
   try { rmSync(profile, { recursive: true, force: true }); } catch { /* chromium may still be writing */ }
   rmSync(stateDir, { recursive: true, force: true });
-  console.log(`test_web_browser: ${passed} passed, ${failed} failed`);
-  process.exit(code ?? (failed ? 1 : 0));
+  checks.summary();
+  process.exit(code ?? (checks.failed ? 1 : 0));
 }
 
 async function healthRev(port, stream) {
@@ -408,7 +372,7 @@ async function panelChecks(ctx, page, port, url) {
   check(!!back && (await serverParams(port, 'energy')).rev === rev0 + 1, 'all parameters to defaults: the default curves, in one set');
 }
 
-// The flame view alone (issue 13): PBVR by default, not blown out (of the flame's pixels
+// The flame view alone: the volume mode by default (its look is test_web_look's); PBVR not blown out (of the flame's pixels
 // brighter than 10%, at most 15% have every channel >= 0.98), hotter at the base than at the
 // top, moving; the orbit camera turns with a mouse drag and a double-click brings it home;
 // the hdr mode keeps the hot core under white too. Screenshots of both modes. Velocity
@@ -436,13 +400,15 @@ async function flameChecks(ctx, port, fxctl) {
     return w.length === 5 ? { mean: w.reduce((s, x) => s + x, 0) / 5, looks: w } : null;
   };
   check(await until(async () => (await drawn()) > 2, 30000, 500), 'flame view: frames drawn');
+  const info = await page.evaluate(() => window.fxs.flame());
+  check(info?.mode === 'volume', 'the flame view defaults to the volume mode', JSON.stringify(info));
+  await page.evaluate(() => { window.fxs.flameSettings.mode = 'pbvr'; });
+  await nextDraw();
   const a = await page.evaluate(() => window.fxs.flameLook());
   await sleep(500);
   await nextDraw();
   const b = await page.evaluate(() => window.fxs.flameLook());
   await page.screenshot({ path: join(ART, 'web-flame-pbvr.png') });
-  const info = await page.evaluate(() => window.fxs.flame());
-  check(info?.mode === 'pbvr', 'the flame view defaults to PBVR', JSON.stringify(info));
   const aw = await whiteMean();
   check(a && a.bright > 0.01 && aw && aw.mean <= 0.15, 'PBVR: at most 15% of the bright flame pixels are white',
     JSON.stringify({ a, aw }));
@@ -497,18 +463,12 @@ try {
   const port = daemon.port;
   // The default streams, made cheaper for a 2-core machine running software WebGL, and the
   // wave's pulse off so the billboard is never momentarily dark.
-  const fxctl = (...a) => execFileSync(join(ROOT, 'build', 'fxctl'), ['--url', `ws://127.0.0.1:${port}`, ...a], { timeout: 15000 });
+  const fxctl = fxctlAt(port);
   fxctl('set', 'flame', 'fps=8');
   fxctl('set', 'energy', 'fps=3', 'animate=false');
-  ctx = await chromium.launchPersistentContext(profile, {
-    executablePath: '/usr/bin/chromium', headless: true, viewport: { width: 800, height: 480 },
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-  });
+  ctx = await launchBrowser(profile, { width: 800, height: 480 });
   const page = ctx.pages()[0] || await ctx.newPage();
-  const logs = [];
-  page.on('console', (m) => { if ((m.type() === 'error' || m.type() === 'warning') && !m.text().includes('GL Driver Message')) logs.push(m.text()); });
-  page.on('pageerror', (e) => logs.push('pageerror: ' + e.message));
+  const logs = collectErrors(page);
   const url = `http://127.0.0.1:${port}/?rl=2&aa=0&drawfps=1`;
   const resp = await page.goto(url, { timeout: 20000 });
   check(resp && resp.ok(), 'page served at / by fxstreamd');

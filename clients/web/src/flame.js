@@ -1,8 +1,20 @@
 // flame.js — the `flame` stream (kind 1 particles, codec 2, decoded by fxs_particles.js) in
-// one of two modes, on a fixed stage (a ground grid in centimetres and each source's outline,
+// one of three modes, on a fixed stage (a ground grid in centimetres and each source's outline,
 // in world units) with an orbit camera that never re-frames on the particles:
 //
-// pbvr (default), the thesis's particle-based volume rendering (digest 002 §4.4–4.6): per
+// volume (default), a continuous emissive body as real-time fire is drawn in games: each
+//   particle is splatted as a soft Gaussian kernel (a few particle spacings wide) into a
+//   half-resolution float target that sums emission (hot particles, growing with heat),
+//   emission × heat and smoke density (cooling gas); nothing is splatted below the sources'
+//   plane (the plate). A composite pass maps the emission-weighted mean heat through a fire
+//   ramp (deep red → orange → yellow-white), turns emission into opacity with 1 − e^(−gain·E)
+//   so the core saturates to the ramp's colour instead of clipping to white, breaks the edge
+//   into rising tongues with animated noise (a displacement that grows with height and a
+//   modulation of the emission), and lays grey smoke under the fire; the result is blended
+//   over the stage with premultiplied alpha, so the grid is hidden behind the flame.
+//   Splatting on the client keeps the wire format and the server's cost unchanged, and one
+//   draw of N sprites plus one full-screen pass is cheap on any WebGL2 GPU.
+// pbvr, the thesis's particle-based volume rendering (digest 002 §4.4–4.6): per
 //   physics particle n = floor(n_max·heat + u) render particles (heat = (T − T_amb) /
 //   (T_max − T_amb)), each at a random offset from one shared table indexed only by (pass r,
 //   emission k), never by the buffer index (the server re-sorts); opaque sprites with a holey
@@ -30,9 +42,12 @@ const BB_T = [800, 1000, 1200, 1500, 1800, 2000, 2200, 2500, 2800, 3000];
 const BB_RGB = [[1, 0.059, 0], [1, 0.116, 0], [1, 0.189, 0], [1, 0.314, 0.009], [1, 0.45, 0.088], [1, 0.543, 0.172],
   [1, 0.638, 0.283], [1, 0.778, 0.503], [1, 0.914, 0.783], [1, 1, 1]];
 
+// volume: kernel diameter in particle spacings, and the emission → opacity gain of 1 − e^(−gain·E)
+const VOLUME_KERNEL = 7, VOLUME_GAIN = 0.4, VOLUME_SMOKE_GAIN = 0.25, VOLUME_HEAT_SCALE = 1.35, VOLUME_TONGUES = 2.2;
+export const FLAME_MODES = ['volume', 'pbvr', 'hdr'];
 export const FLAME_DEFAULTS = {
-  mode: 'pbvr', rl: 15, threshold: 0.3, intensity: 1.0, smoke: true, smokeT: 1000, smokeColor: '#595959',
-  whiteT: 4000, exposure: 1.0, velLines: false, velScale: 0.005,
+  mode: 'volume', rl: 15, threshold: 0.3, intensity: 1.0, smoke: true, smokeT: 1000, smokeColor: '#595959',
+  whiteT: 4000, exposure: 1.0, velLines: false, velScale: 0.005, tongues: 1.0, smokeDensity: 1.0, density: 1.0, kernel: VOLUME_KERNEL,
 };
 const LINE_ALPHA = 0.3; // a hot particle's segment at the particle; × (0.35 + 0.65 heat), fading to the tip
 
@@ -175,6 +190,89 @@ void main() {
   gl_FragColor = vec4(vColor * gain * texture2D(alphaTex, gl_PointCoord).a, 1.0);  // additive
 }`;
 
+// volume: one soft Gaussian kernel per particle, summed into a float target: (emission,
+// emission × heat, smoke density, 1). Below the clip plane (the plate under the sources)
+// the kernel is cut with a short fade, so no light is drawn under the base.
+const SPLAT_VERT = /* glsl */ `${COMMON_VERT}
+uniform float smokeT, smokeOn, kernel, clipH;
+uniform vec3 upW, clipPoint;
+uniform vec2 upScreen;   // world-up component of the camera's right and up vectors
+varying vec4 vW;
+varying vec3 vClip;      // the particle's height above the clip plane, its change across the sprite (x, y)
+void main() {
+  float heat = heatOf(itemp);
+  bool hot = itemp >= smokeT;
+  float smoke = smokeOn * clamp((itemp - tAmb) / max(smokeT - tAmb, 1.0), 0.0, 1.0);
+  float e = hot ? heat * sqrt(heat) : 0.0;
+  if (e <= 0.0 && smoke <= 0.0) { hide(); return; }
+  float size = kernel * radius;
+  place(ipos, size);
+  vW = vec4(e, e * heat, hot ? 0.0 : smoke, 1.0);
+  vClip = vec3(dot(ipos - clipPoint, upW), 0.5 * size * upScreen);
+}`;
+
+const SPLAT_FRAG = /* glsl */ `
+uniform float clipFade;
+varying vec4 vW;
+varying vec3 vClip;
+void main() {
+  vec2 q = 2.0 * gl_PointCoord - 1.0;
+  float r2 = dot(q, q);
+  if (r2 >= 1.0) discard;
+  float h = vClip.x + q.x * vClip.y - q.y * vClip.z;   // gl_PointCoord's y grows downwards
+  float g = (exp(-3.0 * r2) - 0.0498) * smoothstep(0.0, clipFade, h);
+  gl_FragColor = vW * g;
+}`;
+
+// 2D value noise and fbm for the composite's tongues.
+const NOISE_GLSL = /* glsl */ `
+float hash12(vec2 p) { vec3 q = fract(vec3(p.xyx) * 0.1031); q += dot(q, q.yzx + 33.33); return fract((q.x + q.y) * q.z); }
+float vnoise(vec2 p) {
+  vec2 i = floor(p), f = fract(p), u = f * f * (3.0 - 2.0 * f);
+  return mix(mix(hash12(i), hash12(i + vec2(1, 0)), u.x), mix(hash12(i + vec2(0, 1)), hash12(i + vec2(1, 1)), u.x), u.y);
+}
+float fbm(vec2 p) { float a = 0.5, s = 0.0; for (int i = 0; i < 4; i++) { s += a * vnoise(p); p = p * 2.03 + 17.1; a *= 0.5; } return s / 0.9375; }`;
+
+// The fire ramp over the emission-weighted mean heat, in display (sRGB) values.
+const RAMP_GLSL = /* glsl */ `
+vec3 fireRamp(float h) {
+  const vec3 c0 = vec3(0.30, 0.03, 0.01), c1 = vec3(0.80, 0.16, 0.02), c2 = vec3(1.00, 0.42, 0.06),
+             c3 = vec3(1.00, 0.70, 0.22), c4 = vec3(1.00, 0.92, 0.55);
+  h = clamp(h, 0.0, 1.0) * 4.0;
+  if (h < 1.0) return mix(c0, c1, h);
+  if (h < 2.0) return mix(c1, c2, h - 1.0);
+  if (h < 3.0) return mix(c2, c3, h - 2.0);
+  return mix(c3, c4, h - 3.0);
+}`;
+
+const VOLUME_FRAG = /* glsl */ `
+uniform sampler2D src;
+uniform vec2 viewPx;        // the view's size in pixels
+uniform float pxPerM, baseY, time, gain, intensity, tongues, smokeGain, heatScale, glow, glowLod;
+uniform vec3 smokeColor;    // display values
+varying vec2 vUv;
+${NOISE_GLSL}
+${RAMP_GLSL}
+void main() {
+  vec2 m = vUv * viewPx / pxPerM;                       // metres across the view plane
+  float above = max(0.0, (vUv.y - baseY) * viewPx.y / pxPerM);
+  vec2 flow = m * 55.0 - vec2(0.0, 9.0 * time);         // ~2 cm cells rising at ~16 cm/s
+  vec2 d = vec2(fbm(flow), fbm(flow + vec2(5.2, 1.3))) - 0.5;
+  vec2 uv = vUv + tongues * d * vec2(0.004 + 0.12 * above, 0.12 * above) * pxPerM / viewPx;
+  vec4 s = texture2D(src, uv);
+  float breakup = mix(1.0, 0.45 + 1.1 * fbm(m * 90.0 - vec2(0.0, 14.0 * time)), clamp(0.5 * tongues, 0.0, 1.0));
+  float E = s.r * breakup;
+  float heat = heatScale * s.g / max(s.r, 1e-6);
+  float af = 1.0 - exp(-gain * E);
+  vec3 fire = fireRamp(heat * (0.55 + 0.45 * af)) * af * intensity;
+  float as = 1.0 - exp(-smokeGain * s.b);
+  vec4 wide = textureLod(src, vUv, glowLod);                              // the emission around, for the glow
+  float ag = glow * (1.0 - exp(-gain * wide.r)) * (1.0 - af) * smoothstep(baseY - 0.01, baseY + 0.01, vUv.y);
+  vec3 halo = fireRamp(0.6 * heatScale * wide.g / max(wide.r, 1e-6)) * ag;
+  float a = 1.0 - (1.0 - af) * (1.0 - as);
+  gl_FragColor = vec4(fire + smokeColor * as * (1.0 - af) + halo * (1.0 - as), a);  // premultiplied; the halo adds light
+}`;
+
 // The stage: a 40 cm ground grid of 1 cm cells normal to `up` and each source's outline.
 function makeStage() {
   const g = new THREE.Group();
@@ -218,6 +316,25 @@ export class FlameView {
       vertexShader: HDR_VERT, fragmentShader: HDR_FRAG,
       uniforms: { ...common, alphaTex: { value: spriteTexture(false) }, gain: { value: 0.08 } },
       depthTest: true, depthWrite: false, blending: THREE.AdditiveBlending, transparent: true,
+    });
+    this.splat = new THREE.ShaderMaterial({
+      vertexShader: SPLAT_VERT, fragmentShader: SPLAT_FRAG,
+      uniforms: {
+        ...common, smokeT: { value: 1000 }, smokeOn: { value: 1 }, kernel: { value: VOLUME_KERNEL }, clipFade: { value: 0.001 },
+        upW: { value: new THREE.Vector3(0, 0, 1) }, clipPoint: { value: new THREE.Vector3() }, upScreen: { value: new THREE.Vector2() },
+      },
+      depthTest: false, depthWrite: false, transparent: true, blending: THREE.CustomBlending,
+      blendEquation: THREE.AddEquation, blendSrc: THREE.OneFactor, blendDst: THREE.OneFactor,
+      blendSrcAlpha: THREE.OneFactor, blendDstAlpha: THREE.OneFactor,
+    });
+    this.volume = fullscreenQuad(VOLUME_FRAG, {
+      src: { value: null }, viewPx: { value: new THREE.Vector2(1, 1) }, pxPerM: { value: 1 }, baseY: { value: 0 }, time: { value: 0 },
+      gain: { value: VOLUME_GAIN }, intensity: { value: 1 }, tongues: { value: 1 }, smokeGain: { value: 0.2 }, heatScale: { value: VOLUME_HEAT_SCALE },
+      glow: { value: 0.35 }, glowLod: { value: 4 },
+      smokeColor: { value: new THREE.Color() },
+    }, {
+      transparent: true, blending: THREE.CustomBlending, blendEquation: THREE.AddEquation,
+      blendSrc: THREE.OneFactor, blendDst: THREE.OneMinusSrcAlphaFactor,
     });
     this.lineMat = new THREE.ShaderMaterial({
       vertexShader: LINE_VERT, fragmentShader: LINE_FRAG,
@@ -347,18 +464,21 @@ export class FlameView {
     return true;
   }
 
-  target(name, w, h, depth) {
+  target(name, w, h, depth, mipmaps = false) {
     let t = this.targets[name];
     if (!t || t.width !== w || t.height !== h) {
       t?.dispose();
-      t = this.targets[name] = new THREE.WebGLRenderTarget(w, h, { type: THREE.HalfFloatType, depthBuffer: depth });
+      t = this.targets[name] = new THREE.WebGLRenderTarget(w, h, {
+        type: THREE.HalfFloatType, depthBuffer: depth, generateMipmaps: mipmaps,
+        minFilter: mipmaps ? THREE.LinearMipmapLinearFilter : THREE.LinearFilter,
+      });
     }
     return t;
   }
 
   setUniforms(w, h) {
     const pr = this.params || {}, s = this.settings, { scale, d } = this.frameOf();
-    for (const m of [this.pbvr, this.hdr]) {
+    for (const m of [this.pbvr, this.hdr, this.splat]) {
       m.uniforms.tAmb.value = pr.T_amb ?? 300;
       m.uniforms.tMax.value = s.whiteT;
       m.uniforms.radius.value = d;
@@ -367,6 +487,8 @@ export class FlameView {
     const u = this.pbvr.uniforms, lu = this.lineMat.uniforms;
     u.threshold.value = s.threshold;
     lu.velScale.value = s.velScale; // tAmb, tMax and the table: the uniforms all three materials share
+    this.splat.uniforms.smokeOn.value = s.smoke ? 1 : 0;
+    this.splat.uniforms.smokeT.value = s.smokeT;
     for (const m of [u, lu]) {
       m.smokeOn.value = s.smoke ? 1 : 0;
       m.smokeT.value = s.smokeT;
@@ -378,12 +500,86 @@ export class FlameView {
     this.camera.updateProjectionMatrix();
   }
 
-  render(renderer, rect) {
+  render(renderer, rect, time = 0) {
     if (!this.count) return false;
     const w = Math.max(1, Math.round(rect.w)), h = Math.max(1, Math.round(rect.h)), s = this.settings;
     this.orbit?.update();
     this.setUniforms(w, h);
-    const hdr = s.mode === 'hdr';
+    if (s.mode === 'volume') this.renderVolume(renderer, rect, w, h, time);
+    else this.renderParticles(renderer, rect, w, h);
+    this.lineVertices = 0;
+    if (s.mode !== 'hdr' && s.velLines && this.hasVel) { // over the picture, in this view's rectangle
+      renderer.render(this.lineScene, this.camera);
+      this.lineVertices = 2 * renderer.info.render.lines;
+    }
+    const drew = this.newFrame;
+    this.newFrame = false;
+    return drew;
+  }
+
+  // volume: the stage straight into the view, the kernels into a half-resolution target,
+  // then the fire composited over the stage (premultiplied alpha).
+  renderVolume(renderer, rect, w, h, time) {
+    const s = this.settings, { up, base, scale, d } = this.frameOf();
+    const sw = Math.max(1, Math.round(w / 2)), sh = Math.max(1, Math.round(h / 2));
+    const splat = this.target('splat', sw, sh, false, true), su = this.splat.uniforms;
+    this.camera.updateMatrixWorld();
+    const right = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 0);
+    const camUp = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1);
+    su.upW.value.copy(up);
+    su.upScreen.value.set(right.dot(up), camUp.dot(up));
+    su.clipPoint.value.copy(this.clipPoint(up, base, scale));
+    su.clipFade.value = (s.baseFade ?? 1) * d;
+    su.kernel.value = s.kernel;
+    su.pointScale.value = sh / (2 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
+    this.points.material = this.splat;
+    this.points.geometry = this.geoms.hdr;
+    this.stage.visible = false;
+    renderer.setRenderTarget(splat);
+    renderer.setClearColor(0x000000, 0);
+    renderer.clear(true, false, false);
+    renderer.render(this.scene, this.camera);
+    this.stage.visible = true;
+    this.points.visible = false;
+    renderer.setRenderTarget(null);
+    renderer.setViewport(rect.x, rect.y, rect.w, rect.h);
+    renderer.setScissor(rect.x, rect.y, rect.w, rect.h);
+    renderer.setScissorTest(true);
+    renderer.render(this.scene, this.camera);
+    this.points.visible = true;
+    const vu = this.volume.material.uniforms, pxPerM = this.pxPerMetre(h, base, scale);
+    vu.src.value = splat.texture;
+    vu.viewPx.value.set(w, h);
+    vu.pxPerM.value = pxPerM;
+    vu.baseY.value = this.screenY(base);
+    vu.time.value = time;
+    vu.intensity.value = s.intensity;
+    vu.gain.value = VOLUME_GAIN * s.density;
+    vu.tongues.value = VOLUME_TONGUES * s.tongues;
+    vu.smokeGain.value = s.smoke ? VOLUME_SMOKE_GAIN * s.smokeDensity : 0;
+    vu.smokeColor.value.set(s.smokeColor);
+    renderer.render(this.volume.scene, this.volume.camera);
+  }
+
+  // The plane below which nothing is drawn: through the lowest burning source's centre
+  // (the sources' plane; what leaks around the plate under it is not flame).
+  clipPoint(up, base, scale) {
+    let low = Infinity;
+    for (const src of this.params?.sources || []) if (src.enabled !== false) low = Math.min(low, new THREE.Vector3(...(src.center || [0, 0, 0])).dot(up));
+    return up.clone().multiplyScalar((Number.isFinite(low) ? low : base.dot(up) / scale) * scale);
+  }
+
+  // Pixels per world metre at the flame's base, and a point's height in the view (0 bottom, 1 top).
+  pxPerMetre(h, base, scale) {
+    const dist = Math.max(1e-6, this.camera.position.distanceTo(base));
+    return scale * h / (2 * dist * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
+  }
+
+  screenY(p) { return 0.5 + 0.5 * p.clone().project(this.camera).y; }
+
+  // pbvr and hdr: particle sprites into float targets, then composited into the view.
+  renderParticles(renderer, rect, w, h) {
+    const s = this.settings, hdr = s.mode === 'hdr';
     this.points.material = hdr ? this.hdr : this.pbvr;
     this.points.geometry = hdr ? this.geoms.hdr : this.geoms.pbvr;
     renderer.setScissorTest(false);
@@ -419,21 +615,28 @@ export class FlameView {
     cu.scale.value = hdr ? s.exposure : s.intensity;
     cu.aces.value = hdr ? 1 : 0;
     renderer.render(this.composite.scene, this.composite.camera);
-    this.lineVertices = 0;
-    if (!hdr && s.velLines && this.hasVel) { // over the picture, in this view's rectangle
-      renderer.render(this.lineScene, this.camera);
-      this.lineVertices = 2 * renderer.info.render.lines;
-    }
-    const drew = this.newFrame;
-    this.newFrame = false;
-    return drew;
   }
 
+  // What the view shows, for the stats overlay and the browser tests: baseRow is the lowest
+  // point of the sources' outlines on screen, as a fraction of the view's height from the top.
   info() {
     return {
       mode: this.settings.mode, count: this.count, cam: this.camera.position.toArray(), target: this.orbit?.target?.toArray(),
-      velocities: this.hasVel, lineVertices: this.lineVertices,
+      velocities: this.hasVel, lineVertices: this.lineVertices, baseRow: this.baseRow(),
     };
+  }
+
+  baseRow() {
+    let low = null;
+    for (const line of this.stage.userData.outlines.children) {
+      line.updateMatrixWorld();
+      const pos = line.geometry.attributes.position, p = new THREE.Vector3();
+      for (let i = 0; i < pos.count; i++) {
+        p.fromBufferAttribute(pos, i).applyMatrix4(line.matrixWorld).project(this.camera);
+        low = Math.max(low ?? -Infinity, 0.5 - 0.5 * p.y);
+      }
+    }
+    return low;
   }
 
   dispose() {
@@ -441,6 +644,8 @@ export class FlameView {
     for (const g of Object.values(this.geoms)) g?.dispose();
     this.pbvr.dispose();
     this.hdr.dispose();
+    this.splat.dispose();
+    this.volume.material.dispose();
     this.lineMat.dispose();
     this.orbit?.dispose();
   }

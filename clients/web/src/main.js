@@ -12,7 +12,7 @@ import { parseHeader } from '../fxs_particles.js';
 import { Conn } from './conn.js';
 import { StreamPanel } from './panel.js';
 import { STATS_HELP, StreamStats } from './stats.js';
-import { FLAME_DEFAULTS, FlameView } from './flame.js';
+import { FLAME_DEFAULTS, FLAME_MODES, FlameView } from './flame.js';
 import { WAVE_DEFAULTS, WaveView } from './wave.js';
 import { SceneView } from './scene.js';
 import { EyeView } from './eye.js';
@@ -38,12 +38,12 @@ renderer.setPixelRatio(Math.min(window.devicePixelRatio || 1, 2));
 
 const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
 // The flame's look (FlameView.settings, shared by every flame view): ?flame=hdr picks the mode.
-const flameSettings = { ...FLAME_DEFAULTS, mode: q.get('flame') === 'hdr' ? 'hdr' : 'pbvr', rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
+const flameSettings = { ...FLAME_DEFAULTS, mode: FLAME_MODES.includes(q.get('flame')) ? q.get('flame') : FLAME_DEFAULTS.mode, rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
 const waveSettings = { ...WAVE_DEFAULTS }; // WaveView.settings, shared by every wave view
 const viewSettings = { waveBlack: 0.55, waveGain: 1.6 };
 const vf = gui.addFolder('view (this page only)');
 const ff = vf.addFolder('flame');
-ff.add(flameSettings, 'mode', ['pbvr', 'hdr']).name('mode');
+ff.add(flameSettings, 'mode', FLAME_MODES).name('mode');
 ff.add(flameSettings, 'rl', 1, 32, 1).name('pbvr: repeat passes RL');
 ff.add(flameSettings, 'threshold', 0.05, 0.95, 0.01).name('pbvr: alpha test');
 ff.add(flameSettings, 'intensity', 0.2, 4, 0.01).name('pbvr: intensity scale');
