@@ -327,8 +327,8 @@ const action = (page, stream, a) => page.locator(`.lil-gui[data-stream="${stream
 // parameter back to its default.
 async function panelChecks(ctx, page, port, url) {
   const groups = await page.evaluate(() => [...document.querySelectorAll('.lil-gui[data-stream="flame"] [data-group]')].map((f) => f.dataset.group));
-  check(JSON.stringify(groups) === JSON.stringify(['presets', 'sources', 'forces', 'combustion', 'diffusion', 'numerics', 'output']),
-    'the flame panel has a folder per describe group', JSON.stringify(groups));
+  check(JSON.stringify(groups) === JSON.stringify(['look', 'presets', 'advanced', 'sources', 'forces', 'combustion', 'diffusion', 'numerics', 'output', 'display']),
+    'the flame panel: look, presets, then advanced with a folder per describe group and the display settings', JSON.stringify(groups));
   const doc = await page.evaluate(() => {
     const d = document.querySelector('.lil-gui[data-stream="energy"] [data-param="beta"] + .fxs-doc');
     return d && d.offsetHeight > 0 ? d.textContent : null;
@@ -435,8 +435,7 @@ async function flameChecks(ctx, port, fxctl) {
   check(h && h.bright > 0.005 && hw && hw.mean <= 0.15, 'hdr: lit, and at most 15% of the bright flame pixels are white',
     JSON.stringify({ h, hw }));
   await page.evaluate(() => { window.fxs.flameSettings.mode = 'pbvr'; });
-  const toggle = async () => page.evaluate(() => [...document.querySelectorAll('.lil-gui .controller')]
-    .find((e) => e.textContent.includes('pbvr: velocity lines')).querySelector('input').click());
+  const toggle = async () => page.evaluate(() => document.querySelector('.lil-gui [data-view="velLines"] input').click());
   await toggle();
   const lines = await until(async () => { const f = await page.evaluate(() => window.fxs.flame()); return f?.velocities && f.lineVertices > 0 ? f : null; }, 20000, 300);
   const velocities = () => JSON.parse(fxctl('get', 'flame').toString()).params.velocities;
@@ -584,8 +583,7 @@ try {
   const authed = await until(() => p3.evaluate(() => document.body.dataset.conn === 'connected'), 15000);
   check(authed && !p3.url().includes('token'), 'with ?token= it authenticates and drops the token from the URL', p3.url());
   await until(() => p3.evaluate(() => window.fxs.streams.get('flame')?.params), 10000);
-  await p3.evaluate(() => [...document.querySelectorAll('.lil-gui .controller')]
-    .find((e) => e.textContent.includes('pbvr: velocity lines')).querySelector('input').click());
+  await p3.evaluate(() => document.querySelector('.lil-gui [data-view="velLines"] input').click());
   const note = await until(() => p3.evaluate(() => document.body.dataset.velNote), 5000);
   check(/role \(view\) may not change/.test(note || '') && (await healthRev(port, 'flame')) === revView,
     'a view-only page turning velocity lines on is told to ask for a tune token, and sends no set', String(note));

@@ -41,26 +41,45 @@ const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
 const flameSettings = { ...FLAME_DEFAULTS, mode: FLAME_MODES.includes(q.get('flame')) ? q.get('flame') : FLAME_DEFAULTS.mode, rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
 const waveSettings = { ...WAVE_DEFAULTS }; // WaveView.settings, shared by every wave view
 const viewSettings = { waveBlack: 0.55, waveGain: 1.6 };
-const vf = gui.addFolder('view (this page only)');
-const ff = vf.addFolder('flame');
-ff.add(flameSettings, 'mode', FLAME_MODES).name('mode');
-ff.add(flameSettings, 'rl', 1, 32, 1).name('pbvr: repeat passes RL');
-ff.add(flameSettings, 'threshold', 0.05, 0.95, 0.01).name('pbvr: alpha test');
-ff.add(flameSettings, 'intensity', 0.2, 4, 0.01).name('pbvr: intensity scale');
-ff.add(flameSettings, 'smoke').name('pbvr: smoke');
-ff.add(flameSettings, 'smokeT', 300, 3000, 10).name('pbvr: smoke below T (K)');
-ff.addColor(flameSettings, 'smokeColor').name('pbvr: smoke colour');
-const velCtl = ff.add(flameSettings, 'velLines').name('pbvr: velocity lines').onChange(velocityLines);
 const velNote = Object.assign(document.createElement('div'), { className: 'fxs-doc fxs-vel-note' });
-velCtl.domElement.after(velNote);
-ff.add(flameSettings, 'velScale', 0.001, 0.05, 0.001).name('pbvr: velocity-line scale (s)');
-ff.add(flameSettings, 'whiteT', 1500, 8000, 50).name('white point T_max (K)');
-ff.add(flameSettings, 'exposure', 0.05, 8, 0.01).name('hdr: exposure');
-vf.add(waveSettings, 'bloom', 0, 3, 0.01).name('wave bloom');
-vf.add(waveSettings, 'exposure', 0.1, 8, 0.01).name('wave exposure');
-vf.add(viewSettings, 'waveBlack', 0, 2, 0.01).name('wave black level (B)');
-vf.add(viewSettings, 'waveGain', 0.1, 5, 0.01).name('wave level gain');
-vf.close();
+
+// The page's own settings of each effect's views, for its panel: the look folder's and the
+// rest ("advanced → display"). They change only this page's picture.
+function viewControls(effect) {
+  const f = flameSettings, w = waveSettings;
+  switch (effect) {
+    case 'flame': return {
+      look: [
+        { obj: f, key: 'mode', choices: FLAME_MODES, label: 'drawn as', doc: 'volume: a continuous glowing body; pbvr: the thesis\'s particle-based volume rendering; hdr: additive sprites' },
+        { obj: f, key: 'intensity', min: 0.2, max: 4, step: 0.01, label: 'intensity', doc: 'brightness of the fire' },
+        { obj: f, key: 'whiteT', min: 1500, max: 8000, step: 50, label: 'white point (K)', doc: 'the temperature drawn yellow-white: lower it for a hotter-looking fire' },
+        { obj: f, key: 'tongues', min: 0, max: 3, step: 0.01, label: 'turbulence (tongues)', doc: 'volume: how much the edge breaks into rising tongues' },
+        { obj: f, key: 'smoke', label: 'smoke', doc: 'grey smoke where the gas has cooled' },
+        { obj: f, key: 'smokeColor', color: true, label: 'smoke colour' },
+      ],
+      display: [
+        { obj: f, key: 'density', min: 0.2, max: 4, step: 0.01, label: 'volume: density', doc: 'how quickly the fire becomes opaque' },
+        { obj: f, key: 'smokeDensity', min: 0, max: 4, step: 0.01, label: 'volume: smoke density' },
+        { obj: f, key: 'kernel', min: 2, max: 12, step: 0.5, label: 'volume: kernel (spacings)', doc: 'width of each particle\'s soft kernel, in particle spacings' },
+        { obj: f, key: 'rl', min: 1, max: 32, step: 1, label: 'pbvr: repeat passes RL' },
+        { obj: f, key: 'threshold', min: 0.05, max: 0.95, step: 0.01, label: 'pbvr: alpha test' },
+        { obj: f, key: 'smokeT', min: 300, max: 3000, step: 10, label: 'smoke below T (K)' },
+        { obj: f, key: 'velLines', label: 'velocity lines', onChange: velocityLines },
+        { obj: f, key: 'velScale', min: 0.001, max: 0.05, step: 0.001, label: 'velocity-line scale (s)' },
+        { obj: f, key: 'exposure', min: 0.05, max: 8, step: 0.01, label: 'hdr: exposure' },
+      ],
+    };
+    case 'energy_wave': return {
+      look: [{ obj: w, key: 'bloom', min: 0, max: 3, step: 0.01, label: 'bloom', doc: 'glow around the bright core' }],
+      display: [
+        { obj: w, key: 'exposure', min: 0.1, max: 8, step: 0.01, label: 'exposure' },
+        { obj: viewSettings, key: 'waveBlack', min: 0, max: 2, step: 0.01, label: 'toon scene: black level (B)' },
+        { obj: viewSettings, key: 'waveGain', min: 0.1, max: 5, step: 0.01, label: 'toon scene: level gain' },
+      ],
+    };
+    default: return { look: [], display: [] };
+  }
+}
 
 const streams = new Map(); // name -> {name, effect, channel, params, rev, views, panel, stats, error}
 const byChannel = new Map();
@@ -179,8 +198,8 @@ async function attach(info) {
   };
   if (st.panel) st.panel.update(st.params, st.rev);
   else {
-    st.panel = new StreamPanel(gui, st.name, st.effect, schema, st.params, st.rev, api);
-    st.panel.folder.close();
+    st.panel = new StreamPanel(gui, st.name, st.effect, schema, st.params, st.rev, api, viewControls(st.effect));
+    if (st.effect === 'flame') st.panel.folder.domElement.querySelector('[data-view="velLines"]')?.after(velNote);
   }
   st.maxFps = START_FPS;
   st.minLat = undefined;

@@ -1,12 +1,16 @@
 // panel.js — the tuning panel of one stream, generated from its effect's `describe` schema
-// (PROTOCOL.md §10) with lil-gui. Parameters sit in one folder per `group`, each with its doc
-// line and unit visible under it and a ↺ button that puts it back to its default. Widgets: a
+// (PROTOCOL.md §10) with lil-gui. First, open, a "look" folder with the few controls an artist
+// reaches for (LOOK_PARAMS: server parameters under plain names, and the page's own view
+// settings given by main.js); then the presets; then "advanced", folded: every parameter in
+// one folder per `group` (and the page's other view settings under "display"), each with its
+// doc line and unit visible under it and a ↺ button that puts it back to its default. Widgets: a
 // number field per float/int (always typed in) with a slider, logarithmic where max/min >= 100;
 // a toggle per bool, a drop-down per enum, a colour picker per color, x/y/z fields per vec3,
 // a text field per float_list and a folder per object_list item (add/remove buttons).
 // A presets folder lists the effect's presets (PROTOCOL.md §3.12): load, save the stream's
 // values under a name, delete a user preset; and the stream can go back to its defaults or
-// restart its simulation. Every change is sent as a partial `set` (throttled to one request
+// restart its simulation. The list shows the preset the stream's values match (its values over
+// the defaults), or "(custom)". Every change is sent as a partial `set` (throttled to one request
 // per 100 ms per stream, merged); the server's `params` (reply or another client's broadcast)
 // updates the widgets; an error's `param` path puts its message next to the field it names.
 const THROTTLE_MS = 100;
@@ -18,6 +22,22 @@ function stepOf(p) {
   const span = p.max - p.min;
   if (!(span > 0)) return 0.001;
   return Math.pow(10, Math.floor(Math.log10(span / 1000)));
+}
+
+// The look folder's server parameters per effect, with the names an artist reads.
+export const LOOK_PARAMS = {
+  flame: [['k_buo', 'height (buoyancy)'], ['wind_velocity', 'wind (m/s)']],
+  energy_wave: [['color_energy', 'colour'], ['alpha', 'intensity'], ['size', 'size (world units)']],
+  compound_eye: [['base_color', 'colour'], ['dot_color', 'pupil colour'], ['density', 'facets (lenses across)']],
+};
+const CUSTOM = '(custom)';
+
+// True when `have` holds every value of `want` (objects: want's keys only; numbers to 1e-9).
+function matches(want, have) {
+  if (Array.isArray(want)) return Array.isArray(have) && want.length === have.length && want.every((w, i) => matches(w, have[i]));
+  if (want && typeof want === 'object') return !!have && typeof have === 'object' && Object.keys(want).every((k) => matches(want[k], have[k]));
+  if (typeof want === 'number') return typeof have === 'number' && Math.abs(want - have) <= 1e-9 * Math.max(1, Math.abs(want));
+  return want === have;
 }
 
 const isLog = (p) => (p.type === 'float' || p.type === 'int') && p.min > 0 && p.max / p.min >= LOG_RATIO;
@@ -35,9 +55,11 @@ export function logValue(p, pos) {
 
 export class StreamPanel {
   /** gui: parent lil-gui; api: {set(partial) -> Promise of the params reply, request(op, fields)
-   * -> Promise of the reply, applied(params reply)}: a reply that changed the parameters. */
-  constructor(gui, stream, effect, schema, doc, rev, api) {
-    Object.assign(this, { gui, stream, effect, schema, api });
+   * -> Promise of the reply, applied(params reply)}: a reply that changed the parameters.
+   * view: the page's own settings of this stream's views, {look: [...], display: [...]}, each
+   * {obj, key, label, doc} with min/max/step (a number), choices, or color: true. */
+  constructor(gui, stream, effect, schema, doc, rev, api, view = { look: [], display: [] }) {
+    Object.assign(this, { gui, stream, effect, schema, api, view });
     this.values = clone(doc);
     this.rev = rev;
     this.pendingPartial = null;
@@ -59,21 +81,56 @@ export class StreamPanel {
     this.controllers.clear();
     this.proxies = [];
     this.logSliders = [];
+    this.buildLook();
     this.buildActions();
+    const adv = this.folder.addFolder('advanced');
+    adv.domElement.dataset.group = 'advanced';
     const groups = new Map();
     for (const p of this.schema.params) {
       const g = p.group || 'other';
       if (!groups.has(g)) {
-        const f = this.folder.addFolder(g);
+        const f = adv.addFolder(g);
         f.domElement.dataset.group = g;
+        f.close();
         groups.set(g, f);
       }
       const c = this.addParam(groups.get(g), this.values, p, p.name, () => this.changed(p.name));
       if (c) this.addReset(c, p);
     }
+    if (this.view.display.length) {
+      const f = adv.addFolder('display (this page)');
+      f.domElement.dataset.group = 'display';
+      for (const v of this.view.display) this.addView(f, v);
+      f.close();
+    }
+    adv.close();
   }
 
-  label(p) { return p.unit ? `${p.name} (${p.unit})` : p.name; }
+  // The look folder: LOOK_PARAMS of this effect, then the page's look settings.
+  buildLook() {
+    const f = this.folder.addFolder('look');
+    f.domElement.dataset.group = 'look';
+    for (const [name, label] of LOOK_PARAMS[this.effect] || []) {
+      const p = this.schema.params.find((x) => x.name === name);
+      if (!p) continue;
+      const c = this.addParam(f, this.values, { ...p, label }, p.name, () => this.changed(p.name));
+      if (c) this.addReset(c, p);
+    }
+    for (const v of this.view.look) this.addView(f, v);
+  }
+
+  // A setting of the page's own views (not sent to the server).
+  addView(folder, v) {
+    const c = v.color ? folder.addColor(v.obj, v.key) : v.choices ? folder.add(v.obj, v.key, v.choices)
+      : v.min !== undefined ? folder.add(v.obj, v.key, v.min, v.max, v.step) : folder.add(v.obj, v.key);
+    c.name(v.label);
+    c.domElement.dataset.view = v.key;
+    if (v.onChange) c.onChange(v.onChange);
+    if (v.doc) c.domElement.after(el('div', 'fxs-doc', v.doc));
+    return c;
+  }
+
+  label(p) { return p.label ?? (p.unit ? `${p.name} (${p.unit})` : p.name); }
 
   /** The doc line under a widget: what it does, and whether a change restarts the stream. */
   addDoc(c, p, isFolder) {
@@ -182,7 +239,7 @@ export class StreamPanel {
     c.domElement.title = p.doc + (p.update === 'restart' ? ' (restarts the stream)' : '');
     c.domElement.dataset.param = path;
     this.addDoc(c, p, false);
-    this.controllers.set(path, c);
+    if (!this.controllers.has(path)) this.controllers.set(path, c); // a look control shows the errors
     return c;
   }
 
@@ -190,7 +247,7 @@ export class StreamPanel {
     sub.domElement.title = p.doc;
     sub.domElement.dataset.param = path;
     this.addDoc(sub, p, true);
-    this.controllers.set(path, sub);
+    if (!this.controllers.has(path)) this.controllers.set(path, sub);
     return sub;
   }
 
@@ -200,7 +257,7 @@ export class StreamPanel {
     const f = this.folder.addFolder('presets & reset');
     f.domElement.dataset.group = 'presets';
     this.presetFolder = f;
-    this.presetState = { preset: this.presetState?.preset ?? '', name: this.presetState?.name ?? '' };
+    this.presetState = { preset: this.presetState?.preset ?? CUSTOM, name: this.presetState?.name ?? '' };
     this.presetCtl = f.add(this.presetState, 'preset', this.presetNames()).name('preset');
     this.presetCtl.onChange(() => this.showPresetDoc());
     this.presetCtl.domElement.dataset.action = 'preset';
@@ -219,7 +276,7 @@ export class StreamPanel {
       c.domElement.title = title;
       return c;
     };
-    button('load', 'load preset', "the effect's defaults with the preset's values over them");
+    this.loadCtl = button('load', 'load preset', "the effect's defaults with the preset's values over them");
     this.deleteCtl = button('delete', 'delete preset', 'your own presets only (admin); built-ins are read-only');
     f.add(this.presetState, 'name').name('save as').domElement.dataset.action = 'name';
     button('save', 'save values as preset', "this stream's values under the name above (admin)");
@@ -232,13 +289,44 @@ export class StreamPanel {
 
   presetNames() {
     const names = this.presetList.map((p) => p.name);
-    return names.length ? names : [''];
+    return this.presetState.preset === CUSTOM || !names.length ? [CUSTOM, ...names] : names;
+  }
+
+  // The preset whose values over the defaults (list items completed with their field
+  // defaults) are the stream's values, or CUSTOM.
+  matchedPreset() {
+    const doc = this.serverDoc || this.values;
+    for (const pr of this.presetList) {
+      const want = {};
+      for (const p of this.schema.params) {
+        const v = pr.params[p.name] ?? p.default;
+        want[p.name] = p.type === 'object_list' && pr.params[p.name]
+          ? v.map((item) => ({ ...Object.fromEntries(p.fields.map((f) => [f.name, f.default])), ...item })) : v;
+      }
+      if (matches(want, doc)) return pr.name;
+    }
+    return CUSTOM;
+  }
+
+  // The list shows the matched preset (the list is rebuilt when "(custom)" comes or goes).
+  showMatch() {
+    const m = this.matchedPreset(), had = this.presetCtl._values?.includes(CUSTOM);
+    this.presetState.preset = m;
+    if (had !== (m === CUSTOM)) {
+      this.presetCtl = this.presetCtl.options(this.presetNames()).name('preset');
+      this.presetCtl.domElement.dataset.action = 'preset';
+      this.presetCtl.onChange(() => this.showPresetDoc());
+      this.presetCtl.domElement.after(this.presetDoc);
+    }
+    this.presetCtl.updateDisplay();
+    this.showPresetDoc();
   }
 
   showPresetDoc() {
     const p = this.presetList.find((x) => x.name === this.presetState.preset);
     this.presetDoc.textContent = p ? `${p.builtin ? 'built-in' : 'yours'}: ${p.doc || '(no description)'}` : '';
     this.deleteCtl.enable(!!p && !p.builtin);
+    this.loadCtl.enable(!!p);
   }
 
   /** Re-reads the effect's presets (at start and after any preset_saved/preset_deleted). */
@@ -249,7 +337,7 @@ export class StreamPanel {
       this.presetStatus.textContent = `presets: ${e.code || ''} ${e.message || e}`;
       return;
     }
-    if (!this.presetList.some((p) => p.name === this.presetState.preset)) this.presetState.preset = this.presetList[0]?.name ?? '';
+    this.presetState.preset = this.matchedPreset();
     this.presetCtl = this.presetCtl.options(this.presetNames()).name('preset');
     this.presetCtl.domElement.dataset.action = 'preset';
     this.presetCtl.onChange(() => this.showPresetDoc());
@@ -343,6 +431,7 @@ export class StreamPanel {
       this.refresh();
     }
     if (!keepErrors) for (const k of [...this.errors.keys()]) this.clearError(k);
+    this.showMatch();
   }
 
   controllerFor(path) {
