@@ -75,11 +75,11 @@ static const char *const fl_diff_names[] = {"stabilized", "literal", NULL};
 
 static const struct param_def fl_source_fields[] = {
     {.name = "center", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -100, .max = 100, .unit = "m",
-     .doc = "centre of the source disc (top layer)"},
-    FL_F("radius", "0.015", 0.001, 1, "m", "disc radius; solids at spacing d in 2 layers normal to `up` (digest §9 #17)", 0),
-    FL_F("T_init", "2000", 1000, 3000, "K", "temperature held by the burning solid (Table 3.1)", 0),
-    FL_F("F_init", "100", 0, 300, "", "fuel held by the burning solid; the thesis's main knob, 80-120", 0),
-    {.name = "enabled", .type = PARAM_BOOL, .def = "true", .unit = "", .doc = "source present"},
+     .doc = "centre of the burning disc (its top layer)"},
+    FL_F("radius", "0.015", 0.001, 1, "m", "disc radius: a wider disc feeds a wider fire (solid particles at spacing d, 2 layers across `up`)", 0),
+    FL_F("T_init", "2000", 1000, 3000, "K", "temperature the burning solid holds (Mabuchi 2012, Table 3.1)", 0),
+    FL_F("F_init", "100", 0, 300, "", "fuel the burning solid holds: more fuel, a taller and brighter flame (the thesis uses 80-120)", 0),
+    {.name = "enabled", .type = PARAM_BOOL, .def = "true", .unit = "", .doc = "the source burns (off: as if removed)"},
     {0},
 };
 
@@ -91,7 +91,7 @@ static const struct param_def fl_obstacle_fields[] = {
     {.name = "pos", .type = PARAM_VEC3, .def = "[0,0.05,0.03]", .min = -100, .max = 100, .unit = "m",
      .doc = "centre at time 0 (after a reset)"},
     {.name = "velocity", .type = PARAM_VEC3, .def = "[0,-0.2,0]", .min = -20, .max = 20, .unit = "m/s",
-     .doc = "prescribed velocity: r(t) = pos + velocity t (digest §9 #16)"},
+     .doc = "the solid moves at this velocity from pos: r(t) = pos + velocity t"},
     {0},
 };
 
@@ -108,13 +108,13 @@ static const struct param_def fl_obstacle_fields[] = {
  * for 10k particles in real time. */
 const struct param_def flame_params[] = {
     {.name = "sources", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.015}]", .max_len = 16,
-     .fields = fl_source_fields, .unit = "", .doc = "burning solids (digest §2.13)"},
+     .fields = fl_source_fields, .unit = "", .doc = "burning solids: discs that hold fuel and heat and feed the flame"},
     {.name = "obstacles", .group = "sources", .type = PARAM_OBJECT_LIST, .max_len = 16,
      .def = "[{\"shape\":\"plate\",\"size\":[0.036,0.036,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]", .fields = fl_obstacle_fields,
-     .unit = "", .doc = "non-burning kinematic solids at T_amb, F = 0 (digest §9 #16)"},
+     .unit = "", .doc = "solids that do not burn (ambient temperature, no fuel): a plate under the fire, a wall, a moving paddle"},
     {.name = "wind_accel", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
-     .doc = "uniform acceleration of gas particles (digest §2.14, §9 #15); across `up` the air's drag (wind_drag) "
-            "caps the drift it gives at wind_accel / wind_drag"},
+     .doc = "a uniform acceleration of the gas; across `up` the air's drag (wind_drag) limits the drift it gives "
+            "to wind_accel / wind_drag"},
     /* The wind as the digest's optional drag model (§2.14 [P], f = rho k_drag (v_wind - v)): gas
      * takes up the velocity of the ambient air the thesis does not simulate, at rate wind_drag,
      * across `up` only, since buoyancy already is the net vertical force (§2.6 [P]: the air's
@@ -129,16 +129,16 @@ const struct param_def flame_params[] = {
      * at 2 m/s; 30/s: 11.1 cm, 0.43 H90, but 9.97k particles; 50/s: 10.6 cm. Drag on the vertical
      * too cut H90 to 9.3 cm at 10/s and to 3.1 cm at 30/s. */
     {.name = "wind_velocity", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -20, .max = 20, .unit = "m/s",
-     .doc = "velocity of the ambient air; gas is dragged toward it across `up` at wind_drag (digest §2.14's drag "
-            "model); its part along `up` is ignored"},
-    FL_F("wind_drag", "25", 0, 200, "1/s", "rate k at which gas takes up the air's velocity across `up`, "
-         "f = rho k (wind_velocity - v) (digest §2.14); 0: no air", 0, .group = "forces"),
-    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy k_buo (T - T_amb) up, a force density (eq 3.16, digest §9 #5)", 0, .group = "forces"),
+     .doc = "velocity of the surrounding air: the flame leans downwind (the gas takes it up at wind_drag); its "
+            "part along `up` is ignored"},
+    FL_F("wind_drag", "25", 0, 200, "1/s", "how quickly the gas takes up the air's velocity across `up`, "
+         "f = rho k (wind_velocity - v); 0: no air, the gas spreads freely", 0, .group = "forces"),
+    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy, the force k_buo (T - T_amb) per volume along `up`: higher, a taller and faster flame (Mabuchi 2012 eq. 3.16)", 0, .group = "forces"),
     {.name = "up", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
-     .doc = "upward unit vector (normalised; digest §9 #20)", .flags = PARAM_NONZERO},
-    FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure constant p = k (rho - rho_rest) (eq 3.11)", 0, .group = "forces"),
-    FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity (eq 3.13)", 0, .group = "forces"),
-    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density; pressure p = k (rho - rho_rest), clamped at 0", 0, .group = "forces"),
+     .doc = "which way is up (normalised): buoyancy pushes along it and the source discs lie across it", .flags = PARAM_NONZERO},
+    FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure stiffness: how strongly the gas resists compression, p = k (rho - rho_rest) (eq. 3.11)", 0, .group = "forces"),
+    FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity: higher smooths the flow, lower lets it swirl (eq. 3.13)", 0, .group = "forces"),
+    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density of the gas; pressure p = k (rho - rho_rest), never below 0", 0, .group = "forces"),
     /* Both forms clamp eq 3.11's p at 0. Unclamped, the difference form (p_j - p_i) pushes the
      * density-deficient free boundary of a gas with no air around it outward (digest §2.5) far
      * faster than buoyancy lifts it: on the default scene no burning gas is left after 2.5 s
@@ -146,42 +146,43 @@ const struct param_def flame_params[] = {
      * (PROTOCOL.md §11.2). Default symmetric (Mueller's form, digest §9 #3): every figure of the
      * default scene and every group D behaviour is measured with it. */
     {.name = "pressure_form", .group = "forces", .type = PARAM_ENUM, .def = "\"symmetric\"", .choices = fl_pform_names, .unit = "",
-     .doc = "difference: eq 3.12 with the sign fixed; symmetric: Mueller's -(p_i+p_j)/2 form (digest §9 #3); "
-            "both with p >= 0"},
-    FL_F("T_amb", "300", 250, 400, "K", "ambient temperature, also of inserted particles", 0, .group = "combustion"),
-    FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature", 0, .group = "combustion"),
-    FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F (eq 3.17)", 0, .group = "combustion"),
-    FL_F("k_cf", "5", 0, 20, "", "fuel consumption dF/dt = -k_cf S (eq 3.18)", 0, .group = "combustion"),
-    FL_F("k_pt", "500", 0, 2000, "", "heat production dT/dt = k_pt S (eq 3.19)", 0, .group = "combustion"),
-    FL_F("k_h", "0.02", 0, 0.1, "m^2/s", "heat diffusion (eq 3.20)", 0, .group = "diffusion"),
-    FL_F("k_f", "0.001", 0, 0.01, "m^2/(s K)", "fuel diffusion, weighted by temperature (eq 3.21)", 0, .group = "diffusion"),
+     .doc = "how pressure pushes particles apart: symmetric, Mueller 2003's -(p_i+p_j)/2 (the default); difference, "
+            "the thesis's eq. 3.12 with its sign corrected; both with p >= 0"},
+    FL_F("T_amb", "300", 250, 400, "K", "temperature of the surrounding air; new particles start at it", 0, .group = "combustion"),
+    FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature: gas above it that has fuel burns", 0, .group = "combustion"),
+    FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F: how fast burning gas uses its fuel (eq. 3.17)", 0, .group = "combustion"),
+    FL_F("k_cf", "5", 0, 20, "", "fuel used per unit of reaction, dF/dt = -k_cf S (eq. 3.18)", 0, .group = "combustion"),
+    FL_F("k_pt", "500", 0, 2000, "", "heat released per unit of reaction, dT/dt = k_pt S: higher, a hotter flame (eq. 3.19)", 0, .group = "combustion"),
+    FL_F("k_h", "0.02", 0, 0.1, "m^2/s", "heat diffusion: how quickly heat spreads to neighbours (eq. 3.20)", 0, .group = "diffusion"),
+    FL_F("k_f", "0.001", 0, 0.01, "m^2/(s K)", "fuel diffusion, faster in hot gas (eq. 3.21)", 0, .group = "diffusion"),
     {.name = "diffusion_mode", .group = "diffusion", .type = PARAM_ENUM, .def = "\"stabilized\"", .choices = fl_diff_names, .unit = "",
-     .doc = "stabilized: per-particle weights capped at omega_max, a convex update (digest §9 #4; viscosity too); "
-            "literal: eqs 3.13/3.20/3.21 as printed (unstable at the thesis's k_f)"},
-    FL_F("omega_max", "0.5", 0.05, 1, "", "cap of the summed explicit diffusion weights per step (digest §9 #4)", 0, .group = "diffusion"),
-    FL_F("k_cool", "0", 0, 50, "1/s", "Newtonian cooling toward T_amb, not in the thesis (digest §9 #13)", 0, .group = "combustion"),
-    FL_F("fuel_eps", "0.001", 0, 1, "", "flame test F > fuel_eps (digest §9 #12)", 0, .group = "combustion"),
-    FL_I("resample_interval", "5", 1, 20, "steps", "steps between particle birth/death passes (digest §2.12)", 0, .group = "numerics"),
-    FL_I("insert_nbr_threshold", "24", 4, 60, "", "flame particles with fewer neighbours get one new particle (digest §9 #8)",
+     .doc = "stabilized: each particle's diffusion (and viscosity) weights capped at omega_max, so a step never "
+            "overshoots; literal: the thesis's eqs. 3.13, 3.20 and 3.21 as printed (unstable at its k_f)"},
+    FL_F("omega_max", "0.5", 0.05, 1, "", "stabilized diffusion: the cap on a particle's summed diffusion weights per step", 0, .group = "diffusion"),
+    FL_F("k_cool", "0", 0, 50, "1/s", "cooling toward the air's temperature, not in the thesis: higher, a shorter flame", 0, .group = "combustion"),
+    FL_F("fuel_eps", "0.001", 0, 1, "", "fuel below this no longer burns", 0, .group = "combustion"),
+    FL_I("resample_interval", "5", 1, 20, "steps", "steps between the passes that add particles where the flame thins and remove spent ones", 0, .group = "numerics"),
+    FL_I("insert_nbr_threshold", "24", 4, 60, "", "a burning particle with fewer neighbours gets a new one beside it: lower, fewer particles",
          0, .group = "numerics"),
-    FL_F("h", "0.0035", 0.002, 0.05, "m", "kernel support radius (Table 3.1: 0.01125; finer by default)",
+    FL_F("h", "0.0035", 0.002, 0.05, "m", "smoothing length, the radius each particle interacts over: smaller, finer detail and more particles "
+         "(the thesis's Table 3.1: 0.01125)",
          PARAM_RESTART, .group = "numerics"),
-    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "solid spacing and insertion offset d (digest §9 #7)", PARAM_RESTART, .group = "numerics"),
-    FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so a lattice at spacing d has rho_rest (digest §9 #6)",
+    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "spacing d of the solids' particles and of inserted particles", PARAM_RESTART, .group = "numerics"),
+    FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so particles at spacing d have the rest density",
          PARAM_RESTART, .group = "numerics"),
     FL_F("dt", "0.003", 0.0001, 0.004, "s", "time step of the simulation", 0, .group = "numerics"),
     FL_I("max_substeps", "24", 1, 256, "steps", "most steps per frame; beyond it the stream runs slower than real "
                                                 "time (see the real-time factor in /metrics)", 0, .group = "numerics"),
     FL_I("max_particles", "1000000", 1000, 4000000, "", "particle limit; reaching it is a runaway (reset)",
          PARAM_RESTART, .group = "numerics"),
-    FL_I("seed", "1", 0, 1000000, "", "seed of the deterministic fallback insertion directions", PARAM_RESTART, .group = "numerics"),
+    FL_I("seed", "1", 0, 1000000, "", "seed of the insertion directions: runs with the same seed are identical", PARAM_RESTART, .group = "numerics"),
     FL_F("fps", "30", 1, 240, "1/s", "frames per second of the stream", 0, .group = "output"),
     FL_F("time_scale", "1", 0, 10, "", "simulated seconds per wall second (0 pauses)", 0, .group = "output"),
     FL_F("space_scale", "1", 0.001, 1000, "", "world units per simulated metre in the frames", 0, .group = "output"),
     FL_I("pos_bits", "16", 8, 24, "bits", "position quantisation of the particle codec", 0, .group = "output"),
     {.name = "velocities", .group = "output", .type = PARAM_BOOL, .def = "false", .unit = "",
-     .doc = "send each particle's velocity (x space_scale, for velocity lines; PROTOCOL.md §7.5.7); off leaves the "
-            "payload as without it"},
+     .doc = "also send each particle's velocity (x space_scale), for velocity lines: about 0.9 byte more per "
+            "particle"},
     FL_I("vel_bits", "8", 4, 12, "bits", "velocity quantisation per component, sign included (with velocities)", 0,
          .group = "output"),
     {0},
