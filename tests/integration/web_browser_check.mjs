@@ -47,9 +47,11 @@ async function healthRev(port, stream) {
 
 // A lil-gui controller of stream S for parameter path P (data-param set by panel.js).
 const ctl = (page, stream, path) => page.locator(`[data-stream="${stream}"] [data-param="${path}"]`).first();
-async function openFolder(page, stream) {
+async function openFolder(page, stream) { // the stream's folder and its "advanced" folder
   const f = page.locator(`.lil-gui[data-stream="${stream}"]`).first();
   if (await f.evaluate((el) => el.classList.contains('closed'))) await f.locator(':scope > .title').click();
+  const adv = f.locator('.lil-gui[data-group="advanced"]').first();
+  if (await adv.evaluate((el) => el.classList.contains('closed'))) await adv.locator(':scope > .title').click();
 }
 async function setNumber(page, stream, path, value) {
   const input = ctl(page, stream, path).locator('input:not(.fxs-log)').first(); // the typed field, not a log slider

@@ -91,7 +91,6 @@ export class StreamPanel {
       if (!groups.has(g)) {
         const f = adv.addFolder(g);
         f.domElement.dataset.group = g;
-        f.close();
         groups.set(g, f);
       }
       const c = this.addParam(groups.get(g), this.values, p, p.name, () => this.changed(p.name));
