@@ -198,13 +198,21 @@ static const struct effect_preset flame_presets[] = {
     {"thesis-f80", "Table 3.1's scene at the low end of the thesis's F_init range (80): a smaller, calmer flame",
      "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],"
      "\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
-    {"candle", "a 1.2 cm wick on a small plate: a narrow, steady flame",
-     "{\"sources\":[{\"radius\":0.006,\"F_init\":90}],"
-     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.016,0.016,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]}"},
-    {"campfire", "three 2.4 cm logs on a 9 cm bed, coarser particles (h 5 mm) to stay in real time",
-     "{\"h\":0.005,\"sources\":[{\"center\":[-0.022,0,0],\"radius\":0.012},{\"center\":[0.022,0,0],\"radius\":0.012},"
-     "{\"center\":[0,0.025,0.005],\"radius\":0.012,\"F_init\":120}],"
-     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.09,0.09,0],\"pos\":[0,0,-0.006],\"velocity\":[0,0,0]}]}"},
+    {"candle", "a narrow candle flame, about 4 cm tall: an 8 mm wick, less buoyancy, finer particles (h 2 mm)",
+     "{\"h\":0.002,\"k_buo\":0.005,\"sources\":[{\"radius\":0.004,\"F_init\":60}],"
+     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.012,0.012,0],\"pos\":[0,0,-0.003],\"velocity\":[0,0,0]}]}"},
+    /* Three logs in a star, each three small discs rising towards the middle (0, 7, 14 mm): their
+     * flames lean together into one broad, low fire. Burning gas starts at the pit's floor all
+     * across, so its lower edge is flat: a pit, not a campfire on open ground. */
+    {"fire-pit", "a broad, low fire in a pit: three logs laid in a star, rising to the middle, on an 11 cm floor "
+                 "(coarser particles, h 5 mm)",
+     "{\"h\":0.005,\"sources\":["
+     "{\"center\":[0,0.04,0],\"radius\":0.008},{\"center\":[0,0.028,0.007],\"radius\":0.008},"
+     "{\"center\":[0,0.016,0.014],\"radius\":0.008},{\"center\":[-0.0346,-0.02,0],\"radius\":0.008},"
+     "{\"center\":[-0.0242,-0.014,0.007],\"radius\":0.008},{\"center\":[-0.0139,-0.008,0.014],\"radius\":0.008},"
+     "{\"center\":[0.0346,-0.02,0],\"radius\":0.008},{\"center\":[0.0242,-0.014,0.007],\"radius\":0.008},"
+     "{\"center\":[0.0139,-0.008,0.014],\"radius\":0.008}],"
+     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.11,0.11,0],\"pos\":[0,0,-0.006],\"velocity\":[0,0,0]}]}"},
     {"gusty", "the default flame in a light breeze (wind_velocity 2 m/s along x): it leans downwind",
      "{\"wind_velocity\":[2,0,0]}"},
     {0},

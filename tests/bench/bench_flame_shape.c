@@ -5,7 +5,7 @@
  * flame_shape.c: H90, W90, share below the source plane, flicker, centroid). Simulated time,
  * not wall time: the figures do not depend on the machine (real time is bench_flame's).
  * BENCH_FLAME_SCENE adds JSON overrides to every case, for experiments; BENCH_SHAPE_ONLY
- * names one case (default, difference, wind). One line per figure. */
+ * names one case (default, difference, wind, candle, fire-pit). One line per figure. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -71,6 +71,14 @@ int main(int argc, char **argv)
                    calm.H90 > 0 ? (windy.centroid_lat[0] - calm.centroid_lat[0]) / calm.H90 : 0);
         }
     }
+    static const char *const presets[] = {"candle", "fire-pit"};
+    for (size_t i = 0; i < sizeof presets / sizeof presets[0]; i++)
+        if (!only || !strcmp(only, presets[i])) {
+            struct flame_shape s;
+            char name[64];
+            snprintf(name, sizeof name, "preset %s", presets[i]);
+            bs_case(ocl, name, flame_shape_preset(presets[i]), 3, 5, &s);
+        }
     if (!only || !strcmp(only, "difference"))
         bs_case(ocl, "difference form at 2.5-3 s", "{\"pressure_form\":\"difference\"}", 2.5, 0.5, &diff);
     ocl_close(ocl);

@@ -92,6 +92,13 @@ void flame_shape_free(struct flame_shape_acc *a)
     memset(a, 0, sizeof *a);
 }
 
+const char *flame_shape_preset(const char *name)
+{
+    for (const struct effect_preset *p = flame_effect.presets; p && p->name; p++)
+        if (!strcmp(p->name, name)) return p->params;
+    return NULL;
+}
+
 static void fs_vec(const cJSON *v, double out[3])
 {
     for (int k = 0; k < 3; k++) out[k] = cJSON_GetArrayItem(v, k)->valuedouble;
@@ -102,8 +109,17 @@ int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double sec
 {
     struct flame *fl = flame_new(ocl, doc, err);
     if (!fl) return -1;
-    double dt = params_num(doc, "dt"), c[3], up[3];
-    fs_vec(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "sources"), 0), "center"), c);
+    double dt = params_num(doc, "dt"), c[3] = {0, 0, 0}, up[3];
+    int ns = 0;
+    const cJSON *src;
+    cJSON_ArrayForEach(src, cJSON_GetObjectItem(doc, "sources")) {
+        if (cJSON_IsFalse(cJSON_GetObjectItem(src, "enabled"))) continue;
+        double sc[3];
+        fs_vec(cJSON_GetObjectItem(src, "center"), sc);
+        for (int k = 0; k < 3; k++) c[k] += sc[k];
+        ns++;
+    }
+    for (int k = 0; k < 3 && ns; k++) c[k] /= ns;
     fs_vec(cJSON_GetObjectItem(doc, "up"), up);
     int per_frame = (int)lround(1.0 / 30 / dt), rc = flame_run(fl, (int)lround(warm_s / dt), err);
     struct flame_shape_acc acc;

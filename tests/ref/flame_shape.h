@@ -1,9 +1,9 @@
 /* flame_shape.h — the default flame's shape figures of issue 13, measured on particle states
  * the way a client measures them on the stream's frames (tests and benches only).
  *
- * "Burning" = a gas particle with T >= T_ign. Heights run along `up` from the source's top
- * plane (the first source's centre), lateral distances from the vertical line through that
- * centre. Frames are added one at a time; the figures pool every added frame. Simulated time,
+ * "Burning" = a gas particle with T >= T_ign. Heights run along `up` from the sources' plane
+ * (through the mean of the enabled sources' centres: the source's centre when there is one),
+ * lateral distances from the vertical line through that centre. Frames are added one at a time; the figures pool every added frame. Simulated time,
  * not wall time: the stream's frames are these states whenever it keeps real time. */
 #ifndef FX_FLAME_SHAPE_H
 #define FX_FLAME_SHAPE_H
@@ -32,9 +32,12 @@ struct flame_shape {
 };
 
 /* Runs the scene of the complete document doc: warm_s simulated seconds, then one state every
- * 1/30 s of simulated time for `seconds`, measured from the first source's centre. 0 or -1 (err). */
+ * 1/30 s of simulated time for `seconds`, measured from the sources' centre. 0 or -1 (err). */
 int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, struct flame_shape *out,
                     struct fx_err *err);
+
+/* The JSON overrides of the flame's built-in preset `name`, or NULL. */
+const char *flame_shape_preset(const char *name);
 
 void flame_shape_init(struct flame_shape_acc *a, const double c[3], const double up[3], double T_ign);
 void flame_shape_add(struct flame_shape_acc *a, const struct flame_particles *p);

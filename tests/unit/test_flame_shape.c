@@ -8,7 +8,8 @@
  * targets themselves. The thesis's difference form (eq 3.12, sign fixed, p >= 0) must give a
  * rising flame: burning centroid >= 3 cm above the source within 3 s (measured over 2.5-3 s:
  * 6.8 cm), <= 10% below the source plane (0.8%). A sideways wind must move the burning
- * centroid by >= 30% of H90 (measured 0.37). The binary takes ~45 s of CPU. */
+ * centroid by >= 30% of H90 (measured 0.37). The presets `candle` and `fire-pit` read as their
+ * names (test_presets_shape). The binary takes ~60 s of CPU. */
 #include <math.h>
 #include <stdio.h>
 
@@ -82,6 +83,19 @@ static void test_wind_lean(void)
     CHECK(s.below <= 0.05, "%.1f%% of the burning gas below the source plane", 100 * s.below);
 }
 
+/* The presets read as their names: `candle` a narrow flame (H90 >= 3 W90; measured 3.7 cm and
+ * 1.0 cm), `fire-pit` a broad, low one (full width 2 W90 >= H90 and H90 <= 6 cm; measured 4.3 and
+ * 5.4 cm). Shorter windows than the default scene's: 3 s of warm-up, 4 s of states. */
+static void test_presets_shape(void)
+{
+    struct flame_shape c, p;
+    if (tfs_run(flame_shape_preset("candle"), 3, 4, &c) || tfs_run(flame_shape_preset("fire-pit"), 3, 4, &p)) return;
+    printf("  info: candle H90 %.1f cm, W90 %.1f cm; fire-pit H90 %.1f cm, W90 %.1f cm\n", 100 * c.H90, 100 * c.W90,
+           100 * p.H90, 100 * p.W90);
+    CHECK(c.H90 >= 3 * c.W90, "candle: H90 %.4f m, W90 %.4f m: not a narrow flame", c.H90, c.W90);
+    CHECK(2 * p.W90 >= p.H90 && p.H90 <= 0.06, "fire-pit: H90 %.4f m, W90 %.4f m: not broad and low", p.H90, p.W90);
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -89,6 +103,7 @@ int main(void)
     RUN(test_default_shape);
     RUN(test_difference_form_rises);
     RUN(test_wind_lean);
+    RUN(test_presets_shape);
     ocl_close(tfs_ocl);
     return CHECK_DONE();
 }

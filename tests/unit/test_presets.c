@@ -99,7 +99,7 @@ static void test_save_reload_delete(void)
     cJSON *back = presets_params(&ps, tp_flame(), "slow", &err);
     CHECK(back && cJSON_Compare(back, doc, 1), "the saved document comes back after a restart");
     CHECK(tp_count(&ps) == 1, "one user preset");
-    CHECK(presets_delete(&ps, tp_flame(), "campfire", &err) && !strcmp(err.code, "read_only"), "delete a built-in");
+    CHECK(presets_delete(&ps, tp_flame(), "fire-pit", &err) && !strcmp(err.code, "read_only"), "delete a built-in");
     CHECK(presets_delete(&ps, tp_flame(), "slw", &err) && !strcmp(err.code, "unknown_preset") &&
               strstr(err.message, "did you mean \"slow\""), "%s", err.message);
     CHECK(!presets_delete(&ps, tp_flame(), "slow", &err), "%s", err.message);

@@ -409,12 +409,29 @@ export class FlameView {
     if (!this.orbit?.moved) this.frameStage();
   }
 
-  // The camera's home: level with the lower flame, 42 cm away, looking at 7 cm above the source.
+  // The camera's home: level with the lower flame, looking at the flame's middle above the
+  // sources' centre; for the default 3 cm disc 42 cm away and 7 cm up, closer for smaller
+  // sources (down to 0.35 times that for a candle's wick).
   frameStage() {
     if (!this.orbit) return;
-    const { scale, up, side, base } = this.frameOf();
-    const target = base.clone().addScaledVector(up, 0.07 * scale);
-    this.orbit.setHome(target.clone().addScaledVector(side, 0.42 * scale).addScaledVector(up, 0.03 * scale), target, up);
+    const { scale, up, side } = this.frameOf(), { centre, extent } = this.sourcesExtent(up);
+    const k = Math.min(1, Math.max(0.35, extent / 0.015)) * scale;
+    const target = centre.multiplyScalar(scale).addScaledVector(up, 0.07 * k);
+    this.orbit.setHome(target.clone().addScaledVector(side, 0.42 * k).addScaledVector(up, 0.03 * k), target, up);
+  }
+
+  // The burning sources' centre (metres) and the radius of the circle across `up` holding them.
+  sourcesExtent(up) {
+    const src = (this.params?.sources || []).filter((s) => s.enabled !== false);
+    if (!src.length) return { centre: new THREE.Vector3(), extent: 0.015 };
+    const at = (s) => new THREE.Vector3(...(s.center || [0, 0, 0]));
+    const centre = src.reduce((a, s) => a.add(at(s)), new THREE.Vector3()).divideScalar(src.length);
+    let extent = 0;
+    for (const s of src) {
+      const d = at(s).sub(centre);
+      extent = Math.max(extent, d.addScaledVector(up, -d.dot(up)).length() + (s.radius ?? 0.015));
+    }
+    return { centre, extent };
   }
 
   // An instanced geometry over the shared per-particle attributes, `slots` sprites per particle.
