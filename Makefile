@@ -48,7 +48,7 @@ WEB_SRC     := $(wildcard clients/web/src/*.js) clients/web/fxs_particles.js cli
 WEB_OUT     := clients/web/dist/app.js
 NPM_STAMP   := node_modules/.package-lock.json
 
-.PHONY: all deps run test bench clean unit web fuzz fuzz-libs install uninstall pkgs-present
+.PHONY: all deps run test bench screenshots clean unit web fuzz fuzz-libs install uninstall pkgs-present
 .SECONDARY: # keep object files of tests and benches between runs
 all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(WEB_OUT)
 
@@ -85,6 +85,13 @@ fuzz: deps
 bench: deps
 	@$(SUBMAKE) all $(BENCH_BIN)
 	@tests/bench/run.sh
+
+# README's pictures (docs/images/), taken in headless chromium from the default streams by the
+# first-look browser test (tests/integration/web_look_check.mjs), which also checks them.
+screenshots: deps
+	@$(SUBMAKE) all
+	@mkdir -p docs/images
+	@tests/integration/test_web_look.sh --shots $(CURDIR)/docs/images
 
 unit: $(UNIT_BIN)
 

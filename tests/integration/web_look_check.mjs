@@ -142,6 +142,13 @@ function flameFigures() {
   };
 }
 
+// The flame view's rectangle without its stats label, for the README.
+async function flameClip(page) {
+  await page.addStyleTag({ content: '.label { display: none }' });
+  const css = await page.evaluate(() => window.fxs.sample('flame').css);
+  return { x: css.left, y: css.top, width: css.w, height: css.h };
+}
+
 const median = (a) => { const s = [...a].sort((x, y) => x - y); return s[Math.floor((s.length - 1) / 2)]; };
 const span = (a) => `min ${Math.min(...a).toFixed(4)}, median ${median(a).toFixed(4)}, max ${Math.max(...a).toFixed(4)}`;
 
@@ -161,8 +168,8 @@ async function flameLook(page, fxctl) {
     busy += Date.now() - t0;
   }
   console.log(`  info: 20 frames measured, ${(busy / 20).toFixed(0)} ms per frame's figures`);
-  if (shotsAt) await page.screenshot({ path: join(shotsAt, 'flame.png') });
-  await page.screenshot({ path: join(ART, 'web-look-flame.png') });
+  if (shotsAt) await page.screenshot({ path: join(shotsAt, 'flame.png'), clip: await flameClip(page), timeout: 120000 });
+  await page.screenshot({ path: join(ART, 'web-look-flame.png'), timeout: 120000 });
   const col = (k) => f.map((x) => x[k]);
   console.log('  info: holes', span(col('holes')), '| white', span(col('white')), '| below', span(col('below')),
     '| moved', span(col('moved').slice(1)), '| top10 G/R', span(f.map((x) => x.top10.gr)), 'B/R', span(f.map((x) => x.top10.br)));
@@ -186,7 +193,7 @@ async function flameLook(page, fxctl) {
   await nextDraw(); await nextDraw();
   const pbvr = await figures();
   await page.screenshot({ path: join(ART, 'web-look-flame-pbvr.png'), timeout: 120000 });
-  if (shotsAt) await page.screenshot({ path: join(shotsAt, 'flame-pbvr.png'), timeout: 120000 });
+  if (shotsAt) await page.screenshot({ path: join(shotsAt, 'flame-pbvr.png'), clip: await flameClip(page), timeout: 120000 });
   await page.evaluate(() => { window.fxs.flameSettings.mode = 'volume'; });
   check(vol.lapVar <= pbvr.lapVar / 4, 'smooth: Laplacian variance inside the silhouette <= 1/4 of PBVR\'s on the same frame',
     `volume ${vol.lapVar.toFixed(1)}, pbvr ${pbvr.lapVar.toFixed(1)}`);
@@ -201,6 +208,21 @@ async function flameLook(page, fxctl) {
   fxctl('set', 'flame', 'time_scale=1');
 }
 
+// The README's pictures: every view of the default page, one at a time, without the stats labels.
+async function viewShots(ctx, port) {
+  const page = await ctx.newPage();
+  await page.setViewportSize({ width: 1280, height: 800 });
+  for (const [stream, kind, file] of [['energy', 'wave', 'energy-wave.png'], ['energy', 'scene', 'toon-scene.png'], ['eye', 'eye', 'eye.png']]) {
+    await page.goto(`http://127.0.0.1:${port}/?streams=${stream}&grid=1x1&aa=0&drawfps=1&views=${kind}`, { timeout: 20000 });
+    await page.addStyleTag({ content: '.label { display: none }' });
+    const shown = await until(() => page.evaluate((k) => window.fxs.stats()[Object.keys(window.fxs.stats())[0]]?.drawn > 2 && window.fxs.sample(k), kind), 60000, 500);
+    check(!!shown, `${stream}: the ${kind} view is drawn`);
+    const css = shown?.css;
+    if (css) await page.screenshot({ path: join(shotsAt, file), clip: { x: css.left, y: css.top, width: css.w, height: css.h }, timeout: 60000 });
+  }
+  await page.close();
+}
+
 try {
   daemon = await startDaemon(0, stateDir);
   const fxctl = fxctlAt(daemon.port);
@@ -210,6 +232,7 @@ try {
   const logs = collectErrors(page);
   await page.goto(`http://127.0.0.1:${daemon.port}/?streams=flame&grid=1x1&aa=0&drawfps=1`, { timeout: 20000 });
   await flameLook(page, fxctl);
+  if (shotsAt) await viewShots(ctx, daemon.port);
   check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
 } catch (e) {
   check(false, 'browser session', e.stack || String(e));

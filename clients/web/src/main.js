@@ -5,7 +5,8 @@
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
 // Query options: url=, flame=hdr (the flame's mode; pbvr by default), rl=N (flame repeat
 // passes), grid=COLSxROWS, aa=0 (no multisampling), drawfps=N (draw at most N frames a
-// second, e.g. under software WebGL), streams=A,B (show only these streams).
+// second, e.g. under software WebGL), streams=A,B (show only these streams), views=K,L (only
+// these kinds of view: flame, wave, scene, eye).
 import * as THREE from 'three';
 import GUI from 'lil-gui';
 import { parseHeader } from '../fxs_particles.js';
@@ -21,6 +22,7 @@ const q = new URLSearchParams(location.search);
 const wsUrl = q.get('url') || `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/v1/ws`;
 const httpBase = wsUrl.replace(/^ws/, 'http').replace(/\/v1\/ws.*$/, '');
 const only = q.get('streams')?.split(',');
+const onlyViews = q.get('views')?.split(',');
 // Access token (PROTOCOL.md §3.11): ?token= once, then kept for the tab and removed from the
 // address bar so it does not stay in the history.
 const token = q.get('token') || sessionStorage.getItem('fxstream-token') || '';
@@ -126,7 +128,8 @@ function makeViews(st) {
 
 function rebuildViewList() {
   const order = { flame: 0, wave: 1, scene: 2, eye: 3 };
-  views = [...streams.values()].flatMap((s) => s.views).sort((a, b) => order[a.kind] - order[b.kind]);
+  views = [...streams.values()].flatMap((s) => s.views).filter((v) => !onlyViews || onlyViews.includes(v.kind))
+    .sort((a, b) => order[a.kind] - order[b.kind]);
   for (const [v, el] of labels) if (!views.includes(v)) { el.remove(); labels.delete(v); }
   for (const v of views) if (!labels.has(v)) {
     const el = document.createElement('div');
