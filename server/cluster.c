@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/eventfd.h>
+#include <sys/random.h>
 #include <unistd.h>
 
 #include <hiredis/hiredis.h>
@@ -22,6 +23,7 @@
 #define CLUSTER_BACKOFF_MIN_S 0.1   /* reconnection: first pause, doubled per failure... */
 #define CLUSTER_BACKOFF_MAX_S 1.0   /* ...up to this */
 #define CLUSTER_FIRST_WAIT_S 10.0   /* cluster_follow waits this long for the first subscription */
+#define CLUSTER_DONE_MS "60000"     /* how long Redis remembers a change's id (a change sent again is made once) */
 
 /* ---- the scripts (Lua, run atomically by Redis) ---- */
 
@@ -31,30 +33,50 @@ enum { CS_CREATE, CS_SET, CS_DESTROY, CS_RESET, CS_LOAD, CS_SEED, CS_COUNT };
 #define CLUSTER_PUBLISH(event, channel) \
     "redis.call('PUBLISH', ARGV[" channel "], string.format('%d ', seq) .. ARGV[" event "])\n"
 
+/* The changes (create, set, destroy, reset) share their first key and argument: KEYS[1] this
+ * node's record of its last change (fxs:done:NODE, "ID SEQ"), ARGV[1] the change's id (unique
+ * per daemon and change). A change whose id is recorded was made: its number is answered
+ * again, so a change sent again after its connection was lost is made once. */
+#define CLUSTER_ONCE                                                                     \
+    "local done = redis.call('GET', KEYS[1])\n"                                         \
+    "if done then\n"                                                                   \
+    "  local id, n = string.match(done, '^(%S+) (%d+)$')\n"                             \
+    "  if id == ARGV[1] then return {'ok', tonumber(n)} end\n"                          \
+    "end\n"
+#define CLUSTER_MADE \
+    "redis.call('SET', KEYS[1], ARGV[1] .. ' ' .. string.format('%d', seq), 'PX', " CLUSTER_DONE_MS ")\n"
+
 static const char *const cluster_scripts[CS_COUNT] = {
-    /* KEYS stream, streams, seq; ARGV name, effect, params, max_streams, event, channel */
-    [CS_CREATE] = "if redis.call('EXISTS', KEYS[1]) == 1 then return {'exists'} end\n"
-                  "if redis.call('ZCARD', KEYS[2]) >= tonumber(ARGV[4]) then return {'limit'} end\n"
-                  "local seq = redis.call('INCR', KEYS[3])\n"
-                  "redis.call('HSET', KEYS[1], 'effect', ARGV[2], 'rev', '1', 'params', ARGV[3])\n"
-                  "redis.call('ZADD', KEYS[2], seq, ARGV[1])\n" CLUSTER_PUBLISH("5", "6") "return {'ok', seq}\n",
-    /* KEYS stream, seq; ARGV effect, base rev, new rev, params, event, channel */
-    [CS_SET] = "local cur = redis.call('HMGET', KEYS[1], 'effect', 'rev', 'params')\n"
+    /* KEYS done, stream, streams, seq; ARGV id, name, effect, params, max_streams, event, channel */
+    [CS_CREATE] = CLUSTER_ONCE
+                  "if redis.call('EXISTS', KEYS[2]) == 1 then return {'exists'} end\n"
+                  "if redis.call('ZCARD', KEYS[3]) >= tonumber(ARGV[5]) then return {'limit'} end\n"
+                  "local seq = redis.call('INCR', KEYS[4])\n"
+                  "redis.call('HSET', KEYS[2], 'effect', ARGV[3], 'rev', '1', 'params', ARGV[4])\n"
+                  "redis.call('ZADD', KEYS[3], seq, ARGV[2])\n" CLUSTER_MADE CLUSTER_PUBLISH("6", "7")
+                  "return {'ok', seq}\n",
+    /* KEYS done, stream, seq; ARGV id, effect, base rev, new rev, params, event, channel */
+    [CS_SET] = CLUSTER_ONCE
+               "local cur = redis.call('HMGET', KEYS[2], 'effect', 'rev', 'params')\n"
                "if not cur[1] then return {'gone'} end\n"
-               "if cur[1] ~= ARGV[1] or cur[2] ~= ARGV[2] then return {'moved', cur[1], cur[2], cur[3]} end\n"
-               "local seq = redis.call('INCR', KEYS[2])\n"
-               "redis.call('HSET', KEYS[1], 'rev', ARGV[3], 'params', ARGV[4])\n" CLUSTER_PUBLISH("5", "6")
+               "if cur[1] ~= ARGV[2] or cur[2] ~= ARGV[3] then return {'moved', cur[1], cur[2], cur[3]} end\n"
+               "local seq = redis.call('INCR', KEYS[3])\n"
+               "redis.call('HSET', KEYS[2], 'rev', ARGV[4], 'params', ARGV[5])\n" CLUSTER_MADE CLUSTER_PUBLISH("6", "7")
                "return {'ok', seq}\n",
-    /* KEYS stream, streams, seq; ARGV name, event, channel */
-    [CS_DESTROY] = "if redis.call('DEL', KEYS[1]) == 0 then return {'gone'} end\n"
-                   "redis.call('ZREM', KEYS[2], ARGV[1])\n"
+    /* KEYS done, stream, streams, seq; ARGV id, name, event, channel */
+    [CS_DESTROY] = CLUSTER_ONCE
+                   "if redis.call('DEL', KEYS[2]) == 0 then return {'gone'} end\n"
+                   "redis.call('ZREM', KEYS[3], ARGV[2])\n"
                    "local p = '" CLUSTER_KEY "'\n"
-                   "redis.call('DEL', p .. 'lease:' .. ARGV[1], p .. 'want:' .. ARGV[1], p .. 'frame:' .. ARGV[1] .. ':1',\n"
-                   "           p .. 'frame:' .. ARGV[1] .. ':2', p .. 'frame:' .. ARGV[1] .. ':3', p .. 'frame:' .. ARGV[1] .. ':4')\n"
-                   "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n",
-    /* KEYS stream, streams, seq; ARGV name, event, channel (as CS_DESTROY's) */
-    [CS_RESET] = "if redis.call('EXISTS', KEYS[1]) == 0 then return {'gone'} end\n"
-                 "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n",
+                   "redis.call('DEL', p .. 'lease:' .. ARGV[2], p .. 'want:' .. ARGV[2], p .. 'frame:' .. ARGV[2] .. ':1',\n"
+                   "           p .. 'frame:' .. ARGV[2] .. ':2', p .. 'frame:' .. ARGV[2] .. ':3', p .. 'frame:' .. ARGV[2] .. ':4')\n"
+                   "local seq = redis.call('INCR', KEYS[4])\n" CLUSTER_MADE CLUSTER_PUBLISH("3", "4")
+                   "return {'ok', seq}\n",
+    /* KEYS done, stream, streams, seq; ARGV id, name, event, channel (as CS_DESTROY's) */
+    [CS_RESET] = CLUSTER_ONCE
+                 "if redis.call('EXISTS', KEYS[2]) == 0 then return {'gone'} end\n"
+                 "local seq = redis.call('INCR', KEYS[4])\n" CLUSTER_MADE CLUSTER_PUBLISH("3", "4")
+                 "return {'ok', seq}\n",
     /* KEYS streams, seq; ARGV key prefix. Returns seq, then name, effect, rev, params per stream. */
     [CS_LOAD] = "local out = {redis.call('GET', KEYS[2]) or '0'}\n"
                 "for _, n in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do\n"
@@ -83,6 +105,8 @@ static const char *const cluster_scripts[CS_COUNT] = {
 struct cluster {
     struct cluster_config cfg;
     char channel[48];
+    char done_key[96];  /* fxs:done:NODE (CLUSTER_ONCE) */
+    char instance[17];  /* this process's random id, in hex: the changes' ids start with it */
 
     /* Network thread only (in_sync is also read by the follower, which wakes the network thread
      * every CLUSTER_PING_S while the copy is stale, so a failed reload is retried when idle). */
@@ -90,6 +114,7 @@ struct cluster {
     char sha[CS_COUNT][48]; /* SCRIPT LOAD's answers on cmd */
     atomic_bool in_sync;
     uint64_t seq;
+    uint64_t changes;       /* changes sent: the last one's id is INSTANCE-changes */
 
     /* The follower. */
     pthread_t thread;
@@ -230,6 +255,19 @@ redisContext *cluster_dial(const struct cluster *cl, char *why, size_t cap)
         return NULL;
     }
     return c;
+}
+
+bool cluster_closed(const redisContext *c)
+{
+    struct pollfd p = {.fd = c->fd, .events = POLLIN};
+    return poll(&p, 1, 0) != 0; /* no answer is due: readable means end of file, a reset, or an error */
+}
+
+/* Whether a command failed because Redis closed the connection (it did not hang): errno as
+ * the command left it. */
+static bool cluster_peer_closed(const redisContext *c, int e)
+{
+    return c->err == REDIS_ERR_EOF || (c->err == REDIS_ERR_IO && (e == ECONNRESET || e == EPIPE));
 }
 
 /* ---- the follower ---- */
@@ -398,6 +436,10 @@ int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct 
     if (!cl) return fx_fail(err, "internal", NULL, "out of memory");
     cl->cfg = *cfg;
     snprintf(cl->channel, sizeof cl->channel, CLUSTER_KEY "events:%d", cfg->db);
+    snprintf(cl->done_key, sizeof cl->done_key, CLUSTER_KEY "done:%s", cfg->node_id);
+    uint64_t id;
+    if (getrandom(&id, sizeof id, 0) != sizeof id) id = (uint64_t)time(NULL) << 20 ^ (uint64_t)getpid();
+    snprintf(cl->instance, sizeof cl->instance, "%016llx", (unsigned long long)id);
     cl->stop_fd = eventfd(0, EFD_CLOEXEC);
     if (cl->stop_fd < 0) {
         free(cl);
@@ -528,6 +570,12 @@ static int cluster_cmd(struct cluster *cl, struct fx_err *err)
         redisFree(cl->cmd);
         cl->cmd = NULL;
     }
+    if (cl->cmd && cluster_closed(cl->cmd)) {
+        log_info("cluster: %s closed the command connection while it was idle (its timeout, or CLIENT KILL): "
+                 "reconnecting", cl->cfg.url);
+        redisFree(cl->cmd);
+        cl->cmd = NULL;
+    }
     if (cl->cmd) return 0;
     if (!(cl->cmd = cluster_dial(cl, why, sizeof why))) {
         atomic_store(&cl->cmd_suspect, true);
@@ -562,8 +610,28 @@ static int cluster_writable(struct cluster *cl, struct fx_err *err)
                    "(nothing changed)", cl->cfg.url, why[0] ? ": " : "", why);
 }
 
+/* Sends script s (EVALSHA, or EVAL after a SCRIPT FLUSH) on the command connection: v holds
+ * the command's n words, v[1] left for the hash. NULL when the connection failed; errno then
+ * says how. */
+static redisReply *cluster_send(struct cluster *cl, int s, int n, const char **v)
+{
+    v[0] = "EVALSHA";
+    v[1] = cl->sha[s];
+    redisReply *r = redisCommandArgv(cl->cmd, n, v, NULL);
+    if (r && r->type == REDIS_REPLY_ERROR && !strncmp(r->str, "NOSCRIPT", 8)) {
+        freeReplyObject(r);
+        v[0] = "EVAL";
+        v[1] = cluster_scripts[s];
+        r = redisCommandArgv(cl->cmd, n, v, NULL);
+    }
+    return r;
+}
+
 /* Runs script s with keys then args (argc of them, lens NULL: C strings): its reply, or NULL
- * with err. A reply lost after sending leaves the outcome unknown: the copy goes stale. */
+ * with err. When Redis closed the connection under the command (CLIENT KILL, its timeout) the
+ * script is sent once more on a new one: every script is safe to repeat (CLUSTER_ONCE). A reply
+ * lost otherwise (no answer in time, or the second try failed too) leaves the outcome unknown:
+ * the copy goes stale. */
 static redisReply *cluster_eval(struct cluster *cl, int s, int nkeys, int argc, const char *const *argv,
                                 struct fx_err *err)
 {
@@ -575,23 +643,29 @@ static redisReply *cluster_eval(struct cluster *cl, int s, int nkeys, int argc, 
     }
     char n[16];
     snprintf(n, sizeof n, "%d", nkeys);
-    v[0] = "EVALSHA";
-    v[1] = cl->sha[s];
     v[2] = n;
     memcpy(v + 3, argv, sizeof *v * (size_t)argc);
-    redisReply *r = redisCommandArgv(cl->cmd, argc + 3, v, NULL);
-    if (r && r->type == REDIS_REPLY_ERROR && !strncmp(r->str, "NOSCRIPT", 8)) { /* SCRIPT FLUSH since */
-        freeReplyObject(r);
-        v[0] = "EVAL";
-        v[1] = cluster_scripts[s];
-        r = redisCommandArgv(cl->cmd, argc + 3, v, NULL);
-    }
+    redisReply *r = cluster_send(cl, s, argc + 3, v);
     int e = errno;
+    char why[256] = "";
+    if (!r && cluster_peer_closed(cl->cmd, e)) {
+        snprintf(why, sizeof why, "%s, and no new connection could be made", cl->cmd->errstr);
+        log_info("cluster: %s closed the command connection during a change (%s): sending it again on a new one",
+                 cl->cfg.url, cl->cmd->errstr);
+        redisFree(cl->cmd);
+        cl->cmd = NULL;
+        if (!cluster_cmd(cl, &(struct fx_err){0})) {
+            why[0] = 0;
+            r = cluster_send(cl, s, argc + 3, v);
+            e = errno;
+        }
+    }
     free(v);
     if (!r) {
-        char why[256];
-        if (e == EAGAIN || e == EWOULDBLOCK) snprintf(why, sizeof why, "no answer within %d s", CLUSTER_TIMEOUT_S);
-        else snprintf(why, sizeof why, "%s", cl->cmd->errstr);
+        if (!why[0] && (e == EAGAIN || e == EWOULDBLOCK))
+            snprintf(why, sizeof why, "no answer within %d s", CLUSTER_TIMEOUT_S);
+        else if (!why[0])
+            snprintf(why, sizeof why, "%s", cl->cmd->errstr);
         redisFree(cl->cmd);
         cl->cmd = NULL;
         cl->in_sync = false;
@@ -649,20 +723,27 @@ static void cluster_key(char *key, size_t cap, const char *stream)
     snprintf(key, cap, CLUSTER_KEY "stream:%s", stream);
 }
 
+/* A new change's id (CLUSTER_ONCE). */
+static void cluster_change_id(struct cluster *cl, char *id, size_t cap)
+{
+    snprintf(id, cap, "%s-%llu", cl->instance, (unsigned long long)++cl->changes);
+}
+
 int cluster_create(struct cluster *cl, const char *stream, const char *effect, const cJSON *params, int max_streams,
                    struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], max[16];
+    char key[128], max[16], id[48];
     cluster_key(key, sizeof key, stream);
+    cluster_change_id(cl, id, sizeof id);
     snprintf(max, sizeof max, "%d", max_streams);
     char *doc = cJSON_PrintUnformatted(params), *ev = cluster_event(cl, "created", stream, effect, 1, params);
     redisReply *r = NULL;
     if (!doc || !ev) fx_fail(err, "internal", NULL, "out of memory");
     else
-        r = cluster_eval(cl, CS_CREATE, 3, 9,
-                         (const char *[]){key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", stream, effect, doc, max, ev,
-                                          cl->channel}, err);
+        r = cluster_eval(cl, CS_CREATE, 4, 11,
+                         (const char *[]){cl->done_key, key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", id, stream, effect,
+                                          doc, max, ev, cl->channel}, err);
     cJSON_free(doc);
     cJSON_free(ev);
     if (!r) return -1;
@@ -705,16 +786,18 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
                 struct cluster_current *cur, struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], from[24], to[24];
+    char key[128], from[24], to[24], id[48];
     cluster_key(key, sizeof key, stream);
+    cluster_change_id(cl, id, sizeof id);
     snprintf(from, sizeof from, "%llu", (unsigned long long)base);
     snprintf(to, sizeof to, "%llu", (unsigned long long)base + 1);
     char *doc = cJSON_PrintUnformatted(params), *ev = cluster_event(cl, "params", stream, effect, base + 1, params);
     redisReply *r = NULL;
     if (!doc || !ev) fx_fail(err, "internal", NULL, "out of memory");
     else
-        r = cluster_eval(cl, CS_SET, 2, 8,
-                         (const char *[]){key, CLUSTER_KEY "seq", effect, from, to, doc, ev, cl->channel}, err);
+        r = cluster_eval(cl, CS_SET, 3, 10,
+                         (const char *[]){cl->done_key, key, CLUSTER_KEY "seq", id, effect, from, to, doc, ev, cl->channel},
+                         err);
     cJSON_free(doc);
     cJSON_free(ev);
     if (!r) return -1;
@@ -729,11 +812,12 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
 static int cluster_stream_change(struct cluster *cl, int s, const char *op, const char *stream, struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], *ev = cluster_event(cl, op, stream, NULL, 0, NULL);
+    char key[128], id[48], *ev = cluster_event(cl, op, stream, NULL, 0, NULL);
     cluster_key(key, sizeof key, stream);
-    redisReply *r = ev ? cluster_eval(cl, s, 3, 6,
-                                      (const char *[]){key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", stream, ev,
-                                                       cl->channel}, err)
+    cluster_change_id(cl, id, sizeof id);
+    redisReply *r = ev ? cluster_eval(cl, s, 4, 8,
+                                      (const char *[]){cl->done_key, key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", id,
+                                                       stream, ev, cl->channel}, err)
                        : NULL;
     if (!ev) fx_fail(err, "internal", NULL, "out of memory");
     cJSON_free(ev);

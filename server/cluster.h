@@ -5,13 +5,15 @@
  *   fxs:streams       sorted set of the names, scored by their creation's change number
  *   fxs:seq           the change counter: +1 per change, whichever daemon made it
  *   fxs:seeded        set once, by the daemon that first filled an empty database
+ *   fxs:done:NODE     "ID SEQ": the id of the node's last change and its number, for a minute
  *   (leases, demand, frames: lease.h and relay.h)
  * and the channel fxs:events:DB (pub/sub is server-wide, hence the database in its name)
  * carries one message per change, "SEQ JSON": the change's number, then {op, node, stream,
  * effect, rev, params} (op created, params, destroyed or reset; destroyed and reset carry
  * only the stream). Each change is one Lua script that checks (the stream exists or not, its
  * effect and rev are those the change was validated against), writes, counts and publishes,
- * so Redis holds every change or none, and the messages come in the changes' order.
+ * so Redis holds every change or none, and the messages come in the changes' order. Each
+ * change carries an id of its own, kept in fxs:done:NODE: one sent again (below) is made once.
  *
  * Threads. Everything here runs on the network thread except the follower: a thread with
  * its own connection SUBSCRIBEd to the channel, which queues each message as it comes, a
@@ -20,6 +22,8 @@
  * to cluster_follow. The queue and the last error are guarded by a mutex inside cluster.c,
  * the link state is atomic; the command connection, the scripts' hashes and the change number
  * the local copy has reached belong to the network thread. The follower never touches the hub.
+ * A command connection that Redis closed while idle (its `timeout`, CLIENT KILL) is replaced
+ * before use; one closed under a command is replaced and the command sent once more.
  *
  * The local copy (replica.c applies what is queued) follows Redis exactly while `in sync`:
  * it has applied every change up to `seq`. A write of this daemon, or a message, numbered
@@ -76,6 +80,9 @@ int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void *ctx, struc
 /* A new connection to Redis (authenticated, on the database; every command bounded by the
  * 1 s timeout), for a thread of its own; NULL with why. Any thread. */
 struct redisContext *cluster_dial(const struct cluster *cl, char *why, size_t cap);
+/* Whether Redis closed c while it sat idle between commands (its `timeout`, CLIENT KILL): the
+ * owner of a connection checks before using it, and makes a new one instead. */
+bool cluster_closed(const struct redisContext *c);
 const struct cluster_config *cluster_config_of(const struct cluster *cl);
 /* Stops the follower (within the connect timeout) and frees everything; NULL is a no-op. */
 void cluster_close(struct cluster *cl);
@@ -117,7 +124,8 @@ void cluster_loaded(struct cluster *cl, uint64_t seq);
 
 /* The changes. Each fails with unavailable (the link is down, the local copy is stale, or
  * Redis did not answer or refused: the message names the URL; when the answer to a sent change
- * was lost the message says the outcome is unknown, and the copy is reloaded), or with what
+ * was lost, on a second connection too, the message says the outcome is unknown, and the copy
+ * is reloaded), or with what
  * Redis's state says:
  * exists and limit (create, limit = max_streams), unknown_stream (set, destroy, reset: no
  * longer in Redis). */

@@ -150,6 +150,12 @@ static void lease_drop_conn(struct lease *l, const char *why)
 
 static bool lease_conn(struct lease *l)
 {
+    if (l->c && cluster_closed(l->c)) {
+        log_info("cluster: %s closed the lease agent's connection (its timeout, or CLIENT KILL): reconnecting", l->cfg->url);
+        redisFree(l->c);
+        l->c = NULL;
+        l->retry_at = 0;
+    }
     if (l->c) return true;
     if (clock_now() < l->retry_at) return false;
     char why[256];

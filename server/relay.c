@@ -106,9 +106,14 @@ static void relay_on_message(struct relay *r, const redisReply *m)
 }
 
 /* A stream just subscribed to: its numbering starts above the hub's frames, and its latest
- * frames come from Redis. */
+ * frames come from Redis (on the `get` connection, made again when Redis closed it while idle). */
 static int relay_fetch_latest(struct relay *r, struct relay_sub *sub, struct stream *s)
 {
+    if (cluster_closed(r->get)) {
+        char why[256];
+        redisFree(r->get);
+        if (!(r->get = cluster_dial(r->srv->cluster, why, sizeof why))) return -1;
+    }
     for (int k = 1; k <= FXS_KIND_MAX; k++) sub->last[k] = hub_latest_seq(&r->srv->hub, s, k);
     for (int k = 1; k <= FXS_KIND_MAX; k++) {
         redisReply *q = redisCommand(r->get, "GET " CLUSTER_KEY "frame:%s:%d", sub->name, k);
@@ -206,8 +211,9 @@ static void *relay_main(void *arg)
         backoff = RELAY_BACKOFF_MIN_S;
         bool due = clock_now() >= followed_at + RELAY_POLL_S; /* not after every batch of frames */
         if (due) followed_at = clock_now();
-        if ((due && relay_follow_hub(r)) || relay_read(r)) {
-            log_warn("cluster: relay lost %s: %s", r->cfg->url, r->sub->err ? r->sub->errstr : "a command failed");
+        if ((due && relay_follow_hub(r)) || relay_read(r)) { /* idle, Redis's timeout or CLIENT KILL may close it */
+            log_msg(r->nsubs ? LOG_WARN : LOG_INFO, "cluster: relay lost %s: %s", r->cfg->url,
+                    r->sub->err ? r->sub->errstr : "a command failed");
             relay_disconnect(r);
             followed_at = 0;
         }

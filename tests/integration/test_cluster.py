@@ -10,7 +10,8 @@ holds; C's subscriber gets the params event of B's set, A's clients the created/
 of B's and C's changes; concurrent sets through two daemons all succeed with distinct
 consecutive revs and lose no update; a set whose daemon is behind Redis is made again on
 Redis's document; racing creates: one wins, everywhere; a reset through B restarts A's stream;
-a reload that finds other params at the same rev re-creates the effect; Redis killed: changes
+a reload that finds other params at the same rev re-creates the effect; Redis closing the daemons' connections while idle
+or under a change: each change is made, once; Redis killed: changes
 answer unavailable naming the cluster, /healthz and /metrics say the link is down, streams keep
 sending frames and reads keep working; Redis back empty: changes are accepted again within
 seconds and the state the daemons had is in Redis again (re-seeded); Redis hung (SIGSTOP): one
@@ -18,7 +19,7 @@ change waits the 1 s timeout, the next are refused at once, frames go on; Redis 
 in an older state: Redis wins, the daemon goes back to it and tells its subscribers; a kill -9 of
 Redis with appendfsync always loses no acknowledged change; flags and configuration errors; a
 password from FXS_REDIS_PASSWORD; SIGTERM with Redis up or down exits 0. Every wait is bounded;
-a missing redis-server fails the suite with a message. About 10 s (more with a cold PoCL cache)."""
+a missing redis-server fails the suite with a message. About 60 s (more with a cold PoCL cache)."""
 import asyncio
 import json
 import os
@@ -66,6 +67,11 @@ def resp_read(f):
     raise RuntimeError("unexpected RESP %r" % line)
 
 
+def resp(*args):
+    """One command in Redis's protocol."""
+    return ("*%d\r\n" % len(args) + "".join("$%d\r\n%s\r\n" % (len(str(a).encode()), a) for a in args)).encode()
+
+
 class Redis:
     """A redis-server on 127.0.0.1:port (free by default), data in dir (a temp dir by default)."""
 
@@ -76,7 +82,8 @@ class Redis:
         self.password = password
         self.url = "redis://127.0.0.1:%d" % self.port
         args = [REDIS, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir, "--save", "",
-                "--daemonize", "no", "--logfile", os.path.join(self.dir, "redis.log")]
+                "--daemonize", "no", "--logfile", os.path.join(self.dir, "redis.log"),
+                "--enable-debug-command", "local"]
         args += ["--appendonly", "yes", "--appendfsync", "always"] if aof else ["--appendonly", "no"]
         if password:
             args += ["--requirepass", password]
@@ -104,8 +111,7 @@ class Redis:
             f = s.makefile("rb")
             cmds = ([["AUTH", self.password]] if self.password else []) + [list(args)]
             for c in cmds:
-                s.sendall(("*%d\r\n" % len(c) + "".join("$%d\r\n%s\r\n" % (len(str(a).encode()), a) for a in c))
-                          .encode())
+                s.sendall(resp(*c))
                 reply = resp_read(f)
             return reply
 
@@ -190,6 +196,20 @@ async def event(c, op, stream, timeout=8.0, **match):
                 all(m.get(k) == v for k, v in match.items()):
             return m
     return None
+
+
+async def frame_made_after(c, wall, timeout=10.0, kind=2):
+    """The next frame of kind computed after the wall-clock time `wall` (its header's
+    server_time_us; daemons and test share the clock), skipping frames still queued; None when
+    none comes within timeout."""
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            f = await c.frame(timeout=max(0.01, deadline - time.monotonic()), kind=kind)
+            if f["server_time_us"] > wall * 1e6:
+                return f
+    except asyncio.TimeoutError:
+        return None
 
 
 def leases(d):
@@ -394,6 +414,50 @@ async def test_metrics(t):
     t.check(val.get("fxs_cluster_changes", 0) >= 3 and val.get("fxs_cluster_applied", 0) >= 3 and
             val.get("fxs_cluster_reloads", 0) >= 1 and val.get("fxs_cluster_in_sync") == 1,
             "B's cluster counters: %s" % val)
+
+
+async def test_idle_links(t):
+    """Redis closes the daemons' command connections while idle (CLIENT KILL TYPE normal, its
+    `timeout`), or with a change on its way: each change is made, once."""
+    a = await Client.connect(A)
+    base = (await get(A, "c1"))["rev"]
+    killed = R.cmd("CLIENT", "KILL", "TYPE", "normal")
+    r1 = await a.request("set", stream="c1", params={"alpha": 1.1})
+    r2 = await a.request("set", stream="c1", params={"alpha": 1.2})
+    t.check(killed >= 3 and r1.get("rev") == base + 1 and r2.get("rev") == base + 2,
+            "after CLIENT KILL TYPE normal (%d connections) the next two sets are made: rev %s, %s (%s)" %
+            (killed, r1.get("rev"), r2.get("rev"), r1.get("message", "")))
+    R.cmd("CONFIG", "SET", "timeout", "1")
+    try:
+        await asyncio.sleep(2.5)
+        b = await Client.connect(B)
+        r3 = await b.request("set", stream="c1", params={"alpha": 1.3})
+        t.check(r3.get("rev") == base + 3, "Redis's timeout at 1 s: a set through B after 2.5 s idle is made: rev %s (%s)"
+                % (r3.get("rev"), r3.get("message", "")))
+        await b.close()
+    finally:
+        R.cmd("CONFIG", "SET", "timeout", "0")
+    # Redis busy (DEBUG SLEEP), then it closes every connection: A's set, sent meanwhile, is lost with its
+    # connection before Redis read it (CLIENT KILL sent with the sleep), or after Redis made it (sent after the set).
+    rev = base + 3
+    for when in ("before Redis read it", "after Redis made it"):
+        with socket.create_connection(("127.0.0.1", R.port), timeout=5) as s, \
+                socket.create_connection(("127.0.0.1", R.port), timeout=5) as k:
+            kill = resp("CLIENT", "KILL", "TYPE", "normal")
+            s.sendall(resp("DEBUG", "SLEEP", "0.8") + (kill if when.startswith("before") else b""))
+            await asyncio.sleep(0.15)
+            pending = asyncio.ensure_future(a.request("set", stream="c1", params={"alpha": rev / 10}))
+            await asyncio.sleep(0.2)
+            if when.startswith("after"):
+                k.sendall(kill)
+            r = await pending
+        rev += 1
+        t.check(r.get("rev") == rev and R.stream("c1")[1] == rev,
+                "a set whose connection Redis closes %s is sent again and made once: rev %s (%s)" %
+                (when, r.get("rev"), r.get("message", "")))
+    g = await get_at(C, "c1", rev)
+    t.check(g.get("params") == r.get("params"), "C follows (rev %s)" % g.get("rev"))
+    await a.close()
 
 
 async def test_redis_down(t):
@@ -632,7 +696,8 @@ if __name__ == "__main__":
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
-               test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
+               test_reset, test_metrics, test_idle_links,
+               test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
         stop_all((A, B, C), R)
