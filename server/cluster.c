@@ -24,10 +24,11 @@
 #define CLUSTER_BACKOFF_MAX_S 1.0   /* ...up to this */
 #define CLUSTER_FIRST_WAIT_S 10.0   /* cluster_follow waits this long for the first subscription */
 #define CLUSTER_DONE_MS "60000"     /* how long Redis remembers a change's id (a change sent again is made once) */
+#define CLUSTER_CLAIM_LOOK_S 0.25   /* cluster_claim looks at a node id held by another daemon this often */
 
 /* ---- the scripts (Lua, run atomically by Redis) ---- */
 
-enum { CS_CREATE, CS_SET, CS_DESTROY, CS_RESET, CS_LOAD, CS_SEED, CS_COUNT };
+enum { CS_CREATE, CS_SET, CS_DESTROY, CS_RESET, CS_LOAD, CS_SEED, CS_CLAIM, CS_COUNT };
 
 /* Each ends by publishing "SEQ EVENT" (the change's number, then the caller's JSON). */
 #define CLUSTER_PUBLISH(event, channel) \
@@ -100,6 +101,15 @@ static const char *const cluster_scripts[CS_COUNT] = {
                 "  end\n"
                 "end\n"
                 "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("3", "4") "return n\n",
+    /* KEYS member; ARGV this daemon's claim, ttl ms. {'ok'}: claimed (a claim whose daemon stopped
+     * renewing it has expired); {'held', claim, ms left}: another daemon's, with its time left. */
+    [CS_CLAIM] = "local v = redis.call('GET', KEYS[1])\n"
+                 "if v and v ~= ARGV[1] then\n"
+                 "  local left = redis.call('PTTL', KEYS[1])\n"
+                 "  if left > 0 and left <= tonumber(ARGV[2]) then return {'held', v, left} end\n"
+                 "end\n"
+                 "redis.call('SET', KEYS[1], ARGV[1], 'PX', ARGV[2])\n"
+                 "return {'ok'}\n",
 };
 
 struct cluster {
@@ -107,6 +117,7 @@ struct cluster {
     char channel[48];
     char done_key[96];  /* fxs:done:NODE (CLUSTER_ONCE) */
     char instance[17];  /* this process's random id, in hex: the changes' ids start with it */
+    char member[128];   /* this daemon's claim on its node id: "INSTANCE PID HOST" */
 
     /* Network thread only (in_sync is also read by the follower, which wakes the network thread
      * every CLUSTER_PING_S while the copy is stale, so a failed reload is retried when idle). */
@@ -124,7 +135,7 @@ struct cluster {
     atomic_bool cmd_stale;   /* the link was lost since the command connection was made */
     atomic_bool cmd_suspect; /* a command got no answer: none is sent until the subscription hears Redis again */
     atomic_uint_fast64_t link_losses;
-    void (*wake)(void *ctx);
+    void (*wake)(void *ctx), (*stop)(void *ctx);
     void *wake_ctx;
 
     pthread_mutex_t mu; /* guards what follows */
@@ -132,6 +143,7 @@ struct cluster {
     int first;          /* the follower's first attempt: 0 pending, 1 subscribed, -1 failed */
     struct cluster_item *head, *tail;
     char last_error[320];
+    char aborted[768];  /* why this daemon had to stop (cluster_node_taken), "" if it need not */
 };
 
 /* ---- configuration ---- */
@@ -440,6 +452,9 @@ int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct 
     uint64_t id;
     if (getrandom(&id, sizeof id, 0) != sizeof id) id = (uint64_t)time(NULL) << 20 ^ (uint64_t)getpid();
     snprintf(cl->instance, sizeof cl->instance, "%016llx", (unsigned long long)id);
+    char host[64] = "";
+    if (gethostname(host, sizeof host - 1) || !host[0]) snprintf(host, sizeof host, "?");
+    snprintf(cl->member, sizeof cl->member, "%s %d %s", cl->instance, (int)getpid(), host);
     cl->stop_fd = eventfd(0, EFD_CLOEXEC);
     if (cl->stop_fd < 0) {
         free(cl);
@@ -451,9 +466,10 @@ int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct 
     return 0;
 }
 
-int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void *ctx, struct fx_err *err)
+int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void (*stop)(void *ctx), void *ctx, struct fx_err *err)
 {
     cl->wake = wake;
+    cl->stop = stop;
     cl->wake_ctx = ctx;
     if (pthread_create(&cl->thread, NULL, cluster_follower, cl))
         return fx_fail(err, "internal", NULL, "cannot start the cluster thread");
@@ -911,4 +927,81 @@ int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_e
     }
     freeReplyObject(r);
     return 0;
+}
+
+/* ---- this daemon's node id ---- */
+
+const char *cluster_member(const struct cluster *cl) { return cl->member; }
+
+/* Who holds a node id, from its claim ("INSTANCE PID HOST"), for people. */
+static void cluster_holder(const char *claim, char *out, size_t cap)
+{
+    char host[64];
+    int pid;
+    if (sscanf(claim, "%*16[0-9a-f] %d %63s", &pid, host) == 2) snprintf(out, cap, "pid %d on host %s", pid, host);
+    else snprintf(out, cap, "claim \"%.40s\"", claim);
+}
+
+/* How a node id is named in messages: the default one says where it came from. */
+static const char *cluster_node_origin(const struct cluster *cl)
+{
+    return cl->cfg.node_id_default ? " (the host name)" : "";
+}
+
+int cluster_claim(struct cluster *cl, struct fx_err *err)
+{
+    char key[96], ttl[16], who[128];
+    snprintf(key, sizeof key, CLUSTER_KEY "member:%s", cl->cfg.node_id);
+    snprintf(ttl, sizeof ttl, "%d", (int)(CLUSTER_MEMBER_TTL_S * 1000));
+    double deadline = clock_now() + CLUSTER_MEMBER_TTL_S + 1.0;
+    long long last = -1; /* the claim's time left at the previous look */
+    for (;;) {
+        redisReply *r = cluster_eval(cl, CS_CLAIM, 1, 3, (const char *[]){key, cl->member, ttl}, err);
+        if (!r) return -1;
+        bool held = !strcmp(cluster_outcome(r), "held") && r->elements == 3 &&
+                    r->element[1]->type == REDIS_REPLY_STRING && r->element[2]->type == REDIS_REPLY_INTEGER;
+        long long left = held ? r->element[2]->integer : 0;
+        if (held) cluster_holder(r->element[1]->str, who, sizeof who);
+        freeReplyObject(r);
+        if (!held) return 0;
+        if (left > last && last >= 0) /* renewed since the last look: its daemon runs */
+            return fx_fail(err, "exists", "node-id", "cluster: node id \"%s\"%s is in use by another running fxstreamd "
+                           "(%s) on %s: give each daemon its own --node-id", cl->cfg.node_id, cluster_node_origin(cl),
+                           who, cl->cfg.url);
+        if (clock_now() > deadline)
+            return fx_fail(err, "exists", "node-id", "cluster: node id \"%s\"%s is still held by another fxstreamd "
+                           "(%s) on %s after %.0f s: give each daemon its own --node-id", cl->cfg.node_id,
+                           cluster_node_origin(cl), who, cl->cfg.url, CLUSTER_MEMBER_TTL_S + 1.0);
+        if (last < 0)
+            log_info("cluster: node id %s is held by %s (%lld ms left): waiting to see whether it is renewed",
+                     cl->cfg.node_id, who, left);
+        last = left;
+        cluster_pause(cl, CLUSTER_CLAIM_LOOK_S);
+    }
+}
+
+void cluster_node_taken(struct cluster *cl, const char *claim)
+{
+    char who[128];
+    cluster_holder(claim, who, sizeof who);
+    pthread_mutex_lock(&cl->mu);
+    bool first = !cl->aborted[0];
+    if (first)
+        snprintf(cl->aborted, sizeof cl->aborted, "cluster: node id \"%s\"%s was taken by another fxstreamd (%s) "
+                 "while this daemon could not renew it (paused, or cut off from %s, for more than %.0f s); two "
+                 "daemons must not share a node id", cl->cfg.node_id, cluster_node_origin(cl), who, cl->cfg.url,
+                 CLUSTER_MEMBER_TTL_S);
+    pthread_mutex_unlock(&cl->mu);
+    if (!first) return;
+    log_error("%s: stopping", cl->aborted);
+    if (cl->stop) cl->stop(cl->wake_ctx);
+}
+
+bool cluster_aborted(struct cluster *cl, char *why, size_t cap)
+{
+    pthread_mutex_lock(&cl->mu);
+    bool aborted = cl->aborted[0];
+    snprintf(why, cap, "%s", cl->aborted);
+    pthread_mutex_unlock(&cl->mu);
+    return aborted;
 }

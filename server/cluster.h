@@ -6,6 +6,8 @@
  *   fxs:seq           the change counter: +1 per change, whichever daemon made it
  *   fxs:seeded        set once, by the daemon that first filled an empty database
  *   fxs:done:NODE     "ID SEQ": the id of the node's last change and its number, for a minute
+ *   fxs:member:NODE   "INSTANCE PID HOST": the running daemon of that node id (its claim),
+ *                     with a TTL of CLUSTER_MEMBER_TTL_S, renewed by its lease agent (lease.h)
  *   (leases, demand, frames: lease.h and relay.h)
  * and the channel fxs:events:DB (pub/sub is server-wide, hence the database in its name)
  * carries one message per change, "SEQ JSON": the change's number, then {op, node, stream,
@@ -51,6 +53,7 @@ struct cluster_config {
     char host[256];
     int port, db;
     char node_id[64];   /* in every message this daemon publishes; default: the host name */
+    bool node_id_default; /* node_id is the host name (no --node-id or "node_id" given) */
     char password[512]; /* FXS_REDIS_PASSWORD; never logged nor reported */
     enum cluster_role role;
     bool role_set;      /* --role or "role" given (it needs --cluster) */
@@ -75,8 +78,9 @@ struct cluster;
 int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct fx_err *err);
 /* Starts the follower and waits for its first subscription: -1 with err (unavailable,
  * naming the URL and the reason) when Redis cannot be reached or refuses it. wake(ctx) is
- * called from the follower whenever it queued something. */
-int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void *ctx, struct fx_err *err);
+ * called from the follower whenever it queued something; stop(ctx), from any thread, when
+ * this daemon must stop (cluster_node_taken). */
+int cluster_follow(struct cluster *cl, void (*wake)(void *ctx), void (*stop)(void *ctx), void *ctx, struct fx_err *err);
 /* A new connection to Redis (authenticated, on the database; every command bounded by the
  * 1 s timeout), for a thread of its own; NULL with why. Any thread. */
 struct redisContext *cluster_dial(const struct cluster *cl, char *why, size_t cap);
@@ -144,6 +148,23 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
 int cluster_destroy(struct cluster *cl, const char *stream, struct fx_err *err);
 /* Tells every daemon to restart the stream's simulation (no state changes). */
 int cluster_reset(struct cluster *cl, const char *stream, struct fx_err *err);
+
+/* A node id belongs to one running daemon: its claim fxs:member:NODE lives this long unless
+ * renewed (each lease agent tick renews it). */
+#define CLUSTER_MEMBER_TTL_S 3.0
+
+/* Claims this daemon's node id before anything else is done in Redis. A claim left by a
+ * daemon that stopped renewing it (killed, or cut off) is waited for until it expires (at most
+ * CLUSTER_MEMBER_TTL_S); one that another daemon renews fails with err naming the node id and
+ * that daemon (its pid and host). Network thread, at start. */
+int cluster_claim(struct cluster *cl, struct fx_err *err);
+/* This daemon's claim ("INSTANCE PID HOST"), for the lease agent to renew. */
+const char *cluster_member(const struct cluster *cl);
+/* Any thread: another daemon holds this node id now (`claim`, its value): this one was paused or
+ * cut off past the claim's TTL while another started with the same id. Logs why and asks the
+ * daemon to stop (the stop callback); cluster_aborted says why afterwards. */
+void cluster_node_taken(struct cluster *cl, const char *claim);
+bool cluster_aborted(struct cluster *cl, char *why, size_t cap);
 
 /* For /healthz and /metrics (network thread). */
 struct cluster_status {

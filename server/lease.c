@@ -24,8 +24,10 @@
 enum { LS_TICK, LS_PUBLISH, LS_RELEASE, LS_COUNT };
 
 static const char *const lease_scripts[LS_COUNT] = {
-    /* ARGV node, compute (1/0), load, ttl ms, then n + the names wanted here, n + (name, token)
-     * of the leases held, n + the names this daemon could compute. A lease held is kept while
+    /* ARGV node, compute (1/0), load, ttl ms, this daemon's claim on its node id and its ttl ms
+     * (cluster.h), then n + the names wanted here, n + (name, token) of the leases held, n + the
+     * names this daemon could compute. The claim is renewed first: when another daemon holds
+     * the node id, nothing else is done and the reply is {{'taken', claim}}. A lease held is kept while
      * nobody else has taken it; it is written again once its stream exists (a Redis that lost
      * its data is seeded again by the daemons a moment later: no stream changes owner then). Returns one entry per held
      * or taken lease: {'held', name, token, demand} {'lost', name} {'taken', name, token, demand,
@@ -34,7 +36,11 @@ static const char *const lease_scripts[LS_COUNT] = {
         "local P, node, compute, ttl = '" CLUSTER_KEY "', ARGV[1], ARGV[2] == '1', tonumber(ARGV[4])\n"
         "local t = redis.call('TIME')\n"
         "local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)\n"
-        "local i = 5\n"
+        "local mk = P .. 'member:' .. node\n"
+        "local mv = redis.call('GET', mk)\n"
+        "if mv and mv ~= ARGV[5] and redis.call('PTTL', mk) > 0 then return {{'taken', mv}} end\n"
+        "redis.call('SET', mk, ARGV[5], 'PX', ARGV[6])\n"
+        "local i = 7\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
         "  i = i + 1\n"
         "  redis.call('HSET', P .. 'want:' .. ARGV[i], node, now + ttl)\n"
@@ -102,12 +108,14 @@ static const char *const lease_scripts[LS_COUNT] = {
                    "redis.call('SET', KEYS[2], ARGV[3])\n"
                    "redis.call('PUBLISH', ARGV[2], ARGV[3])\n"
                    "return 1\n",
-    /* ARGV node, then (name, token) of the leases held: each still ours is given up, so
-     * another daemon takes the stream at its next tick instead of after the TTL. */
+    /* ARGV node, its claim, then (name, token) of the leases held: each still ours is given up,
+     * so another daemon takes the stream at its next tick instead of after the TTL; so is the
+     * node id, so a daemon started again with it need not wait for the claim to expire. */
     [LS_RELEASE] = "local P = '" CLUSTER_KEY "'\n"
                    "redis.call('DEL', P .. 'node:' .. ARGV[1])\n"
                    "redis.call('ZREM', P .. 'computes', ARGV[1])\n"
-                   "for i = 2, #ARGV, 2 do\n"
+                   "if redis.call('GET', P .. 'member:' .. ARGV[1]) == ARGV[2] then redis.call('DEL', P .. 'member:' .. ARGV[1]) end\n"
+                   "for i = 3, #ARGV, 2 do\n"
                    "  if redis.call('GET', P .. 'lease:' .. ARGV[i]) == ARGV[i + 1] then redis.call('DEL', P .. 'lease:' .. ARGV[i]) end\n"
                    "end\n"
                    "return 1\n",
@@ -130,6 +138,7 @@ struct lease {
     redisContext *c;
     double retry_at, busy_t, error_logged; /* error_logged: Redis's refusals are logged every LEASE_LOG_S */
     uint64_t busy_ns;
+    bool node_taken; /* another daemon holds this node id now: this one stops, touching nothing in Redis */
 
     pthread_mutex_t mu; /* guards what follows */
     pthread_cond_t cv;
@@ -203,7 +212,7 @@ static redisReply *lease_eval(struct lease *l, int s, int nkeys, int argc, const
 struct lease_args {
     const char **v;
     char (*tokens)[96];
-    char counts[3][16], load[32], ttl[16];
+    char counts[3][16], load[32], ttl[16], member_ttl[16];
     int n;
 };
 
@@ -226,15 +235,18 @@ static double lease_load(struct lease *l)
 static int lease_args_build(struct lease *l, struct stream **ss, int n, struct lease_args *a)
 {
     bool compute = l->cfg->role != CLUSTER_ROLE_EDGE;
-    a->v = calloc((size_t)(7 + 4 * n), sizeof *a->v);
+    a->v = calloc((size_t)(9 + 4 * n), sizeof *a->v);
     a->tokens = calloc((size_t)n + 1, sizeof *a->tokens);
     if (!a->v || !a->tokens) return -1;
     snprintf(a->load, sizeof a->load, "%.4f", compute ? lease_load(l) : 0.0);
     snprintf(a->ttl, sizeof a->ttl, "%d", (int)(LEASE_TTL_S * 1000));
+    snprintf(a->member_ttl, sizeof a->member_ttl, "%d", (int)(CLUSTER_MEMBER_TTL_S * 1000));
     a->v[a->n++] = l->cfg->node_id;
     a->v[a->n++] = compute ? "1" : "0";
     a->v[a->n++] = a->load;
     a->v[a->n++] = a->ttl;
+    a->v[a->n++] = cluster_member(l->srv->cluster);
+    a->v[a->n++] = a->member_ttl;
     struct stream_status st[n > 0 ? n : 1];
     for (int i = 0; i < n; i++) hub_status(&l->srv->hub, ss[i], &st[i]);
     int at = a->n++, k = 0; /* wanted here */
@@ -305,14 +317,34 @@ static void lease_keep_all(struct lease *l, struct stream **ss, int n)
     }
 }
 
+/* Another daemon holds this node id: this one computes nothing more and stops (cluster.h). */
+static void lease_node_taken(struct lease *l, struct stream **ss, int n, const char *claim)
+{
+    l->node_taken = true;
+    for (int i = 0; i < n; i++) {
+        struct stream_status st;
+        hub_status(&l->srv->hub, ss[i], &st);
+        if (st.lease.owned) hub_set_lease(&l->srv->hub, ss[i], &(struct stream_lease){0});
+    }
+    cluster_node_taken(l->srv->cluster, claim);
+}
+
 static void lease_tick(struct lease *l)
 {
     int n;
     struct stream **ss = hub_snapshot(&l->srv->hub, &n);
     struct lease_args a = {0};
     double sent = clock_now();
+    if (l->node_taken) {
+        hub_release_all(ss, n);
+        return;
+    }
     redisReply *r = lease_args_build(l, ss, n, &a) ? NULL : lease_eval(l, LS_TICK, 0, a.n, a.v, NULL);
-    if (r && r->type == REDIS_REPLY_ARRAY)
+    const redisReply *e0 = r && r->type == REDIS_REPLY_ARRAY && r->elements ? r->element[0] : NULL;
+    if (e0 && e0->type == REDIS_REPLY_ARRAY && e0->elements == 2 && e0->element[0]->type == REDIS_REPLY_STRING &&
+        !strcmp(e0->element[0]->str, "taken") && e0->element[1]->type == REDIS_REPLY_STRING)
+        lease_node_taken(l, ss, n, e0->element[1]->str);
+    else if (r && r->type == REDIS_REPLY_ARRAY)
         for (size_t i = 0; i < r->elements; i++) lease_apply(l, r->element[i], sent + LEASE_TTL_S - LEASE_MARGIN_S);
     else if (!r)
         lease_keep_all(l, ss, n);
@@ -399,11 +431,12 @@ static void lease_release(struct lease *l)
 {
     int n;
     struct stream **ss = hub_snapshot(&l->srv->hub, &n);
-    const char **v = calloc((size_t)(1 + 2 * n), sizeof *v);
+    const char **v = calloc((size_t)(2 + 2 * n), sizeof *v);
     char (*tokens)[96] = calloc((size_t)n + 1, sizeof *tokens);
     int argc = 0, held = 0;
     if (v && tokens) {
         v[argc++] = l->cfg->node_id;
+        v[argc++] = cluster_member(l->srv->cluster);
         for (int i = 0; i < n; i++) {
             struct stream_status st;
             hub_status(&l->srv->hub, ss[i], &st);
@@ -444,7 +477,7 @@ static void *lease_main(void *arg)
         pthread_mutex_unlock(&l->mu);
         if (stop) break;
     }
-    if (l->cfg->role != CLUSTER_ROLE_EDGE) lease_release(l);
+    if (!l->node_taken) lease_release(l); /* another daemon's now: nothing here is this one's to give up */
     return NULL;
 }
 

@@ -10,7 +10,8 @@ holds; C's subscriber gets the params event of B's set, A's clients the created/
 of B's and C's changes; concurrent sets through two daemons all succeed with distinct
 consecutive revs and lose no update; a set whose daemon is behind Redis is made again on
 Redis's document; racing creates: one wins, everywhere; a reset through B restarts A's stream;
-a reload that finds other params at the same rev re-creates the effect; Redis closing the daemons' connections while idle
+a reload that finds other params at the same rev re-creates the effect; a second daemon given
+a node id in use refuses to start, saying so; Redis closing the daemons' connections while idle
 or under a change: each change is made, once; Redis killed: changes
 answer unavailable naming the cluster, /healthz and /metrics say the link is down, streams keep
 sending frames and reads keep working; Redis back empty: changes are accepted again within
@@ -38,6 +39,7 @@ from fxtest import DAEMON, Client, Daemon, Suite, free_port  # noqa: E402
 REDIS = shutil.which("redis-server") or "/usr/bin/redis-server"
 SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: several daemons share 2 cores
 LEASE_TTL_S = 3.0  # server/lease.h
+CLAIM_TTL_S = 3.0  # a node id's claim, CLUSTER_MEMBER_TTL_S in server/cluster.h
 R = None  # the shared Redis
 TEMP_DIRS = []  # Redis data dirs, removed at the end
 A = B = C = None  # its daemons, node ids a, b, c
@@ -416,6 +418,39 @@ async def test_metrics(t):
             "B's cluster counters: %s" % val)
 
 
+async def test_duplicate_node(t):
+    """A daemon given the node id of a running daemon refuses to start, saying why; the running
+    one goes on undisturbed."""
+    start = time.monotonic()
+    code, out = start_refused("--cluster", R.url, "--node-id", "b")
+    t.check(code == 1 and 'node id "b"' in out and "--node-id" in out,
+            "a second daemon with node id b exits 1 after %.1f s, naming it (%s)" %
+            (time.monotonic() - start, out.strip()[-220:]))
+    b = await Client.connect(B)
+    await b.request("subscribe", stream="c1")
+    f = await frame_made_after(b, time.time(), timeout=8)
+    t.check(f is not None and http_json(B, "/healthz")["cluster"]["node"] == "b",
+            "b goes on: its subscriber of c1 gets new frames")
+    await b.close()
+    # A daemon paused past its claim's TTL while another starts with its node id stops when it resumes.
+    first = cluster_daemon(R, "twin", "--role", "edge")
+    first.proc.send_signal(signal.SIGSTOP)
+    try:
+        await asyncio.sleep(CLAIM_TTL_S + 0.5)
+        second = cluster_daemon(R, "twin", "--role", "edge")
+    finally:
+        first.proc.send_signal(signal.SIGCONT)
+    try:
+        code = first.proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        code = None
+    t.check(code == 1 and 'node id "twin" was taken by another fxstreamd' in first.log(),
+            "one paused past its claim while another started with its node id exits 1 when it resumes, saying why "
+            "(%s: %s)" % (code, first.log().strip()[-160:]))
+    t.check(http_json(second, "/healthz")["cluster"]["node"] == "twin" and second.stop() == 0,
+            "the other one goes on")
+
+
 async def test_idle_links(t):
     """Redis closes the daemons' command connections while idle (CLIENT KILL TYPE normal, its
     `timeout`), or with a change on its way: each change is made, once."""
@@ -610,6 +645,15 @@ def run_daemon(*args, env=None, timeout=30):
     return p.returncode, p.stdout + p.stderr
 
 
+def start_refused(*args, timeout=20):
+    """run_daemon for a daemon expected to refuse to start: (exit status, output), or (None,
+    why) when it still runs after timeout s (it is killed then)."""
+    try:
+        return run_daemon(*args, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, "still running after %d s" % timeout
+
+
 async def test_flags(t):
     for args, word, what in ((["--cluster", "http://127.0.0.1:6379"], "redis://", "a URL that is not redis://"),
                              (["--cluster", "redis://:pw-xyz@127.0.0.1"], "FXS_REDIS_PASSWORD", "a password in the URL"),
@@ -645,6 +689,9 @@ async def test_flags(t):
     with Daemon("--cluster", R.url) as d:
         t.check(http_json(d, "/healthz")["cluster"]["node"] == socket.gethostname()[:63],
                 "the node id defaults to the host name")
+        code, out = start_refused("--cluster", R.url)
+        t.check(code == 1 and "(the host name)" in out and "--node-id" in out,
+                "a second daemon on the same host without --node-id exits 1, saying why (%s)" % out.strip()[-220:])
 
 
 async def test_password(t):
@@ -696,7 +743,7 @@ if __name__ == "__main__":
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
-               test_reset, test_metrics, test_idle_links,
+               test_reset, test_metrics, test_duplicate_node, test_idle_links,
                test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
