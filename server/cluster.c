@@ -34,52 +34,56 @@ enum { CS_CREATE, CS_SET, CS_DESTROY, CS_RESET, CS_LOAD, CS_SEED, CS_CLAIM, CS_C
 #define CLUSTER_PUBLISH(event, channel) \
     "redis.call('PUBLISH', ARGV[" channel "], string.format('%d ', seq) .. ARGV[" event "])\n"
 
-/* The changes (create, set, destroy, reset) share their first key and argument: KEYS[1] this
- * node's record of its last change (fxs:done:NODE, "ID SEQ"), ARGV[1] the change's id (unique
- * per daemon and change). A change whose id is recorded was made: its number is answered
- * again, so a change sent again after its connection was lost is made once. */
-#define CLUSTER_ONCE                                                                     \
+/* The changes (create, set, destroy, reset) share their first keys and arguments:
+ *   KEYS[1] this node's record of its last change (fxs:done:NODE, "ID SEQ"), KEYS[2]
+ *   fxs:seeded, KEYS[3] the change counter fxs:seq; ARGV[1] the change's id (unique per daemon
+ *   and change), ARGV[2] its event, ARGV[3] the channel; then their own from KEYS[4], ARGV[4].
+ * A database that lost fxs:seeded lost its data (FLUSHALL, a restart without persistence):
+ * {'unseeded'}, nothing done (the daemon reloads, which seeds it again). A change whose id is
+ * recorded was made: its number is answered again, so a change sent again after its
+ * connection was lost is made once. Each made change answers {'ok', its number}. */
+#define CLUSTER_BEGIN                                                                    \
+    "if redis.call('EXISTS', KEYS[2]) == 0 then return {'unseeded'} end\n"              \
     "local done = redis.call('GET', KEYS[1])\n"                                         \
     "if done then\n"                                                                   \
     "  local id, n = string.match(done, '^(%S+) (%d+)$')\n"                             \
     "  if id == ARGV[1] then return {'ok', tonumber(n)} end\n"                          \
     "end\n"
-#define CLUSTER_MADE \
-    "redis.call('SET', KEYS[1], ARGV[1] .. ' ' .. string.format('%d', seq), 'PX', " CLUSTER_DONE_MS ")\n"
+#define CLUSTER_NEXT "local seq = redis.call('INCR', KEYS[3])\n"
+#define CLUSTER_MADE                                                                                     \
+    "redis.call('SET', KEYS[1], ARGV[1] .. ' ' .. string.format('%d', seq), 'PX', " CLUSTER_DONE_MS ")\n" \
+    CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n"
 
 static const char *const cluster_scripts[CS_COUNT] = {
-    /* KEYS done, stream, streams, seq; ARGV id, name, effect, params, max_streams, event, channel */
-    [CS_CREATE] = CLUSTER_ONCE
-                  "if redis.call('EXISTS', KEYS[2]) == 1 then return {'exists'} end\n"
-                  "if redis.call('ZCARD', KEYS[3]) >= tonumber(ARGV[5]) then return {'limit'} end\n"
-                  "local seq = redis.call('INCR', KEYS[4])\n"
-                  "redis.call('HSET', KEYS[2], 'effect', ARGV[3], 'rev', '1', 'params', ARGV[4])\n"
-                  "redis.call('ZADD', KEYS[3], seq, ARGV[2])\n" CLUSTER_MADE CLUSTER_PUBLISH("6", "7")
-                  "return {'ok', seq}\n",
-    /* KEYS done, stream, seq; ARGV id, effect, base rev, new rev, params, event, channel */
-    [CS_SET] = CLUSTER_ONCE
-               "local cur = redis.call('HMGET', KEYS[2], 'effect', 'rev', 'params')\n"
+    /* KEYS stream, streams; ARGV name, effect, params, max_streams */
+    [CS_CREATE] = CLUSTER_BEGIN
+                  "if redis.call('EXISTS', KEYS[4]) == 1 then return {'exists'} end\n"
+                  "if redis.call('ZCARD', KEYS[5]) >= tonumber(ARGV[7]) then return {'limit'} end\n"
+                  CLUSTER_NEXT
+                  "redis.call('HSET', KEYS[4], 'effect', ARGV[5], 'rev', '1', 'params', ARGV[6])\n"
+                  "redis.call('ZADD', KEYS[5], seq, ARGV[4])\n" CLUSTER_MADE,
+    /* KEYS stream; ARGV effect, base rev, new rev, params */
+    [CS_SET] = CLUSTER_BEGIN
+               "local cur = redis.call('HMGET', KEYS[4], 'effect', 'rev', 'params')\n"
                "if not cur[1] then return {'gone'} end\n"
-               "if cur[1] ~= ARGV[2] or cur[2] ~= ARGV[3] then return {'moved', cur[1], cur[2], cur[3]} end\n"
-               "local seq = redis.call('INCR', KEYS[3])\n"
-               "redis.call('HSET', KEYS[2], 'rev', ARGV[4], 'params', ARGV[5])\n" CLUSTER_MADE CLUSTER_PUBLISH("6", "7")
-               "return {'ok', seq}\n",
-    /* KEYS done, stream, streams, seq; ARGV id, name, event, channel */
-    [CS_DESTROY] = CLUSTER_ONCE
-                   "if redis.call('DEL', KEYS[2]) == 0 then return {'gone'} end\n"
-                   "redis.call('ZREM', KEYS[3], ARGV[2])\n"
+               "if cur[1] ~= ARGV[4] or cur[2] ~= ARGV[5] then return {'moved', cur[1], cur[2], cur[3]} end\n"
+               CLUSTER_NEXT
+               "redis.call('HSET', KEYS[4], 'rev', ARGV[6], 'params', ARGV[7])\n" CLUSTER_MADE,
+    /* KEYS stream, streams; ARGV name */
+    [CS_DESTROY] = CLUSTER_BEGIN
+                   "if redis.call('DEL', KEYS[4]) == 0 then return {'gone'} end\n"
+                   "redis.call('ZREM', KEYS[5], ARGV[4])\n"
                    "local p = '" CLUSTER_KEY "'\n"
-                   "redis.call('DEL', p .. 'lease:' .. ARGV[2], p .. 'want:' .. ARGV[2], p .. 'frame:' .. ARGV[2] .. ':1',\n"
-                   "           p .. 'frame:' .. ARGV[2] .. ':2', p .. 'frame:' .. ARGV[2] .. ':3', p .. 'frame:' .. ARGV[2] .. ':4')\n"
-                   "local seq = redis.call('INCR', KEYS[4])\n" CLUSTER_MADE CLUSTER_PUBLISH("3", "4")
-                   "return {'ok', seq}\n",
-    /* KEYS done, stream, streams, seq; ARGV id, name, event, channel (as CS_DESTROY's) */
-    [CS_RESET] = CLUSTER_ONCE
-                 "if redis.call('EXISTS', KEYS[2]) == 0 then return {'gone'} end\n"
-                 "local seq = redis.call('INCR', KEYS[4])\n" CLUSTER_MADE CLUSTER_PUBLISH("3", "4")
-                 "return {'ok', seq}\n",
-    /* KEYS streams, seq; ARGV key prefix. Returns seq, then name, effect, rev, params per stream. */
-    [CS_LOAD] = "local out = {redis.call('GET', KEYS[2]) or '0'}\n"
+                   "redis.call('DEL', p .. 'lease:' .. ARGV[4], p .. 'want:' .. ARGV[4], p .. 'frame:' .. ARGV[4] .. ':1',\n"
+                   "           p .. 'frame:' .. ARGV[4] .. ':2', p .. 'frame:' .. ARGV[4] .. ':3', p .. 'frame:' .. ARGV[4] .. ':4')\n"
+                   CLUSTER_NEXT CLUSTER_MADE,
+    /* KEYS stream (streams and ARGV name, as CS_DESTROY's, unused) */
+    [CS_RESET] = CLUSTER_BEGIN
+                 "if redis.call('EXISTS', KEYS[4]) == 0 then return {'gone'} end\n" CLUSTER_NEXT CLUSTER_MADE,
+    /* KEYS streams, seq, seeded; ARGV key prefix. Returns seq, then name, effect, rev, params per
+     * stream; {'unseeded'} when the database lost its data (as the changes). */
+    [CS_LOAD] = "if redis.call('EXISTS', KEYS[3]) == 0 then return {'unseeded'} end\n"
+                "local out = {redis.call('GET', KEYS[2]) or '0'}\n"
                 "for _, n in ipairs(redis.call('ZRANGE', KEYS[1], 0, -1)) do\n"
                 "  local h = redis.call('HMGET', ARGV[1] .. n, 'effect', 'rev', 'params')\n"
                 "  if h[1] and h[2] and h[3] then\n"
@@ -87,11 +91,14 @@ static const char *const cluster_scripts[CS_COUNT] = {
                 "  end\n"
                 "end\n"
                 "return out\n",
-    /* KEYS seeded, streams, seq; ARGV node, key prefix, event, channel, then name, effect, rev,
-     * params per stream. 0 when the database was seeded before, else 1 + the streams added. */
+    /* KEYS seeded, streams, seq; ARGV node, key prefix, event, channel, the change this daemon's
+     * copy has reached (the counter goes on from there, so that daemons whose copy is there too
+     * see the new changes, rather than skip them as old ones), then name, effect, rev, params per
+     * stream. 0 when the database was seeded before, else 1 + the streams added. */
     [CS_SEED] = "if redis.call('SETNX', KEYS[1], ARGV[1]) == 0 then return 0 end\n"
+                "if (tonumber(redis.call('GET', KEYS[3])) or 0) < tonumber(ARGV[5]) then redis.call('SET', KEYS[3], ARGV[5]) end\n"
                 "local n = 1\n"
-                "for i = 5, #ARGV, 4 do\n"
+                "for i = 6, #ARGV, 4 do\n"
                 "  local k = ARGV[2] .. ARGV[i]\n"
                 "  if redis.call('EXISTS', k) == 0 then\n"
                 "    local seq = redis.call('INCR', KEYS[3])\n"
@@ -539,6 +546,14 @@ enum cluster_fit cluster_fit(struct cluster *cl, uint64_t seq)
 }
 
 bool cluster_in_sync(struct cluster *cl) { return atomic_load(&cl->in_sync); }
+
+void cluster_emptied(struct cluster *cl)
+{
+    if (atomic_exchange(&cl->in_sync, false))
+        log_warn("cluster: %s has lost its data (no " CLUSTER_KEY "seeded: FLUSHALL, or a restart without "
+                 "persistence): seeding it again", cl->cfg.url);
+    if (cl->wake) cl->wake(cl->wake_ctx);
+}
 bool cluster_link_up(struct cluster *cl) { return atomic_load(&cl->link_up); }
 void cluster_stale(struct cluster *cl) { cl->in_sync = false; }
 
@@ -739,27 +754,51 @@ static void cluster_key(char *key, size_t cap, const char *stream)
     snprintf(key, cap, CLUSTER_KEY "stream:%s", stream);
 }
 
-/* A new change's id (CLUSTER_ONCE). */
-static void cluster_change_id(struct cluster *cl, char *id, size_t cap)
+#define CLUSTER_CHANGE_MAX_ARGS 8 /* a change script's own keys and arguments, at most */
+
+/* Runs change script s (CLUSTER_BEGIN) with a new id, its event, and its own nk keys and na
+ * arguments: the reply, or NULL with err. An {'unseeded'} reply is turned into err here. */
+static redisReply *cluster_change(struct cluster *cl, int s, const char *event, int nk, const char *const *keys, int na,
+                                  const char *const *args, struct fx_err *err)
 {
-    snprintf(id, cap, "%s-%llu", cl->instance, (unsigned long long)++cl->changes);
+    if (!event) {
+        fx_fail(err, "internal", NULL, "out of memory");
+        return NULL;
+    }
+    char id[48];
+    snprintf(id, sizeof id, "%s-%llu", cl->instance, (unsigned long long)++cl->changes);
+    const char *v[6 + 2 * CLUSTER_CHANGE_MAX_ARGS];
+    int n = 0;
+    v[n++] = cl->done_key;
+    v[n++] = CLUSTER_KEY "seeded";
+    v[n++] = CLUSTER_KEY "seq";
+    for (int i = 0; i < nk; i++) v[n++] = keys[i];
+    v[n++] = id;
+    v[n++] = event;
+    v[n++] = cl->channel;
+    for (int i = 0; i < na; i++) v[n++] = args[i];
+    redisReply *r = cluster_eval(cl, s, 3 + nk, n, v, err);
+    if (r && !strcmp(cluster_outcome(r), "unseeded")) {
+        freeReplyObject(r);
+        cluster_emptied(cl);
+        fx_fail(err, "unavailable", NULL, "cluster: %s has lost its data (emptied by FLUSHALL, or restarted without "
+                "persistence); this daemon seeds it again with the cluster's streams: try again (nothing changed)",
+                cl->cfg.url);
+        return NULL;
+    }
+    return r;
 }
 
 int cluster_create(struct cluster *cl, const char *stream, const char *effect, const cJSON *params, int max_streams,
                    struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], max[16], id[48];
+    char key[128], max[16];
     cluster_key(key, sizeof key, stream);
-    cluster_change_id(cl, id, sizeof id);
     snprintf(max, sizeof max, "%d", max_streams);
-    char *doc = cJSON_PrintUnformatted(params), *ev = cluster_event(cl, "created", stream, effect, 1, params);
-    redisReply *r = NULL;
-    if (!doc || !ev) fx_fail(err, "internal", NULL, "out of memory");
-    else
-        r = cluster_eval(cl, CS_CREATE, 4, 11,
-                         (const char *[]){cl->done_key, key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", id, stream, effect,
-                                          doc, max, ev, cl->channel}, err);
+    char *doc = cJSON_PrintUnformatted(params), *ev = doc ? cluster_event(cl, "created", stream, effect, 1, params) : NULL;
+    redisReply *r = cluster_change(cl, CS_CREATE, ev, 2, (const char *[]){key, CLUSTER_KEY "streams"}, 4,
+                                   (const char *[]){stream, effect, doc, max}, err);
     cJSON_free(doc);
     cJSON_free(ev);
     if (!r) return -1;
@@ -802,18 +841,14 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
                 struct cluster_current *cur, struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], from[24], to[24], id[48];
+    char key[128], from[24], to[24];
     cluster_key(key, sizeof key, stream);
-    cluster_change_id(cl, id, sizeof id);
     snprintf(from, sizeof from, "%llu", (unsigned long long)base);
     snprintf(to, sizeof to, "%llu", (unsigned long long)base + 1);
-    char *doc = cJSON_PrintUnformatted(params), *ev = cluster_event(cl, "params", stream, effect, base + 1, params);
-    redisReply *r = NULL;
-    if (!doc || !ev) fx_fail(err, "internal", NULL, "out of memory");
-    else
-        r = cluster_eval(cl, CS_SET, 3, 10,
-                         (const char *[]){cl->done_key, key, CLUSTER_KEY "seq", id, effect, from, to, doc, ev, cl->channel},
-                         err);
+    char *doc = cJSON_PrintUnformatted(params);
+    char *ev = doc ? cluster_event(cl, "params", stream, effect, base + 1, params) : NULL;
+    redisReply *r = cluster_change(cl, CS_SET, ev, 1, (const char *[]){key}, 4, (const char *[]){effect, from, to, doc},
+                                   err);
     cJSON_free(doc);
     cJSON_free(ev);
     if (!r) return -1;
@@ -828,14 +863,10 @@ int cluster_set(struct cluster *cl, const char *stream, const char *effect, uint
 static int cluster_stream_change(struct cluster *cl, int s, const char *op, const char *stream, struct fx_err *err)
 {
     if (cluster_writable(cl, err)) return -1;
-    char key[128], id[48], *ev = cluster_event(cl, op, stream, NULL, 0, NULL);
+    char key[128], *ev = cluster_event(cl, op, stream, NULL, 0, NULL);
     cluster_key(key, sizeof key, stream);
-    cluster_change_id(cl, id, sizeof id);
-    redisReply *r = ev ? cluster_eval(cl, s, 4, 8,
-                                      (const char *[]){cl->done_key, key, CLUSTER_KEY "streams", CLUSTER_KEY "seq", id,
-                                                       stream, ev, cl->channel}, err)
-                       : NULL;
-    if (!ev) fx_fail(err, "internal", NULL, "out of memory");
+    redisReply *r = cluster_change(cl, s, ev, 2, (const char *[]){key, CLUSTER_KEY "streams"}, 1,
+                                   (const char *[]){stream}, err);
     cJSON_free(ev);
     if (!r) return -1;
     if (!strcmp(cluster_outcome(r), "ok")) return cluster_done(cl, r, err);
@@ -857,18 +888,19 @@ int cluster_reset(struct cluster *cl, const char *stream, struct fx_err *err)
 
 int cluster_seed(struct cluster *cl, const cJSON *streams, struct fx_err *err)
 {
-    int n = cJSON_GetArraySize(streams), argc = 7 + 4 * n, i = 0;
+    int n = cJSON_GetArraySize(streams), argc = 8 + 4 * n, i = 0;
     const char **v = calloc((size_t)argc, sizeof *v);
     struct { char rev[24]; char *doc; } *a = calloc((size_t)n + 1, sizeof *a);
-    char *ev = cluster_event(cl, "seeded", NULL, NULL, 0, NULL);
+    char *ev = cluster_event(cl, "seeded", NULL, NULL, 0, NULL), floor[24];
+    snprintf(floor, sizeof floor, "%llu", (unsigned long long)cl->seq);
     bool ok = v && a && ev;
     if (ok) {
         const char *head[] = {CLUSTER_KEY "seeded", CLUSTER_KEY "streams", CLUSTER_KEY "seq", cl->cfg.node_id,
-                              CLUSTER_KEY "stream:", ev, cl->channel};
+                              CLUSTER_KEY "stream:", ev, cl->channel, floor};
         memcpy(v, head, sizeof head);
     }
     for (const cJSON *s = streams->child; ok && s; s = s->next, i++) {
-        const char **p = v + 7 + 4 * i;
+        const char **p = v + 8 + 4 * i;
         snprintf(a[i].rev, sizeof a[i].rev, "%.0f", cJSON_GetObjectItemCaseSensitive(s, "rev")->valuedouble);
         a[i].doc = cJSON_PrintUnformatted(cJSON_GetObjectItemCaseSensitive(s, "params"));
         p[0] = cJSON_GetObjectItemCaseSensitive(s, "stream")->valuestring;
@@ -912,9 +944,14 @@ static cJSON *cluster_load_entry(const struct cluster *cl, redisReply *const *e)
 
 int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_err *err)
 {
-    redisReply *r = cluster_eval(cl, CS_LOAD, 2, 3,
-                                 (const char *[]){CLUSTER_KEY "streams", CLUSTER_KEY "seq", CLUSTER_KEY "stream:"}, err);
+    redisReply *r = cluster_eval(cl, CS_LOAD, 3, 4,
+                                 (const char *[]){CLUSTER_KEY "streams", CLUSTER_KEY "seq", CLUSTER_KEY "seeded",
+                                                  CLUSTER_KEY "stream:"}, err);
     if (!r) return -1;
+    if (!strcmp(cluster_outcome(r), "unseeded")) {
+        freeReplyObject(r);
+        return 1;
+    }
     if (r->type != REDIS_REPLY_ARRAY || r->elements % 4 != 1 || r->element[0]->type != REDIS_REPLY_STRING) {
         freeReplyObject(r);
         return fx_fail(err, "internal", NULL, "cluster: unexpected answer from %s", cl->cfg.url);

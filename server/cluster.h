@@ -12,7 +12,8 @@
  * and the channel fxs:events:DB (pub/sub is server-wide, hence the database in its name)
  * carries one message per change, "SEQ JSON": the change's number, then {op, node, stream,
  * effect, rev, params} (op created, params, destroyed or reset; destroyed and reset carry
- * only the stream). Each change is one Lua script that checks (the stream exists or not, its
+ * only the stream; op seeded, with no stream, when a daemon filled the database anew: every
+ * daemon reloads). Each change is one Lua script that checks (the stream exists or not, its
  * effect and rev are those the change was validated against), writes, counts and publishes,
  * so Redis holds every change or none, and the messages come in the changes' order. Each
  * change carries an id of its own, kept in fxs:done:NODE: one sent again (below) is made once.
@@ -30,7 +31,8 @@
  * The local copy (replica.c applies what is queued) follows Redis exactly while `in sync`:
  * it has applied every change up to `seq`. A write of this daemon, or a message, numbered
  * seq + 1 keeps it in sync; anything else (a gap, a reconnection, a write whose answer was
- * lost) marks it stale, and replica.c reloads the whole state from Redis (Redis wins). A
+ * lost, a database emptied under it) marks it stale, and replica.c reloads the whole state
+ * from Redis (Redis wins). A
  * daemon's own messages come back to it too and are skipped by their number (its write
  * already moved the copy there), which also holds when two daemons were given the same node
  * id: `node` names the author, for logs and for people reading the channel. */
@@ -121,10 +123,16 @@ void cluster_stale(struct cluster *cl);
  * and at most once per database (fxs:seeded; logged when this call did it). */
 int cluster_seed(struct cluster *cl, const cJSON *streams, struct fx_err *err);
 /* The whole state, atomically: [{stream, effect, rev, params}] in creation order, and the
- * number of the last change it includes. The copy is in sync at that number once the caller
- * has applied it (cluster_loaded). */
+ * number of the last change it includes: 0. The copy is in sync at that number once the caller
+ * has applied it (cluster_loaded). 1 when the database lost its data since it was seeded
+ * (nothing loaded: seed it again), -1 with err. */
 int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_err *err);
 void cluster_loaded(struct cluster *cl, uint64_t seq);
+/* Any thread: Redis lost its data (no fxs:seeded: FLUSHALL, or a restart without persistence),
+ * as a change or the lease agent found: the copy goes stale and the network thread is woken to
+ * reload it, which seeds Redis again with this daemon's streams (as after a restart of an empty
+ * Redis). Changes answer unavailable meanwhile. */
+void cluster_emptied(struct cluster *cl);
 
 /* The changes. Each fails with unavailable (the link is down, the local copy is stale, or
  * Redis did not answer or refused: the message names the URL; when the answer to a sent change

@@ -27,19 +27,23 @@ static const char *const lease_scripts[LS_COUNT] = {
     /* ARGV node, compute (1/0), load, ttl ms, this daemon's claim on its node id and its ttl ms
      * (cluster.h), then n + the names wanted here, n + (name, token) of the leases held, n + the
      * names this daemon could compute. The claim is renewed first: when another daemon holds
-     * the node id, nothing else is done and the reply is {{'taken', claim}}. A lease held is kept while
-     * nobody else has taken it; it is written again once its stream exists (a Redis that lost
-     * its data is seeded again by the daemons a moment later: no stream changes owner then). Returns one entry per held
-     * or taken lease: {'held', name, token, demand} {'lost', name} {'taken', name, token, demand,
-     * seq1, seq2, seq3, seq4} (seqK: the 8 bytes of the latest frame's number, or ""). */
+     * the node id, nothing else is done and the reply is {{'node_taken', claim}}. A lease held is
+     * kept while nobody else has taken it; it is written again once its stream exists (a Redis that lost
+     * its data is seeded again by the daemons a moment later: no stream changes owner then, and
+     * fxs:leasegen is raised to the generations held). Returns {'unseeded'} first when Redis lost
+     * its data (no fxs:seeded), then one entry per held or taken lease: {'held', name, token,
+     * demand} {'lost', name} {'taken', name, token, demand, seq1, seq2, seq3, seq4} (seqK: the 8
+     * bytes of the latest frame's number, or ""). */
     [LS_TICK] =
         "local P, node, compute, ttl = '" CLUSTER_KEY "', ARGV[1], ARGV[2] == '1', tonumber(ARGV[4])\n"
         "local t = redis.call('TIME')\n"
         "local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)\n"
         "local mk = P .. 'member:' .. node\n"
         "local mv = redis.call('GET', mk)\n"
-        "if mv and mv ~= ARGV[5] and redis.call('PTTL', mk) > 0 then return {{'taken', mv}} end\n"
+        "if mv and mv ~= ARGV[5] and redis.call('PTTL', mk) > 0 then return {{'node_taken', mv}} end\n"
         "redis.call('SET', mk, ARGV[5], 'PX', ARGV[6])\n"
+        "local out, held = {}, 0\n"
+        "if redis.call('EXISTS', P .. 'seeded') == 0 then out[1] = {'unseeded'} end\n"
         "local i = 7\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
         "  i = i + 1\n"
@@ -51,7 +55,6 @@ static const char *const lease_scripts[LS_COUNT] = {
         "  for j = 1, #h, 2 do if h[j] ~= node and tonumber(h[j + 1]) > now then return 1 end end\n"
         "  return 0\n"
         "end\n"
-        "local out, held = {}, 0\n"
         "i = i + 1\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
         "  local name, token = ARGV[i + 1], ARGV[i + 2]\n"
@@ -59,6 +62,12 @@ static const char *const lease_scripts[LS_COUNT] = {
         "  local k = P .. 'lease:' .. name\n"
         "  local v = redis.call('GET', k)\n"
         "  if v == token or not v then\n"
+        "    if not v and redis.call('EXISTS', P .. 'stream:' .. name) == 1 then\n"
+        "      local gen = tonumber(string.match(token, '^%d+'))\n"
+        "      if (tonumber(redis.call('GET', P .. 'leasegen')) or 0) < gen then\n"
+        "        redis.call('SET', P .. 'leasegen', string.format('%d', gen))\n"
+        "      end\n"
+        "    end\n"
         "    if redis.call('EXISTS', P .. 'stream:' .. name) == 1 then redis.call('SET', k, token, 'PX', ttl) end\n"
         "    held = held + 1\n"
         "    out[#out + 1] = {'held', name, token, demand(name)}\n"
@@ -329,6 +338,19 @@ static void lease_node_taken(struct lease *l, struct stream **ss, int n, const c
     cluster_node_taken(l->srv->cluster, claim);
 }
 
+/* One entry of the tick's reply. */
+static void lease_entry(struct lease *l, const redisReply *e, struct stream **ss, int n, double until)
+{
+    const char *what = e->type == REDIS_REPLY_ARRAY && e->elements && e->element[0]->type == REDIS_REPLY_STRING
+                           ? e->element[0]->str : "";
+    if (!strcmp(what, "node_taken") && e->elements == 2 && e->element[1]->type == REDIS_REPLY_STRING)
+        lease_node_taken(l, ss, n, e->element[1]->str);
+    else if (!strcmp(what, "unseeded"))
+        cluster_emptied(l->srv->cluster);
+    else
+        lease_apply(l, e, until);
+}
+
 static void lease_tick(struct lease *l)
 {
     int n;
@@ -340,14 +362,9 @@ static void lease_tick(struct lease *l)
         return;
     }
     redisReply *r = lease_args_build(l, ss, n, &a) ? NULL : lease_eval(l, LS_TICK, 0, a.n, a.v, NULL);
-    const redisReply *e0 = r && r->type == REDIS_REPLY_ARRAY && r->elements ? r->element[0] : NULL;
-    if (e0 && e0->type == REDIS_REPLY_ARRAY && e0->elements == 2 && e0->element[0]->type == REDIS_REPLY_STRING &&
-        !strcmp(e0->element[0]->str, "taken") && e0->element[1]->type == REDIS_REPLY_STRING)
-        lease_node_taken(l, ss, n, e0->element[1]->str);
-    else if (r && r->type == REDIS_REPLY_ARRAY)
-        for (size_t i = 0; i < r->elements; i++) lease_apply(l, r->element[i], sent + LEASE_TTL_S - LEASE_MARGIN_S);
-    else if (!r)
-        lease_keep_all(l, ss, n);
+    if (!r) lease_keep_all(l, ss, n);
+    for (size_t i = 0; r && r->type == REDIS_REPLY_ARRAY && i < r->elements && !l->node_taken; i++)
+        lease_entry(l, r->element[i], ss, n, sent + LEASE_TTL_S - LEASE_MARGIN_S);
     freeReplyObject(r);
     free(a.v);
     free(a.tokens);

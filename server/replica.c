@@ -102,7 +102,7 @@ static void replica_event(struct server *srv, const cJSON *ev)
         struct stream *s = hub_find(&srv->hub, name);
         if (s) hub_request_reset(&srv->hub, s);
         stream_unref(s);
-    } else { /* "seeded" (the database was filled anew), or unreadable */
+    } else { /* unreadable */
         cluster_stale(srv->cluster);
         return;
     }
@@ -116,15 +116,19 @@ static bool replica_listed(const cJSON *all, const char *name)
     return false;
 }
 
-/* Seeds a database never seeded with this daemon's streams, then makes the copy Redis's state. */
+/* Seeds a database never seeded with this daemon's streams, then makes the copy Redis's state
+ * (seeding again when Redis lost its data between the two). */
 static int replica_reload(struct server *srv, struct fx_err *err)
 {
     struct cluster *cl = srv->cluster;
     cJSON *mine = store_streams(srv), *all = NULL;
     uint64_t seq;
-    int rc = cluster_seed(cl, mine, err);
+    int rc = 1;
+    for (int tries = 0; rc == 1 && tries < 2; tries++)
+        rc = cluster_seed(cl, mine, err) ? -1 : cluster_load(cl, &all, &seq, err);
     cJSON_Delete(mine);
-    if (rc || cluster_load(cl, &all, &seq, err)) return -1;
+    if (rc == 1) fx_fail(err, "unavailable", NULL, "cluster: %s lost its data again while being seeded", srv->cfg.cluster.url);
+    if (rc) return -1;
     int n;
     struct stream **local = hub_snapshot(&srv->hub, &n);
     for (int i = 0; i < n; i++)
@@ -147,7 +151,9 @@ int replica_poll(struct server *srv, struct fx_err *err)
     if (!cl) return 0;
     struct cluster_item *it;
     while ((it = cluster_next(cl))) {
-        if (it->kind == CLUSTER_EVENT && !it->doc) cluster_stale(cl); /* unreadable: reload */
+        const char *op = it->doc ? replica_str(it->doc, "op") : NULL;
+        if (it->kind == CLUSTER_EVENT && (!op || !strcmp(op, "seeded"))) /* unreadable, or Redis was emptied: reload */
+            cluster_stale(cl);
         else if (it->kind == CLUSTER_EVENT && cluster_fit(cl, it->seq) == CLUSTER_APPLY) replica_event(srv, it->doc);
         cluster_item_free(it);
     }

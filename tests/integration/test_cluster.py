@@ -12,7 +12,8 @@ consecutive revs and lose no update; a set whose daemon is behind Redis is made 
 Redis's document; racing creates: one wins, everywhere; a reset through B restarts A's stream;
 a reload that finds other params at the same rev re-creates the effect; a second daemon given
 a node id in use refuses to start, saying so; Redis closing the daemons' connections while idle
-or under a change: each change is made, once; Redis killed: changes
+or under a change: each change is made, once; FLUSHALL: the daemons seed Redis again with their
+state within seconds and go on; Redis killed: changes
 answer unavailable naming the cluster, /healthz and /metrics say the link is down, streams keep
 sending frames and reads keep working; Redis back empty: changes are accepted again within
 seconds and the state the daemons had is in Redis again (re-seeded); Redis hung (SIGSTOP): one
@@ -495,6 +496,46 @@ async def test_idle_links(t):
     await a.close()
 
 
+async def test_flushall(t):
+    """FLUSHALL empties Redis under running daemons: as after a restart of an empty Redis they
+    seed it again with their state within seconds; changes, events and relayed frames go on."""
+    o = await owner("c1", (A, B, C))
+    other = B if o is A else A
+    sub = await Client.connect(other)
+    await sub.request("subscribe", stream="c1")
+    await sub.frame(kind=2)
+    listed = await names(A)
+    before = await get(A, "c1")
+    R.cmd("FLUSHALL")
+    start, wall = time.monotonic(), time.time()
+    a = await Client.connect(A)
+    replies = []
+
+    async def accepted():
+        r = await a.request("set", stream="c1", params={"alpha": 2.5})
+        replies.append(r)
+        return r if r.get("op") == "params" else None
+
+    r = await until(accepted, timeout=5, step=0.1)
+    t.check(r is not None and r.get("rev") == before["rev"] + 1,
+            "a set is made %.1f s after FLUSHALL, at rev %s (answers before: %s)" %
+            (time.monotonic() - start, r and r.get("rev"), sorted({x.get("code") for x in replies[:-1]})))
+    t.check(R.cmd("ZRANGE", "fxs:streams", "0", "-1") == listed and R.cmd("EXISTS", "fxs:seeded") == 1 and
+            R.stream("c1") == ("energy_wave", r and r["rev"], r and r["params"]),
+            "Redis holds the daemons' streams again, with the set")
+    ok = True
+    for d in (B, C):
+        g = await get_at(d, "c1", r and r["rev"])
+        ok = ok and r is not None and g.get("rev") == r["rev"] and g.get("params") == r["params"] and \
+            await names(d) == listed
+    t.check(ok, "B and C follow")
+    f = await frame_made_after(sub, wall + 1.0, timeout=8)
+    t.check(f is not None and f["param_rev"] == (r and r["rev"]),
+            "the subscriber on a daemon relaying c1 gets frames of the new rev (%s)" % (f and f["param_rev"]))
+    await sub.close()
+    await a.close()
+
+
 async def test_redis_down(t):
     """Redis killed: changes are refused with unavailable naming the cluster, nothing changes,
     the owner of a stream keeps sending its frames to its subscribers, reads keep working."""
@@ -743,7 +784,7 @@ if __name__ == "__main__":
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
-               test_reset, test_metrics, test_duplicate_node, test_idle_links,
+               test_reset, test_metrics, test_duplicate_node, test_idle_links, test_flushall,
                test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
