@@ -3,7 +3,9 @@
  * Redis is then the system of record of the stream definitions, in the configured database:
  *   fxs:stream:NAME   hash {effect, rev, params (the complete document as JSON text)}
  *   fxs:streams       sorted set of the names, scored by their creation's change number
- *   fxs:seq           the change counter: +1 per change, whichever daemon made it
+ *   fxs:seq           the change counter: +1 per change, whichever daemon made it; each change
+ *                     passes the number its daemon's copy has reached, and a counter below it
+ *                     (or not a number) is set there first (cluster_bad)
  *   fxs:seeded        set once, by the daemon that first filled an empty database
  *   fxs:done:NODE     "ID SEQ": the id of the node's last change and its number, for a minute
  *   fxs:member:NODE   "INSTANCE PID HOST": the running daemon of that node id (its claim),
@@ -31,7 +33,8 @@
  * The local copy (replica.c applies what is queued) follows Redis exactly while `in sync`:
  * it has applied every change up to `seq`. A write of this daemon, or a message, numbered
  * seq + 1 keeps it in sync; anything else (a gap, a reconnection, a write whose answer was
- * lost, a database emptied under it) marks it stale, and replica.c reloads the whole state
+ * lost, a database emptied under it, a message numbered at or below the previous one on the
+ * subscription: the counter went back) marks it stale, and replica.c reloads the whole state
  * from Redis (Redis wins). A
  * daemon's own messages come back to it too and are skipped by their number (its write
  * already moved the copy there), which also holds when two daemons were given the same node
@@ -75,6 +78,38 @@ const char *cluster_role_name(enum cluster_role role);
 #define CLUSTER_FRAMES_CHANNEL CLUSTER_KEY "frames:" /* + DB ":" NAME: the stream's frames, as sent to clients */
 
 struct cluster;
+
+/* What Redis holds is read like any input: a value that does not parse, or cannot be right (a
+ * change counter behind what a daemon has seen, a lease that never expires, a frame number
+ * past CLUSTER_SEQ_MAX), is logged, counted by kind for /metrics, and repaired or ignored. */
+enum cluster_bad {
+    CLUSTER_BAD_SEQ,     /* fxs:seq, and change numbers on the channel that go back */
+    CLUSTER_BAD_STREAM,  /* fxs:stream:NAME (its rev, effect or params) */
+    CLUSTER_BAD_LEASE,   /* fxs:lease:NAME, fxs:leasegen, fxs:want:NAME, fxs:node:NAME, fxs:member:NODE */
+    CLUSTER_BAD_MESSAGE, /* messages on fxs:events:DB */
+    CLUSTER_BAD_FRAME,   /* frames on fxs:frames:DB:NAME and in fxs:frame:NAME:KIND */
+    CLUSTER_BAD_COUNT
+};
+const char *cluster_bad_name(enum cluster_bad what);
+/* Any thread: logs one such value (a warning: what it was and what was done) and counts it. */
+void cluster_bad(struct cluster *cl, enum cluster_bad what, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+/* Frame numbers read from Redis are trusted below this (a client's double holds them exactly). */
+#define CLUSTER_SEQ_MAX (UINT64_C(1) << 53)
+
+/* Lua shared by the scripts of cluster.c and lease.c: fxs_get(k) is the string at k (false
+ * when absent; nil and the key's type when k holds another type, which would make GET fail
+ * the script); fxs_show(v, t) is such a value as reported ('"..."', 'nothing', 'a hash'). */
+#define CLUSTER_LUA_LIB                                                                  \
+    "local function fxs_get(k)\n"                                                        \
+    "  local v = redis.pcall('GET', k)\n"                                                \
+    "  if type(v) == 'table' and v.err then return nil, redis.call('TYPE', k).ok end\n"  \
+    "  return v\n"                                                                       \
+    "end\n"                                                                              \
+    "local function fxs_show(v, t)\n"                                                    \
+    "  if t then return 'a ' .. t end\n"                                                 \
+    "  if not v then return 'nothing' end\n"                                             \
+    "  return '\"' .. string.sub(v, 1, 48) .. '\"'\n"                                     \
+    "end\n"
 
 /* Allocates the link (no connection yet). */
 int cluster_open(struct cluster **out, const struct cluster_config *cfg, struct fx_err *err);
@@ -122,12 +157,19 @@ void cluster_stale(struct cluster *cl);
 /* Seeds a database never seeded with `streams` ([{stream, effect, rev, params}]), atomically
  * and at most once per database (fxs:seeded; logged when this call did it). */
 int cluster_seed(struct cluster *cl, const cJSON *streams, struct fx_err *err);
-/* The whole state, atomically: [{stream, effect, rev, params}] in creation order, and the
+/* The whole state, atomically: [{stream, effect, rev or bad_rev, params}] in creation order
+ * (a stream whose effect or params do not read is left out, counted), and the
  * number of the last change it includes: 0. The copy is in sync at that number once the caller
  * has applied it (cluster_loaded). 1 when the database lost its data since it was seeded
  * (nothing loaded: seed it again), -1 with err. */
 int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_err *err);
 void cluster_loaded(struct cluster *cl, uint64_t seq);
+/* A stream of the loaded state whose "bad_rev" (its rev field as read: not a revision) is set
+ * to rev, if Redis still holds the same there: a change like a set of `params` (numbered,
+ * published as its params event). Counted and logged. 0 (the copy is then stale: load again),
+ * or -1 with err. */
+int cluster_repair_rev(struct cluster *cl, const char *stream, const char *effect, const char *bad, uint64_t rev,
+                       const cJSON *params, struct fx_err *err);
 /* Any thread: Redis lost its data (no fxs:seeded: FLUSHALL, or a restart without persistence),
  * as a change or the lease agent found: the copy goes stale and the network thread is woken to
  * reload it, which seeds Redis again with this daemon's streams (as after a restart of an empty
@@ -181,6 +223,7 @@ struct cluster_status {
     uint64_t seq;          /* the change the local copy has reached */
     uint64_t link_losses;  /* times the follower lost its subscription */
     char last_error[320];  /* the latest failure to reach Redis or of a change sent to it ("" if none) */
+    uint64_t bad[CLUSTER_BAD_COUNT]; /* values read from Redis that were not trusted (cluster_bad) */
 };
 void cluster_status(struct cluster *cl, struct cluster_status *out);
 

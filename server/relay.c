@@ -53,8 +53,9 @@ static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream 
                           bool latest)
 {
     struct fxs_header h;
-    if (fxs_header_unpack(bytes, len, &h) || h.kind < 1 || h.kind > FXS_KIND_MAX) {
-        log_warn("cluster: an unreadable frame of stream %s on Redis (%zu bytes), skipped", s->name, len);
+    if (fxs_header_unpack(bytes, len, &h) || h.kind < 1 || h.kind > FXS_KIND_MAX || h.seq >= CLUSTER_SEQ_MAX) {
+        cluster_bad(r->srv->cluster, CLUSTER_BAD_FRAME, "a frame of stream %s in %s (%zu bytes) does not read as one, "
+                    "or its number is out of range: skipped", s->name, r->cfg->url, len);
         return;
     }
     if (h.seq + sub->shift[h.kind] <= sub->last[h.kind]) {

@@ -13,7 +13,8 @@ Redis's document; racing creates: one wins, everywhere; a reset through B restar
 a reload that finds other params at the same rev re-creates the effect; a second daemon given
 a node id in use refuses to start, saying so; Redis closing the daemons' connections while idle
 or under a change: each change is made, once; FLUSHALL: the daemons seed Redis again with their
-state within seconds and go on; Redis killed: changes
+state within seconds and go on; leases, the change counter and revisions in Redis that do not
+parse or cannot be right are counted and repaired; Redis killed: changes
 answer unavailable naming the cluster, /healthz and /metrics say the link is down, streams keep
 sending frames and reads keep working; Redis back empty: changes are accepted again within
 seconds and the state the daemons had is in Redis again (re-seeded); Redis hung (SIGSTOP): one
@@ -213,6 +214,11 @@ async def frame_made_after(c, wall, timeout=10.0, kind=2):
                 return f
     except asyncio.TimeoutError:
         return None
+
+
+def bad_values(what):
+    """fxs_cluster_bad_values_total{what=...} summed over A, B and C."""
+    return sum(metric(d, 'fxs_cluster_bad_values_total{what="%s"}' % what) or 0 for d in (A, B, C))
 
 
 def leases(d):
@@ -536,6 +542,53 @@ async def test_flushall(t):
     await a.close()
 
 
+async def test_bad_values(t):
+    """What Redis holds is read like any input: a lease value that does not parse or never
+    expires, a change counter set back or not a number, a revision out of range are logged,
+    counted in fxs_cluster_bad_values_total and repaired; the cluster goes on."""
+    a = await Client.connect(A)
+    for value in ("0", "abc"):
+        before = bad_values("seq")
+        R.cmd("SET", "fxs:seq", value)
+        s = await a.request("set", stream="c1", params={"alpha": 1.25 if value == "0" else 1.35})
+        gs = [await get_at(d, "c1", s.get("rev"), timeout=5) for d in (B, C)]
+        t.check(s.get("op") == "params" and all(g.get("rev") == s["rev"] and g.get("params") == s["params"] for g in gs),
+                "fxs:seq set to %s: the next set (rev %s) reaches B and C (%s)" % (value, s.get("rev"), s.get("message", "")))
+        seq = R.cmd("GET", "fxs:seq")
+        t.check(seq.isdigit() and int(seq) > 1 and bad_values("seq") > before,
+                "the counter is set forward again (%s) and it is counted" % seq)
+    for value in ("-5", "18446744073709551615"):
+        before = bad_values("stream")
+        R.cmd("HSET", "fxs:stream:c1", "rev", value)
+        R.cmd("CLIENT", "KILL", "TYPE", "pubsub")  # every daemon reloads Redis's state
+
+        async def agreed():
+            revs = [(await get(d, "c1")).get("rev") for d in (A, B, C)]
+            red = R.cmd("HGET", "fxs:stream:c1", "rev")
+            return revs if red.isdigit() and len(set(revs)) == 1 and revs[0] == int(red) else None
+
+        revs = await until(agreed, timeout=8, step=0.1)
+        t.check(revs is not None and revs[0] >= 1, "rev %s in c1's hash: Redis and every daemon agree on a valid rev "
+                "again (%s)" % (value, revs and revs[0]))
+        t.check(bad_values("stream") > before, "and it is counted (fxs_cluster_bad_values_total{what=\"stream\"})")
+    o = await owner("c1", (A, B, C))
+    sub = await Client.connect(o or A)
+    await sub.request("subscribe", stream="c1")
+    await sub.frame(kind=2)
+    for value, what in (("garbage", "a lease value that does not parse"), ("99 ghost", "a lease that never expires")):
+        before = bad_values("lease")
+        R.cmd("SET", "fxs:lease:c1", value)
+        f = await frame_made_after(sub, time.time() + 1.0, timeout=8)
+        ttl = R.cmd("PTTL", "fxs:lease:c1")
+        t.check(f is not None and await owner("c1", (A, B, C)) is not None and 0 < ttl <= LEASE_TTL_S * 1000,
+                "%s in fxs:lease:c1: c1 is still computed, its lease repaired (ttl %s ms)" % (what, ttl))
+        t.check(bad_values("lease") > before, "and counted (fxs_cluster_bad_values_total{what=\"lease\"})")
+    await sub.close()
+    s = await a.request("set", stream="c1", params={"alpha": 1.0})
+    t.check(s.get("op") == "params", "sets go on (rev %s)" % s.get("rev"))
+    await a.close()
+
+
 async def test_redis_down(t):
     """Redis killed: changes are refused with unavailable naming the cluster, nothing changes,
     the owner of a stream keeps sending its frames to its subscribers, reads keep working."""
@@ -784,7 +837,7 @@ if __name__ == "__main__":
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
-               test_reset, test_metrics, test_duplicate_node, test_idle_links, test_flushall,
+               test_reset, test_metrics, test_duplicate_node, test_idle_links, test_flushall, test_bad_values,
                test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
