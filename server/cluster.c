@@ -163,7 +163,7 @@ static const char *const cluster_scripts[CS_COUNT] = {
 struct cluster {
     struct cluster_config cfg;
     char channel[48];
-    char done_key[96];  /* fxs:done:NODE (CLUSTER_ONCE) */
+    char done_key[96];  /* fxs:done:NODE (CLUSTER_BEGIN) */
     char instance[17];  /* this process's random id, in hex: the changes' ids start with it */
     char member[128];   /* this daemon's claim on its node id: "INSTANCE PID HOST" */
 
@@ -636,6 +636,8 @@ enum cluster_fit cluster_fit(struct cluster *cl, uint64_t seq)
 }
 
 bool cluster_in_sync(struct cluster *cl) { return atomic_load(&cl->in_sync); }
+bool cluster_link_up(struct cluster *cl) { return atomic_load(&cl->link_up); }
+void cluster_stale(struct cluster *cl) { cl->in_sync = false; }
 
 void cluster_emptied(struct cluster *cl)
 {
@@ -644,8 +646,6 @@ void cluster_emptied(struct cluster *cl)
                  "persistence): seeding it again", cl->cfg.url);
     if (cl->wake) cl->wake(cl->wake_ctx);
 }
-bool cluster_link_up(struct cluster *cl) { return atomic_load(&cl->link_up); }
-void cluster_stale(struct cluster *cl) { cl->in_sync = false; }
 
 void cluster_loaded(struct cluster *cl, uint64_t seq)
 {
@@ -751,7 +751,7 @@ static redisReply *cluster_send(struct cluster *cl, int s, int n, const char **v
 
 /* Runs script s with keys then args (argc of them, lens NULL: C strings): its reply, or NULL
  * with err. When Redis closed the connection under the command (CLIENT KILL, its timeout) the
- * script is sent once more on a new one: every script is safe to repeat (CLUSTER_ONCE). A reply
+ * script is sent once more on a new one: every script is safe to repeat (CLUSTER_BEGIN). A reply
  * lost otherwise (no answer in time, or the second try failed too) leaves the outcome unknown:
  * the copy goes stale. */
 static redisReply *cluster_eval(struct cluster *cl, int s, int nkeys, int argc, const char *const *argv,

@@ -35,10 +35,9 @@
  * seq + 1 keeps it in sync; anything else (a gap, a reconnection, a write whose answer was
  * lost, a database emptied under it, a message numbered at or below the previous one on the
  * subscription: the counter went back) marks it stale, and replica.c reloads the whole state
- * from Redis (Redis wins). A
- * daemon's own messages come back to it too and are skipped by their number (its write
- * already moved the copy there), which also holds when two daemons were given the same node
- * id: `node` names the author, for logs and for people reading the channel. */
+ * from Redis (Redis wins). A daemon's own messages come back to it too and are skipped by
+ * their number (its write already moved the copy there); `node` names the author, for logs
+ * and for people reading the channel. */
 #ifndef FX_CLUSTER_H
 #define FX_CLUSTER_H
 
@@ -158,10 +157,10 @@ void cluster_stale(struct cluster *cl);
  * and at most once per database (fxs:seeded; logged when this call did it). */
 int cluster_seed(struct cluster *cl, const cJSON *streams, struct fx_err *err);
 /* The whole state, atomically: [{stream, effect, rev or bad_rev, params}] in creation order
- * (a stream whose effect or params do not read is left out, counted), and the
- * number of the last change it includes: 0. The copy is in sync at that number once the caller
- * has applied it (cluster_loaded). 1 when the database lost its data since it was seeded
- * (nothing loaded: seed it again), -1 with err. */
+ * (a stream whose effect or params do not read is left out, counted), and the number of the
+ * last change it includes: 0. The copy is in sync at that number once the caller has applied
+ * it (cluster_loaded). 1 when the database lost its data since it was seeded (nothing loaded:
+ * seed it again), -1 with err. */
 int cluster_load(struct cluster *cl, cJSON **streams, uint64_t *seq, struct fx_err *err);
 void cluster_loaded(struct cluster *cl, uint64_t seq);
 /* A stream of the loaded state whose "bad_rev" (its rev field as read: not a revision) is set
@@ -176,13 +175,11 @@ int cluster_repair_rev(struct cluster *cl, const char *stream, const char *effec
  * Redis). Changes answer unavailable meanwhile. */
 void cluster_emptied(struct cluster *cl);
 
-/* The changes. Each fails with unavailable (the link is down, the local copy is stale, or
- * Redis did not answer or refused: the message names the URL; when the answer to a sent change
- * was lost, on a second connection too, the message says the outcome is unknown, and the copy
- * is reloaded), or with what
- * Redis's state says:
- * exists and limit (create, limit = max_streams), unknown_stream (set, destroy, reset: no
- * longer in Redis). */
+/* The changes. Each fails with unavailable (the link is down, the local copy is stale, Redis
+ * lost its data, or Redis did not answer or refused: the message names the URL; when the
+ * answer to a sent change was lost, on a second connection too, the message says the outcome
+ * is unknown, and the copy is reloaded), or with what Redis's state says: exists and limit
+ * (create, limit = max_streams), unknown_stream (set, destroy, reset: no longer in Redis). */
 int cluster_create(struct cluster *cl, const char *stream, const char *effect, const cJSON *params, int max_streams,
                    struct fx_err *err);
 /* The document as Redis holds it when a set finds that the stream moved on. */

@@ -404,7 +404,8 @@ static void lease_entry(struct lease *l, const redisReply *e, struct stream **ss
         lease_node_taken(l, ss, n, e->element[1]->str);
     else if (!strcmp(what, "unseeded"))
         cluster_emptied(l->srv->cluster);
-    else if (!strcmp(what, "bad") && e->elements == 4)
+    else if (!strcmp(what, "bad") && e->elements == 4 && e->element[1]->type == REDIS_REPLY_STRING &&
+             e->element[2]->type == REDIS_REPLY_STRING && e->element[3]->type == REDIS_REPLY_STRING)
         cluster_bad(l->srv->cluster, CLUSTER_BAD_LEASE, "%s in %s held %s, not what the daemons write: %s",
                     e->element[1]->str, l->cfg->url, e->element[2]->str, e->element[3]->str);
     else
@@ -413,14 +414,11 @@ static void lease_entry(struct lease *l, const redisReply *e, struct stream **ss
 
 static void lease_tick(struct lease *l)
 {
+    if (l->node_taken) return;
     int n;
     struct stream **ss = hub_snapshot(&l->srv->hub, &n);
     struct lease_args a = {0};
     double sent = clock_now();
-    if (l->node_taken) {
-        hub_release_all(ss, n);
-        return;
-    }
     redisReply *r = lease_args_build(l, ss, n, &a) ? NULL : lease_eval(l, LS_TICK, 0, a.n, a.v, NULL);
     if (!r) lease_keep_all(l, ss, n);
     for (size_t i = 0; r && r->type == REDIS_REPLY_ARRAY && i < r->elements && !l->node_taken; i++)
