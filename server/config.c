@@ -286,6 +286,7 @@ static int config_cluster(struct cluster_config *c, struct fx_err *err)
         return 0;
     }
     bool named = c->node_id[0];
+    c->node_id_default = !named;
     if (!named && gethostname(c->node_id, sizeof c->node_id - 1))
         return fx_fail(err, "bad_request", "node-id", "cannot read the host name for the node id: set --node-id");
     if (!hub_valid_name(c->node_id))

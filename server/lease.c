@@ -23,47 +23,105 @@
 
 enum { LS_TICK, LS_PUBLISH, LS_RELEASE, LS_COUNT };
 
+/* Lua shared by the tick and the publisher: lease_ok(k, v) says whether v, read at k, is a
+ * lease: "GEN NODE" with a TTL of at most ttl. Anything else (no expiry, another form, another
+ * type) is no lease: nobody holds the stream, and the tick that finds it takes its place. */
+#define LEASE_LUA_OK                                                                     \
+    CLUSTER_LUA_LIB                                                                      \
+    "local function lease_ok(k, v)\n"                                                    \
+    "  if not v or #v > 96 or not string.match(v, '^%d+ [%w_.%-]+$') then return false end\n" \
+    "  local left = redis.call('PTTL', k)\n"                                             \
+    "  return left > 0 and left <= ttl\n"                                                \
+    "end\n"                                                                              \
+    "local function digits(v) return v and #v <= 15 and string.match(v, '^%d+$') and tonumber(v) end\n"
+
 static const char *const lease_scripts[LS_COUNT] = {
-    /* ARGV node, compute (1/0), load, ttl ms, then n + the names wanted here, n + (name, token)
-     * of the leases held, n + the names this daemon could compute. A lease held is kept while
-     * nobody else has taken it; it is written again once its stream exists (a Redis that lost
-     * its data is seeded again by the daemons a moment later: no stream changes owner then). Returns one entry per held
-     * or taken lease: {'held', name, token, demand} {'lost', name} {'taken', name, token, demand,
-     * seq1, seq2, seq3, seq4} (seqK: the 8 bytes of the latest frame's number, or ""). */
+    /* ARGV node, compute (1/0), load, ttl ms, this daemon's claim on its node id and its ttl ms
+     * (cluster.h), then n + the names wanted here, n + (name, token) of the leases held, n + the
+     * names this daemon could compute. The claim is renewed first: when another daemon holds
+     * the node id, nothing else is done and the reply is {{'node_taken', claim}}. A lease held is
+     * kept while nobody else has taken it; it is written again once its stream exists (a Redis
+     * that lost its data is seeded again by the daemons a moment later: no stream changes owner
+     * then, and fxs:leasegen is raised to the generations held). Returns {'unseeded'} first when
+     * Redis lost its data (no fxs:seeded), then one entry per held or taken lease: {'held', name,
+     * token, demand} {'lost', name} {'taken', name, token, demand, head1, head2, head3, head4}
+     * (headK: the first 24 bytes of the latest frame, or ""), and {'bad', key, value as read,
+     * what was done} per value that was not what this script writes (lease_ok, a demand's
+     * expiry, a start time or generation that is not a number, a claim that is not one). */
     [LS_TICK] =
         "local P, node, compute, ttl = '" CLUSTER_KEY "', ARGV[1], ARGV[2] == '1', tonumber(ARGV[4])\n"
+        LEASE_LUA_OK
         "local t = redis.call('TIME')\n"
         "local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)\n"
-        "local i = 5\n"
+        "local out, held = {}, 0\n"
+        "local function bad(k, v, vt, done) out[#out + 1] = {'bad', k, fxs_show(v, vt), done} end\n"
+        "local mk = P .. 'member:' .. node\n"
+        "local mv, mt = fxs_get(mk)\n"
+        "if mv ~= false and mv ~= ARGV[5] then\n"
+        "  local left = redis.call('PTTL', mk)\n"
+        "  if mv and string.match(mv, '^%x+ %d+ %S+$') and left > 0 and left <= tonumber(ARGV[6]) then\n"
+        "    return {{'node_taken', mv}}\n"
+        "  end\n"
+        "  bad(mk, mv, mt, 'replaced by this daemon\\'s claim')\n"
+        "end\n"
+        "redis.call('SET', mk, ARGV[5], 'PX', ARGV[6])\n"
+        "if redis.call('EXISTS', P .. 'seeded') == 0 then table.insert(out, 1, {'unseeded'}) end\n"
+        "local i = 7\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
         "  i = i + 1\n"
-        "  redis.call('HSET', P .. 'want:' .. ARGV[i], node, now + ttl)\n"
-        "  redis.call('PEXPIRE', P .. 'want:' .. ARGV[i], ttl)\n"
+        "  local w = P .. 'want:' .. ARGV[i]\n"
+        "  local r = redis.pcall('HSET', w, node, now + ttl)\n"
+        "  if type(r) == 'table' and r.err then\n"
+        "    bad(w, nil, redis.call('TYPE', w).ok, 'removed')\n"
+        "    redis.call('DEL', w)\n"
+        "    redis.call('HSET', w, node, now + ttl)\n"
+        "  end\n"
+        "  redis.call('PEXPIRE', w, ttl)\n"
         "end\n"
         "local function demand(name)\n"
-        "  local h = redis.call('HGETALL', P .. 'want:' .. name)\n"
-        "  for j = 1, #h, 2 do if h[j] ~= node and tonumber(h[j + 1]) > now then return 1 end end\n"
+        "  local w = P .. 'want:' .. name\n"
+        "  local h = redis.pcall('HGETALL', w)\n"
+        "  if h.err then return 0 end\n"
+        "  for j = 1, #h, 2 do\n"
+        "    local e = digits(h[j + 1])\n"
+        "    if not e or e > now + ttl then\n"
+        "      bad(w .. ' ' .. h[j], h[j + 1], nil, 'removed')\n"
+        "      redis.call('HDEL', w, h[j])\n"
+        "    elseif h[j] ~= node and e > now then return 1 end\n"
+        "  end\n"
         "  return 0\n"
         "end\n"
-        "local out, held = {}, 0\n"
+        "local gk = P .. 'leasegen'\n"
+        "local g, gt = fxs_get(gk)\n"
+        "if g ~= false and not digits(g) then bad(gk, g, gt, 'set to 0'); redis.call('SET', gk, '0') end\n"
         "i = i + 1\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
         "  local name, token = ARGV[i + 1], ARGV[i + 2]\n"
         "  i = i + 2\n"
         "  local k = P .. 'lease:' .. name\n"
-        "  local v = redis.call('GET', k)\n"
+        "  local v, vt = fxs_get(k)\n"
+        "  if v ~= false and v ~= token and not lease_ok(k, v) then bad(k, v, vt, 'replaced by this daemon\\'s lease'); v = false end\n"
         "  if v == token or not v then\n"
-        "    if redis.call('EXISTS', P .. 'stream:' .. name) == 1 then redis.call('SET', k, token, 'PX', ttl) end\n"
+        "    if redis.call('EXISTS', P .. 'stream:' .. name) == 1 then\n"
+        "      local gen = tonumber(string.match(token, '^%d+'))\n"
+        "      if not v and (digits(fxs_get(gk)) or 0) < gen then redis.call('SET', gk, string.format('%d', gen)) end\n"
+        "      redis.call('SET', k, token, 'PX', ttl)\n"
+        "    end\n"
         "    held = held + 1\n"
-        "    out[#out + 1] = {'held', name, token, demand(name)}\n"
+        "    local d = demand(name)\n"
+        "    out[#out + 1] = {'held', name, token, d}\n"
         "  else\n"
         "    out[#out + 1] = {'lost', name}\n"
         "  end\n"
         "end\n"
         "i = i + 1\n"
         "if not compute then return out end\n"
-        "local since = tonumber(redis.call('GET', P .. 'node:' .. node) or now)\n"
-        "redis.call('SET', P .. 'node:' .. node, since, 'PX', ttl)\n"
+        "local nk = P .. 'node:' .. node\n"
+        "local sv, st = fxs_get(nk)\n"
+        "local since = digits(sv)\n"
+        "if sv ~= false and (not since or since > now) then bad(nk, sv, st, 'set to now'); since = nil end\n"
+        "since = since or now\n"
+        "redis.call('SET', nk, string.format('%d', since), 'PX', ttl)\n"
         "local score = tonumber(ARGV[3]) + " LEASE_STREAM_COST " * held\n"
         "redis.call('ZADD', P .. 'computes', score, node)\n"
         "if now - since < ttl then return out end\n"
@@ -82,32 +140,37 @@ static const char *const lease_scripts[LS_COUNT] = {
         "  if least and score > least then break end\n"
         "  local name = ARGV[i]\n"
         "  local k = P .. 'lease:' .. name\n"
-        "  if redis.call('EXISTS', k) == 0 and redis.call('EXISTS', P .. 'stream:' .. name) == 1 then\n"
-        "    local token = redis.call('INCR', P .. 'leasegen') .. ' ' .. node\n"
+        "  local v, vt = fxs_get(k)\n"
+        "  if v ~= false and not lease_ok(k, v) then bad(k, v, vt, 'replaced by a new lease'); v = false end\n"
+        "  if not v and redis.call('EXISTS', P .. 'stream:' .. name) == 1 then\n"
+        "    local token = redis.call('INCR', gk) .. ' ' .. node\n"
         "    redis.call('SET', k, token, 'PX', ttl)\n"
         "    local e = {'taken', name, token, demand(name)}\n"
-        "    for kind = 1, 4 do e[#e + 1] = redis.call('GETRANGE', P .. 'frame:' .. name .. ':' .. kind, 16, 23) end\n"
+        "    for kind = 1, 4 do e[#e + 1] = redis.call('GETRANGE', P .. 'frame:' .. name .. ':' .. kind, 0, 23) end\n"
         "    out[#out + 1] = e\n"
         "    score = score + " LEASE_STREAM_COST "\n"
         "    redis.call('ZADD', P .. 'computes', score, node)\n"
         "  end\n"
         "end\n"
         "return out\n",
-    /* KEYS lease, latest frame; ARGV token, channel, frame. 1: published; 0: another daemon
-     * holds the lease now; -1: nobody does (a Redis that lost its data: the next tick writes it
-     * again, or says it was lost). */
-    [LS_PUBLISH] = "local v = redis.call('GET', KEYS[1])\n"
-                   "if not v then return -1 end\n"
-                   "if v ~= ARGV[1] then return 0 end\n"
+    /* KEYS lease, latest frame; ARGV token, channel, frame, ttl ms. 1: published; 0: another
+     * daemon holds the lease now; -1: nobody does (a Redis that lost its data, or a value that
+     * is no lease: the next tick writes it again, or says it was lost). */
+    [LS_PUBLISH] = "local ttl = tonumber(ARGV[4])\n"
+                   LEASE_LUA_OK
+                   "local v = fxs_get(KEYS[1])\n"
+                   "if v ~= ARGV[1] then return lease_ok(KEYS[1], v) and 0 or -1 end\n"
                    "redis.call('SET', KEYS[2], ARGV[3])\n"
                    "redis.call('PUBLISH', ARGV[2], ARGV[3])\n"
                    "return 1\n",
-    /* ARGV node, then (name, token) of the leases held: each still ours is given up, so
-     * another daemon takes the stream at its next tick instead of after the TTL. */
+    /* ARGV node, its claim, then (name, token) of the leases held: each still ours is given up,
+     * so another daemon takes the stream at its next tick instead of after the TTL; so is the
+     * node id, so a daemon started again with it need not wait for the claim to expire. */
     [LS_RELEASE] = "local P = '" CLUSTER_KEY "'\n"
                    "redis.call('DEL', P .. 'node:' .. ARGV[1])\n"
                    "redis.call('ZREM', P .. 'computes', ARGV[1])\n"
-                   "for i = 2, #ARGV, 2 do\n"
+                   "if redis.call('GET', P .. 'member:' .. ARGV[1]) == ARGV[2] then redis.call('DEL', P .. 'member:' .. ARGV[1]) end\n"
+                   "for i = 3, #ARGV, 2 do\n"
                    "  if redis.call('GET', P .. 'lease:' .. ARGV[i]) == ARGV[i + 1] then redis.call('DEL', P .. 'lease:' .. ARGV[i]) end\n"
                    "end\n"
                    "return 1\n",
@@ -130,6 +193,7 @@ struct lease {
     redisContext *c;
     double retry_at, busy_t, error_logged; /* error_logged: Redis's refusals are logged every LEASE_LOG_S */
     uint64_t busy_ns;
+    bool node_taken; /* another daemon holds this node id now: this one stops, touching nothing in Redis */
 
     pthread_mutex_t mu; /* guards what follows */
     pthread_cond_t cv;
@@ -150,6 +214,12 @@ static void lease_drop_conn(struct lease *l, const char *why)
 
 static bool lease_conn(struct lease *l)
 {
+    if (l->c && cluster_closed(l->c)) {
+        log_info("cluster: %s closed the lease agent's connection (its timeout, or CLIENT KILL): reconnecting", l->cfg->url);
+        redisFree(l->c);
+        l->c = NULL;
+        l->retry_at = 0;
+    }
     if (l->c) return true;
     if (clock_now() < l->retry_at) return false;
     char why[256];
@@ -197,7 +267,7 @@ static redisReply *lease_eval(struct lease *l, int s, int nkeys, int argc, const
 struct lease_args {
     const char **v;
     char (*tokens)[96];
-    char counts[3][16], load[32], ttl[16];
+    char counts[3][16], load[32], ttl[16], member_ttl[16];
     int n;
 };
 
@@ -220,15 +290,18 @@ static double lease_load(struct lease *l)
 static int lease_args_build(struct lease *l, struct stream **ss, int n, struct lease_args *a)
 {
     bool compute = l->cfg->role != CLUSTER_ROLE_EDGE;
-    a->v = calloc((size_t)(7 + 4 * n), sizeof *a->v);
+    a->v = calloc((size_t)(9 + 4 * n), sizeof *a->v);
     a->tokens = calloc((size_t)n + 1, sizeof *a->tokens);
     if (!a->v || !a->tokens) return -1;
     snprintf(a->load, sizeof a->load, "%.4f", compute ? lease_load(l) : 0.0);
     snprintf(a->ttl, sizeof a->ttl, "%d", (int)(LEASE_TTL_S * 1000));
+    snprintf(a->member_ttl, sizeof a->member_ttl, "%d", (int)(CLUSTER_MEMBER_TTL_S * 1000));
     a->v[a->n++] = l->cfg->node_id;
     a->v[a->n++] = compute ? "1" : "0";
     a->v[a->n++] = a->load;
     a->v[a->n++] = a->ttl;
+    a->v[a->n++] = cluster_member(l->srv->cluster);
+    a->v[a->n++] = a->member_ttl;
     struct stream_status st[n > 0 ? n : 1];
     for (int i = 0; i < n; i++) hub_status(&l->srv->hub, ss[i], &st[i]);
     int at = a->n++, k = 0; /* wanted here */
@@ -253,6 +326,20 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
 
 static uint64_t lease_gen_of(const char *token) { return strtoull(token, NULL, 10); }
 
+/* The number of the latest frame of kind k in Redis, from its first 24 bytes (h): a taken
+ * stream's frames go on from there. 0 when there is none, or it is not a frame of that kind
+ * (counted) or its number is past CLUSTER_SEQ_MAX (counted: not trusted). */
+static uint64_t lease_seq_from(struct lease *l, const char *name, int k, const redisReply *h)
+{
+    if (h->type != REDIS_REPLY_STRING || h->len == 0) return 0;
+    const uint8_t *b = (const uint8_t *)h->str;
+    uint64_t seq = h->len == 24 ? fxs_get_u64(b + 16) : 0;
+    if (h->len == 24 && !memcmp(b, FXS_MAGIC, 4) && fxs_get_u16(b + 6) == k && seq < CLUSTER_SEQ_MAX) return seq;
+    cluster_bad(l->srv->cluster, CLUSTER_BAD_FRAME, CLUSTER_KEY "frame:%s:%d in %s is not a frame of that kind, or its "
+                "number is out of range: the stream's frames are numbered from 1", name, k, l->cfg->url);
+    return 0;
+}
+
 /* One entry of the tick's reply, into the hub. */
 static void lease_apply(struct lease *l, const redisReply *e, double until)
 {
@@ -276,10 +363,7 @@ static void lease_apply(struct lease *l, const redisReply *e, double until)
     } else if (!strcmp(what, "taken") && e->elements == 8) {
         nl = (struct stream_lease){.owned = true, .gen = lease_gen_of(e->element[2]->str), .until = until,
                                    .remote_demand = e->element[3]->integer != 0};
-        for (int k = 1; k <= FXS_KIND_MAX; k++) {
-            const redisReply *q = e->element[3 + k];
-            nl.seq_from[k] = q->type == REDIS_REPLY_STRING && q->len == 8 ? fxs_get_u64((const uint8_t *)q->str) : 0;
-        }
+        for (int k = 1; k <= FXS_KIND_MAX; k++) nl.seq_from[k] = lease_seq_from(l, name, k, e->element[3 + k]);
         atomic_fetch_add(&c->cluster_leases_taken, 1);
         log_info("cluster: stream %s: took its lease (generation %llu)", name, (unsigned long long)nl.gen);
     }
@@ -299,17 +383,46 @@ static void lease_keep_all(struct lease *l, struct stream **ss, int n)
     }
 }
 
+/* Another daemon holds this node id: this one computes nothing more and stops (cluster.h). */
+static void lease_node_taken(struct lease *l, struct stream **ss, int n, const char *claim)
+{
+    l->node_taken = true;
+    for (int i = 0; i < n; i++) {
+        struct stream_status st;
+        hub_status(&l->srv->hub, ss[i], &st);
+        if (st.lease.owned) hub_set_lease(&l->srv->hub, ss[i], &(struct stream_lease){0});
+    }
+    cluster_node_taken(l->srv->cluster, claim);
+}
+
+/* One entry of the tick's reply. */
+static void lease_entry(struct lease *l, const redisReply *e, struct stream **ss, int n, double until)
+{
+    const char *what = e->type == REDIS_REPLY_ARRAY && e->elements && e->element[0]->type == REDIS_REPLY_STRING
+                           ? e->element[0]->str : "";
+    if (!strcmp(what, "node_taken") && e->elements == 2 && e->element[1]->type == REDIS_REPLY_STRING)
+        lease_node_taken(l, ss, n, e->element[1]->str);
+    else if (!strcmp(what, "unseeded"))
+        cluster_emptied(l->srv->cluster);
+    else if (!strcmp(what, "bad") && e->elements == 4 && e->element[1]->type == REDIS_REPLY_STRING &&
+             e->element[2]->type == REDIS_REPLY_STRING && e->element[3]->type == REDIS_REPLY_STRING)
+        cluster_bad(l->srv->cluster, CLUSTER_BAD_LEASE, "%s in %s held %s, not what the daemons write: %s",
+                    e->element[1]->str, l->cfg->url, e->element[2]->str, e->element[3]->str);
+    else
+        lease_apply(l, e, until);
+}
+
 static void lease_tick(struct lease *l)
 {
+    if (l->node_taken) return;
     int n;
     struct stream **ss = hub_snapshot(&l->srv->hub, &n);
     struct lease_args a = {0};
     double sent = clock_now();
     redisReply *r = lease_args_build(l, ss, n, &a) ? NULL : lease_eval(l, LS_TICK, 0, a.n, a.v, NULL);
-    if (r && r->type == REDIS_REPLY_ARRAY)
-        for (size_t i = 0; i < r->elements; i++) lease_apply(l, r->element[i], sent + LEASE_TTL_S - LEASE_MARGIN_S);
-    else if (!r)
-        lease_keep_all(l, ss, n);
+    if (!r) lease_keep_all(l, ss, n);
+    for (size_t i = 0; r && r->type == REDIS_REPLY_ARRAY && i < r->elements && !l->node_taken; i++)
+        lease_entry(l, r->element[i], ss, n, sent + LEASE_TTL_S - LEASE_MARGIN_S);
     freeReplyObject(r);
     free(a.v);
     free(a.tokens);
@@ -363,9 +476,11 @@ static void lease_publish(struct lease *l, const struct lease_out *o)
     snprintf(frame_key, sizeof frame_key, CLUSTER_KEY "frame:%s:%u", o->s->name, (unsigned)o->f->hdr.kind);
     snprintf(channel, sizeof channel, CLUSTER_FRAMES_CHANNEL "%d:%s", l->cfg->db, o->s->name);
     lease_token(token, sizeof token, o->gen, l->cfg->node_id);
-    const char *v[] = {lease_key, frame_key, token, channel, (const char *)o->f->bytes};
-    size_t lens[] = {strlen(lease_key), strlen(frame_key), strlen(token), strlen(channel), o->f->len};
-    redisReply *r = lease_eval(l, LS_PUBLISH, 2, 5, v, lens);
+    char ttl[16];
+    snprintf(ttl, sizeof ttl, "%d", (int)(LEASE_TTL_S * 1000));
+    const char *v[] = {lease_key, frame_key, token, channel, (const char *)o->f->bytes, ttl};
+    size_t lens[] = {strlen(lease_key), strlen(frame_key), strlen(token), strlen(channel), o->f->len, strlen(ttl)};
+    redisReply *r = lease_eval(l, LS_PUBLISH, 2, 6, v, lens);
     if (r && r->type == REDIS_REPLY_INTEGER && r->integer == 1) atomic_fetch_add(&l->srv->counters.cluster_frames_published, 1);
     else if (r && r->type == REDIS_REPLY_INTEGER && r->integer == 0) lease_fenced(l, o->s, o->gen);
     freeReplyObject(r);
@@ -393,11 +508,12 @@ static void lease_release(struct lease *l)
 {
     int n;
     struct stream **ss = hub_snapshot(&l->srv->hub, &n);
-    const char **v = calloc((size_t)(1 + 2 * n), sizeof *v);
+    const char **v = calloc((size_t)(2 + 2 * n), sizeof *v);
     char (*tokens)[96] = calloc((size_t)n + 1, sizeof *tokens);
     int argc = 0, held = 0;
     if (v && tokens) {
         v[argc++] = l->cfg->node_id;
+        v[argc++] = cluster_member(l->srv->cluster);
         for (int i = 0; i < n; i++) {
             struct stream_status st;
             hub_status(&l->srv->hub, ss[i], &st);
@@ -438,7 +554,7 @@ static void *lease_main(void *arg)
         pthread_mutex_unlock(&l->mu);
         if (stop) break;
     }
-    if (l->cfg->role != CLUSTER_ROLE_EDGE) lease_release(l);
+    if (!l->node_taken) lease_release(l); /* another daemon's now: nothing here is this one's to give up */
     return NULL;
 }
 

@@ -3,6 +3,8 @@
  * Each stream is computed by exactly one compute daemon: the one holding its lease in Redis,
  * fxs:lease:NAME = "GEN NODE" with a TTL of LEASE_TTL_S. One thread (the agent) with its own
  * Redis connection runs, every LEASE_TICK_S, one script that atomically
+ *   - renews this daemon's claim on its node id (cluster.h); when another daemon holds it now,
+ *     does nothing else, and this daemon stops (cluster_node_taken);
  *   - records which streams have subscribers here (fxs:want:NAME, node -> expiry in ms), so
  *     their owners compute them even with no subscriber of their own;
  *   - renews the leases this daemon holds and says which it lost (taken by another daemon after
@@ -24,6 +26,8 @@
  * still the one the frame was computed under: fencing. A paused owner whose lease was taken
  * meanwhile is refused at Redis (fxs_cluster_frames_fenced_total), and its engine stopped
  * computing by itself when the lease's time ran out locally.
+ *
+ * A clean stop gives the leases and the node id's claim up.
  *
  * Redis unreachable: the leases held are kept locally (the owner goes on computing for its own
  * subscribers; nothing can be published anyway) and checked again when Redis answers. */

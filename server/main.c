@@ -37,6 +37,9 @@ static void main_on_signal(int sig)
     if (main_net) net_request_stop(main_net);
 }
 
+/* The cluster's stop callback (cluster_node_taken), from any thread. */
+static void main_stop(void *net) { net_request_stop(net); }
+
 /* Creates one stream from {stream, effect, params, rev?}; params are re-validated. */
 static int main_create_stream(struct server *srv, const cJSON *def, struct fx_err *err)
 {
@@ -105,12 +108,14 @@ static int main_prepare_state_dir(const char *dir, struct fx_err *err)
     return 0;
 }
 
-/* Cluster mode: follows Redis, seeds it with the streams just made if it was never seeded,
- * and takes its state (replica.h), before anything is served or computed. */
+/* Cluster mode: follows Redis, claims the node id (refused while another daemon runs with it),
+ * seeds Redis with the streams just made if it was never seeded, and takes its state
+ * (replica.h), before anything is served or computed. */
 static int main_join_cluster(struct server *srv, struct fx_err *err)
 {
     if (cluster_open(&srv->cluster, &srv->cfg.cluster, err) ||
-        cluster_follow(srv->cluster, net_notify, main_net, err) || replica_poll(srv, err) ||
+        cluster_follow(srv->cluster, net_notify, main_stop, main_net, err) || cluster_claim(srv->cluster, err) ||
+        replica_poll(srv, err) ||
         lease_start(&srv->lease, srv, err) || relay_start(&srv->relay, srv, err))
         return -1;
     if (srv->cfg.cluster.role != CLUSTER_ROLE_EDGE) {
@@ -161,6 +166,7 @@ static int main_serve(struct server *srv, struct fx_err *err)
         main_signals();
         net_run(main_net);
         log_info("stopped serving");
+        if (srv->cluster && cluster_aborted(srv->cluster, err->message, sizeof err->message)) rc = -1;
     }
     engine_stop(&srv->engine);
     lease_stop(srv->lease); /* after the engine: it gives the leases up */

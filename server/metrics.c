@@ -156,6 +156,12 @@ static void metrics_cluster(struct server *srv, struct fx_buf *out)
     metrics_printf(out, "fxs_cluster_change %llu\n", (unsigned long long)st.seq);
     metrics_head(out, "fxs_cluster_link_losses_total", "counter", "Times the subscription to Redis was lost.");
     metrics_printf(out, "fxs_cluster_link_losses_total %llu\n", (unsigned long long)st.link_losses);
+    metrics_head(out, "fxs_cluster_bad_values_total", "counter",
+                 "Values read from Redis that did not parse or could not be right, by kind; each was logged and "
+                 "repaired or ignored.");
+    for (int k = 0; k < CLUSTER_BAD_COUNT; k++)
+        metrics_printf(out, "fxs_cluster_bad_values_total{what=\"%s\"} %llu\n", cluster_bad_name(k),
+                       (unsigned long long)st.bad[k]);
     static const struct {
         const char *name, *help;
         size_t off;

@@ -53,8 +53,9 @@ static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream 
                           bool latest)
 {
     struct fxs_header h;
-    if (fxs_header_unpack(bytes, len, &h) || h.kind < 1 || h.kind > FXS_KIND_MAX) {
-        log_warn("cluster: an unreadable frame of stream %s on Redis (%zu bytes), skipped", s->name, len);
+    if (fxs_header_unpack(bytes, len, &h) || h.kind < 1 || h.kind > FXS_KIND_MAX || h.seq >= CLUSTER_SEQ_MAX) {
+        cluster_bad(r->srv->cluster, CLUSTER_BAD_FRAME, "a frame of stream %s in %s (%zu bytes) does not read as one, "
+                    "or its number is out of range: skipped", s->name, r->cfg->url, len);
         return;
     }
     if (h.seq + sub->shift[h.kind] <= sub->last[h.kind]) {
@@ -106,9 +107,14 @@ static void relay_on_message(struct relay *r, const redisReply *m)
 }
 
 /* A stream just subscribed to: its numbering starts above the hub's frames, and its latest
- * frames come from Redis. */
+ * frames come from Redis (on the `get` connection, made again when Redis closed it while idle). */
 static int relay_fetch_latest(struct relay *r, struct relay_sub *sub, struct stream *s)
 {
+    if (cluster_closed(r->get)) {
+        char why[256];
+        redisFree(r->get);
+        if (!(r->get = cluster_dial(r->srv->cluster, why, sizeof why))) return -1;
+    }
     for (int k = 1; k <= FXS_KIND_MAX; k++) sub->last[k] = hub_latest_seq(&r->srv->hub, s, k);
     for (int k = 1; k <= FXS_KIND_MAX; k++) {
         redisReply *q = redisCommand(r->get, "GET " CLUSTER_KEY "frame:%s:%d", sub->name, k);
@@ -206,8 +212,9 @@ static void *relay_main(void *arg)
         backoff = RELAY_BACKOFF_MIN_S;
         bool due = clock_now() >= followed_at + RELAY_POLL_S; /* not after every batch of frames */
         if (due) followed_at = clock_now();
-        if ((due && relay_follow_hub(r)) || relay_read(r)) {
-            log_warn("cluster: relay lost %s: %s", r->cfg->url, r->sub->err ? r->sub->errstr : "a command failed");
+        if ((due && relay_follow_hub(r)) || relay_read(r)) { /* idle, Redis's timeout or CLIENT KILL may close it */
+            log_msg(r->nsubs ? LOG_WARN : LOG_INFO, "cluster: relay lost %s: %s", r->cfg->url,
+                    r->sub->err ? r->sub->errstr : "a command failed");
             relay_disconnect(r);
             followed_at = 0;
         }

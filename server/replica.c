@@ -102,7 +102,7 @@ static void replica_event(struct server *srv, const cJSON *ev)
         struct stream *s = hub_find(&srv->hub, name);
         if (s) hub_request_reset(&srv->hub, s);
         stream_unref(s);
-    } else { /* "seeded" (the database was filled anew), or unreadable */
+    } else { /* unreadable */
         cluster_stale(srv->cluster);
         return;
     }
@@ -116,27 +116,73 @@ static bool replica_listed(const cJSON *all, const char *name)
     return false;
 }
 
-/* Seeds a database never seeded with this daemon's streams, then makes the copy Redis's state. */
-static int replica_reload(struct server *srv, struct fx_err *err)
+/* Sets each revision of `all` that did not read as one (bad_rev) to the one this daemon has
+ * + 1 (1 for a stream it has not): the number of repairs sent, or -1 with err. */
+static int replica_repair(struct server *srv, const cJSON *all, struct fx_err *err)
+{
+    int made = 0;
+    for (const cJSON *e = all->child; e; e = e->next) {
+        const char *bad = replica_str(e, "bad_rev"), *name = replica_str(e, "stream");
+        if (!bad) continue;
+        struct stream *s = hub_find(&srv->hub, name);
+        struct stream_status st = {.rev = 0};
+        if (s) hub_status(&srv->hub, s, &st);
+        stream_unref(s);
+        uint64_t rev = (double)st.rev + 1 < HUB_REV_MAX ? st.rev + 1 : 1;
+        if (cluster_repair_rev(srv->cluster, name, replica_str(e, "effect"), bad, rev,
+                               cJSON_GetObjectItemCaseSensitive(e, "params"), err))
+            return -1;
+        made++;
+    }
+    return made;
+}
+
+/* Redis's state and the number of its last change: a database never seeded (or that lost its
+ * data) is seeded with this daemon's streams first, and revisions that do not read are
+ * repaired, then the state is loaded again (a third load keeps what still does not read). */
+static int replica_fetch(struct server *srv, cJSON **all, uint64_t *seq, struct fx_err *err)
 {
     struct cluster *cl = srv->cluster;
-    cJSON *mine = store_streams(srv), *all = NULL;
-    uint64_t seq;
-    int rc = cluster_seed(cl, mine, err);
+    cJSON *mine = store_streams(srv);
+    int rc = 1;
+    for (int pass = 0; rc > 0 && pass < 3; pass++) {
+        cJSON_Delete(*all);
+        *all = NULL;
+        rc = cluster_seed(cl, mine, err) ? -1 : cluster_load(cl, all, seq, err);
+        if (!rc && pass < 2) rc = replica_repair(srv, *all, err);
+    }
     cJSON_Delete(mine);
-    if (rc || cluster_load(cl, &all, &seq, err)) return -1;
+    if (rc > 0) rc = fx_fail(err, "unavailable", NULL, "cluster: %s lost its data again while being seeded",
+                             srv->cfg.cluster.url);
+    return rc;
+}
+
+/* Makes the copy Redis's state (replica_fetch). A stream whose revision still does not read is
+ * left here as it is. */
+static int replica_reload(struct server *srv, struct fx_err *err)
+{
+    cJSON *all = NULL;
+    uint64_t seq;
+    if (replica_fetch(srv, &all, &seq, err)) {
+        cJSON_Delete(all);
+        return -1;
+    }
     int n;
     struct stream **local = hub_snapshot(&srv->hub, &n);
     for (int i = 0; i < n; i++)
         if (!replica_listed(all, local[i]->name)) replica_destroy(srv, local[i]->name);
     hub_release_all(local, n);
     for (const cJSON *e = all->child; e; e = e->next)
-        replica_put(srv, replica_str(e, "stream"), replica_str(e, "effect"), replica_rev(e),
-                    cJSON_GetObjectItemCaseSensitive(e, "params"));
+        if (replica_rev(e))
+            replica_put(srv, replica_str(e, "stream"), replica_str(e, "effect"), replica_rev(e),
+                        cJSON_GetObjectItemCaseSensitive(e, "params"));
+        else
+            log_warn("cluster: stream %s left as it is here: its revision in %s still does not read",
+                     replica_str(e, "stream"), srv->cfg.cluster.url);
     log_info("cluster: %d streams loaded from %s (change %llu)", cJSON_GetArraySize(all), srv->cfg.cluster.url,
              (unsigned long long)seq);
     cJSON_Delete(all);
-    cluster_loaded(cl, seq);
+    cluster_loaded(srv->cluster, seq);
     atomic_fetch_add(&srv->counters.cluster_reloads, 1);
     return 0;
 }
@@ -147,7 +193,9 @@ int replica_poll(struct server *srv, struct fx_err *err)
     if (!cl) return 0;
     struct cluster_item *it;
     while ((it = cluster_next(cl))) {
-        if (it->kind == CLUSTER_EVENT && !it->doc) cluster_stale(cl); /* unreadable: reload */
+        const char *op = it->doc ? replica_str(it->doc, "op") : NULL;
+        if (it->kind == CLUSTER_EVENT && (!op || !strcmp(op, "seeded"))) /* unreadable, or Redis was emptied: reload */
+            cluster_stale(cl);
         else if (it->kind == CLUSTER_EVENT && cluster_fit(cl, it->seq) == CLUSTER_APPLY) replica_event(srv, it->doc);
         cluster_item_free(it);
     }

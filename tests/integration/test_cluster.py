@@ -10,7 +10,11 @@ holds; C's subscriber gets the params event of B's set, A's clients the created/
 of B's and C's changes; concurrent sets through two daemons all succeed with distinct
 consecutive revs and lose no update; a set whose daemon is behind Redis is made again on
 Redis's document; racing creates: one wins, everywhere; a reset through B restarts A's stream;
-a reload that finds other params at the same rev re-creates the effect; Redis killed: changes
+a reload that finds other params at the same rev re-creates the effect; a second daemon given
+a node id in use refuses to start, saying so; Redis closing the daemons' connections while idle
+or under a change: each change is made, once; FLUSHALL: the daemons seed Redis again with their
+state within seconds and go on; leases, the change counter and revisions in Redis that do not
+parse or cannot be right are counted and repaired; Redis killed: changes
 answer unavailable naming the cluster, /healthz and /metrics say the link is down, streams keep
 sending frames and reads keep working; Redis back empty: changes are accepted again within
 seconds and the state the daemons had is in Redis again (re-seeded); Redis hung (SIGSTOP): one
@@ -18,7 +22,7 @@ change waits the 1 s timeout, the next are refused at once, frames go on; Redis 
 in an older state: Redis wins, the daemon goes back to it and tells its subscribers; a kill -9 of
 Redis with appendfsync always loses no acknowledged change; flags and configuration errors; a
 password from FXS_REDIS_PASSWORD; SIGTERM with Redis up or down exits 0. Every wait is bounded;
-a missing redis-server fails the suite with a message. About 10 s (more with a cold PoCL cache)."""
+a missing redis-server fails the suite with a message. About 60 s (more with a cold PoCL cache)."""
 import asyncio
 import json
 import os
@@ -37,6 +41,7 @@ from fxtest import DAEMON, Client, Daemon, Suite, free_port  # noqa: E402
 REDIS = shutil.which("redis-server") or "/usr/bin/redis-server"
 SMALL = {"width": 32, "height": 24, "fps": 20}  # cheap frames: several daemons share 2 cores
 LEASE_TTL_S = 3.0  # server/lease.h
+CLAIM_TTL_S = 3.0  # a node id's claim, CLUSTER_MEMBER_TTL_S in server/cluster.h
 R = None  # the shared Redis
 TEMP_DIRS = []  # Redis data dirs, removed at the end
 A = B = C = None  # its daemons, node ids a, b, c
@@ -66,6 +71,11 @@ def resp_read(f):
     raise RuntimeError("unexpected RESP %r" % line)
 
 
+def resp(*args):
+    """One command in Redis's protocol."""
+    return ("*%d\r\n" % len(args) + "".join("$%d\r\n%s\r\n" % (len(str(a).encode()), a) for a in args)).encode()
+
+
 class Redis:
     """A redis-server on 127.0.0.1:port (free by default), data in dir (a temp dir by default)."""
 
@@ -76,7 +86,8 @@ class Redis:
         self.password = password
         self.url = "redis://127.0.0.1:%d" % self.port
         args = [REDIS, "--port", str(self.port), "--bind", "127.0.0.1", "--dir", self.dir, "--save", "",
-                "--daemonize", "no", "--logfile", os.path.join(self.dir, "redis.log")]
+                "--daemonize", "no", "--logfile", os.path.join(self.dir, "redis.log"),
+                "--enable-debug-command", "local"]
         args += ["--appendonly", "yes", "--appendfsync", "always"] if aof else ["--appendonly", "no"]
         if password:
             args += ["--requirepass", password]
@@ -104,8 +115,7 @@ class Redis:
             f = s.makefile("rb")
             cmds = ([["AUTH", self.password]] if self.password else []) + [list(args)]
             for c in cmds:
-                s.sendall(("*%d\r\n" % len(c) + "".join("$%d\r\n%s\r\n" % (len(str(a).encode()), a) for a in c))
-                          .encode())
+                s.sendall(resp(*c))
                 reply = resp_read(f)
             return reply
 
@@ -190,6 +200,25 @@ async def event(c, op, stream, timeout=8.0, **match):
                 all(m.get(k) == v for k, v in match.items()):
             return m
     return None
+
+
+async def frame_made_after(c, wall, timeout=10.0, kind=2):
+    """The next frame of kind computed after the wall-clock time `wall` (its header's
+    server_time_us; daemons and test share the clock), skipping frames still queued; None when
+    none comes within timeout."""
+    deadline = time.monotonic() + timeout
+    try:
+        while True:
+            f = await c.frame(timeout=max(0.01, deadline - time.monotonic()), kind=kind)
+            if f["server_time_us"] > wall * 1e6:
+                return f
+    except asyncio.TimeoutError:
+        return None
+
+
+def bad_values(what):
+    """fxs_cluster_bad_values_total{what=...} summed over A, B and C."""
+    return sum(metric(d, 'fxs_cluster_bad_values_total{what="%s"}' % what) or 0 for d in (A, B, C))
 
 
 def leases(d):
@@ -396,6 +425,170 @@ async def test_metrics(t):
             "B's cluster counters: %s" % val)
 
 
+async def test_duplicate_node(t):
+    """A daemon given the node id of a running daemon refuses to start, saying why; the running
+    one goes on undisturbed."""
+    start = time.monotonic()
+    code, out = start_refused("--cluster", R.url, "--node-id", "b")
+    t.check(code == 1 and 'node id "b"' in out and "--node-id" in out,
+            "a second daemon with node id b exits 1 after %.1f s, naming it (%s)" %
+            (time.monotonic() - start, out.strip()[-220:]))
+    b = await Client.connect(B)
+    await b.request("subscribe", stream="c1")
+    f = await frame_made_after(b, time.time(), timeout=8)
+    t.check(f is not None and http_json(B, "/healthz")["cluster"]["node"] == "b",
+            "b goes on: its subscriber of c1 gets new frames")
+    await b.close()
+    # A daemon paused past its claim's TTL while another starts with its node id stops when it resumes.
+    first = cluster_daemon(R, "twin", "--role", "edge")
+    first.proc.send_signal(signal.SIGSTOP)
+    try:
+        await asyncio.sleep(CLAIM_TTL_S + 0.5)
+        second = cluster_daemon(R, "twin", "--role", "edge")
+    finally:
+        first.proc.send_signal(signal.SIGCONT)
+    try:
+        code = first.proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        code = None
+    t.check(code == 1 and 'node id "twin" was taken by another fxstreamd' in first.log(),
+            "one paused past its claim while another started with its node id exits 1 when it resumes, saying why "
+            "(%s: %s)" % (code, first.log().strip()[-160:]))
+    t.check(http_json(second, "/healthz")["cluster"]["node"] == "twin" and second.stop() == 0,
+            "the other one goes on")
+
+
+async def test_idle_links(t):
+    """Redis closes the daemons' command connections while idle (CLIENT KILL TYPE normal, its
+    `timeout`), or with a change on its way: each change is made, once."""
+    a = await Client.connect(A)
+    base = (await get(A, "c1"))["rev"]
+    killed = R.cmd("CLIENT", "KILL", "TYPE", "normal")
+    r1 = await a.request("set", stream="c1", params={"alpha": 1.1})
+    r2 = await a.request("set", stream="c1", params={"alpha": 1.2})
+    t.check(killed >= 3 and r1.get("rev") == base + 1 and r2.get("rev") == base + 2,
+            "after CLIENT KILL TYPE normal (%d connections) the next two sets are made: rev %s, %s (%s)" %
+            (killed, r1.get("rev"), r2.get("rev"), r1.get("message", "")))
+    R.cmd("CONFIG", "SET", "timeout", "1")
+    try:
+        await asyncio.sleep(2.5)
+        b = await Client.connect(B)
+        r3 = await b.request("set", stream="c1", params={"alpha": 1.3})
+        t.check(r3.get("rev") == base + 3, "Redis's timeout at 1 s: a set through B after 2.5 s idle is made: rev %s (%s)"
+                % (r3.get("rev"), r3.get("message", "")))
+        await b.close()
+    finally:
+        R.cmd("CONFIG", "SET", "timeout", "0")
+    # Redis busy (DEBUG SLEEP), then it closes every connection: A's set, sent meanwhile, is lost with its
+    # connection before Redis read it (CLIENT KILL sent with the sleep), or after Redis made it (sent after the set).
+    rev = base + 3
+    for when in ("before Redis read it", "after Redis made it"):
+        with socket.create_connection(("127.0.0.1", R.port), timeout=5) as s, \
+                socket.create_connection(("127.0.0.1", R.port), timeout=5) as k:
+            kill = resp("CLIENT", "KILL", "TYPE", "normal")
+            s.sendall(resp("DEBUG", "SLEEP", "0.8") + (kill if when.startswith("before") else b""))
+            await asyncio.sleep(0.15)
+            pending = asyncio.ensure_future(a.request("set", stream="c1", params={"alpha": rev / 10}))
+            await asyncio.sleep(0.2)
+            if when.startswith("after"):
+                k.sendall(kill)
+            r = await pending
+        rev += 1
+        t.check(r.get("rev") == rev and R.stream("c1")[1] == rev,
+                "a set whose connection Redis closes %s is sent again and made once: rev %s (%s)" %
+                (when, r.get("rev"), r.get("message", "")))
+    g = await get_at(C, "c1", rev)
+    t.check(g.get("params") == r.get("params"), "C follows (rev %s)" % g.get("rev"))
+    await a.close()
+
+
+async def test_flushall(t):
+    """FLUSHALL empties Redis under running daemons: as after a restart of an empty Redis they
+    seed it again with their state within seconds; changes, events and relayed frames go on."""
+    o = await owner("c1", (A, B, C))
+    other = B if o is A else A
+    sub = await Client.connect(other)
+    await sub.request("subscribe", stream="c1")
+    await sub.frame(kind=2)
+    listed = await names(A)
+    before = await get(A, "c1")
+    R.cmd("FLUSHALL")
+    start, wall = time.monotonic(), time.time()
+    a = await Client.connect(A)
+    replies = []
+
+    async def accepted():
+        r = await a.request("set", stream="c1", params={"alpha": 2.5})
+        replies.append(r)
+        return r if r.get("op") == "params" else None
+
+    r = await until(accepted, timeout=5, step=0.1)
+    t.check(r is not None and r.get("rev") == before["rev"] + 1,
+            "a set is made %.1f s after FLUSHALL, at rev %s (answers before: %s)" %
+            (time.monotonic() - start, r and r.get("rev"), sorted({x.get("code") for x in replies[:-1]})))
+    t.check(R.cmd("ZRANGE", "fxs:streams", "0", "-1") == listed and R.cmd("EXISTS", "fxs:seeded") == 1 and
+            R.stream("c1") == ("energy_wave", r and r["rev"], r and r["params"]),
+            "Redis holds the daemons' streams again, with the set")
+    ok = True
+    for d in (B, C):
+        g = await get_at(d, "c1", r and r["rev"])
+        ok = ok and r is not None and g.get("rev") == r["rev"] and g.get("params") == r["params"] and \
+            await names(d) == listed
+    t.check(ok, "B and C follow")
+    f = await frame_made_after(sub, wall + 1.0, timeout=8)
+    t.check(f is not None and f["param_rev"] == (r and r["rev"]),
+            "the subscriber on a daemon relaying c1 gets frames of the new rev (%s)" % (f and f["param_rev"]))
+    await sub.close()
+    await a.close()
+
+
+async def test_bad_values(t):
+    """What Redis holds is read like any input: a lease value that does not parse or never
+    expires, a change counter set back or not a number, a revision out of range are logged,
+    counted in fxs_cluster_bad_values_total and repaired; the cluster goes on."""
+    a = await Client.connect(A)
+    for value in ("0", "abc"):
+        before = bad_values("seq")
+        R.cmd("SET", "fxs:seq", value)
+        s = await a.request("set", stream="c1", params={"alpha": 1.25 if value == "0" else 1.35})
+        gs = [await get_at(d, "c1", s.get("rev"), timeout=5) for d in (B, C)]
+        t.check(s.get("op") == "params" and all(g.get("rev") == s["rev"] and g.get("params") == s["params"] for g in gs),
+                "fxs:seq set to %s: the next set (rev %s) reaches B and C (%s)" % (value, s.get("rev"), s.get("message", "")))
+        seq = R.cmd("GET", "fxs:seq")
+        t.check(seq.isdigit() and int(seq) > 1 and bad_values("seq") > before,
+                "the counter is set forward again (%s) and it is counted" % seq)
+    for value in ("-5", "18446744073709551615"):
+        before = bad_values("stream")
+        R.cmd("HSET", "fxs:stream:c1", "rev", value)
+        R.cmd("CLIENT", "KILL", "TYPE", "pubsub")  # every daemon reloads Redis's state
+
+        async def agreed():
+            revs = [(await get(d, "c1")).get("rev") for d in (A, B, C)]
+            red = R.cmd("HGET", "fxs:stream:c1", "rev")
+            return revs if red.isdigit() and len(set(revs)) == 1 and revs[0] == int(red) else None
+
+        revs = await until(agreed, timeout=8, step=0.1)
+        t.check(revs is not None and revs[0] >= 1, "rev %s in c1's hash: Redis and every daemon agree on a valid rev "
+                "again (%s)" % (value, revs and revs[0]))
+        t.check(bad_values("stream") > before, "and it is counted (fxs_cluster_bad_values_total{what=\"stream\"})")
+    o = await owner("c1", (A, B, C))
+    sub = await Client.connect(o or A)
+    await sub.request("subscribe", stream="c1")
+    await sub.frame(kind=2)
+    for value, what in (("garbage", "a lease value that does not parse"), ("99 ghost", "a lease that never expires")):
+        before = bad_values("lease")
+        R.cmd("SET", "fxs:lease:c1", value)
+        f = await frame_made_after(sub, time.time() + 1.0, timeout=8)
+        ttl = R.cmd("PTTL", "fxs:lease:c1")
+        t.check(f is not None and await owner("c1", (A, B, C)) is not None and 0 < ttl <= LEASE_TTL_S * 1000,
+                "%s in fxs:lease:c1: c1 is still computed, its lease repaired (ttl %s ms)" % (what, ttl))
+        t.check(bad_values("lease") > before, "and counted (fxs_cluster_bad_values_total{what=\"lease\"})")
+    await sub.close()
+    s = await a.request("set", stream="c1", params={"alpha": 1.0})
+    t.check(s.get("op") == "params", "sets go on (rev %s)" % s.get("rev"))
+    await a.close()
+
+
 async def test_redis_down(t):
     """Redis killed: changes are refused with unavailable naming the cluster, nothing changes,
     the owner of a stream keeps sending its frames to its subscribers, reads keep working."""
@@ -546,6 +739,15 @@ def run_daemon(*args, env=None, timeout=30):
     return p.returncode, p.stdout + p.stderr
 
 
+def start_refused(*args, timeout=20):
+    """run_daemon for a daemon expected to refuse to start: (exit status, output), or (None,
+    why) when it still runs after timeout s (it is killed then)."""
+    try:
+        return run_daemon(*args, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, "still running after %d s" % timeout
+
+
 async def test_flags(t):
     for args, word, what in ((["--cluster", "http://127.0.0.1:6379"], "redis://", "a URL that is not redis://"),
                              (["--cluster", "redis://:pw-xyz@127.0.0.1"], "FXS_REDIS_PASSWORD", "a password in the URL"),
@@ -581,6 +783,9 @@ async def test_flags(t):
     with Daemon("--cluster", R.url) as d:
         t.check(http_json(d, "/healthz")["cluster"]["node"] == socket.gethostname()[:63],
                 "the node id defaults to the host name")
+        code, out = start_refused("--cluster", R.url)
+        t.check(code == 1 and "(the host name)" in out and "--node-id" in out,
+                "a second daemon on the same host without --node-id exits 1, saying why (%s)" % out.strip()[-220:])
 
 
 async def test_password(t):
@@ -632,7 +837,8 @@ if __name__ == "__main__":
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
         s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
-               test_reset, test_metrics, test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
+               test_reset, test_metrics, test_duplicate_node, test_idle_links, test_flushall, test_bad_values,
+               test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
     finally:
         stop_all((A, B, C), R)

@@ -27,8 +27,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fxtest import DAEMON, Client, Suite, parse_frame  # noqa: E402
-from test_cluster import (LEASE_TTL_S, SMALL, Redis, cluster_daemon, get, http_json, leases, metric,  # noqa: E402
-                          names, require_redis, stop_all, until)
+from test_cluster import (LEASE_TTL_S, SMALL, Redis, cluster_daemon, frame_made_after, get, http_json,  # noqa: E402
+                          leases, metric, names, require_redis, stop_all, until)
 
 R = None
 P = Q = E = None  # compute, compute, edge
@@ -70,16 +70,6 @@ async def frames_after(c, seq, n=1, timeout=10.0, kind=2):
         if f["seq"] > seq:
             out.append(f)
     return out
-
-
-async def frame_made_after(c, wall, timeout=10.0, kind=2):
-    """The next frame of kind computed after the wall-clock time `wall` (its header's
-    server_time_us; daemons and test share the clock), skipping frames still queued."""
-    deadline = time.monotonic() + timeout
-    while True:
-        f = await c.frame(timeout=max(0.01, deadline - time.monotonic()), kind=kind)
-        if f["server_time_us"] > wall * 1e6:
-            return f
 
 
 class ChannelTap:
