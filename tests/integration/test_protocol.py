@@ -244,6 +244,16 @@ async def test_error_codes(t):
     await expect_error(t, c, '{"op":"list\\u0000x"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"create","effect":"energy_wave","stream":"ab\\u0000cd"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"auth","token":"t\\u0000junk"}', "bad_json", "U+0000")
+    # RFC 8259 exactly (issue 27 item 9): 0200 was read as 200, \f as whitespace, raw controls kept.
+    rev = (await c.request("get", stream="energy"))["rev"]
+    for text, why in (('{"op":"set","stream":"energy","params":{"divisions":0200}}', "leading zero"),
+                      ('{"op":"set","stream":"energy","params":{"alpha":1.}}', "digit must follow '.'"),
+                      ('{"op":"set","stream":"energy","params":{"alpha":-00}}', "leading zero"),
+                      ('\f{"op":"list"}', "byte 0x0c"), ('{"op":"list"}\v', "trailing data"),
+                      ('{"op":"li\x01st"}', "raw control character U+0001")):
+        m = await expect_error(t, c, text, "bad_json", "%r" % text)
+        t.check(why in m["message"], "%r: the message says %r (%s)" % (text, why, m["message"]))
+    t.check((await c.request("get", stream="energy"))["rev"] == rev, "none of those sets changed the stream")
     # ids come back exactly (issue 15 item 12), or are refused when a double cannot hold them
     for text in ("9007199254740991", "-9007199254740991", "0.1", "123456.789", "1e-300", '"x\\u00e9"'):
         await c.ws.send('{"op":"list","id":%s}' % text)
