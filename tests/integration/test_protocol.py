@@ -471,6 +471,26 @@ async def test_presets_persist(t):
                 "bad_param k_buo (%s)" % r)
         t.check((await c.request("get", stream="flame"))["params"]["k_buo"] == 0.02, "and changes nothing")
         await c.close()
+    # Each entry is checked as preset_save checks one (issue 27 item 8): each of these loaded,
+    # then was listed (1e999 as null), sent raw (\xff) or could not be deleted (../../x).
+    good = json.load(open(os.path.join(state, "presets.json")))
+    entry = lambda name, **kw: dict(dict(effect="flame", name=name, doc="", params={"fps": 20}), **kw)
+    for extra, why in (([entry("candle")], 'entry 3 (flame/candle): "candle" is a built-in flame preset'),
+                       ([entry("../../x")], "entry 3 (flame/../../x): preset names are"),
+                       ([entry("twin"), entry("twin")], 'entry 4 (flame/twin): a second preset named "twin"'),
+                       ([entry("inf", params={"fps": "INF"})], "entry 3 (flame/inf): params.fps is not a finite number"),
+                       ([entry("p%d" % i) for i in range(63)], "entry 65 (flame/p62): flame already has 64 presets"),
+                       ([entry("bad\xff")], "invalid UTF-8")):
+        text = json.dumps(good + extra).replace('"INF"', "1e999").encode().replace(b"\\u00ff", b"\xff")
+        with open(os.path.join(state, "presets.json"), "wb") as f:
+            f.write(text)
+        try:
+            p = subprocess.run([DAEMON, "--port", "0", "--state-dir", state], capture_output=True, timeout=20)
+        except subprocess.TimeoutExpired as e:  # it started and served
+            p = subprocess.CompletedProcess(e.cmd, None, b"", e.stderr or b"")
+        err = [x for x in p.stderr.decode(errors="replace").splitlines() if "presets.json" in x]
+        t.check(p.returncode not in (0, None) and err and why in err[-1] and open(os.path.join(state, "presets.json"), "rb").read() == text,
+                "presets.json with %s: the start is refused naming it, the file kept (%s)" % (why[:40], err))
 
 
 async def test_quarantine(t):
