@@ -55,6 +55,7 @@ struct net_conn {
     struct net_conn *retry_next, *retry_prev; /* the list of connections to wake at retry_at */
     double retry_at;
     bool retry_queued;
+    bool rx_paused; /* no request is read while the session is backlogged (session_backlogged) */
 };
 
 static struct net_conn *net_conn_of(struct session *ss) { return (struct net_conn *)ss; }
@@ -319,6 +320,17 @@ static bool net_pick_frame(struct net *net, struct session *ss)
     return false;
 }
 
+/* Reads the connection's requests only while its queue is not backlogged: a client that asks
+ * for more than it reads waits (TCP backpressure), and every reply it asked for is sent. */
+static void net_rx_follow(struct session *ss)
+{
+    struct net_conn *c = net_conn_of(ss);
+    bool pause = session_backlogged(ss);
+    if (pause == c->rx_paused) return;
+    c->rx_paused = pause;
+    lws_rx_flow_control(c->wsi, !pause);
+}
+
 /* Sends the next chunk of the current frame as a fragment of one binary message. */
 static int net_send_chunk(struct session *ss)
 {
@@ -392,6 +404,7 @@ static int net_writable(struct net *net, struct session *ss)
         size_t len = m->len;
         free(m);
         if (w < (int)len) return -1;
+        net_rx_follow(ss);
     } else if (net_has_frame(ss) && net_backlogged(net, ss)) {
         net_retry_later(net, ss, NET_BACKLOG_RETRY_S);
         return 0;
@@ -532,6 +545,7 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
     case LWS_CALLBACK_RECEIVE: /* other daemons' changes first: the request is checked against them */
         replica_poll(net->srv, &(struct fx_err){0});
         session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
+        net_rx_follow(ss);
         break;
     case LWS_CALLBACK_SERVER_WRITEABLE:
         return net_writable(net, ss);

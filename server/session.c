@@ -24,10 +24,12 @@ void session_send(struct session *ss, cJSON *msg)
     if (!text) return;
     size_t len = strlen(text);
     const struct limits *l = &ss->srv->cfg.limits;
-    if (ss->q_count >= l->max_queued_messages || ss->q_bytes + len > (size_t)l->max_queued_bytes) {
-        /* The peer is not reading its replies: close rather than grow without bound (in
-         * messages, and in bytes: 60 readers of ~11 kB describe replies held 9 MiB each). */
-        ss->kill = "replies not read";
+    bool event = !ss->replying;
+    if (event && (ss->q_count >= l->max_queued_messages || ss->q_event_bytes + len > (size_t)l->max_queued_bytes)) {
+        /* The peer is not reading what it is sent: close rather than grow without bound (in
+         * messages, and in bytes: 60 subscribers of a stream set 100 times a second). Replies
+         * are bounded by not reading requests meanwhile (session_backlogged). */
+        ss->kill = "messages not read";
         free(text);
         if (ss->srv->wake) ss->srv->wake(ss);
         return;
@@ -36,15 +38,23 @@ void session_send(struct session *ss, cJSON *msg)
     if (m) {
         m->next = NULL;
         m->len = len;
+        m->event = event;
         memcpy(m->data + FRAME_HEADROOM, text, len);
         if (ss->q_tail) ss->q_tail->next = m;
         else ss->q_head = m;
         ss->q_tail = m;
         ss->q_count++;
         ss->q_bytes += len;
+        if (event) ss->q_event_bytes += len;
     }
     free(text);
     if (ss->srv->wake) ss->srv->wake(ss);
+}
+
+bool session_backlogged(const struct session *ss)
+{
+    const struct limits *l = &ss->srv->cfg.limits;
+    return ss->q_bytes > (size_t)l->max_queued_bytes || ss->q_count >= l->max_queued_messages;
 }
 
 struct outmsg *session_pop(struct session *ss)
@@ -55,6 +65,7 @@ struct outmsg *session_pop(struct session *ss)
     if (!ss->q_head) ss->q_tail = NULL;
     ss->q_count--;
     ss->q_bytes -= m->len;
+    if (m->event) ss->q_event_bytes -= m->len;
     return m;
 }
 
@@ -732,6 +743,7 @@ void session_handle(struct session *ss, const char *text, size_t len)
     cJSON *req = NULL;
     char why[128];
     atomic_fetch_add(&ss->srv->counters.messages_in, 1);
+    ss->replying = true;
     if (!session_rate_ok(ss))
         fx_fail(&err, "limit", NULL, "more than %d control messages per second", l->max_control_per_sec);
     else if (session_json_depth(text, len) > l->max_json_depth)
@@ -741,6 +753,7 @@ void session_handle(struct session *ss, const char *text, size_t len)
     else
         session_dispatch(ss, req, &id, &err);
     if (err.code[0]) session_error(ss, id, &err);
+    ss->replying = false;
     cJSON_Delete(req);
 }
 
@@ -755,8 +768,13 @@ void session_receive(struct session *ss, const void *data, size_t len, bool fina
         fx_fail(&err, "bad_request", NULL, "binary messages are not accepted; send JSON text");
     else if (ss->rx_overflow)
         fx_fail(&err, "limit", NULL, "message exceeds %zu bytes", max);
-    if (err.code[0]) session_error(ss, NULL, &err);
-    else session_handle(ss, (const char *)ss->rx.data, ss->rx.len);
+    if (err.code[0]) {
+        ss->replying = true;
+        session_error(ss, NULL, &err);
+        ss->replying = false;
+    } else {
+        session_handle(ss, (const char *)ss->rx.data, ss->rx.len);
+    }
     ss->rx.len = 0; /* the next fragment starts a new message */
     ss->rx_overflow = false;
     if (ss->rx.cap > 2 * max) fx_buf_free(&ss->rx);
