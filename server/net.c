@@ -14,6 +14,7 @@
  * libwebsockets keeps its timers in one sorted list, so a timer per connection costs O(n)
  * per insert: with 1536 backlogged subscribers that was 38% of the daemon's CPU. The
  * sessions waiting instead sit in one unsorted list here, walked by a single timer. */
+#include <dlfcn.h>
 #include <limits.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -175,6 +176,22 @@ static int net_http_not_allowed(struct lws *wsi)
     return -1;
 }
 
+/* libwebsockets 4.1 answers two kinds of request itself, before any callback, with 403: an
+ * unknown method (TRACE) and a request target that is not a path (OPTIONS *). The daemon
+ * serves GET only, so those get the 405 that every other method gets (net_http_not_allowed).
+ * lws calls this function through its PLT, so the executable's definition is the one it uses;
+ * any other status, and a 403 for a GET, goes to lws's own. */
+int lws_return_http_status(struct lws *wsi, unsigned int code, const char *html_body)
+{
+    static int (*next)(struct lws *, unsigned int, const char *);
+    if (code == HTTP_STATUS_FORBIDDEN && lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) <= 0) {
+        net_http_not_allowed(wsi);
+        return 0;
+    }
+    if (!next) next = (int (*)(struct lws *, unsigned int, const char *))dlsym(RTLD_NEXT, "lws_return_http_status");
+    return next ? next(wsi, code, html_body) : -1;
+}
+
 static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
 {
     struct net *net = lws_context_user(lws_get_context(wsi));
@@ -312,6 +329,7 @@ static bool net_pick_frame(struct net *net, struct session *ss)
             ss->rr = i + 1;
             ss->cur = f;
             ss->cur_off = 0;
+            ss->cur_paused = f->hdr.seq <= sub->paused_seq[k];
             stream_ref(ss->cur_stream = sub->s);
             return true;
         }
@@ -331,16 +349,30 @@ static void net_rx_follow(struct session *ss)
     lws_rx_flow_control(c->wsi, !pause);
 }
 
+/* The first chunk p[0..n) of a frame computed before its stream paused, copied (the frame's
+ * bytes are shared) with FXS_FLAG_BEFORE_PAUSE set, LWS_PRE bytes of room before it; free
+ * from the returned pointer - LWS_PRE. NULL when out of memory. */
+static uint8_t *net_paused_copy(const uint8_t *p, size_t n)
+{
+    uint8_t *c = malloc(LWS_PRE + n);
+    if (!c) return NULL;
+    memcpy(c + LWS_PRE, p, n);
+    fxs_put_u32(c + LWS_PRE + 56, fxs_get_u32(p + 56) | FXS_FLAG_BEFORE_PAUSE);
+    return c + LWS_PRE;
+}
+
 /* Sends the next chunk of the current frame as a fragment of one binary message. */
 static int net_send_chunk(struct session *ss)
 {
     struct frame *f = ss->cur;
     size_t left = f->len - ss->cur_off, n = left < NET_CHUNK ? left : NET_CHUNK;
     bool start = ss->cur_off == 0, end = n == left;
-    uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE];
+    uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE], *copy = NULL;
     if (!start) memcpy(saved, p - LWS_PRE, LWS_PRE);
     else hist_observe(&ss->cur_stream->frame_age, (double)clock_wall_us() * 1e-6 - (double)f->hdr.server_time_us * 1e-6);
+    if (start && ss->cur_paused && !(p = copy = net_paused_copy(p, n))) return -1;
     int w = lws_write(net_conn_of(ss)->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
+    if (copy) free(copy - LWS_PRE);
     if (!start) memcpy(p - LWS_PRE, saved, LWS_PRE);
     if (w < (int)n) return -1;
     ss->cur_off += n;

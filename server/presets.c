@@ -55,12 +55,18 @@ static int presets_read_only(const struct effect_ops *ops, const char *name, str
 /* What a new user preset `name` of ops must pass, in the order of PROTOCOL.md §3 (fields, then
  * state): a valid name and doc, not a built-in's name, room for one more unless it replaces
  * one (*index: the preset it replaces, or -1), parameters within PRESETS_MAX_PARAMS_BYTES. */
-static int presets_check(const struct presets *ps, const struct effect_ops *ops, const char *name, const char *doc,
-                         const cJSON *params, int *index, struct fx_err *err)
+int presets_check_fields(const char *name, const char *doc, struct fx_err *err)
 {
     if (!hub_valid_name(name)) return presets_bad_name(err);
     if (strlen(doc) > PRESETS_MAX_DOC)
         return fx_fail(err, "bad_request", "doc", "a preset's doc is at most %d bytes", PRESETS_MAX_DOC);
+    return 0;
+}
+
+static int presets_check(const struct presets *ps, const struct effect_ops *ops, const char *name, const char *doc,
+                         const cJSON *params, int *index, struct fx_err *err)
+{
+    if (presets_check_fields(name, doc, err)) return -1;
     if (presets_builtin(ops, name)) return presets_read_only(ops, name, err);
     *index = presets_user_index(ps, ops, name);
     int count = presets_count(ps, ops);

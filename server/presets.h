@@ -47,6 +47,10 @@ cJSON *presets_list(const struct presets *ps, const struct effect_ops *ops);
  * or NULL with unknown_preset (param `name`). */
 cJSON *presets_params(const struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err);
 
+/* The checks of a new preset's name and doc alone (bad_request, param name or doc): the first
+ * of presets_save's, which a request makes before it looks at any state. */
+int presets_check_fields(const char *name, const char *doc, struct fx_err *err);
+
 /* Saves params (a complete document of the effect) as a user preset, replacing one of that name
  * (*replaced). Errors, in this order: bad_request (name, doc), read_only (a built-in's name),
  * limit (PRESETS_MAX_PER_EFFECT; params over PRESETS_MAX_PARAMS_BYTES), unavailable (the file

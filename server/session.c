@@ -409,6 +409,8 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
         struct stream_status st;
         hub_status(&ss->srv->hub, s, &st);
         p[i].error_gen = st.error_gen;
+        if (ss->srv->cfg.pause_idle && !st.subscribers && !st.lease.remote_demand) /* paused: its frames are old */
+            for (int k = 1; k <= FXS_KIND_MAX; k++) p[i].paused_seq[k] = hub_latest_seq(&ss->srv->hub, s, k);
         hub_add_subscriber(&ss->srv->hub, s, +1);
     } else {
         stream_unref(s); /* already subscribed: only max_fps changes */
@@ -484,11 +486,20 @@ static cJSON *session_rebase(const void *ctx, const cJSON *current, struct fx_er
 /* Installs an accepted complete document, validated at revision rev: stored first (store.h),
  * then applied at the stored revision (rev + 1, or later when it was re-made on a newer
  * document: partial, NULL for a whole document), broadcast to the stream's other subscribers
- * and sent to the requester (PROTOCOL.md §3.8). Takes doc; -1 with err when it could not be
+ * and sent to the requester (PROTOCOL.md §3.8). A document equal to the current one changes
+ * nothing and is only sent back at revision rev. Takes doc; -1 with err when it could not be
  * stored. */
 static int session_accept_params(struct session *ss, struct stream *s, uint64_t rev, const cJSON *id, cJSON *doc,
                                  const cJSON *partial, struct fx_err *err)
 {
+    uint64_t now;
+    cJSON *cur = hub_get_params(&ss->srv->hub, s, &now);
+    bool same = now == rev && cJSON_Compare(cur, doc, 1);
+    cJSON_Delete(cur);
+    if (same) { /* nothing changes: no revision, no store, no broadcast, no restart */
+        session_send(ss, session_params_msg(s, id, rev, doc));
+        return 0;
+    }
     struct session_partial p = {s->effect, partial};
     struct store_change c = {.op = STORE_SET, .stream = s->name, .effect = s->effect->name, .params = doc,
                              .rev = rev, .rebase = partial ? session_rebase : NULL, .rebase_ctx = &p};
@@ -562,14 +573,22 @@ static int session_op_presets(struct session *ss, const cJSON *req, const cJSON 
     return 0;
 }
 
+/* preset_save's fields in the order of PROTOCOL.md §3 (stream, name, doc: presence, type and
+ * form), before any state; the stream's existence is checked by the caller next. */
+static int session_preset_fields(const cJSON *req, const char **name, const char **doc, struct fx_err *err)
+{
+    *doc = "";
+    if (!session_str(req, "stream", err) || !(*name = session_str(req, "name", err))) return -1;
+    if (cJSON_GetObjectItemCaseSensitive(req, "doc") && !(*doc = session_str(req, "doc", err))) return -1;
+    return presets_check_fields(*name, *doc, err);
+}
+
 static int session_op_preset_save(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
     static const char *const allowed[] = {"stream", "name", "doc", NULL};
     if (session_only(req, "preset_save", allowed, err)) return -1;
-    const char *doc = "";
-    if (cJSON_GetObjectItemCaseSensitive(req, "doc") && !(doc = session_str(req, "doc", err))) return -1;
-    const char *name = session_str(req, "name", err);
-    struct stream *s = name ? session_stream(ss, req, err) : NULL;
+    const char *name, *doc;
+    struct stream *s = session_preset_fields(req, &name, &doc, err) ? NULL : session_stream(ss, req, err);
     if (!s) return -1;
     uint64_t rev;
     bool replaced = false;
@@ -594,7 +613,7 @@ static int session_op_preset_load(struct session *ss, const cJSON *req, const cJ
 {
     static const char *const allowed[] = {"stream", "name", NULL};
     if (session_only(req, "preset_load", allowed, err)) return -1;
-    const char *name = session_str(req, "name", err);
+    const char *name = session_str(req, "stream", err) ? session_str(req, "name", err) : NULL;
     struct stream *s = name ? session_stream(ss, req, err) : NULL;
     if (!s) return -1;
     uint64_t rev;

@@ -23,6 +23,7 @@ struct sub {
     double last_sent;     /* CLOCK_MONOTONIC seconds of the last step's first frame sent */
     double step_time;     /* that step's sim_time (NAN before the first): its other kinds are not held back by max_fps */
     uint64_t last_seq[FXS_KIND_MAX + 1];
+    uint64_t paused_seq[FXS_KIND_MAX + 1]; /* frames up to these were computed before the stream paused */
     uint64_t error_gen;   /* stream errors already reported */
 };
 
@@ -46,6 +47,7 @@ struct session {
     bool replying;        /* handling this connection's own message: what it queues are replies */
     struct frame *cur;    /* frame being sent, how far, and its stream (referenced) */
     size_t cur_off;
+    bool cur_paused;      /* it goes out marked FXS_FLAG_BEFORE_PAUSE */
     struct stream *cur_stream;
     struct fx_buf rx;     /* fragments of the message being received */
     bool rx_overflow;
