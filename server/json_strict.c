@@ -6,6 +6,7 @@
  * space as whitespace, reads numbers with strtod (0200, 1., -00) and copies control
  * characters in strings; none of that reaches it now. */
 #include "json_strict.h"
+#include "utf8.h"
 
 #include <stdarg.h>
 #include <stdbool.h>
@@ -106,21 +107,6 @@ static bool js_escape_u(struct js *j)
     return true;
 }
 
-/* Length of the UTF-8 sequence at p (RFC 3629: shortest form, no surrogates, at most
- * U+10FFFF), or 0 when it is not one. */
-static size_t js_utf8(const unsigned char *p, size_t left)
-{
-    unsigned c = p[0];
-    size_t n = c >= 0xc2 && c <= 0xdf ? 2 : c >= 0xe0 && c <= 0xef ? 3 : c >= 0xf0 && c <= 0xf4 ? 4 : 0;
-    if (!n || n > left) return 0;
-    for (size_t k = 1; k < n; k++)
-        if ((p[k] & 0xc0) != 0x80) return 0;
-    if ((c == 0xe0 && p[1] < 0xa0) || (c == 0xed && p[1] > 0x9f) || (c == 0xf0 && p[1] < 0x90) ||
-        (c == 0xf4 && p[1] > 0x8f))
-        return 0;
-    return n;
-}
-
 static bool js_string(struct js *j)
 {
     size_t start = j->i++;
@@ -145,7 +131,7 @@ static bool js_string(struct js *j)
         } else if (c < 0x80) {
             j->i++;
         } else {
-            size_t n = js_utf8(j->t + j->i, j->len - j->i);
+            size_t n = utf8_seq_len(j->t + j->i, j->len - j->i);
             if (!n) return js_fail(j, "invalid UTF-8 in a string at byte %zu", j->i);
             j->i += n;
         }

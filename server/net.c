@@ -56,7 +56,8 @@ struct net_conn {
     struct net_conn *retry_next, *retry_prev; /* the list of connections to wake at retry_at */
     double retry_at;
     bool retry_queued;
-    bool rx_paused; /* no request is read while the session is backlogged (session_backlogged) */
+    bool rx_paused;   /* no request is read while the session is backlogged (session_backlogged) */
+    bool peer_closed; /* the client sent its close frame: nothing after it is acted on */
 };
 
 static struct net_conn *net_conn_of(struct session *ss) { return (struct net_conn *)ss; }
@@ -574,7 +575,16 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
         net_pending_drop(net, wsi);
         if (wsguard_close_if_bad(wsi)) return -1; /* an unmasked frame came with the handshake */
         return net_established(net, ss, wsi);
+    case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE: {
+        const char *why;
+        int code = wsguard_close_status(in, len, &why);
+        net_conn_of(ss)->peer_closed = true;
+        if (!code) return 0; /* lws echoes it */
+        lws_close_reason(wsi, (enum lws_close_status)code, (uint8_t *)why, strlen(why));
+        return -1;
+    }
     case LWS_CALLBACK_RECEIVE: /* other daemons' changes first: the request is checked against them */
+        if (net_conn_of(ss)->peer_closed) break;
         replica_poll(net->srv, &(struct fx_err){0});
         session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
         net_rx_follow(ss);

@@ -31,6 +31,7 @@
 #include <openssl/ssl.h>
 
 #include "log.h"
+#include "utf8.h"
 #include "wsguard.h"
 
 #define WSG_CLOSE_S 5
@@ -186,6 +187,25 @@ static long wsg_filter(int fd, void *buf, long n)
         lws_set_timeout(c->wsi, PENDING_TIMEOUT_USER_OK, WSG_CLOSE_S);
     }
     return pass ? (long)pass : -1;
+}
+
+int wsguard_close_status(const uint8_t *payload, size_t len, const char **why)
+{
+    if (len == 0) return 0;
+    if (len == 1) {
+        *why = "close frame of one byte";
+        return LWS_CLOSE_STATUS_PROTOCOL_ERR;
+    }
+    unsigned code = (unsigned)payload[0] << 8 | payload[1];
+    if (!((code >= 1000 && code <= 1003) || (code >= 1007 && code <= 1011) || (code >= 3000 && code <= 4999))) {
+        *why = "close status code not allowed";
+        return LWS_CLOSE_STATUS_PROTOCOL_ERR;
+    }
+    if (!utf8_valid(payload + 2, len - 2)) {
+        *why = "close reason not UTF-8";
+        return LWS_CLOSE_STATUS_INVALID_PAYLOAD;
+    }
+    return 0;
 }
 
 static void *wsg_next(const char *name)

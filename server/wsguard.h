@@ -11,6 +11,8 @@
 #define FX_WSGUARD_H
 
 #include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
 
 struct lws;
 
@@ -23,6 +25,13 @@ void wsguard_open(struct lws *wsi);
 /* Whether the connection sent an unmasked frame; then its close reason is set to 1002 and
  * the caller closes it (a callback returning -1). */
 bool wsguard_close_if_bad(struct lws *wsi);
+/* The status to answer a client's close frame with instead of lws's echo of it, or 0 when the
+ * echo is right (RFC 6455 5.5.1, 7.4): a payload of one byte, or a status code a client may
+ * not send (below 1000, 1004-1006, 1012-2999, 5000 and up), is 1002; a reason that is not
+ * UTF-8 (a character cut off at its end included) is 1007. *why names the problem. lws 4.1
+ * echoes all of these (it rewrites only codes below 3000 to 1002 and checks the reason's
+ * bytes but not that its last character is whole). */
+int wsguard_close_status(const uint8_t *payload, size_t len, const char **why);
 /* Frees the guard's table (after the last lws_service). */
 void wsguard_stop(void);
 

@@ -8,15 +8,19 @@ client built from the RFC's rules (rawws.py) to a real daemon (issue 15 items 8 
 - a text frame that is not UTF-8 closes with 1007 (8.1), also when split inside a character
   across fragments, while a character split across fragments is accepted;
 - every reply is valid UTF-8 (the raw reader decodes strictly);
-- over TLS the same unmasked frame closes with 1002 (the guard reads SSL_read's bytes).
+- over TLS the same unmasked frame closes with 1002 (the guard reads SSL_read's bytes);
+- a client's close frame (5.5.1, 7.4) is answered with its own code when it is valid, with
+  1002 for a one-byte payload or a code a client may not send, with 1007 for a reason that is
+  not UTF-8 (cut inside a character too), and nothing sent after it is acted on.
 After each case the daemon still serves a new connection."""
 import json
 import ssl
+import struct
 import tempfile
 import time
 
 from fxtest import Daemon, Suite, refusal
-from rawws import OP_BINARY, OP_CONT, OP_PING, OP_PONG, OP_TEXT, Conn, frame
+from rawws import OP_BINARY, OP_CLOSE, OP_CONT, OP_PING, OP_PONG, OP_TEXT, Conn, frame
 from test_access import self_signed
 
 D = None
@@ -127,6 +131,53 @@ async def test_utf8(t):
     await served(t, "UTF-8")
 
 
+def close_answer(payload, after=b""):
+    """The server's close frame (code, reason) in answer to a client close with payload (and the
+    bytes after it in the same write), and the text messages before it."""
+    c = opened()
+    c.send(frame(payload, op=OP_CLOSE) + after)
+    texts, answer = [], None
+    try:
+        while answer is None:
+            fin, op, data = c.read_frame()
+            if op == OP_CLOSE:
+                answer = (int.from_bytes(data[:2], "big") if len(data) >= 2 else None, data[2:])
+            elif op == OP_TEXT:
+                texts.append(data.decode("utf-8"))
+    except (ConnectionError, OSError):
+        pass
+    c.close()
+    return answer, texts
+
+
+async def test_close_frames(t):
+    """Close frames as RFC 6455 5.5.1 and 7.4 have them (issue 27 item 10): lws 4.1 echoed a
+    one-byte payload, codes 5000 and 65535 and a reason cut inside a character, and a request
+    sent after the client's close was acted on."""
+    code = lambda n: struct.pack(">H", n)
+    for payload, want, what in ((b"", (None, b""), "an empty close is echoed empty"),
+                                (code(1000) + b"bye", (1000, b"bye"), "1000 with a reason is echoed"),
+                                (code(3000), (3000, b""), "a registered code (3000) is echoed"),
+                                (code(4999) + "\u00e9".encode(), (4999, "\u00e9".encode()), "a private code with a UTF-8 reason"),
+                                (b"\x03", (1002, b"close frame of one byte"), "a one-byte close: 1002"),
+                                (code(5000), (1002, b"close status code not allowed"), "code 5000: 1002"),
+                                (code(65535), (1002, b"close status code not allowed"), "code 65535: 1002"),
+                                (code(999), (1002, b""), "code 999: 1002 (lws rewrites the code)"),
+                                (code(1000) + "\u00e9".encode()[:1], (1007, b"close reason not UTF-8"),
+                                 "a reason cut inside a character: 1007")):
+        answer, _ = close_answer(payload)
+        t.check(answer == want, "%s (%s)" % (what, answer))
+    # a destroy after the client's close, in the same write: not acted on
+    answer, texts = close_answer(code(1000), frame('{"op":"destroy","stream":"flame","id":7}'))
+    c = opened()
+    c.send(frame(LIST))
+    names = [s["stream"] for s in json.loads(c.read_text())["streams"]]
+    c.close()
+    t.check(answer == (1000, b"") and not texts and "flame" in names,
+            "a request after the client's close frame is not acted on (%s, %s, %s)" % (answer, texts, names))
+    await served(t, "close frames")
+
+
 async def test_tls(t):
     tmp = tempfile.mkdtemp(prefix="fxs-tls-")
     cert, key = self_signed(tmp)
@@ -149,6 +200,6 @@ async def test_tls(t):
 if __name__ == "__main__":
     D = Daemon()
     try:
-        Suite("test_conformance").run([test_masked_served, test_unmasked, test_utf8, test_tls])
+        Suite("test_conformance").run([test_masked_served, test_unmasked, test_utf8, test_close_frames, test_tls])
     finally:
         D.stop()
