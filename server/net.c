@@ -20,6 +20,7 @@
 #include <sys/stat.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <time.h>
 
 #include <linux/sockios.h>
@@ -135,6 +136,15 @@ static const char *net_mime(const char *file)
     return "application/octet-stream";
 }
 
+/* Ends an HTTP transaction: lws reads the connection's next request (keep-alive) afresh, and
+ * the masking guard follows it from its first byte. -1: the connection is to close. */
+static int net_http_done(struct lws *wsi)
+{
+    if (lws_http_transaction_completed(wsi)) return -1;
+    wsguard_next_request(wsi);
+    return 0;
+}
+
 static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h, const char *path)
 {
     uint8_t hdr[LWS_PRE + 1024], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
@@ -152,7 +162,7 @@ static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h
         char real[PATH_MAX];
         if (!net_static_path(net, path, real)) {
             int n = lws_serve_http_file(wsi, real, net_mime(real), NULL, 0);
-            return n < 0 || (n > 0 && lws_http_transaction_completed(wsi)) ? -1 : 0;
+            return n < 0 || (n > 0 && net_http_done(wsi)) ? -1 : 0;
         }
         status = HTTP_STATUS_NOT_FOUND;
         fx_buf_append(&h->body, "{\"error\":\"not found\"}", 21);
@@ -199,12 +209,18 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
     struct net_http *h = user;
     switch (reason) {
     case LWS_CALLBACK_SERVER_NEW_CLIENT_INSTANTIATED:
-        wsguard_open(wsi);
+        wsguard_open(wsi, lws_get_socket_fd(wsi));
         net_pending_add(net, wsi);
         break;
-    case LWS_CALLBACK_WSI_DESTROY:
+    case LWS_CALLBACK_WSI_DESTROY: /* every connection's, whatever its protocol */
+        wsguard_close(wsi);
         net_pending_drop(net, wsi);
         break;
+    case LWS_CALLBACK_HTTP_FILE_COMPLETION: /* lws ends the transaction right after */
+        wsguard_next_request(wsi);
+        break;
+    case LWS_CALLBACK_HTTP_CONFIRM_UPGRADE: /* h2c (HTTP/2 in the clear) is not spoken here */
+        return strcasecmp((const char *)in, "websocket") ? -1 : 0;
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
         net_pending_drop(net, wsi);
         /* A WebSocket upgrade without subprotocol fxstream.v1 lands here: refuse it. */
@@ -223,7 +239,7 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
         int w = lws_write(wsi, h->body.data + LWS_PRE, n, LWS_WRITE_HTTP_FINAL);
         fx_buf_free(&h->body);
         if (w < (int)n) return -1;
-        return lws_http_transaction_completed(wsi) ? -1 : 0;
+        return net_http_done(wsi);
     }
     case LWS_CALLBACK_CLOSED_HTTP:
         if (h) fx_buf_free(&h->body);
@@ -465,6 +481,10 @@ static bool net_accept(struct net *net, struct lws *wsi)
 {
     char uri[256] = "", origin[ACCESS_ORIGIN_MAX], host[ACCESS_ORIGIN_MAX];
     if (net->stopping) return false;
+    if (!wsguard_upgrade_ok(wsi)) { /* the guard could not place its end (wsguard.h): frames unchecked */
+        log_info("refused WebSocket: the handshake, or a request before it, is not one the masking guard follows");
+        return false;
+    }
     if (lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI) <= 0 || strcmp(uri, NET_WS_PATH) != 0) {
         log_info("refused WebSocket on \"%.64s\" (the endpoint is %s)", uri, NET_WS_PATH);
         return false;
@@ -665,6 +685,7 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     if (srv->cfg.tls_cert[0]) { /* TLS only: a plain-text connection fails its handshake */
         info.ssl_cert_filepath = srv->cfg.tls_cert;
         info.ssl_private_key_filepath = srv->cfg.tls_key;
+        info.alpn = "http/1.1"; /* not h2: the masking guard follows HTTP/1.1 handshakes only */
     }
     net->vh = lws_create_vhost(net->ctx, &info);
     if (!net->vh) {

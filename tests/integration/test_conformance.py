@@ -9,6 +9,10 @@ client built from the RFC's rules (rawws.py) to a real daemon (issue 15 items 8 
   across fragments, while a character split across fragments is accepted;
 - every reply is valid UTF-8 (the raw reader decodes strictly);
 - over TLS the same unmasked frame closes with 1002 (the guard reads SSL_read's bytes);
+- whatever libwebsockets takes as the end of a handshake (bare \n line endings, \r\r\n, a
+  header name that swallows the line end, an escaped line end in the path, a request before
+  the upgrade on the same connection), the guard sees the same end: an unmasked frame after
+  it is never acted on, over plain and TLS, and a handshake it can follow is served;
 - a client's close frame (5.5.1, 7.4) is answered with its own code when it is valid, with
   1002 for a one-byte payload or a code a client may not send, with 1007 for a reason that is
   not UTF-8 (cut inside a character too), and nothing sent after it is acted on.
@@ -20,7 +24,7 @@ import tempfile
 import time
 
 from fxtest import Daemon, Suite, refusal
-from rawws import OP_BINARY, OP_CLOSE, OP_CONT, OP_PING, OP_PONG, OP_TEXT, Conn, frame
+from rawws import OP_BINARY, OP_CLOSE, OP_CONT, OP_PING, OP_PONG, OP_TEXT, Conn, frame, handshake
 from test_access import self_signed
 
 D = None
@@ -178,6 +182,85 @@ async def test_close_frames(t):
     await served(t, "close frames")
 
 
+VICTIM = '{"op":"destroy","stream":"victim","id":7}'
+
+
+def victim_there(port=None, wrap=None):
+    """Whether the stream "victim" exists (created when not: the next case starts with it)."""
+    c = opened(wrap, port)
+    c.send(frame('{"op":"list","id":1}'))
+    there = any(s["stream"] == "victim" for s in json.loads(c.read_text())["streams"])
+    if not there:
+        c.send(frame('{"op":"create","effect":"energy_wave","stream":"victim","id":2}'))
+        c.read_text()
+    c.close()
+    return there
+
+
+def boundary_cases(port):
+    """(what, request bytes) that end a handshake where lws ends it, each followed (in the same
+    write) by an unmasked destroy of "victim"."""
+    std = handshake(port)
+    return (("bare \\n line endings", handshake(port, eol="\n")),
+            ("\\r\\n lines ended by a bare \\n", std[:-2] + b"\n"),
+            ("\\r\\r\\n line endings", handshake(port, eol="\r\r\n")),
+            ("mixed line endings", handshake(port).replace(b"Upgrade\r\n", b"Upgrade\n")),
+            ("a header without a colon last", std[:-2] + b"X-Junk\r\n\r\n"),
+            ("a header name that ends at its colon", handshake(port, headers=("A: b",))),
+            ("an escaped line end in the path", handshake(port, path="/v1/ws?x=%0a")),
+            ("an escaped line end, then a bare \\n", handshake(port, eol="\n", path="/v1/ws%0A")),
+            ("a request before the upgrade", b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n" + std),
+            ("a request with a body before it", b"GET /healthz HTTP/1.1\r\nContent-Length: 2\r\n\r\nab" + std),
+            ("Upgrade: h2c", std.replace(b"Upgrade: websocket", b"Upgrade: h2c")),
+            ("Upgrade: WebSocket twice", std.replace(b"Upgrade: websocket", b"Upgrade: WebSocket\r\nUpgrade: x")))
+
+
+async def test_handshake_boundaries(t, port=None, wrap=None, label=""):
+    """The guard sees each handshake end where lws sees it (issue 27 item 7): a handshake with
+    bare \\n line endings then an unmasked destroy got `destroyed`, over plain and TLS."""
+    port = port or D.port
+    victim_there(port, wrap)
+    for what, request in boundary_cases(port):
+        try:
+            c = Conn.connect(port, wrap=wrap, request=request + frame(VICTIM, masked=False), timeout=5)
+            texts, code = until_close(c) if b" 101" in c.status else ([], None)
+            c.close()
+        except OSError as e:  # lws waits for the rest of a request it cannot end
+            c, texts, code = Conn(None), [], None
+            c.status = ("(%s)" % type(e).__name__).encode()
+        kept = victim_there(port, wrap)
+        t.check(kept and not any('"destroyed"' in x for x in texts) and (code == 1002 or b" 101" not in c.status),
+                "%s%s, then an unmasked destroy: not acted on (%s, close %s, stream kept %s)"
+                % (label, what, c.status.decode(errors="replace"), code, kept))
+    for what, request in (("bare \\n line endings", handshake(port, eol="\n")),
+                          ("mixed line endings", handshake(port).replace(b"Upgrade\r\n", b"Upgrade\n")),
+                          ("Upgrade: WebSocket", handshake(port).replace(b"Upgrade: websocket", b"Upgrade: WebSocket")),
+                          ("a header name that ends at its colon", handshake(port, headers=("A: b", "Accept: x")))):
+        c = Conn.connect(port, wrap=wrap, request=request)
+        ok = b" 101" in c.status and json.loads(c.read_text())["op"] == "hello"
+        c.send(frame(LIST))
+        t.check(ok and json.loads(c.read_text())["id"] == 7, "%sa handshake with %s is served" % (label, what))
+        c.close()
+    # a proxy's kept-alive link (nginx): a GET, its response, then the upgrade on the same connection
+    c = Conn.connect(port, wrap=wrap, request=b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    c._need(int(c.head.lower().split(b"content-length:")[1].split(b"\r\n")[0]))
+    c.send(handshake(port, eol="\n") + frame(LIST))
+    data = c.buf  # what was read past the body: the 101's start
+    while b"\r\n\r\n" not in data:
+        chunk = c.s.recv(4096)
+        if not chunk:
+            break
+        data += chunk
+    head, _, c.buf = data.partition(b"\r\n\r\n")
+    ok = b" 101" in head.split(b"\r\n")[0] and json.loads(c.read_text())["op"] == "hello"
+    t.check(ok and json.loads(c.read_text())["id"] == 7, "%san upgrade after a GET answered on the same connection "
+            "(a proxy's kept-alive link) is served" % label)
+    c.send(frame(VICTIM, masked=False))
+    texts, code = until_close(c)
+    c.close()
+    t.check(code == 1002 and victim_there(port, wrap), "%sand an unmasked frame on it closes with 1002 (%s)" % (label, code))
+
+
 async def test_tls(t):
     tmp = tempfile.mkdtemp(prefix="fxs-tls-")
     cert, key = self_signed(tmp)
@@ -191,6 +274,7 @@ async def test_tls(t):
         await unmasked_case(t, "TLS: an unmasked text frame", b"", frame(LIST, masked=False), d.port, wrap)
         await unmasked_case(t, "TLS: an unmasked frame after a masked one", frame('{"op":"list","id":1}'),
                             frame(LIST, masked=False), d.port, wrap)
+        await test_handshake_boundaries(t, d.port, wrap, "TLS: ")
         c = opened(wrap, d.port)
         c.send(frame(LIST))
         t.check(json.loads(c.read_text())["id"] == 7, "TLS: the daemon serves the next connection")
@@ -200,6 +284,7 @@ async def test_tls(t):
 if __name__ == "__main__":
     D = Daemon()
     try:
-        Suite("test_conformance").run([test_masked_served, test_unmasked, test_utf8, test_close_frames, test_tls])
+        Suite("test_conformance").run([test_masked_served, test_unmasked, test_utf8, test_close_frames,
+                                        test_handshake_boundaries, test_tls])
     finally:
         D.stop()
