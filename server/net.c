@@ -216,6 +216,13 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
         wsguard_close(wsi);
         net_pending_drop(net, wsi);
         break;
+    case LWS_CALLBACK_RAW_ADOPT: { /* lws turns a CONNECT request into a raw socket: 405 too */
+        static const char r[] = "HTTP/1.1 405 Method Not Allowed\r\nallow: GET\r\ncontent-length: 0\r\n\r\n";
+        uint8_t buf[LWS_PRE + sizeof r];
+        memcpy(buf + LWS_PRE, r, sizeof r - 1);
+        lws_write(wsi, buf + LWS_PRE, sizeof r - 1, LWS_WRITE_RAW);
+        return -1;
+    }
     case LWS_CALLBACK_HTTP_FILE_COMPLETION: /* lws ends the transaction right after */
         wsguard_next_request(wsi);
         break;
