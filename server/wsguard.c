@@ -85,7 +85,7 @@ void wsguard_open(struct lws *wsi, int fd)
         int cap = fd + 1 > 2 * wsg.cap ? fd + 1 : 2 * wsg.cap;
         struct wsg_conn *c = realloc(wsg.conns, sizeof *c * (size_t)cap);
         if (!c) {
-            log_error("wsguard: out of memory: the connection on socket %d is not checked for unmasked frames", fd);
+            log_error("wsguard: out of memory: the connection on socket %d cannot be followed (no WebSocket on it)", fd);
             return;
         }
         memset(c + wsg.cap, 0, sizeof *c * (size_t)(cap - wsg.cap));
@@ -99,7 +99,10 @@ void wsguard_open(struct lws *wsi, int fd)
 void wsguard_close(struct lws *wsi)
 {
     for (int fd = 0; fd < wsg.cap; fd++) /* its socket is closed already: found by wsi */
-        if (wsg.conns[fd].wsi == wsi) wsg.conns[fd].wsi = NULL;
+        if (wsg.conns[fd].wsi == wsi) {
+            wsg.conns[fd].wsi = NULL;
+            return;
+        }
 }
 
 void wsguard_next_request(struct lws *wsi)
@@ -124,7 +127,7 @@ bool wsguard_close_if_bad(struct lws *wsi)
     return true;
 }
 
-/* One byte of the first request; the state after it. */
+/* One byte of a request; the state after it. */
 static void wsg_request_byte(struct wsg_conn *c, uint8_t b)
 {
     switch (lwsreq_byte(&c->req, b)) {
