@@ -24,6 +24,10 @@ enum fxs_kind {
 };
 #define FXS_KIND_MAX 4
 
+/* Header flags (PROTOCOL.md §7.1): bits 0-30 are the kind's; bit 31 marks a frame computed
+ * before its stream paused, sent to a subscriber that made it run again (§8.3). */
+#define FXS_FLAG_BEFORE_PAUSE 0x80000000u
+
 /* The range of subscribe's max_fps (PROTOCOL.md §3.5): at least one step every 100 s, so a
  * subscription's interval always fits the daemon's timers. */
 #define FXS_MAX_FPS_MIN 0.01

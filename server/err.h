@@ -9,6 +9,9 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
+
+#include "utf8.h"
 
 struct fx_err {
     char code[24];    /* bad_json, bad_request, unknown_op, unknown_effect, unknown_stream,
@@ -25,23 +28,8 @@ struct fx_err {
 static inline void fx_utf8_sanitize(char *s)
 {
     unsigned char *p = (unsigned char *)s;
-    while (*p) {
-        unsigned c = *p;
-        int n = c < 0x80 ? 0 : c >= 0xC2 && c <= 0xDF ? 1 : c >= 0xE0 && c <= 0xEF ? 2 : c >= 0xF0 && c <= 0xF4 ? 3 : -1;
-        unsigned lo = 0x80, hi = 0xBF; /* the allowed range of the second byte */
-        if (c == 0xE0) lo = 0xA0;
-        if (c == 0xED) hi = 0x9F;
-        if (c == 0xF0) lo = 0x90;
-        if (c == 0xF4) hi = 0x8F;
-        int ok = n >= 0;
-        for (int k = 1; ok && k <= n; k++)
-            ok = p[k] >= (k == 1 ? lo : 0x80) && p[k] <= (k == 1 ? hi : 0xBF);
-        if (!ok) {
-            *p++ = '?';
-            continue;
-        }
-        p += n + 1;
-    }
+    for (size_t left = strlen(s), n; left; p += n, left -= n)
+        if (!(n = utf8_seq_len(p, left))) *p = '?', n = 1;
 }
 
 /* Fills err (if non-NULL) and returns -1, so callers can `return fx_fail(...)`. */

@@ -87,8 +87,9 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_printf(out, "fxs_uptime_seconds %.3f\n", metrics_uptime(srv));
     metrics_head(out, "fxs_connections", "gauge", "Open WebSocket connections.");
     metrics_printf(out, "fxs_connections %d\n", srv->nsessions);
-    metrics_head(out, "fxs_connections_total", "counter", "WebSocket connections accepted.");
-    metrics_printf(out, "fxs_connections_total %llu\n", (unsigned long long)atomic_load(&c->connections_total));
+    /* not fxs_connections_total: a counter's family is its name without _total, the gauge's */
+    metrics_head(out, "fxs_connections_accepted_total", "counter", "WebSocket connections accepted.");
+    metrics_printf(out, "fxs_connections_accepted_total %llu\n", (unsigned long long)atomic_load(&c->connections_total));
     metrics_head(out, "fxs_messages_received_total", "counter", "Control messages received.");
     metrics_printf(out, "fxs_messages_received_total %llu\n", (unsigned long long)atomic_load(&c->messages_in));
     metrics_head(out, "fxs_errors_sent_total", "counter", "Error replies sent.");

@@ -14,11 +14,13 @@
  * libwebsockets keeps its timers in one sorted list, so a timer per connection costs O(n)
  * per insert: with 1536 backlogged subscribers that was 38% of the daemon's CPU. The
  * sessions waiting instead sit in one unsorted list here, walked by a single timer. */
+#include <dlfcn.h>
 #include <limits.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <time.h>
 
 #include <linux/sockios.h>
@@ -55,6 +57,8 @@ struct net_conn {
     struct net_conn *retry_next, *retry_prev; /* the list of connections to wake at retry_at */
     double retry_at;
     bool retry_queued;
+    bool rx_paused;   /* no request is read while the session is backlogged (session_backlogged) */
+    bool peer_closed; /* the client sent its close frame: nothing after it is acted on */
 };
 
 static struct net_conn *net_conn_of(struct session *ss) { return (struct net_conn *)ss; }
@@ -132,6 +136,15 @@ static const char *net_mime(const char *file)
     return "application/octet-stream";
 }
 
+/* Ends an HTTP transaction: lws reads the connection's next request (keep-alive) afresh, and
+ * the masking guard follows it from its first byte. -1: the connection is to close. */
+static int net_http_done(struct lws *wsi)
+{
+    if (lws_http_transaction_completed(wsi)) return -1;
+    wsguard_next_request(wsi);
+    return 0;
+}
+
 static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h, const char *path)
 {
     uint8_t hdr[LWS_PRE + 1024], *start = hdr + LWS_PRE, *p = start, *end = hdr + sizeof hdr - 1;
@@ -149,7 +162,7 @@ static int net_http_request(struct lws *wsi, struct net *net, struct net_http *h
         char real[PATH_MAX];
         if (!net_static_path(net, path, real)) {
             int n = lws_serve_http_file(wsi, real, net_mime(real), NULL, 0);
-            return n < 0 || (n > 0 && lws_http_transaction_completed(wsi)) ? -1 : 0;
+            return n < 0 || (n > 0 && net_http_done(wsi)) ? -1 : 0;
         }
         status = HTTP_STATUS_NOT_FOUND;
         fx_buf_append(&h->body, "{\"error\":\"not found\"}", 21);
@@ -174,18 +187,47 @@ static int net_http_not_allowed(struct lws *wsi)
     return -1;
 }
 
+/* libwebsockets 4.1 answers two kinds of request itself, before any callback, with 403: an
+ * unknown method (TRACE) and a request target that is not a path (OPTIONS *). The daemon
+ * serves GET only, so those get the 405 that every other method gets (net_http_not_allowed).
+ * lws calls this function through its PLT, so the executable's definition is the one it uses;
+ * any other status, and a 403 for a GET, goes to lws's own. */
+int lws_return_http_status(struct lws *wsi, unsigned int code, const char *html_body)
+{
+    static int (*next)(struct lws *, unsigned int, const char *);
+    if (code == HTTP_STATUS_FORBIDDEN && lws_hdr_total_length(wsi, WSI_TOKEN_GET_URI) <= 0) {
+        net_http_not_allowed(wsi);
+        return 0;
+    }
+    if (!next) next = (int (*)(struct lws *, unsigned int, const char *))dlsym(RTLD_NEXT, "lws_return_http_status");
+    return next ? next(wsi, code, html_body) : -1;
+}
+
 static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
 {
     struct net *net = lws_context_user(lws_get_context(wsi));
     struct net_http *h = user;
     switch (reason) {
     case LWS_CALLBACK_SERVER_NEW_CLIENT_INSTANTIATED:
-        wsguard_open(wsi);
+        wsguard_open(wsi, lws_get_socket_fd(wsi));
         net_pending_add(net, wsi);
         break;
-    case LWS_CALLBACK_WSI_DESTROY:
+    case LWS_CALLBACK_WSI_DESTROY: /* every connection's, whatever its protocol */
+        wsguard_close(wsi);
         net_pending_drop(net, wsi);
         break;
+    case LWS_CALLBACK_RAW_ADOPT: { /* lws turns a CONNECT request into a raw socket: 405 too */
+        static const char r[] = "HTTP/1.1 405 Method Not Allowed\r\nallow: GET\r\ncontent-length: 0\r\n\r\n";
+        uint8_t buf[LWS_PRE + sizeof r];
+        memcpy(buf + LWS_PRE, r, sizeof r - 1);
+        lws_write(wsi, buf + LWS_PRE, sizeof r - 1, LWS_WRITE_RAW);
+        return -1;
+    }
+    case LWS_CALLBACK_HTTP_FILE_COMPLETION: /* lws ends the transaction right after */
+        wsguard_next_request(wsi);
+        break;
+    case LWS_CALLBACK_HTTP_CONFIRM_UPGRADE: /* h2c (HTTP/2 in the clear) is not spoken here */
+        return strcasecmp((const char *)in, "websocket") ? -1 : 0;
     case LWS_CALLBACK_FILTER_PROTOCOL_CONNECTION:
         net_pending_drop(net, wsi);
         /* A WebSocket upgrade without subprotocol fxstream.v1 lands here: refuse it. */
@@ -204,7 +246,7 @@ static int net_http_cb(struct lws *wsi, enum lws_callback_reasons reason, void *
         int w = lws_write(wsi, h->body.data + LWS_PRE, n, LWS_WRITE_HTTP_FINAL);
         fx_buf_free(&h->body);
         if (w < (int)n) return -1;
-        return lws_http_transaction_completed(wsi) ? -1 : 0;
+        return net_http_done(wsi);
     }
     case LWS_CALLBACK_CLOSED_HTTP:
         if (h) fx_buf_free(&h->body);
@@ -311,6 +353,7 @@ static bool net_pick_frame(struct net *net, struct session *ss)
             ss->rr = i + 1;
             ss->cur = f;
             ss->cur_off = 0;
+            ss->cur_paused = f->hdr.seq <= sub->paused_seq[k];
             stream_ref(ss->cur_stream = sub->s);
             return true;
         }
@@ -319,16 +362,41 @@ static bool net_pick_frame(struct net *net, struct session *ss)
     return false;
 }
 
+/* Reads the connection's requests only while its queue is not backlogged: a client that asks
+ * for more than it reads waits (TCP backpressure), and every reply it asked for is sent. */
+static void net_rx_follow(struct session *ss)
+{
+    struct net_conn *c = net_conn_of(ss);
+    bool pause = session_backlogged(ss);
+    if (pause == c->rx_paused) return;
+    c->rx_paused = pause;
+    lws_rx_flow_control(c->wsi, !pause);
+}
+
+/* The first chunk p[0..n) of a frame computed before its stream paused, copied (the frame's
+ * bytes are shared) with FXS_FLAG_BEFORE_PAUSE set, LWS_PRE bytes of room before it; free
+ * from the returned pointer - LWS_PRE. NULL when out of memory. */
+static uint8_t *net_paused_copy(const uint8_t *p, size_t n)
+{
+    uint8_t *c = malloc(LWS_PRE + n);
+    if (!c) return NULL;
+    memcpy(c + LWS_PRE, p, n);
+    fxs_put_u32(c + LWS_PRE + 56, fxs_get_u32(p + 56) | FXS_FLAG_BEFORE_PAUSE);
+    return c + LWS_PRE;
+}
+
 /* Sends the next chunk of the current frame as a fragment of one binary message. */
 static int net_send_chunk(struct session *ss)
 {
     struct frame *f = ss->cur;
     size_t left = f->len - ss->cur_off, n = left < NET_CHUNK ? left : NET_CHUNK;
     bool start = ss->cur_off == 0, end = n == left;
-    uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE];
+    uint8_t *p = f->bytes + ss->cur_off, saved[LWS_PRE], *copy = NULL;
     if (!start) memcpy(saved, p - LWS_PRE, LWS_PRE);
     else hist_observe(&ss->cur_stream->frame_age, (double)clock_wall_us() * 1e-6 - (double)f->hdr.server_time_us * 1e-6);
+    if (start && ss->cur_paused && !(p = copy = net_paused_copy(p, n))) return -1;
     int w = lws_write(net_conn_of(ss)->wsi, p, n, (enum lws_write_protocol)lws_write_ws_flags(LWS_WRITE_BINARY, start, end));
+    if (copy) free(copy - LWS_PRE);
     if (!start) memcpy(p - LWS_PRE, saved, LWS_PRE);
     if (w < (int)n) return -1;
     ss->cur_off += n;
@@ -392,6 +460,7 @@ static int net_writable(struct net *net, struct session *ss)
         size_t len = m->len;
         free(m);
         if (w < (int)len) return -1;
+        net_rx_follow(ss);
     } else if (net_has_frame(ss) && net_backlogged(net, ss)) {
         net_retry_later(net, ss, NET_BACKLOG_RETRY_S);
         return 0;
@@ -419,6 +488,10 @@ static bool net_accept(struct net *net, struct lws *wsi)
 {
     char uri[256] = "", origin[ACCESS_ORIGIN_MAX], host[ACCESS_ORIGIN_MAX];
     if (net->stopping) return false;
+    if (!wsguard_upgrade_ok(wsi)) { /* the guard could not place its end (wsguard.h): frames unchecked */
+        log_info("refused WebSocket: the handshake, or a request before it, is not one the masking guard follows");
+        return false;
+    }
     if (lws_hdr_copy(wsi, uri, sizeof uri, WSI_TOKEN_GET_URI) <= 0 || strcmp(uri, NET_WS_PATH) != 0) {
         log_info("refused WebSocket on \"%.64s\" (the endpoint is %s)", uri, NET_WS_PATH);
         return false;
@@ -529,9 +602,19 @@ static int net_ws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *us
         net_pending_drop(net, wsi);
         if (wsguard_close_if_bad(wsi)) return -1; /* an unmasked frame came with the handshake */
         return net_established(net, ss, wsi);
+    case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE: {
+        const char *why;
+        int code = wsguard_close_status(in, len, &why);
+        net_conn_of(ss)->peer_closed = true;
+        if (!code) return 0; /* lws echoes it */
+        lws_close_reason(wsi, (enum lws_close_status)code, (uint8_t *)why, strlen(why));
+        return -1;
+    }
     case LWS_CALLBACK_RECEIVE: /* other daemons' changes first: the request is checked against them */
+        if (net_conn_of(ss)->peer_closed) break;
         replica_poll(net->srv, &(struct fx_err){0});
         session_receive(ss, in, len, lws_is_final_fragment(wsi), lws_frame_is_binary(wsi));
+        net_rx_follow(ss);
         break;
     case LWS_CALLBACK_SERVER_WRITEABLE:
         return net_writable(net, ss);
@@ -609,6 +692,7 @@ int net_open(struct net **out, struct server *srv, struct fx_err *err)
     if (srv->cfg.tls_cert[0]) { /* TLS only: a plain-text connection fails its handshake */
         info.ssl_cert_filepath = srv->cfg.tls_cert;
         info.ssl_private_key_filepath = srv->cfg.tls_key;
+        info.alpn = "http/1.1"; /* not h2: the masking guard follows HTTP/1.1 handshakes only */
     }
     net->vh = lws_create_vhost(net->ctx, &info);
     if (!net->vh) {

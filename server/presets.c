@@ -1,5 +1,7 @@
 /* presets.c — see presets.h. */
 #include <errno.h>
+#include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "hub.h"
@@ -33,10 +35,84 @@ static int presets_user_index(const struct presets *ps, const struct effect_ops 
     return -1;
 }
 
-static bool presets_entry_ok(const cJSON *e)
+static int presets_count(const struct presets *ps, const struct effect_ops *ops)
 {
-    return cJSON_IsObject(e) && presets_str(e, "effect") && presets_str(e, "name") && presets_str(e, "doc") &&
-           cJSON_IsObject(cJSON_GetObjectItemCaseSensitive(e, "params"));
+    int n = 0;
+    for (const cJSON *u = ps->user->child; u; u = u->next) n += !strcmp(presets_str(u, "effect"), ops->name);
+    return n;
+}
+
+static int presets_bad_name(struct fx_err *err)
+{
+    return fx_fail(err, "bad_request", "name", "preset names are 1-63 characters of A-Z a-z 0-9 _ . -");
+}
+
+static int presets_read_only(const struct effect_ops *ops, const char *name, struct fx_err *err)
+{
+    return fx_fail(err, "read_only", "name", "\"%s\" is a built-in %s preset and cannot be changed", name, ops->name);
+}
+
+/* What a new user preset `name` of ops must pass, in the order of PROTOCOL.md §3 (fields, then
+ * state): a valid name and doc, not a built-in's name, room for one more unless it replaces
+ * one (*index: the preset it replaces, or -1), parameters within PRESETS_MAX_PARAMS_BYTES. */
+int presets_check_fields(const char *name, const char *doc, struct fx_err *err)
+{
+    if (!hub_valid_name(name)) return presets_bad_name(err);
+    if (strlen(doc) > PRESETS_MAX_DOC)
+        return fx_fail(err, "bad_request", "doc", "a preset's doc is at most %d bytes", PRESETS_MAX_DOC);
+    return 0;
+}
+
+static int presets_check(const struct presets *ps, const struct effect_ops *ops, const char *name, const char *doc,
+                         const cJSON *params, int *index, struct fx_err *err)
+{
+    if (presets_check_fields(name, doc, err)) return -1;
+    if (presets_builtin(ops, name)) return presets_read_only(ops, name, err);
+    *index = presets_user_index(ps, ops, name);
+    int count = presets_count(ps, ops);
+    if (*index < 0 && count >= PRESETS_MAX_PER_EFFECT)
+        return fx_fail(err, "limit", "name", "%s already has %d presets (delete one first)", ops->name, count);
+    char *text = cJSON_PrintUnformatted(params);
+    size_t n = text ? strlen(text) : 0;
+    cJSON_free(text);
+    if (!text) return fx_fail(err, "internal", NULL, "out of memory");
+    if (n > PRESETS_MAX_PARAMS_BYTES)
+        return fx_fail(err, "limit", NULL, "the parameters are %zu bytes as JSON; a preset holds at most %d bytes",
+                       n, PRESETS_MAX_PARAMS_BYTES);
+    return 0;
+}
+
+/* Fails naming the first number of v (at path) that is not finite: the reader takes 1e999 as
+ * infinity, which no parameter accepts and JSON cannot print (it went out as null). */
+static int presets_finite(const cJSON *v, const char *path, struct fx_err *err)
+{
+    if (cJSON_IsNumber(v) && !isfinite(v->valuedouble))
+        return fx_fail(err, "bad_param", path, "%s is not a finite number", path);
+    int i = 0;
+    for (const cJSON *c = v->child; c; c = c->next, i++) {
+        char sub[256];
+        if (cJSON_IsObject(v)) snprintf(sub, sizeof sub, "%s.%s", path, c->string);
+        else snprintf(sub, sizeof sub, "%s[%d]", path, i);
+        if (presets_finite(c, sub, err)) return -1;
+    }
+    return 0;
+}
+
+/* Entry e of presets.json checked as a save would check it against the entries before it
+ * (ps->user), and appended there; -1 with err saying why (without the file's name). */
+static int presets_load_entry(struct presets *ps, const cJSON *e, struct fx_err *err)
+{
+    const char *effect = presets_str(e, "effect"), *name = presets_str(e, "name"), *doc = presets_str(e, "doc");
+    const cJSON *params = cJSON_GetObjectItemCaseSensitive(e, "params");
+    if (!cJSON_IsObject(e) || cJSON_GetArraySize(e) != 4 || !effect || !name || !doc || !cJSON_IsObject(params))
+        return fx_fail(err, "internal", NULL, "not an object {effect, name, doc, params} of three strings and an object");
+    const struct effect_ops *ops = effect_find(effect);
+    int index;
+    if (!ops) fx_fail(err, "unknown_effect", "effect", "no effect named \"%s\"", effect);
+    if (!ops || presets_check(ps, ops, name, doc, params, &index, err) || presets_finite(params, "params", err)) return -1;
+    if (index >= 0) return fx_fail(err, "internal", NULL, "a second preset named \"%s\" for %s", name, effect);
+    cJSON_AddItemToArray(ps->user, cJSON_Duplicate(e, 1));
+    return 0;
 }
 
 int presets_load(struct presets *ps, const char *dir, struct fx_err *err)
@@ -50,15 +126,23 @@ int presets_load(struct presets *ps, const char *dir, struct fx_err *err)
     cJSON *arr = NULL;
     if (jsonfile_read(path, PRESETS_MAX_BYTES, &arr, why, sizeof why))
         return errno == ENOENT ? 0 : fx_fail(err, "internal", NULL, "cannot read %s: %s", path, strerror(errno));
-    bool ok = cJSON_IsArray(arr);
-    for (const cJSON *e = ok ? arr->child : NULL; e && ok; e = e->next) ok = presets_entry_ok(e);
-    if (!ok) {
+    if (!cJSON_IsArray(arr)) {
         cJSON_Delete(arr);
-        return fx_fail(err, "internal", NULL, "%s: %s (left as it is)", path,
-                       why[0] ? why : "not a JSON array of {effect, name, doc, params}");
+        return fx_fail(err, "internal", NULL, "%s: %s (left as it is)", path, why[0] ? why : "not a JSON array of presets");
     }
-    cJSON_Delete(ps->user);
-    ps->user = arr;
+    int i = 1;
+    for (const cJSON *e = arr->child; e; e = e->next, i++) {
+        struct fx_err why_entry = {0};
+        if (!presets_load_entry(ps, e, &why_entry)) continue;
+        const char *ef = presets_str(e, "effect"), *nm = presets_str(e, "name");
+        char which[160] = "";
+        if (ef && nm) snprintf(which, sizeof which, " (%.64s/%.64s)", ef, nm);
+        cJSON_Delete(arr);
+        cJSON_Delete(ps->user);
+        ps->user = cJSON_CreateArray();
+        return fx_fail(err, "internal", NULL, "%s: entry %d%s: %s (left as it is)", path, i, which, why_entry.message);
+    }
+    cJSON_Delete(arr);
     return 0;
 }
 
@@ -137,25 +221,11 @@ static int presets_commit(struct presets *ps, cJSON *before, struct fx_err *err)
     return 0;
 }
 
-static int presets_writable(const struct effect_ops *ops, const char *name, struct fx_err *err)
-{
-    if (!hub_valid_name(name))
-        return fx_fail(err, "bad_request", "name", "preset names are 1-63 characters of A-Z a-z 0-9 _ . -");
-    if (presets_builtin(ops, name))
-        return fx_fail(err, "read_only", "name", "\"%s\" is a built-in %s preset and cannot be changed", name, ops->name);
-    return 0;
-}
-
 int presets_save(struct presets *ps, const struct effect_ops *ops, const char *name, const char *doc,
                  const cJSON *params, bool *replaced, struct fx_err *err)
 {
-    if (presets_writable(ops, name, err)) return -1;
-    if (strlen(doc) > PRESETS_MAX_DOC)
-        return fx_fail(err, "bad_request", "doc", "a preset's doc is at most %d bytes", PRESETS_MAX_DOC);
-    int i = presets_user_index(ps, ops, name), count = 0;
-    for (const cJSON *u = ps->user->child; u; u = u->next) count += !strcmp(presets_str(u, "effect"), ops->name);
-    if (i < 0 && count >= PRESETS_MAX_PER_EFFECT)
-        return fx_fail(err, "limit", "name", "%s already has %d presets (delete one first)", ops->name, count);
+    int i;
+    if (presets_check(ps, ops, name, doc, params, &i, err)) return -1;
     cJSON *before = cJSON_Duplicate(ps->user, 1);
     cJSON *item = cJSON_CreateObject();
     cJSON_AddStringToObject(item, "effect", ops->name);
@@ -170,7 +240,8 @@ int presets_save(struct presets *ps, const struct effect_ops *ops, const char *n
 
 int presets_delete(struct presets *ps, const struct effect_ops *ops, const char *name, struct fx_err *err)
 {
-    if (presets_writable(ops, name, err)) return -1;
+    if (!hub_valid_name(name)) return presets_bad_name(err);
+    if (presets_builtin(ops, name)) return presets_read_only(ops, name, err);
     int i = presets_user_index(ps, ops, name);
     if (i < 0) return presets_unknown(ps, ops, name, err);
     cJSON *before = cJSON_Duplicate(ps->user, 1);

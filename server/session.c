@@ -24,10 +24,12 @@ void session_send(struct session *ss, cJSON *msg)
     if (!text) return;
     size_t len = strlen(text);
     const struct limits *l = &ss->srv->cfg.limits;
-    if (ss->q_count >= l->max_queued_messages || ss->q_bytes + len > (size_t)l->max_queued_bytes) {
-        /* The peer is not reading its replies: close rather than grow without bound (in
-         * messages, and in bytes: 60 readers of ~11 kB describe replies held 9 MiB each). */
-        ss->kill = "replies not read";
+    bool event = !ss->replying;
+    if (event && (ss->q_count >= l->max_queued_messages || ss->q_event_bytes + len > (size_t)l->max_queued_bytes)) {
+        /* The peer is not reading what it is sent: close rather than grow without bound (in
+         * messages, and in bytes: 60 subscribers of a stream set 100 times a second). Replies
+         * are bounded by not reading requests meanwhile (session_backlogged). */
+        ss->kill = "messages not read";
         free(text);
         if (ss->srv->wake) ss->srv->wake(ss);
         return;
@@ -36,15 +38,23 @@ void session_send(struct session *ss, cJSON *msg)
     if (m) {
         m->next = NULL;
         m->len = len;
+        m->event = event;
         memcpy(m->data + FRAME_HEADROOM, text, len);
         if (ss->q_tail) ss->q_tail->next = m;
         else ss->q_head = m;
         ss->q_tail = m;
         ss->q_count++;
         ss->q_bytes += len;
+        if (event) ss->q_event_bytes += len;
     }
     free(text);
     if (ss->srv->wake) ss->srv->wake(ss);
+}
+
+bool session_backlogged(const struct session *ss)
+{
+    const struct limits *l = &ss->srv->cfg.limits;
+    return ss->q_bytes > (size_t)l->max_queued_bytes || ss->q_count >= l->max_queued_messages;
 }
 
 struct outmsg *session_pop(struct session *ss)
@@ -55,6 +65,7 @@ struct outmsg *session_pop(struct session *ss)
     if (!ss->q_head) ss->q_tail = NULL;
     ss->q_count--;
     ss->q_bytes -= m->len;
+    if (m->event) ss->q_event_bytes -= m->len;
     return m;
 }
 
@@ -398,6 +409,8 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
         struct stream_status st;
         hub_status(&ss->srv->hub, s, &st);
         p[i].error_gen = st.error_gen;
+        if (ss->srv->cfg.pause_idle && !st.subscribers && !st.lease.remote_demand) /* paused: its frames are old */
+            for (int k = 1; k <= FXS_KIND_MAX; k++) p[i].paused_seq[k] = hub_latest_seq(&ss->srv->hub, s, k);
         hub_add_subscriber(&ss->srv->hub, s, +1);
     } else {
         stream_unref(s); /* already subscribed: only max_fps changes */
@@ -473,11 +486,20 @@ static cJSON *session_rebase(const void *ctx, const cJSON *current, struct fx_er
 /* Installs an accepted complete document, validated at revision rev: stored first (store.h),
  * then applied at the stored revision (rev + 1, or later when it was re-made on a newer
  * document: partial, NULL for a whole document), broadcast to the stream's other subscribers
- * and sent to the requester (PROTOCOL.md §3.8). Takes doc; -1 with err when it could not be
+ * and sent to the requester (PROTOCOL.md §3.8). A document equal to the current one changes
+ * nothing and is only sent back at revision rev. Takes doc; -1 with err when it could not be
  * stored. */
 static int session_accept_params(struct session *ss, struct stream *s, uint64_t rev, const cJSON *id, cJSON *doc,
                                  const cJSON *partial, struct fx_err *err)
 {
+    uint64_t now;
+    cJSON *cur = hub_get_params(&ss->srv->hub, s, &now);
+    bool same = now == rev && cJSON_Compare(cur, doc, 1);
+    cJSON_Delete(cur);
+    if (same) { /* nothing changes: no revision, no store, no broadcast, no restart */
+        session_send(ss, session_params_msg(s, id, rev, doc));
+        return 0;
+    }
     struct session_partial p = {s->effect, partial};
     struct store_change c = {.op = STORE_SET, .stream = s->name, .effect = s->effect->name, .params = doc,
                              .rev = rev, .rebase = partial ? session_rebase : NULL, .rebase_ctx = &p};
@@ -551,14 +573,22 @@ static int session_op_presets(struct session *ss, const cJSON *req, const cJSON 
     return 0;
 }
 
+/* preset_save's fields in the order of PROTOCOL.md §3 (stream, name, doc: presence, type and
+ * form), before any state; the stream's existence is checked by the caller next. */
+static int session_preset_fields(const cJSON *req, const char **name, const char **doc, struct fx_err *err)
+{
+    *doc = "";
+    if (!session_str(req, "stream", err) || !(*name = session_str(req, "name", err))) return -1;
+    if (cJSON_GetObjectItemCaseSensitive(req, "doc") && !(*doc = session_str(req, "doc", err))) return -1;
+    return presets_check_fields(*name, *doc, err);
+}
+
 static int session_op_preset_save(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
     static const char *const allowed[] = {"stream", "name", "doc", NULL};
     if (session_only(req, "preset_save", allowed, err)) return -1;
-    const char *doc = "";
-    if (cJSON_GetObjectItemCaseSensitive(req, "doc") && !(doc = session_str(req, "doc", err))) return -1;
-    const char *name = session_str(req, "name", err);
-    struct stream *s = name ? session_stream(ss, req, err) : NULL;
+    const char *name, *doc;
+    struct stream *s = session_preset_fields(req, &name, &doc, err) ? NULL : session_stream(ss, req, err);
     if (!s) return -1;
     uint64_t rev;
     bool replaced = false;
@@ -583,7 +613,7 @@ static int session_op_preset_load(struct session *ss, const cJSON *req, const cJ
 {
     static const char *const allowed[] = {"stream", "name", NULL};
     if (session_only(req, "preset_load", allowed, err)) return -1;
-    const char *name = session_str(req, "name", err);
+    const char *name = session_str(req, "stream", err) ? session_str(req, "name", err) : NULL;
     struct stream *s = name ? session_stream(ss, req, err) : NULL;
     if (!s) return -1;
     uint64_t rev;
@@ -732,6 +762,7 @@ void session_handle(struct session *ss, const char *text, size_t len)
     cJSON *req = NULL;
     char why[128];
     atomic_fetch_add(&ss->srv->counters.messages_in, 1);
+    ss->replying = true;
     if (!session_rate_ok(ss))
         fx_fail(&err, "limit", NULL, "more than %d control messages per second", l->max_control_per_sec);
     else if (session_json_depth(text, len) > l->max_json_depth)
@@ -741,6 +772,7 @@ void session_handle(struct session *ss, const char *text, size_t len)
     else
         session_dispatch(ss, req, &id, &err);
     if (err.code[0]) session_error(ss, id, &err);
+    ss->replying = false;
     cJSON_Delete(req);
 }
 
@@ -755,8 +787,13 @@ void session_receive(struct session *ss, const void *data, size_t len, bool fina
         fx_fail(&err, "bad_request", NULL, "binary messages are not accepted; send JSON text");
     else if (ss->rx_overflow)
         fx_fail(&err, "limit", NULL, "message exceeds %zu bytes", max);
-    if (err.code[0]) session_error(ss, NULL, &err);
-    else session_handle(ss, (const char *)ss->rx.data, ss->rx.len);
+    if (err.code[0]) {
+        ss->replying = true;
+        session_error(ss, NULL, &err);
+        ss->replying = false;
+    } else {
+        session_handle(ss, (const char *)ss->rx.data, ss->rx.len);
+    }
     ss->rx.len = 0; /* the next fragment starts a new message */
     ss->rx_overflow = false;
     if (ss->rx.cap > 2 * max) fx_buf_free(&ss->rx);

@@ -23,6 +23,7 @@ struct sub {
     double last_sent;     /* CLOCK_MONOTONIC seconds of the last step's first frame sent */
     double step_time;     /* that step's sim_time (NAN before the first): its other kinds are not held back by max_fps */
     uint64_t last_seq[FXS_KIND_MAX + 1];
+    uint64_t paused_seq[FXS_KIND_MAX + 1]; /* frames up to these were computed before the stream paused */
     uint64_t error_gen;   /* stream errors already reported */
 };
 
@@ -30,6 +31,7 @@ struct sub {
 struct outmsg {
     struct outmsg *next;
     size_t len;
+    bool event;           /* sent unasked (not a reply to this connection's request) */
     uint8_t data[];       /* FRAME_HEADROOM + len bytes */
 };
 
@@ -40,9 +42,12 @@ struct session {
     int nsubs, rr;        /* rr: round-robin start for frame sends */
     struct outmsg *q_head, *q_tail;
     int q_count;
-    size_t q_bytes; /* text bytes queued */
+    size_t q_bytes;       /* text bytes queued */
+    size_t q_event_bytes; /* ... of them events */
+    bool replying;        /* handling this connection's own message: what it queues are replies */
     struct frame *cur;    /* frame being sent, how far, and its stream (referenced) */
     size_t cur_off;
+    bool cur_paused;      /* it goes out marked FXS_FLAG_BEFORE_PAUSE */
     struct stream *cur_stream;
     struct fx_buf rx;     /* fragments of the message being received */
     bool rx_overflow;
@@ -62,8 +67,16 @@ void session_close(struct session *ss);
 void session_receive(struct session *ss, const void *data, size_t len, bool final, bool binary);
 /* Handles one complete text message (exposed for tests). */
 void session_handle(struct session *ss, const char *text, size_t len);
-/* Queues msg (takes ownership) and wakes the network layer. */
+/* Queues msg (takes ownership) and wakes the network layer. A reply is always queued; an event
+ * (a message the connection did not ask for) that would make more than max_queued_messages
+ * messages, or more than max_queued_bytes of events, queued closes the connection instead
+ * (kill): the client is not reading. */
 void session_send(struct session *ss, cJSON *msg);
+/* Whether more than max_queued_bytes (or max_queued_messages messages) wait to be sent: then
+ * the network layer reads no further request until they have gone out, so replies queue at
+ * most one past the bound, however large they are, and a client that asks without reading is
+ * held back by TCP instead of growing the queue. */
+bool session_backlogged(const struct session *ss);
 /* Pops the next queued text message (caller frees), or NULL. */
 struct outmsg *session_pop(struct session *ss);
 /* The events of a change to a stream, sent to every connection but `except` (NULL: to all)

@@ -5,21 +5,24 @@
  * libwebsockets' calls bind to these, which call the C library's and OpenSSL's own through
  * dlsym(RTLD_NEXT). Only the thread that called wsguard_start looks at the bytes; on every
  * other thread (the engine, the cluster's Redis link, OpenCL's workers) the functions are
- * plain pass-throughs. On that thread every socket read is lws's, of a connection it
- * accepted, so an entry left by a closed connection is harmless: wsguard_open resets it
- * before the descriptor's next connection is read.
+ * plain pass-throughs. On that thread only the sockets of connections lws accepted are
+ * followed (wsguard_open), each until lws destroys its connection (wsguard_close): any other
+ * socket read there, a Redis link's with hiredis 1.x included, passes untouched.
  *
- * Per connection, indexed by its socket: first the HTTP request, up to its blank line. A
- * request with a Sec-WebSocket-Key header is an upgrade, so WebSocket frames follow it
- * (a refused upgrade is closed by lws); any other request leaves the connection in HTTP
- * (keep-alive). Then each frame's header is followed byte by byte (RFC 6455 §5.2: 2 bytes,
+ * Per connection, indexed by its socket: first its HTTP requests, each followed byte by byte
+ * as lws parses it (lwsreq.h), up to the byte where lws ends its headers. A request whose
+ * Upgrade is websocket is followed by WebSocket frames. After another request without a body
+ * the next one is followed from the first byte read once its response went out
+ * (wsguard_next_request): lws 4.1 does not parse what arrives before that as a request (it
+ * serves the previous one again), so bytes read in between leave the connection unfollowed,
+ * like a request lwsreq cannot follow or a body; wsguard_upgrade_ok then refuses an upgrade
+ * on it. Then each frame's header is followed byte by byte (RFC 6455 §5.2: 2 bytes,
  * 2 or 8 of extended length, 4 of masking key) and its payload skipped. A header whose mask
  * bit is clear makes the connection bad: that read returns only the bytes before the frame,
  * later reads are drained and return nothing, and the connection is closed with 1002 where
  * net.c can close it (wsguard_close_if_bad: when it is established, for a frame sent with
  * the handshake, else when it is next writable, which the guard asks for), within
  * WSG_CLOSE_S even if the client never reads the close frame. */
-#include <ctype.h>
 #include <dlfcn.h>
 #include <errno.h>
 #include <stdint.h>
@@ -31,19 +34,18 @@
 #include <openssl/ssl.h>
 
 #include "log.h"
+#include "lwsreq.h"
+#include "utf8.h"
 #include "wsguard.h"
 
 #define WSG_CLOSE_S 5
-static const char wsg_key_line[] = "\nsec-websocket-key:";
 
-enum wsg_state { WSG_HTTP, WSG_HEADER, WSG_PAYLOAD, WSG_BAD };
+enum wsg_state { WSG_REQUEST, WSG_BETWEEN, WSG_HEADER, WSG_PAYLOAD, WSG_BAD, WSG_UNFOLLOWED };
 
 struct wsg_conn {
-    struct lws *wsi;  /* NULL: not a connection of the guarded thread */
+    struct lws *wsi;  /* NULL: not a connection lws accepted */
     uint8_t state;
-    uint8_t crlf;     /* how much of "\r\n\r\n" the request has matched */
-    uint8_t key;      /* how much of wsg_key_line the current line has matched */
-    bool upgrade;     /* the request has a Sec-WebSocket-Key line */
+    struct lwsreq req; /* WSG_REQUEST */
     uint8_t hlen;     /* bytes of the current frame header seen */
     uint8_t hneed;    /* its length once the second byte is known */
     uint64_t len;     /* payload length, then payload bytes left */
@@ -59,6 +61,7 @@ static _Thread_local bool wsg_here; /* this thread runs lws_service */
 
 void wsguard_start(bool tls)
 {
+    lwsreq_init();
     wsg.tls = tls;
     wsg_here = true;
 }
@@ -75,22 +78,45 @@ static struct wsg_conn *wsg_conn(int fd)
     return fd >= 0 && fd < wsg.cap && wsg.conns[fd].wsi ? &wsg.conns[fd] : NULL;
 }
 
-void wsguard_open(struct lws *wsi)
+void wsguard_open(struct lws *wsi, int fd)
 {
-    int fd = lws_get_socket_fd(wsi);
     if (fd < 0) return;
     if (fd >= wsg.cap) {
         int cap = fd + 1 > 2 * wsg.cap ? fd + 1 : 2 * wsg.cap;
         struct wsg_conn *c = realloc(wsg.conns, sizeof *c * (size_t)cap);
         if (!c) {
-            log_error("wsguard: out of memory: the connection on socket %d is not checked for unmasked frames", fd);
+            log_error("wsguard: out of memory: the connection on socket %d cannot be followed (no WebSocket on it)", fd);
             return;
         }
         memset(c + wsg.cap, 0, sizeof *c * (size_t)(cap - wsg.cap));
         wsg.conns = c;
         wsg.cap = cap;
     }
-    wsg.conns[fd] = (struct wsg_conn){.wsi = wsi, .state = WSG_HTTP};
+    wsg.conns[fd] = (struct wsg_conn){.wsi = wsi, .state = WSG_REQUEST};
+    lwsreq_start(&wsg.conns[fd].req);
+}
+
+void wsguard_close(struct lws *wsi)
+{
+    for (int fd = 0; fd < wsg.cap; fd++) /* its socket is closed already: found by wsi */
+        if (wsg.conns[fd].wsi == wsi) {
+            wsg.conns[fd].wsi = NULL;
+            return;
+        }
+}
+
+void wsguard_next_request(struct lws *wsi)
+{
+    struct wsg_conn *c = wsg_conn(lws_get_socket_fd(wsi));
+    if (!c || c->wsi != wsi || c->state != WSG_BETWEEN) return;
+    c->state = WSG_REQUEST;
+    lwsreq_start(&c->req);
+}
+
+bool wsguard_upgrade_ok(struct lws *wsi)
+{
+    struct wsg_conn *c = wsg_conn(lws_get_socket_fd(wsi));
+    return c && c->wsi == wsi && (c->state == WSG_HEADER || c->state == WSG_PAYLOAD || c->state == WSG_BAD);
 }
 
 bool wsguard_close_if_bad(struct lws *wsi)
@@ -101,20 +127,18 @@ bool wsguard_close_if_bad(struct lws *wsi)
     return true;
 }
 
-/* One byte of the HTTP request. */
-static void wsg_http_byte(struct wsg_conn *c, uint8_t b)
+/* One byte of a request; the state after it. */
+static void wsg_request_byte(struct wsg_conn *c, uint8_t b)
 {
-    c->crlf = b == (uint8_t)"\r\n\r\n"[c->crlf] ? c->crlf + 1 : b == '\r';
-    c->key = (uint8_t)tolower(b) == (uint8_t)wsg_key_line[c->key] ? c->key + 1 : b == '\n';
-    if (c->key == sizeof wsg_key_line - 1) {
-        c->upgrade = true;
-        c->key = 0;
+    switch (lwsreq_byte(&c->req, b)) {
+    case LWSREQ_MORE: return;
+    case LWSREQ_WEBSOCKET:
+        c->state = WSG_HEADER;
+        c->hlen = 0;
+        return;
+    case LWSREQ_OTHER: c->state = WSG_BETWEEN; return; /* until its response went out */
+    default: c->state = WSG_UNFOLLOWED; return;
     }
-    if (c->crlf < 4) return;
-    c->crlf = 0;
-    c->state = c->upgrade ? WSG_HEADER : WSG_HTTP;
-    c->upgrade = false;
-    c->hlen = 0;
 }
 
 /* One byte of a frame header; false when it shows the frame unmasked. */
@@ -143,8 +167,8 @@ static size_t wsg_scan(struct wsg_conn *c, const uint8_t *p, size_t n)
     size_t frame_start = 0;
     for (size_t i = 0; i < n;) {
         switch (c->state) {
-        case WSG_HTTP:
-            wsg_http_byte(c, p[i++]);
+        case WSG_REQUEST:
+            wsg_request_byte(c, p[i++]);
             break;
         case WSG_HEADER:
             if (c->hlen == 0) frame_start = i;
@@ -161,6 +185,11 @@ static size_t wsg_scan(struct wsg_conn *c, const uint8_t *p, size_t n)
             if (!c->len) c->state = WSG_HEADER;
             break;
         }
+        case WSG_BETWEEN: /* lws ignores what comes before its response went out: not followed */
+            c->state = WSG_UNFOLLOWED;
+            return n;
+        case WSG_UNFOLLOWED:
+            return n;
         default:
             return 0;
         }
@@ -175,7 +204,7 @@ static long wsg_filter(int fd, void *buf, long n)
     struct wsg_conn *c = wsg_conn(fd);
     if (!c || n <= 0) return n;
     if (c->state == WSG_BAD) return -1;
-    bool upgraded = c->state != WSG_HTTP; /* else lws upgrades on this read, then establishes */
+    bool upgraded = c->state != WSG_REQUEST; /* else lws upgrades on this read, then establishes */
     size_t pass = wsg_scan(c, buf, (size_t)n);
     if (c->state != WSG_BAD) return n;
     char peer[64] = "?";
@@ -186,6 +215,25 @@ static long wsg_filter(int fd, void *buf, long n)
         lws_set_timeout(c->wsi, PENDING_TIMEOUT_USER_OK, WSG_CLOSE_S);
     }
     return pass ? (long)pass : -1;
+}
+
+int wsguard_close_status(const uint8_t *payload, size_t len, const char **why)
+{
+    if (len == 0) return 0;
+    if (len == 1) {
+        *why = "close frame of one byte";
+        return LWS_CLOSE_STATUS_PROTOCOL_ERR;
+    }
+    unsigned code = (unsigned)payload[0] << 8 | payload[1];
+    if (!((code >= 1000 && code <= 1003) || (code >= 1007 && code <= 1011) || (code >= 3000 && code <= 4999))) {
+        *why = "close status code not allowed";
+        return LWS_CLOSE_STATUS_PROTOCOL_ERR;
+    }
+    if (!utf8_valid(payload + 2, len - 2)) {
+        *why = "close reason not UTF-8";
+        return LWS_CLOSE_STATUS_INVALID_PAYLOAD;
+    }
+    return 0;
 }
 
 static void *wsg_next(const char *name)

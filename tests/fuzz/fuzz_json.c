@@ -1,7 +1,8 @@
 /* fuzz_json.c — libFuzzer target: the strict JSON reader (server/json_strict.c) on arbitrary
  * bytes. An accepted text must print as text that is accepted again and prints the same; a
  * refusal must say why. Seeds: tests/fuzz/corpus/fuzz_json (trailing data,
- * duplicate keys, \u0000 in keys and values). */
+ * duplicate keys, \u0000 in keys and values, RFC 8259's edges: leading zeros, 1., form feed,
+ * raw control characters, escapes, surrogates, invalid UTF-8). */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>

@@ -10,12 +10,14 @@ import struct
 OP_CONT, OP_TEXT, OP_BINARY, OP_CLOSE, OP_PING, OP_PONG = 0, 1, 2, 8, 9, 10
 
 
-def handshake(port, extra=b"", version="13"):
-    """The upgrade request for fxstream.v1 on /v1/ws, with extra bytes sent in the same write."""
+def handshake(port, extra=b"", version="13", eol="\r\n", path="/v1/ws", headers=()):
+    """The upgrade request for fxstream.v1 on path, lines ended by eol, with headers (lines)
+    before the standard ones and extra bytes sent in the same write."""
     key = base64.b64encode(os.urandom(16)).decode()
-    return ("GET /v1/ws HTTP/1.1\r\nHost: 127.0.0.1:%d\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-            "Sec-WebSocket-Key: %s\r\nSec-WebSocket-Version: %s\r\nSec-WebSocket-Protocol: fxstream.v1\r\n\r\n"
-            % (port, key, version)).encode() + extra
+    lines = ["GET %s HTTP/1.1" % path, *headers, "Host: 127.0.0.1:%d" % port, "Upgrade: websocket",
+             "Connection: Upgrade", "Sec-WebSocket-Key: " + key, "Sec-WebSocket-Version: " + version,
+             "Sec-WebSocket-Protocol: fxstream.v1", "", ""]
+    return eol.join(lines).encode() + extra
 
 
 def frame(payload, op=OP_TEXT, fin=True, masked=True):
@@ -49,9 +51,10 @@ class Conn:
         self.status = b""  # its first line
 
     @classmethod
-    def connect(cls, port, extra=b"", wrap=None, timeout=10, rcvbuf=None, version="13"):
+    def connect(cls, port, extra=b"", wrap=None, timeout=10, rcvbuf=None, version="13", request=None):
         """rcvbuf: the socket's receive buffer, set before connecting (a client that reads
-        slowly or never); version: Sec-WebSocket-Version."""
+        slowly or never); version: Sec-WebSocket-Version; request: bytes sent instead of
+        handshake(port, extra, version)."""
         s = socket.socket()
         if rcvbuf:
             s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
@@ -60,7 +63,7 @@ class Conn:
         if wrap:
             s = wrap(s)
         c = cls(s)
-        s.sendall(handshake(port, extra, version))
+        s.sendall(request if request is not None else handshake(port, extra, version))
         while b"\r\n\r\n" not in c.head:
             b = s.recv(1)
             if not b:

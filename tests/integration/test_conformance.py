@@ -8,15 +8,23 @@ client built from the RFC's rules (rawws.py) to a real daemon (issue 15 items 8 
 - a text frame that is not UTF-8 closes with 1007 (8.1), also when split inside a character
   across fragments, while a character split across fragments is accepted;
 - every reply is valid UTF-8 (the raw reader decodes strictly);
-- over TLS the same unmasked frame closes with 1002 (the guard reads SSL_read's bytes).
+- over TLS the same unmasked frame closes with 1002 (the guard reads SSL_read's bytes);
+- whatever libwebsockets takes as the end of a handshake (bare \n line endings, \r\r\n, a
+  header name that swallows the line end, an escaped line end in the path, a request before
+  the upgrade on the same connection), the guard sees the same end: an unmasked frame after
+  it is never acted on, over plain and TLS, and a handshake it can follow is served;
+- a client's close frame (5.5.1, 7.4) is answered with its own code when it is valid, with
+  1002 for a one-byte payload or a code a client may not send, with 1007 for a reason that is
+  not UTF-8 (cut inside a character too), and nothing sent after it is acted on.
 After each case the daemon still serves a new connection."""
 import json
 import ssl
+import struct
 import tempfile
 import time
 
 from fxtest import Daemon, Suite, refusal
-from rawws import OP_BINARY, OP_CONT, OP_PING, OP_PONG, OP_TEXT, Conn, frame
+from rawws import OP_BINARY, OP_CLOSE, OP_CONT, OP_PING, OP_PONG, OP_TEXT, Conn, frame, handshake
 from test_access import self_signed
 
 D = None
@@ -127,6 +135,132 @@ async def test_utf8(t):
     await served(t, "UTF-8")
 
 
+def close_answer(payload, after=b""):
+    """The server's close frame (code, reason) in answer to a client close with payload (and the
+    bytes after it in the same write), and the text messages before it."""
+    c = opened()
+    c.send(frame(payload, op=OP_CLOSE) + after)
+    texts, answer = [], None
+    try:
+        while answer is None:
+            fin, op, data = c.read_frame()
+            if op == OP_CLOSE:
+                answer = (int.from_bytes(data[:2], "big") if len(data) >= 2 else None, data[2:])
+            elif op == OP_TEXT:
+                texts.append(data.decode("utf-8"))
+    except (ConnectionError, OSError):
+        pass
+    c.close()
+    return answer, texts
+
+
+async def test_close_frames(t):
+    """Close frames as RFC 6455 5.5.1 and 7.4 have them (issue 27 item 10): lws 4.1 echoed a
+    one-byte payload, codes 5000 and 65535 and a reason cut inside a character, and a request
+    sent after the client's close was acted on."""
+    code = lambda n: struct.pack(">H", n)
+    for payload, want, what in ((b"", (None, b""), "an empty close is echoed empty"),
+                                (code(1000) + b"bye", (1000, b"bye"), "1000 with a reason is echoed"),
+                                (code(3000), (3000, b""), "a registered code (3000) is echoed"),
+                                (code(4999) + "\u00e9".encode(), (4999, "\u00e9".encode()), "a private code with a UTF-8 reason"),
+                                (b"\x03", (1002, b"close frame of one byte"), "a one-byte close: 1002"),
+                                (code(5000), (1002, b"close status code not allowed"), "code 5000: 1002"),
+                                (code(65535), (1002, b"close status code not allowed"), "code 65535: 1002"),
+                                (code(999), (1002, b""), "code 999: 1002 (lws rewrites the code)"),
+                                (code(1000) + "\u00e9".encode()[:1], (1007, b"close reason not UTF-8"),
+                                 "a reason cut inside a character: 1007")):
+        answer, _ = close_answer(payload)
+        t.check(answer == want, "%s (%s)" % (what, answer))
+    # a destroy after the client's close, in the same write: not acted on
+    answer, texts = close_answer(code(1000), frame('{"op":"destroy","stream":"flame","id":7}'))
+    c = opened()
+    c.send(frame(LIST))
+    names = [s["stream"] for s in json.loads(c.read_text())["streams"]]
+    c.close()
+    t.check(answer == (1000, b"") and not texts and "flame" in names,
+            "a request after the client's close frame is not acted on (%s, %s, %s)" % (answer, texts, names))
+    await served(t, "close frames")
+
+
+VICTIM = '{"op":"destroy","stream":"victim","id":7}'
+
+
+def victim_there(port=None, wrap=None):
+    """Whether the stream "victim" exists (created when not: the next case starts with it)."""
+    c = opened(wrap, port)
+    c.send(frame('{"op":"list","id":1}'))
+    there = any(s["stream"] == "victim" for s in json.loads(c.read_text())["streams"])
+    if not there:
+        c.send(frame('{"op":"create","effect":"energy_wave","stream":"victim","id":2}'))
+        c.read_text()
+    c.close()
+    return there
+
+
+def boundary_cases(port):
+    """(what, request bytes) that end a handshake where lws ends it, each followed (in the same
+    write) by an unmasked destroy of "victim"."""
+    std = handshake(port)
+    return (("bare \\n line endings", handshake(port, eol="\n")),
+            ("\\r\\n lines ended by a bare \\n", std[:-2] + b"\n"),
+            ("\\r\\r\\n line endings", handshake(port, eol="\r\r\n")),
+            ("mixed line endings", handshake(port).replace(b"Upgrade\r\n", b"Upgrade\n")),
+            ("a header without a colon last", std[:-2] + b"X-Junk\r\n\r\n"),
+            ("a header name that ends at its colon", handshake(port, headers=("A: b",))),
+            ("an escaped line end in the path", handshake(port, path="/v1/ws?x=%0a")),
+            ("an escaped line end, then a bare \\n", handshake(port, eol="\n", path="/v1/ws%0A")),
+            ("a request before the upgrade", b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n" + std),
+            ("a request with a body before it", b"GET /healthz HTTP/1.1\r\nContent-Length: 2\r\n\r\nab" + std),
+            ("Upgrade: h2c", std.replace(b"Upgrade: websocket", b"Upgrade: h2c")),
+            ("Upgrade: WebSocket twice", std.replace(b"Upgrade: websocket", b"Upgrade: WebSocket\r\nUpgrade: x")))
+
+
+async def test_handshake_boundaries(t, port=None, wrap=None, label=""):
+    """The guard sees each handshake end where lws sees it (issue 27 item 7): a handshake with
+    bare \\n line endings then an unmasked destroy got `destroyed`, over plain and TLS."""
+    port = port or D.port
+    victim_there(port, wrap)
+    for what, request in boundary_cases(port):
+        try:
+            c = Conn.connect(port, wrap=wrap, request=request + frame(VICTIM, masked=False), timeout=5)
+            texts, code = until_close(c) if b" 101" in c.status else ([], None)
+            c.close()
+        except OSError as e:  # lws waits for the rest of a request it cannot end
+            c, texts, code = Conn(None), [], None
+            c.status = ("(%s)" % type(e).__name__).encode()
+        kept = victim_there(port, wrap)
+        t.check(kept and not any('"destroyed"' in x for x in texts) and (code == 1002 or b" 101" not in c.status),
+                "%s%s, then an unmasked destroy: not acted on (%s, close %s, stream kept %s)"
+                % (label, what, c.status.decode(errors="replace"), code, kept))
+    for what, request in (("bare \\n line endings", handshake(port, eol="\n")),
+                          ("mixed line endings", handshake(port).replace(b"Upgrade\r\n", b"Upgrade\n")),
+                          ("Upgrade: WebSocket", handshake(port).replace(b"Upgrade: websocket", b"Upgrade: WebSocket")),
+                          ("a header name that ends at its colon", handshake(port, headers=("A: b", "Accept: x")))):
+        c = Conn.connect(port, wrap=wrap, request=request)
+        ok = b" 101" in c.status and json.loads(c.read_text())["op"] == "hello"
+        c.send(frame(LIST))
+        t.check(ok and json.loads(c.read_text())["id"] == 7, "%sa handshake with %s is served" % (label, what))
+        c.close()
+    # a proxy's kept-alive link (nginx): a GET, its response, then the upgrade on the same connection
+    c = Conn.connect(port, wrap=wrap, request=b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    c._need(int(c.head.lower().split(b"content-length:")[1].split(b"\r\n")[0]))
+    c.send(handshake(port, eol="\n") + frame(LIST))
+    data = c.buf  # what was read past the body: the 101's start
+    while b"\r\n\r\n" not in data:
+        chunk = c.s.recv(4096)
+        if not chunk:
+            break
+        data += chunk
+    head, _, c.buf = data.partition(b"\r\n\r\n")
+    ok = b" 101" in head.split(b"\r\n")[0] and json.loads(c.read_text())["op"] == "hello"
+    t.check(ok and json.loads(c.read_text())["id"] == 7, "%san upgrade after a GET answered on the same connection "
+            "(a proxy's kept-alive link) is served" % label)
+    c.send(frame(VICTIM, masked=False))
+    texts, code = until_close(c)
+    c.close()
+    t.check(code == 1002 and victim_there(port, wrap), "%sand an unmasked frame on it closes with 1002 (%s)" % (label, code))
+
+
 async def test_tls(t):
     tmp = tempfile.mkdtemp(prefix="fxs-tls-")
     cert, key = self_signed(tmp)
@@ -140,6 +274,7 @@ async def test_tls(t):
         await unmasked_case(t, "TLS: an unmasked text frame", b"", frame(LIST, masked=False), d.port, wrap)
         await unmasked_case(t, "TLS: an unmasked frame after a masked one", frame('{"op":"list","id":1}'),
                             frame(LIST, masked=False), d.port, wrap)
+        await test_handshake_boundaries(t, d.port, wrap, "TLS: ")
         c = opened(wrap, d.port)
         c.send(frame(LIST))
         t.check(json.loads(c.read_text())["id"] == 7, "TLS: the daemon serves the next connection")
@@ -149,6 +284,7 @@ async def test_tls(t):
 if __name__ == "__main__":
     D = Daemon()
     try:
-        Suite("test_conformance").run([test_masked_served, test_unmasked, test_utf8, test_tls])
+        Suite("test_conformance").run([test_masked_served, test_unmasked, test_utf8, test_close_frames,
+                                        test_handshake_boundaries, test_tls])
     finally:
         D.stop()

@@ -4,8 +4,10 @@ says why, and the connection or daemon still usable afterwards.
 Run from the repository root: /usr/bin/python3 tests/integration/test_limits.py"""
 import asyncio
 import json
+import os
 import resource
 import socket
+import tempfile
 import time
 import urllib.request
 
@@ -84,8 +86,8 @@ async def test_rate_and_size(t):
 
 
 def raw_ws(port, rcvbuf=4096):
-    """A WebSocket on a socket with a small receive buffer that this test never reads from."""
-    return Conn.connect(port, rcvbuf=rcvbuf).s
+    """A WebSocket on a socket with a small receive buffer that this test does not read from."""
+    return Conn.connect(port, rcvbuf=rcvbuf)
 
 
 def rss_kib(d):
@@ -93,44 +95,105 @@ def rss_kib(d):
         return int(f.read().split("VmRSS:")[1].split()[0])
 
 
+# A rich energy document's sources: 16 curves of 32 weights at full precision (~15 kB of JSON).
+RICH_CURVES = [{"p0": [-1.123456789012345 - i, 0.3333333333333333, 0.1428571428571428],
+                "p1": [0.7071067811865476, 1.4142135623730951 + i, -0.5772156649015329],
+                "p2": [1.618033988749895, -0.6931471805599453, 2.718281828459045 + i],
+                "coef": 8.123456789012345, "W": [(k + 1) / 33 for k in range(32)]} for i in range(16)]
+
+
+def drain_close(c, timeout=20):
+    """Reads c to its end; the close frame's code and the last bytes read."""
+    s = c.s
+    s.settimeout(10)
+    tail, deadline = b"", time.monotonic() + timeout
+    while time.monotonic() < deadline:  # drain what was sent; the close frame comes last
+        try:
+            chunk = s.recv(65536)
+        except OSError:
+            break
+        if not chunk:
+            break
+        tail = (tail + chunk)[-64:]
+    i = tail.rfind(b"\x88")
+    return (int.from_bytes(tail[i + 2:i + 4], "big") if i >= 0 and len(tail) >= i + 4 else None), tail
+
+
 async def test_queued_bytes(t):
     """Replies a client does not read are bounded in bytes (issue 15 item 2): describe replies
-    (~11 kB) asked for at the allowed rate by readers that never read."""
+    (~11 kB) asked for at the allowed rate by readers that never read. Its requests are no longer
+    read while its replies wait, and each one is answered once it reads (issue 27 item 6)."""
     # stall_timeout_s 60: sending 12,000 requests can take longer than the default 10 s on a
     # loaded host, and a reader whose socket is full that long is closed for not reading (no
     # close frame fits), which is another limit than the one checked here.
     limits = {"max_queued_bytes": 65536, "max_control_per_sec": 1000, "stall_timeout_s": 60}
     with Daemon("--config", config_file({"limits": limits})) as d:
         rss0 = rss_kib(d)
-        socks = [raw_ws(d.port) for _ in range(N_READERS)]
+        conns = [raw_ws(d.port) for _ in range(N_READERS)]
         for _ in range(ASKS):
-            for s in socks:
-                try:
-                    s.sendall(frame('{"op":"describe","effect":"energy_wave"}'))
-                except OSError:  # closed by the daemon: what this test wants
-                    pass
+            for c in conns:
+                c.send(frame('{"op":"describe","effect":"energy_wave"}'))
         await asyncio.sleep(1.0)
         grown = rss_kib(d) - rss0
         bound = N_READERS * (65536 + 512 * 1024) // 1024  # the queue limit plus socket buffers, per reader
         t.check(grown < bound, "%d readers that never read asked for %d x 11 kB each: RSS +%d KiB (bound %d KiB)"
                 % (N_READERS, ASKS, grown, bound))
-        s = socks[0]
-        s.settimeout(10)
-        tail, deadline = b"", time.monotonic() + 20
-        while time.monotonic() < deadline:  # drain what was sent; the close frame comes last
-            try:
-                chunk = s.recv(65536)
-            except OSError:
-                break
-            if not chunk:
-                break
-            tail = (tail + chunk)[-64:]
-        i = tail.rfind(b"\x88")
-        code = int.from_bytes(tail[i + 2:i + 4], "big") if i >= 0 and len(tail) >= i + 4 else None
-        t.check(code == 1008 and b"replies not read" in tail, "the reader was closed with 1008 (%s, %r)" % (code, tail[-24:]))
-        for x in socks:
+        c = conns[0]
+        c.read_text()  # hello
+        got = [json.loads(c.read_text())["op"] for _ in range(ASKS)]
+        t.check(got == ["describe"] * ASKS, "once it reads, it gets every one of its %d replies (%d)" % (ASKS, len(got)))
+        c.send(frame('{"op":"list","id":1}'))
+        t.check(json.loads(c.read_text())["op"] == "list", "and the connection is served on")
+        for x in conns:
             x.close()
         t.check(d.proc.poll() is None, "the daemon runs on")
+
+
+async def test_events_not_read(t):
+    """Events a client does not read (another client's sets of a stream it watches, ~15 kB each,
+    more than the socket's buffers take) are bounded: more than max_queued_bytes of them close it
+    with 1008."""
+    limits = {"max_queued_bytes": 65536, "max_control_per_sec": 1000, "stall_timeout_s": 60}
+    with Daemon("--config", config_file({"limits": limits})) as d:
+        a = await Client.connect(d)
+        r = await a.request("create", effect="energy_wave", stream="tiny", params={"width": 32, "height": 32, "curves": RICH_CURVES})
+        reader = raw_ws(d.port)
+        reader.send(frame('{"op":"subscribe","stream":"tiny"}'))
+        t.check(r["op"] == "created" and json.loads(reader.read_text())["op"] == "hello" and
+                json.loads(reader.read_text())["op"] == "subscribed", "the reader subscribes, then reads no more")
+        for i in range(600):
+            await a.request("set", stream="tiny", params={"alpha": 1 + i / 1000})
+        code, tail = drain_close(reader)
+        t.check(code == 1008 and b"messages not read" in tail, "the reader was closed with 1008 (%s, %r)" % (code, tail[-24:]))
+        t.check((await a.request("list"))["op"] == "list", "the other client is served on")
+        await a.close()
+        reader.close()
+
+
+async def test_large_reply(t):
+    """A reply larger than max_queued_bytes is delivered to a client that reads it (issue 27 item
+    6): 64 presets of a rich energy document (presets.json ~600 kB) used to close the page's
+    connection with 1008 within ms. Two such replies asked for at once both come."""
+    state = tempfile.mkdtemp(prefix="fxs-state-")
+    with Daemon(state_dir=state) as d:
+        c = await Client.connect(d)
+        r = await c.request("set", stream="energy", params={"curves": RICH_CURVES})
+        t.check(r["op"] == "params", "a rich energy document is set (%s)" % r.get("message"))
+        for i in range(64):
+            r = await c.request("preset_save", stream="energy", name="rich-%02d" % i, doc="sixteen curves, 32 weights")
+        t.check(r["op"] == "preset_saved", "64 presets saved (%s)" % r.get("message"))
+        r = await c.request("preset_save", stream="energy", name="one-more")
+        t.check(r.get("code") == "limit", "a 65th is refused: limit (%s)" % r.get("code"))
+        size = os.path.getsize(os.path.join(state, "presets.json"))
+        ids = []
+        for i in (1, 2):  # both requests in one go
+            await c.ws.send(json.dumps({"op": "presets", "id": 100 + i}))
+        for _ in (1, 2):
+            m = await c.recv(timeout=20)
+            ids.append((json.loads(m).get("id"), len(m), len(json.loads(m).get("presets", []))))
+        t.check([x[0] for x in ids] == [101, 102] and all(x[1] > 262144 and x[2] == 64 + 17 for x in ids),
+                "presets.json of %d kB: both presets replies arrive whole (%s)" % (size // 1024, ids))
+        await c.close()
 
 
 async def test_half_open_flood(t):
@@ -200,4 +263,4 @@ def metric(d, name):
 
 if __name__ == "__main__":
     Suite("test_limits").run([test_connections, test_streams_and_subscriptions, test_rate_and_size, test_queued_bytes,
-                              test_half_open_flood])
+                              test_events_not_read, test_large_reply, test_half_open_flood])

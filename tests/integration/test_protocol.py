@@ -4,7 +4,9 @@ broadcasts, one check per error code, limits, persistence across restarts, shutd
 import asyncio
 import json
 import os
+import re
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -31,6 +33,20 @@ def http_get_status(path):
 def http_get(path):
     with urllib.request.urlopen(D.http + path, timeout=10) as r:
         return r.status, r.headers.get("Content-Type"), r.read().decode()
+
+
+def http_raw(port, request):
+    """Sends request bytes as they are; the response head's lines, lower-cased but the first."""
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(request)
+        out = b""
+        while b"\r\n\r\n" not in out:
+            chunk = s.recv(4096)
+            if not chunk:
+                break
+            out += chunk
+    lines = out.split(b"\r\n\r\n")[0].split(b"\r\n")
+    return lines[:1] + [x.lower() for x in lines[1:]] if out else []
 
 
 async def test_http(t):
@@ -63,6 +79,13 @@ async def test_metrics_parse(t):
     _, _, body = http_get("/metrics")
     fams = {f.name: f for f in text_string_to_metric_families(body)}
     t.check(len(fams) >= 25, "the text parser reads %d metric families" % len(fams))
+    # Each # TYPE line is a family of its own (issue 27 item 13): the counter
+    # fxs_connections_total was read into the gauge fxs_connections's family.
+    types = re.findall(r"^# TYPE (\S+) (\S+)$", body, re.M)
+    own = [(n, ty) for n, ty in types if fams.get(n[:-6] if ty == "counter" and n.endswith("_total") else n) is not None
+           and fams[n[:-6] if ty == "counter" and n.endswith("_total") else n].type == ty]
+    t.check(len(fams) == len(types) and len(own) == len(types),
+            "%d families for %d # TYPE lines, each its own (%s)" % (len(fams), len(types), sorted(set(types) - set(own))))
     bad = [n for n, f in fams.items() if f.type == "counter" and not any(s.name.endswith("_total") for s in f.samples)]
     t.check(not bad, "every counter's samples end in _total (%s)" % bad)
     for name in ("fxs_stream_step_seconds", "fxs_stream_encode_seconds", "fxs_stream_frame_age_seconds"):
@@ -112,6 +135,14 @@ async def test_static_root(t):
         for method in ("OPTIONS", "POST", "PUT", "DELETE"):
             st, _, hd = get("/healthz", method)
             t.check(st == 405 and hd.get("Allow") == "GET", "%s: 405 with Allow: GET (%s, %s)" % (method, st, hd.get("Allow")))
+        # lws answers these itself, before any callback (issue 27 item 13: they got 403)
+        for line in (b"OPTIONS * HTTP/1.1", b"TRACE / HTTP/1.1", b"TRACE * HTTP/1.1", b"BREW /pot HTTP/1.1",
+                     b"CONNECT 127.0.0.1:1 HTTP/1.1"):  # CONNECT: lws made it a raw socket held open
+            head = http_raw(d.port, line + b"\r\nHost: 127.0.0.1\r\n\r\n")
+            t.check(head[:1] and b" 405 " in head[0] and b"allow: get" in head[1:],
+                    "%s: 405 with Allow: GET (%s)" % (line.decode(), head[:1]))
+        head = http_raw(d.port, b"GET * HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        t.check(head[:1] and b" 403 " in head[0], "GET * (not a path) stays 403 (%s)" % head[:1])
         t.check(get("/healthz")[0] == 200, "GET still served")
 
 
@@ -244,6 +275,26 @@ async def test_error_codes(t):
     await expect_error(t, c, '{"op":"list\\u0000x"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"create","effect":"energy_wave","stream":"ab\\u0000cd"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"auth","token":"t\\u0000junk"}', "bad_json", "U+0000")
+    # preset ops check their fields in the order of §3 before any state (issue 27 item 13)
+    for text, code, param in (('{"op":"preset_save","stream":"nope","name":"bad name"}', "bad_request", "name"),
+                              ('{"op":"preset_save","stream":"nope","name":"ok","doc":"%s"}' % ("x" * 201), "bad_request", "doc"),
+                              ('{"op":"preset_save","stream":"energy","name":"ember-arc","doc":"%s"}' % ("x" * 201),
+                               "bad_request", "doc"),
+                              ('{"op":"preset_save","stream":"nope","name":"ember-arc"}', "unknown_stream", "stream"),
+                              ('{"op":"preset_save","name":"x","doc":7}', "bad_request", "stream"),
+                              ('{"op":"preset_load","name":7}', "bad_request", "stream")):
+        m = await expect_error(t, c, text, code, text[:60])
+        t.check(m.get("param") == param, "%s: param %s (%s)" % (text[:60], param, m.get("param")))
+    # RFC 8259 exactly (issue 27 item 9): 0200 was read as 200, \f as whitespace, raw controls kept.
+    rev = (await c.request("get", stream="energy"))["rev"]
+    for text, why in (('{"op":"set","stream":"energy","params":{"divisions":0200}}', "leading zero"),
+                      ('{"op":"set","stream":"energy","params":{"alpha":1.}}', "digit must follow '.'"),
+                      ('{"op":"set","stream":"energy","params":{"alpha":-00}}', "leading zero"),
+                      ('\f{"op":"list"}', "byte 0x0c"), ('{"op":"list"}\v', "trailing data"),
+                      ('{"op":"li\x01st"}', "raw control character U+0001")):
+        m = await expect_error(t, c, text, "bad_json", "%r" % text)
+        t.check(why in m["message"], "%r: the message says %r (%s)" % (text, why, m["message"]))
+    t.check((await c.request("get", stream="energy"))["rev"] == rev, "none of those sets changed the stream")
     # ids come back exactly (issue 15 item 12), or are refused when a double cannot hold them
     for text in ("9007199254740991", "-9007199254740991", "0.1", "123456.789", "1e-300", '"x\\u00e9"'):
         await c.ws.send('{"op":"list","id":%s}' % text)
@@ -279,6 +330,61 @@ async def test_invalid_utf8_closes_1007(t):
     except websockets.exceptions.ConnectionClosed as e:
         t.check(e.rcvd is not None and e.rcvd.code == 1007, "invalid UTF-8 in a text frame: closed with 1007 (%s)" % e.rcvd)
     t.check(await refusal(D, read=True) is None, "the daemon serves the next connection")
+
+
+async def test_noop_set(t):
+    """A set that changes nothing keeps the revision and broadcasts nothing (issue 27 item 13:
+    it bumped rev and sent params to every subscriber)."""
+    a, b = await Client.connect(D), await Client.connect(D)
+    await a.request("create", effect="energy_wave", stream="still", params=SMALL)
+    await b.request("subscribe", stream="still")
+    cur = await a.request("get", stream="still")
+    for params in ({"alpha": cur["params"]["alpha"]}, {}, {"width": SMALL["width"], "fps": SMALL["fps"]}, cur["params"]):
+        r = await a.request("set", stream="still", params=params)
+        t.check(r["op"] == "params" and r["rev"] == cur["rev"] and r["params"] == cur["params"],
+                "a set of the current values %s: rev stays %d (%s)" % (list(params)[:3], cur["rev"], r.get("rev")))
+    r = await a.request("preset_save", stream="still", name="same")
+    r = await a.request("preset_load", stream="still", name="same")
+    t.check(r["op"] == "params" and r["rev"] == cur["rev"], "a preset_load of the current document too (%s)" % r.get("rev"))
+    r = await a.request("set", stream="still", params={"alpha": 2.5})
+    t.check(r["rev"] == cur["rev"] + 1, "a real change takes the next revision (%s)" % r["rev"])
+    events = []
+    try:
+        while True:
+            events.append(await b.text(timeout=1.0))
+    except asyncio.TimeoutError:
+        pass
+    events = [e["rev"] for e in events if e["op"] == "params"]
+    t.check(events == [cur["rev"] + 1], "the subscriber heard of the real change only (%s)" % events)
+    await a.request("preset_delete", effect="energy_wave", name="same")
+    await a.request("destroy", stream="still")
+    await a.close()
+    await b.close()
+
+
+async def test_paused_first_frame(t):
+    """The first frame after subscribing to a paused stream was computed before the pause: it is
+    sent at once marked FXS_FLAG_BEFORE_PAUSE (flags bit 31), fresh frames unmarked after it
+    (issue 27 item 13: it came unmarked, with its old sim_time)."""
+    c = await Client.connect(D)
+    await c.request("create", effect="energy_wave", stream="napping", params=SMALL)
+    await c.request("subscribe", stream="napping")
+    last = [await c.frame(kind=2) for _ in range(3)][-1]
+    t.check(all(f["flags"] == 0 for f in [last]), "frames of a running stream are unmarked")
+    await c.request("unsubscribe", stream="napping")
+    await asyncio.sleep(0.5)
+    await c.request("subscribe", stream="napping")
+    first, second = await c.frame(kind=2), await c.frame(kind=2)
+    t.check(first["flags"] == 0x80000000 and first["seq"] >= last["seq"] and first["sim_time"] <= second["sim_time"],
+            "the first frame after the pause is marked (flags %#x, seq %d after %d)" % (first["flags"], first["seq"], last["seq"]))
+    t.check(second["flags"] == 0 and second["seq"] > first["seq"], "the next one is fresh and unmarked (%#x)" % second["flags"])
+    d = await Client.connect(D)
+    await d.request("subscribe", stream="napping")
+    f = await d.frame(kind=2)
+    t.check(f["flags"] == 0, "a subscriber joining the running stream gets no marked frame (%#x)" % f["flags"])
+    await c.request("destroy", stream="napping")
+    await c.close()
+    await d.close()
 
 
 async def test_nothing_half_applied(t):
@@ -461,6 +567,26 @@ async def test_presets_persist(t):
                 "bad_param k_buo (%s)" % r)
         t.check((await c.request("get", stream="flame"))["params"]["k_buo"] == 0.02, "and changes nothing")
         await c.close()
+    # Each entry is checked as preset_save checks one (issue 27 item 8): each of these loaded,
+    # then was listed (1e999 as null), sent raw (\xff) or could not be deleted (../../x).
+    good = json.load(open(os.path.join(state, "presets.json")))
+    entry = lambda name, **kw: dict(dict(effect="flame", name=name, doc="", params={"fps": 20}), **kw)
+    for extra, why in (([entry("candle")], 'entry 3 (flame/candle): "candle" is a built-in flame preset'),
+                       ([entry("../../x")], "entry 3 (flame/../../x): preset names are"),
+                       ([entry("twin"), entry("twin")], 'entry 4 (flame/twin): a second preset named "twin"'),
+                       ([entry("inf", params={"fps": "INF"})], "entry 3 (flame/inf): params.fps is not a finite number"),
+                       ([entry("p%d" % i) for i in range(63)], "entry 65 (flame/p62): flame already has 64 presets"),
+                       ([entry("bad\xff")], "invalid UTF-8")):
+        text = json.dumps(good + extra).replace('"INF"', "1e999").encode().replace(b"\\u00ff", b"\xff")
+        with open(os.path.join(state, "presets.json"), "wb") as f:
+            f.write(text)
+        try:
+            p = subprocess.run([DAEMON, "--port", "0", "--state-dir", state], capture_output=True, timeout=20)
+        except subprocess.TimeoutExpired as e:  # it started and served
+            p = subprocess.CompletedProcess(e.cmd, None, b"", e.stderr or b"")
+        err = [x for x in p.stderr.decode(errors="replace").splitlines() if "presets.json" in x]
+        t.check(p.returncode not in (0, None) and err and why in err[-1] and open(os.path.join(state, "presets.json"), "rb").read() == text,
+                "presets.json with %s: the start is refused naming it, the file kept (%s)" % (why[:40], err))
 
 
 async def test_quarantine(t):
@@ -566,7 +692,7 @@ if __name__ == "__main__":
     s = Suite("test_protocol")
     try:
         s.run([test_http, test_metrics_parse, test_static_root, test_websocket_version, test_hello, test_spec_current, test_frames, test_set_reaches_frames, test_error_codes,
-               test_invalid_utf8_closes_1007, test_nothing_half_applied, test_destroy_and_max_fps, test_max_fps_range, test_persistence, test_rev_64bit, test_state_write_failure, test_presets_persist, test_quarantine, test_stream_events,
+               test_invalid_utf8_closes_1007, test_noop_set, test_paused_first_frame, test_nothing_half_applied, test_destroy_and_max_fps, test_max_fps_range, test_persistence, test_rev_64bit, test_state_write_failure, test_presets_persist, test_quarantine, test_stream_events,
                test_shutdown_closes_1001, test_flags])
     finally:
         D.stop(signal.SIGKILL)

@@ -1,7 +1,9 @@
 /* test_presets.c — presets.c: every built-in preset of every effect is valid and named by
  * the rules; user presets are saved, listed, loaded back from presets.json after a restart,
- * deleted; built-ins are read-only; the per-effect limit holds; and a save or delete whose
- * file write fails leaves memory and the file as they were (`unavailable`). */
+ * deleted; built-ins are read-only; the per-effect limit and the size bound hold; every entry of
+ * presets.json is checked as a save is (or the start is refused naming it); and a save or
+ * delete whose file write fails leaves memory and the file as they were (`unavailable`). */
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -16,6 +18,7 @@
 static char tp_dir[64];
 
 static const struct effect_ops *tp_flame(void) { return effect_find("flame"); }
+static cJSON *tp_longest(const struct param_def *defs);
 
 static void test_builtins_valid(void)
 {
@@ -167,6 +170,122 @@ static void test_bad_file(void)
     CHECK(!jsonfile_write(tp_dir, "presets.json", "[]"), "write");
 }
 
+/* Loads presets.json holding `entries` (the inside of the array): refused with a message that
+ * names the file, the entry and has `why`, or (why NULL) accepted. The file is left as it is. */
+static void tp_load_case(const char *entries, const char *why)
+{
+    struct presets ps;
+    struct fx_err err = {0};
+    char text[8192], back[8192] = "";
+    snprintf(text, sizeof text, "[%s]", entries);
+    CHECK(!jsonfile_write(tp_dir, "presets.json", text), "write");
+    int rc = presets_load(&ps, tp_dir, &err);
+    presets_free(&ps);
+    if (!why) {
+        CHECK(!rc, "%s: refused (%s)", entries, err.message);
+        return;
+    }
+    CHECK(rc && strstr(err.message, "presets.json") && strstr(err.message, why), "%s: %s (wanted \"%s\")", entries,
+          rc ? err.message : "accepted", why);
+    char path[128];
+    snprintf(path, sizeof path, "%s/presets.json", tp_dir);
+    FILE *f = fopen(path, "r");
+    size_t n = f ? fread(back, 1, sizeof back - 1, f) : 0;
+    if (f) fclose(f);
+    CHECK(n == strlen(text) && !memcmp(back, text, n), "%s: the file is left as it is", entries);
+}
+
+#define TP_E(effect, name, rest) "{\"effect\":\"" effect "\",\"name\":\"" name "\",\"doc\":\"\"," rest "}"
+#define TP_P "\"params\":{\"fps\":20}"
+
+/* Every entry of presets.json is checked as preset_save checks a new one (issue 27 item 8):
+ * each of these loaded before and was then listed, sent or impossible to delete. */
+static void test_bad_entries(void)
+{
+    tp_load_case(TP_E("flame", "ok", TP_P) "," TP_E("energy_wave", "ok", TP_P), NULL);
+    tp_load_case(TP_E("flame", "ok", TP_P) "," TP_E("flame", "a\xff", TP_P), "invalid UTF-8");
+    tp_load_case(TP_E("flame", "a\\u00ff", TP_P), "entry 1 (flame/a\xc3\xbf): preset names are 1-63 characters");
+    tp_load_case(TP_E("flame", "x", "\"params\":{\"fps\":1e999}"), "entry 1 (flame/x): params.fps is not a finite number");
+    tp_load_case(TP_E("flame", "x", "\"params\":{\"sources\":[{\"radius\":-1e999}]}"), "params.sources[0].radius");
+    tp_load_case(TP_E("flame", "candle", TP_P), "entry 1 (flame/candle): \"candle\" is a built-in flame preset");
+    tp_load_case(TP_E("flame", "../../x", TP_P), "entry 1 (flame/../../x): preset names are");
+    tp_load_case(TP_E("flame", "twice", TP_P) "," TP_E("flame", "twice", TP_P), "entry 2 (flame/twice): a second preset");
+    tp_load_case(TP_E("smoke", "x", TP_P), "entry 1 (smoke/x): no effect named \"smoke\"");
+    tp_load_case(TP_E("flame", "x", "\"params\":[]"), "entry 1 (flame/x): not an object {effect, name, doc, params}");
+    tp_load_case(TP_E("flame", "x", TP_P ",\"extra\":1"), "entry 1 (flame/x): not an object {effect, name, doc, params}");
+    tp_load_case("{\"effect\":\"flame\",\"name\":\"x\",\"doc\":7," TP_P "}", "entry 1 (flame/x): not an object {effect, name, doc, params}");
+    char big[4096] = "", one[96];
+    for (int i = 0; i < PRESETS_MAX_PER_EFFECT + 1; i++) {
+        snprintf(one, sizeof one, "%s" TP_E("flame", "p%d", TP_P), i ? "," : "", i);
+        strcat(big, one);
+    }
+    tp_load_case(big, "entry 65 (flame/p64): flame already has 64 presets");
+    char doc[400];
+    snprintf(doc, sizeof doc, "{\"effect\":\"flame\",\"name\":\"x\",\"doc\":\"%0*d\"," TP_P "}", PRESETS_MAX_DOC + 1, 0);
+    tp_load_case(doc, "entry 1 (flame/x): a preset's doc is at most 200 bytes");
+    CHECK(!jsonfile_write(tp_dir, "presets.json", "[]"), "write");
+}
+
+/* A value of d as long as it can print: lists at their longest, numbers with 17 digits. */
+static cJSON *tp_longest_value(const struct param_def *d, int i)
+{
+    double x = d->type == PARAM_INT ? d->max : d->min + (d->max - d->min) * (0.1234567890123457 + 0.01 * i);
+    if (d->flags & PARAM_EVEN) x = 2 * floor(d->max / 2);
+    cJSON *a = d->type == PARAM_FLOAT || d->type == PARAM_INT ? cJSON_CreateNumber(x)
+               : d->type == PARAM_BOOL ? cJSON_CreateFalse() : d->type == PARAM_ENUM ? NULL : cJSON_CreateArray();
+    int n = d->type == PARAM_VEC3 || d->type == PARAM_COLOR ? 3 : d->max_len;
+    if (d->type == PARAM_ENUM) {
+        const char *const *c = d->choices, *best = *c;
+        for (; *c; c++) best = strlen(*c) > strlen(best) ? *c : best;
+        a = cJSON_CreateString(best);
+    } else if (d->type == PARAM_OBJECT_LIST) {
+        for (int k = 0; k < n; k++) cJSON_AddItemToArray(a, tp_longest(d->fields));
+    } else if (cJSON_IsArray(a)) {
+        for (int k = 0; k < n; k++) cJSON_AddItemToArray(a, tp_longest_value(&(struct param_def){.type = PARAM_FLOAT,
+                                                             .min = d->min, .max = d->max}, k + 1));
+    }
+    return a;
+}
+
+static cJSON *tp_longest(const struct param_def *defs)
+{
+    cJSON *o = cJSON_CreateObject();
+    for (; defs->name; defs++) cJSON_AddItemToObject(o, defs->name, tp_longest_value(defs, 0));
+    return o;
+}
+
+/* A preset's parameters are bounded in size, so a presets reply is too (issue 27 item 6). */
+static void test_params_size(void)
+{
+    struct presets ps;
+    struct fx_err err = {0};
+    bool replaced;
+    cJSON *doc = tp_doc(20);
+    CHECK(!presets_load(&ps, NULL, &err), "%s", err.message);
+    char *pad = malloc(PRESETS_MAX_PARAMS_BYTES);
+    memset(pad, 'x', PRESETS_MAX_PARAMS_BYTES - 1);
+    pad[PRESETS_MAX_PARAMS_BYTES - 1] = 0;
+    cJSON_AddStringToObject(doc, "pad", pad);
+    CHECK(presets_save(&ps, tp_flame(), "huge", "", doc, &replaced, &err) && !strcmp(err.code, "limit") &&
+              strstr(err.message, "at most 32768 bytes"), "a document over the bound: %s %s", err.code, err.message);
+    CHECK(tp_count(&ps) == 0, "nothing saved");
+    presets_free(&ps);
+    for (const struct effect_ops *const *e = effect_all(); *e; e++) {
+        cJSON *partial = tp_longest((*e)->params), *defaults = params_defaults((*e)->params), *d = NULL;
+        struct fx_err perr = {0};
+        CHECK(!params_merge((*e)->params, defaults, partial, &d, &perr), "%s: %s", (*e)->name, perr.message);
+        char *text = d ? cJSON_PrintUnformatted(d) : NULL;
+        CHECK(text && strlen(text) < PRESETS_MAX_PARAMS_BYTES, "%s: its longest document (%zu bytes) fits", (*e)->name,
+              text ? strlen(text) : 0);
+        free(text);
+        cJSON_Delete(d);
+        cJSON_Delete(defaults);
+        cJSON_Delete(partial);
+    }
+    free(pad);
+    cJSON_Delete(doc);
+}
+
 int main(void)
 {
     snprintf(tp_dir, sizeof tp_dir, "/tmp/fxs-presets-XXXXXX");
@@ -177,6 +296,8 @@ int main(void)
     RUN(test_limit);
     RUN(test_write_failure);
     RUN(test_bad_file);
+    RUN(test_bad_entries);
+    RUN(test_params_size);
     char cmd[128];
     snprintf(cmd, sizeof cmd, "rm -rf %s", tp_dir);
     if (system(cmd)) fprintf(stderr, "cannot remove %s\n", tp_dir);

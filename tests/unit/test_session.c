@@ -386,6 +386,43 @@ static void test_rate_limit(void)
     t_server_free();
 }
 
+/* The send queue (issue 27 item 6): a reply is queued whatever its size and then holds the
+ * connection's requests back (session_backlogged) until it has gone; events a connection does
+ * not read close it past max_queued_bytes. */
+static void test_send_queue(void)
+{
+    t_server_init();
+    t_srv.cfg.limits.max_queued_bytes = 4096;
+    struct session *a = t_open(), *b = t_open();
+    t_drain(a), t_drain(b);
+    const char *describe = "{\"op\":\"describe\",\"effect\":\"energy_wave\"}"; /* ~11 kB */
+    session_handle(a, describe, strlen(describe));
+    CHECK(a->q_count == 1 && a->q_bytes > 4096 && !a->kill, "a reply over max_queued_bytes is queued (%zu bytes)",
+          a->q_bytes);
+    CHECK(session_backlogged(a), "then the connection is backlogged: its requests wait");
+    session_handle(a, describe, strlen(describe)); /* one read together with the first */
+    CHECK(a->q_count == 2 && !a->kill, "a second reply asked for is queued too");
+    cJSON *r = t_next(a);
+    CHECK(!strcmp(t_op(r), "describe") && session_backlogged(a), "the first goes out; still backlogged");
+    cJSON_Delete(r);
+    r = t_next(a);
+    CHECK(!strcmp(t_op(r), "describe") && !session_backlogged(a), "the second goes out; requests are read again");
+    cJSON_Delete(r);
+    cJSON_Delete(t_req(b, "{\"op\":\"create\",\"effect\":\"energy_wave\",\"stream\":\"x\"}"));
+    cJSON_Delete(t_req(a, "{\"op\":\"subscribe\",\"stream\":\"x\"}"));
+    t_drain(a);
+    session_handle(a, describe, strlen(describe)); /* a reply waiting: events beside it are counted alone */
+    char set[96];
+    for (int i = 0; i < 11 && !a->kill; i++) {
+        snprintf(set, sizeof set, "{\"op\":\"set\",\"stream\":\"x\",\"params\":{\"alpha\":%d}}", 2 + i);
+        cJSON_Delete(t_req(b, set));
+        CHECK(i >= 3 || (!a->kill && a->q_count == 2 + i), "~1 kB events beside an 11 kB reply are queued (%d)", a->q_count);
+    }
+    CHECK(a->kill && !strcmp(a->kill, "messages not read"), "more than 4 kB of events not read: closed (%s)",
+          a->kill ? a->kill : "open");
+    t_server_free();
+}
+
 int main(void)
 {
     log_set_level(LOG_WARN);
@@ -398,6 +435,7 @@ int main(void)
     RUN(test_stream_error_event);
     RUN(test_receive_limits);
     RUN(test_rate_limit);
+    RUN(test_send_queue);
     RUN(test_roles);
     RUN(test_access_rules);
     return CHECK_DONE();
