@@ -1,5 +1,5 @@
 // web_look_check.mjs — what an artist sees on opening the page, measured: the flame's default
-// (volume) mode on the default scene, camera at home, 1600x1000, in Debian's chromium against a
+// (volume) mode on the default scene, camera at home, a 1200x760 page, in Debian's chromium against a
 // real fxstreamd. Over 20 drawn frames, from the view's pixels:
 // - a continuous body: inside the silhouette (flame pixels above 5% of the frame's peak after a
 //   9-pixel box blur) at most 3% holes (below 2% of the peak), and the variance of the
@@ -22,7 +22,7 @@ import { ART, checker, collectErrors, fxctlAt, launchBrowser, sleep, startDaemon
 const checks = checker('test_web_look');
 const check = checks.check;
 const shotsAt = process.argv.includes('--shots') ? process.argv[process.argv.indexOf('--shots') + 1] : null;
-const hardStop = setTimeout(() => { console.log('FAIL overall time limit (420 s)'); finish(1); }, 420000);
+const hardStop = setTimeout(() => { console.log('FAIL overall time limit (560 s)'); finish(1); }, 560000);
 const stateDir = mkdtempSync(join(tmpdir(), 'fxs-look-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-look-profile-'));
 let daemon = null, ctx = null;
@@ -227,7 +227,7 @@ try {
   daemon = await startDaemon(0, stateDir);
   const fxctl = fxctlAt(daemon.port);
   fxctl('set', 'flame', 'fps=8'); // the same flame, fewer frames for a 2-core machine drawing in software
-  ctx = await launchBrowser(profile, { width: 1600, height: 1000 });
+  ctx = await launchBrowser(profile, { width: 1200, height: 760 });
   const page = ctx.pages()[0] || await ctx.newPage();
   const logs = collectErrors(page);
   await page.goto(`http://127.0.0.1:${daemon.port}/?streams=flame&grid=1x1&aa=0&drawfps=1`, { timeout: 20000 });
