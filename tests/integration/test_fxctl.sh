@@ -191,6 +191,9 @@ check_human() {
     fx set flame k_buo=0.01 k_buo=0.02; check "the same parameter twice: usage error" 2 "" "parameter given twice: k_buo"
     fx sett flame; check "an unknown command: did you mean" 2 "" 'did you mean "set"'
     fx set flame alpa=1; check "an unknown parameter: the server's did you mean" 1 "" 'unknown parameter'
+    fx set flame k_bou=0.01; check "swapped letters: did you mean k_buo" 1 "" 'did you mean "k_buo"'
+    fx set energy alhpa=2; check "swapped letters: did you mean alpha" 1 "" 'did you mean "alpha"'
+    fx lsit; check "a command with swapped letters: did you mean list" 2 "" 'did you mean "list"'
     fx subscribe eye --frames 1; sleep 1.5
     fx subscribe eye --frames 1; check "a stale first frame is noted" 0 '"kind":4' "the first frame is [0-9.]* s old"
 }
