@@ -27,7 +27,6 @@
 #define FXP_KEEP_HEADER 256           /* bytes of a message kept when payloads are off */
 #define FXP_RX_KEEP_CAP (64 * 1024)   /* a bigger reassembly buffer is freed after use */
 #define FXP_RX_CHUNK (16 * 1024)      /* lws's per-connection receive buffer */
-#define FXP_READ_BUF (128 * 1024)     /* lws's per-thread read size */
 #define FXP_REARM_US 1000
 
 struct fxp_target {
@@ -314,9 +313,10 @@ int fxp_pool_create(struct fxp_pool **out, const struct fxp_callbacks *cb, const
     info.gid = (gid_t)-1;
     info.uid = (uid_t)-1;
     info.fd_limit_per_thread = (unsigned)need;
-    info.pt_serv_buf_size = FXP_READ_BUF;
+    info.pt_serv_buf_size = FXWS_READ_BUF;
     info.user = p;
     fxws_tls_context(&info, o->ca_file); /* any target may be wss:// */
+    fxws_log_default();
     if (!(p->ctx = lws_create_context(&info))) {
         free(p);
         fxws_set_err(eb, el, "cannot create a libwebsockets context for %d connections", o->max_connections);

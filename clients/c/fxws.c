@@ -10,6 +10,7 @@
 
 #include <netdb.h>
 #include <poll.h>
+#include <pthread.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -26,6 +27,24 @@ void fxws_set_err(char *buf, size_t len, const char *fmt, ...)
     vsnprintf(buf, len, fmt, ap);
     va_end(ap);
 }
+
+/* ---- logging ---------------------------------------------------------------- */
+
+static int fxws_log_chosen; /* fxws_log_set was called: fxws_log_default leaves lws alone */
+static pthread_once_t fxws_log_once = PTHREAD_ONCE_INIT;
+
+void fxws_log_set(int levels, void (*emit)(int level, const char *line))
+{
+    __atomic_store_n(&fxws_log_chosen, 1, __ATOMIC_RELEASE);
+    lws_set_log_level(levels, emit ? emit : lwsl_emit_stderr);
+}
+
+static void fxws_log_quiet(void)
+{
+    if (!__atomic_load_n(&fxws_log_chosen, __ATOMIC_ACQUIRE)) lws_set_log_level(0, NULL);
+}
+
+void fxws_log_default(void) { pthread_once(&fxws_log_once, fxws_log_quiet); }
 
 /* ---- URL ------------------------------------------------------------------ */
 

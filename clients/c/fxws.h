@@ -1,11 +1,13 @@
-/* fxws.h — WebSocket client helpers shared by libfxclient's two front ends.
+/* fxws.h — WebSocket client helpers shared by libfxclient's two front ends (internal: not
+ * installed, its symbols hidden in the shared library).
  *
- * fxclient.c (one blocking connection) and fxpool.c (many event-driven connections)
- * speak the same handshake to the same server, so what they must agree on lives here
+ * fxclient.c (one connection, the public API) and fxpool.c (many event-driven connections,
+ * fxload's) speak the same handshake to the same server, so what they must agree on lives here
  * once: parsing ws:// URLs, resolving and diagnosing failed connects, the checks and
  * one-line messages of the handshake (subprotocol fxstream.v1), decoding the server's
- * close frame, and reassembling fragmented messages under a size bound. Everything
- * here is plain functions over caller-owned structs: no lws context, no globals. */
+ * close frame, reassembling fragmented messages under a size bound, and keeping
+ * libwebsockets quiet unless fxc_set_log asked otherwise (its one global). Everything else
+ * here is plain functions over caller-owned structs: no lws context. */
 #ifndef FXWS_H
 #define FXWS_H
 
@@ -19,6 +21,13 @@ struct addrinfo;
 #define FXWS_DEFAULT_PORT 7681
 #define FXWS_DEFAULT_PATH "/v1/ws"
 #define FXWS_SUBPROTOCOL "fxstream.v1"
+#define FXWS_READ_BUF (128 * 1024) /* lws's per-thread read size: bytes one service reads */
+
+/* libwebsockets logs levels (LLL_* bits) through emit (NULL: stderr), process-wide: fxc_set_log. */
+void fxws_log_set(int levels, void (*emit)(int level, const char *line));
+/* Before a context is created: silences libwebsockets (its banner included) unless
+ * fxws_log_set was called. Once per process. */
+void fxws_log_default(void);
 
 /* printf into buf (len bytes; either may be NULL/0: nothing is written): the one-line
  * error messages of libfxclient. */
