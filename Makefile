@@ -24,7 +24,7 @@ LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
 PROTO_SRC   := $(wildcard protocol/*.c)
 SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c)) $(PROTO_SRC)
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
-FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c clients/c/fxctl_save.c clients/c/png.c
+FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c clients/c/fxctl_save.c clients/c/fxctl_sub.c clients/c/png.c
 FXLOAD_SRC  := $(wildcard clients/c/fxload*.c)
 CLIENT_MAIN := $(FXCTL_SRC) $(FXLOAD_SRC)
 # libfxclient: every other clients/c/*.c and the codecs, compiled once position-independent

@@ -6,8 +6,8 @@
  * stdout is not a terminal, every reply is one line of JSON (easy to pipe into jq or a
  * script). Every failure is one line on stderr with exit status 1 (server or
  * transport) or 2 (usage); notes (a set that restarts the simulation, a stale first
- * frame) go to stderr too. `subscribe` receives the frames; fxctl_save.h prints and
- * writes them. */
+ * frame) go to stderr too. `subscribe` counts steps in fxctl_sub.h, which prints and
+ * writes the frames with fxctl_save.h. */
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -19,12 +19,11 @@
 
 #include "fxclient.h"
 #include "fxctl_print.h"
-#include "fxctl_save.h"
+#include "fxctl_sub.h"
 #include "suggest.h"
 
 #define FXCTL_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
 #define FXCTL_DEFAULT_TIMEOUT_MS 10000
-#define FXCTL_STALE_MS 1000 /* a first frame older than this gets a note */
 
 enum { FXCTL_OK = 0, FXCTL_FAIL = 1, FXCTL_USAGE = 2 };
 
@@ -32,7 +31,7 @@ struct fxctl_opts {
     const char *url;
     int timeout_ms;
     struct fxc_options conn; /* token, CA file */
-    long frames;       /* subscribe --frames, 0 when not given */
+    long frames;       /* subscribe --frames: steps, or frames of --kind; 0 when not given */
     long count;        /* watch --count, 0 = until interrupted */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
@@ -57,9 +56,11 @@ static const char fxctl_help[] =
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
     "  subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]\n"
-    "                                receive N frames of NAME (only of kind K, 1..4,\n"
-    "                                with --kind); prints the subscribed\n"
-    "                                reply, then one JSON line per frame (stream,\n"
+    "                                receive N steps of NAME (a step: the frames computed\n"
+    "                                together, e.g. energy's texture and its light rig),\n"
+    "                                or with --kind N frames of kind K (1 particles,\n"
+    "                                2 texture, 3 light rig, 4 look-up table); prints the\n"
+    "                                subscribed reply, then one JSON line per frame (stream,\n"
     "                                channel, kind, seq, param_rev, sim_time,\n"
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
     "                                width and height, or count, flags) and any params\n"
@@ -97,17 +98,20 @@ static const char fxctl_help[] =
     "  --ca-file F    PEM bundle that signs a wss:// server's certificate\n"
     "                 (default $FXSTREAM_CA_FILE, else the system's)\n"
     "  --json         print every reply as one line of JSON (the default when stdout\n"
-    "                 is not a terminal; on a terminal describe, get, set, list and\n"
-    "                 presets print tables)\n"
+    "                 is not a terminal; on a terminal replies print for people, below)\n"
     "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
-    "                 each frame (with watch --count, each event; default 10000)\n"
+    "                 each step (frame of --kind: other kinds and events do not extend\n"
+    "                 it; the error names the kinds that came); with watch --count,\n"
+    "                 for each event (default 10000)\n"
     "  --help, -h     this text\n"
     "\n"
     "output: on a terminal, describe is a table per parameter group, get is aligned\n"
-    "name = value, set shows the values it changed and the new rev, list and presets are\n"
-    "tables; otherwise (or with --json) each reply is one line of JSON (the server's\n"
-    "reply object without the request id). A set that restarts the simulation and a\n"
-    "first frame older than 1 s are noted on stderr. Errors go to stderr as\n"
+    "name = value, set shows the values it changed and the new rev, preset load the\n"
+    "values that changed and what they were, list and presets are tables, create,\n"
+    "destroy, reset and preset save/delete one sentence; otherwise (or with --json) each\n"
+    "reply is one line of JSON (the server's reply object without the request id). A\n"
+    "set that restarts the simulation and a first frame older than 1 s are noted on\n"
+    "stderr. Errors go to stderr as\n"
     "\"fxctl: CODE: MESSAGE\" for server errors or \"fxctl: WHAT\" for transport errors.\n"
     "exit status: 0 success, 1 server or transport error, 2 usage error (bad URL too).\n"
     "environment: FXCTL_URL default URL; FXSTREAM_TOKEN, FXSTREAM_CA_FILE as above;\n"
@@ -350,9 +354,9 @@ static void fxctl_print_json(FILE *f, const cJSON *j)
     free(s);
 }
 
-/* Sends req and parses its reply: the reply object without its id, or NULL after printing the
- * error ("fxctl: code: message" or the transport's) on stderr. */
-static cJSON *fxctl_ask(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req)
+/* Sends req and parses its reply: the reply object without its id, or NULL (with `report`,
+ * after printing the error, "fxctl: code: message" or the transport's, on stderr). */
+static cJSON *fxctl_ask(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req, int report)
 {
     struct fxc_event ev;
     char err[512], *text = cJSON_PrintUnformatted(req);
@@ -360,54 +364,14 @@ static cJSON *fxctl_ask(struct fxc_client *c, const struct fxctl_opts *o, const 
     int r = text ? fxc_request(c, text, &ev, o->timeout_ms, err, sizeof err) : -1;
     if (!text) snprintf(err, sizeof err, "out of memory");
     if (!r && !(reply = cJSON_Parse(ev.json))) snprintf(err, sizeof err, "out of memory");
-    if (!reply) fprintf(stderr, "fxctl: %s\n", err);
+    if (!reply && report) fprintf(stderr, "fxctl: %s\n", err);
     cJSON_DeleteItemFromObjectCaseSensitive(reply, "id");
     fxc_event_free(&ev);
     free(text);
     return reply;
 }
 
-/* ---- subscribe --------------------------------------------------------------------------- */
-
-struct fxctl_sub {
-    const struct fxctl_opts *o;
-    const char *stream;
-    uint32_t channel;
-    long got;
-};
-
-static int fxctl_on_frame(struct fxctl_sub *s, const struct fxc_event *ev)
-{
-    char line[1024];
-    if (ev->channel != s->channel || (s->o->kind && ev->header.kind != s->o->kind)) return 0;
-    fxctl_frame_line(line, sizeof line, s->stream, ev);
-    printf("%s\n", line);
-    fflush(stdout);
-    if (!s->got++ && fxctl_age_ms(ev) > FXCTL_STALE_MS)
-        fprintf(stderr, "fxctl: note: the first frame is %.1f s old (the stream's newest, sent at once on subscribe: it "
-                        "only sends on change, or it is paused)\n", fxctl_age_ms(ev) / 1000);
-    return s->o->out_dir && fxctl_save_frame(s->o->out_dir, s->stream, ev, line) ? FXCTL_FAIL : 0;
-}
-
-/* Prints the stream's params events; fails when the stream goes away. */
-static int fxctl_on_event(struct fxctl_sub *s, const struct fxc_event *ev)
-{
-    if (!ev->stream || strcmp(ev->stream, s->stream)) return 0;
-    if (!strcmp(ev->op, "params")) {
-        printf("%s\n", ev->json);
-        fflush(stdout);
-    } else if (!strcmp(ev->op, "unsubscribed")) {
-        cJSON *j = cJSON_Parse(ev->json);
-        const char *why = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(j, "reason"));
-        fprintf(stderr, "fxctl: unsubscribed from stream \"%s\" (%s) after %ld of %ld frames\n", s->stream,
-                why ? why : "no reason given", s->got, s->o->frames);
-        cJSON_Delete(j);
-        return FXCTL_FAIL;
-    } else if (!strcmp(ev->op, "error")) {
-        fprintf(stderr, "fxctl: stream \"%s\" reported: %s\n", s->stream, ev->json);
-    }
-    return 0;
-}
+/* ---- subscribe and watch ------------------------------------------------------------- */
 
 static int fxctl_make_dir(const char *dir)
 {
@@ -416,32 +380,14 @@ static int fxctl_make_dir(const char *dir)
     return FXCTL_FAIL;
 }
 
-static int fxctl_subscribe(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *reply)
+/* After the subscribed reply: fxctl_sub.h. */
+static int fxctl_frames(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *reply)
 {
     const cJSON *ch = cJSON_GetObjectItemCaseSensitive(reply, "channel");
-    struct fxctl_sub s = { o, o->args[0], 0, 0 };
-    char err[512];
-    int r = 0;
-    if (!cJSON_IsNumber(ch)) {
-        fprintf(stderr, "fxctl: subscribed reply without a channel\n");
-        return FXCTL_FAIL;
-    }
-    s.channel = (uint32_t)ch->valuedouble;
-    while (!r && s.got < o->frames) {
-        struct fxc_event ev;
-        int n = fxc_poll(c, &ev, o->timeout_ms, err, sizeof err);
-        if (n <= 0) {
-            if (n == 0)
-                fprintf(stderr, "fxctl: timeout after %d ms waiting for frame %ld of %ld of \"%s\"\n",
-                        o->timeout_ms, s.got + 1, o->frames, s.stream);
-            else
-                fprintf(stderr, "fxctl: %s\n", err);
-            return FXCTL_FAIL;
-        }
-        r = ev.type == FXC_EVENT_FRAME ? fxctl_on_frame(&s, &ev) : fxctl_on_event(&s, &ev);
-        fxc_event_free(&ev);
-    }
-    return r;
+    struct fxctl_sub_opts so = { o->args[0], o->frames, o->kind, o->timeout_ms, o->out_dir };
+    if (cJSON_IsNumber(ch)) return fxctl_subscribe(c, &so, (uint32_t)ch->valuedouble) ? FXCTL_FAIL : 0;
+    fprintf(stderr, "fxctl: subscribed reply without a channel\n");
+    return FXCTL_FAIL;
 }
 
 /* After the list reply: prints created/destroyed events until o->count of them (each within
@@ -480,7 +426,7 @@ static const char *fxctl_effect_of(struct fxc_client *c, const struct fxctl_opts
 {
     cJSON *q = cJSON_CreateObject();
     cJSON_AddStringToObject(q, "op", "list");
-    *list = fxctl_ask(c, o, q);
+    *list = fxctl_ask(c, o, q, 0);
     cJSON_Delete(q);
     for (const cJSON *s = fxctl_first(*list, "streams"); s; s = s->next)
         if (!strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "stream")), stream))
@@ -489,7 +435,7 @@ static const char *fxctl_effect_of(struct fxc_client *c, const struct fxctl_opts
 }
 
 /* After an accepted set: a note on stderr naming the parameters whose change restarted the
- * simulation (describe's `update`). Best effort: a failed lookup prints its error, no note. */
+ * simulation (describe's `update`). Best effort: a failed lookup prints nothing. */
 static void fxctl_restart_note(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req)
 {
     const char *stream = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring;
@@ -498,7 +444,7 @@ static void fxctl_restart_note(struct fxc_client *c, const struct fxctl_opts *o,
     char names[512] = "";
     cJSON_AddStringToObject(q, "op", "describe");
     cJSON_AddStringToObject(q, "effect", effect ? effect : "");
-    if (effect && (desc = fxctl_ask(c, o, q)))
+    if (effect && (desc = fxctl_ask(c, o, q, 0)))
         for (const cJSON *p = fxctl_first(desc, "params"); p; p = p->next) {
             const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(p, "name"));
             if (cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(req, "params"), name) &&
@@ -513,10 +459,48 @@ static void fxctl_restart_note(struct fxc_client *c, const struct fxctl_opts *o,
 
 /* ---- main ------------------------------------------------------------------------------------ */
 
+/* A preset load on a terminal: the stream's parameters before it, for the diff; NULL else
+ * (or when the get fails: the load then reports the error). */
+static cJSON *fxctl_params_before(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req)
+{
+    cJSON *q, *reply;
+    if (!o->human || strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(req, "op")), "preset_load")) return NULL;
+    q = cJSON_CreateObject();
+    cJSON_AddStringToObject(q, "op", "get");
+    cJSON_AddStringToObject(q, "stream", cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(req, "stream")));
+    reply = fxctl_ask(c, o, q, 0);
+    cJSON_Delete(q);
+    return reply;
+}
+
+/* The names of the parameters whose values differ between before's and reply's documents. */
+static cJSON *fxctl_changed(const cJSON *before, const cJSON *reply)
+{
+    const cJSON *old = cJSON_GetObjectItemCaseSensitive(before, "params");
+    cJSON *names = cJSON_CreateObject();
+    for (const cJSON *p = fxctl_first(reply, "params"); p && names; p = p->next)
+        if (!cJSON_Compare(p, cJSON_GetObjectItemCaseSensitive(old, p->string), 1)) cJSON_AddTrueToObject(names, p->string);
+    return names;
+}
+
+/* Prints the reply: for people on a terminal (a set's values, a preset load's changes), else
+ * as one line of JSON. */
+static void fxctl_print_reply(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req,
+                              const cJSON *reply, const cJSON *before)
+{
+    const cJSON *only = !strcmp(cmd->name, "set") ? cJSON_GetObjectItemCaseSensitive(req, "params") : NULL;
+    cJSON *changed = before ? fxctl_changed(before, reply) : NULL;
+    if (!o->human ||
+        !fxctl_print_human(stdout, reply, changed ? changed : only, before ? cJSON_GetObjectItemCaseSensitive(before, "params") : NULL))
+        fxctl_print_json(stdout, reply);
+    fflush(stdout);
+    cJSON_Delete(changed);
+}
+
 static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req)
 {
     struct fxc_client *c;
-    cJSON *reply;
+    cJSON *reply, *before;
     char err[512];
     int r = 0;
     if (o->out_dir && fxctl_make_dir(o->out_dir)) return FXCTL_FAIL;
@@ -524,16 +508,16 @@ static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, co
         fprintf(stderr, "fxctl: %s\n", err);
         return r == -2 ? FXCTL_USAGE : FXCTL_FAIL;
     }
-    if (!(reply = fxctl_ask(c, o, req))) {
+    before = fxctl_params_before(c, o, req);
+    if (!(reply = fxctl_ask(c, o, req, 1))) {
         r = FXCTL_FAIL;
     } else {
-        const cJSON *only = !strcmp(cmd->name, "set") ? cJSON_GetObjectItemCaseSensitive(req, "params") : NULL;
-        if (!o->human || !fxctl_print_human(stdout, reply, only)) fxctl_print_json(stdout, reply);
-        fflush(stdout);
+        fxctl_print_reply(o, cmd, req, reply, before);
         if (!strcmp(cmd->name, "set")) fxctl_restart_note(c, o, req);
-        if (!strcmp(cmd->name, "subscribe")) r = fxctl_subscribe(c, o, reply);
+        if (!strcmp(cmd->name, "subscribe")) r = fxctl_frames(c, o, reply);
         if (!strcmp(cmd->name, "watch")) r = fxctl_watch(c, o);
     }
+    cJSON_Delete(before);
     cJSON_Delete(reply);
     fxc_close(c);
     return r;
