@@ -29,13 +29,6 @@
 #define FXC_REARM_US 1000  /* poll wait after a tick fired before lws polled */
 #define FXC_STREAM_MAX 64  /* a stream name and its NUL (PROTOCOL.md §3.10: 63 characters) */
 
-/* A request waiting for the socket: LWS_PRE bytes, then the text. */
-struct fxc_out {
-    struct fxc_out *next;
-    size_t len;
-    unsigned char data[];
-};
-
 /* An event and what its pointers point into. */
 struct fxc_node {
     struct fxc_node *next;
@@ -64,8 +57,7 @@ struct fxc_client {
     uint64_t rx_bytes;             /* bytes received so far: fxc_poll's progress */
 
     struct fxws_rx rx;             /* message being reassembled */
-    struct fxc_out *out_head, *out_tail;
-    int n_out;
+    struct fxws_outq out;          /* requests waiting for the socket */
 
     int64_t next_id;
     int64_t want_id;               /* the reply fxc_wait waits for, 0: none */
@@ -320,26 +312,6 @@ static void fxc_on_connect_error(struct fxc_client *c, const char *why)
     fxws_connect_error(&c->url, c->tcp_up, w, e, c->err, sizeof c->err);
 }
 
-/* Writes the oldest waiting request; asks for another turn while more wait. */
-static int fxc_on_writeable(struct fxc_client *c, struct lws *wsi)
-{
-    struct fxc_out *o = c->out_head;
-    int n;
-    if (c->closing) return -1; /* lws_close_reason was set: lws sends the close frame */
-    if (!o) return 0;
-    c->out_head = o->next;
-    if (!c->out_head) c->out_tail = NULL;
-    c->n_out--;
-    n = lws_write(wsi, o->data + LWS_PRE, o->len, LWS_WRITE_TEXT);
-    free(o);
-    if (n < 0) {
-        fxws_set_err(c->err, sizeof c->err, "write to server failed");
-        return -1;
-    }
-    if (c->out_head) lws_callback_on_writable(wsi);
-    return 0;
-}
-
 static void fxc_on_closed(struct fxc_client *c)
 {
     if (!c->err[0]) fxws_set_err(c->err, sizeof c->err, "connection to %s:%d lost", c->url.host, c->url.port);
@@ -364,12 +336,13 @@ static int fxc_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         return fxws_check_subprotocol(&c->url, wsi, c->err, sizeof c->err);
     case LWS_CALLBACK_CLIENT_ESTABLISHED:
         c->established = 1;
-        if (c->out_head) lws_callback_on_writable(wsi);
+        if (c->out.head) lws_callback_on_writable(wsi);
         return 0;
     case LWS_CALLBACK_CLIENT_RECEIVE:
         return fxc_on_receive(c, wsi, in, len);
     case LWS_CALLBACK_CLIENT_WRITEABLE:
-        return fxc_on_writeable(c, wsi);
+        if (c->closing) return -1; /* lws_close_reason was set: lws sends the close frame */
+        return fxws_outq_write(&c->out, wsi, c->err, sizeof c->err);
     case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE:
         fxws_peer_close(in, len, &code, c->err, sizeof c->err, NULL, 0);
         return 0;
@@ -473,11 +446,7 @@ static void fxc_free(struct fxc_client *c)
         lws_sul_cancel(&c->tick);
         lws_context_destroy(c->ctx);
     }
-    while (c->out_head) {
-        struct fxc_out *o = c->out_head;
-        c->out_head = o->next;
-        free(o);
-    }
+    fxws_outq_free(&c->out);
     fxc_queue_free(c);
     fxc_node_free(c->reply);
     fxws_rx_free(&c->rx);
@@ -557,32 +526,21 @@ void fxc_close(struct fxc_client *c)
 /* Gives req (consumed) a fresh id and queues its text. Returns the id, or -1. */
 static int64_t fxc_send_obj(struct fxc_client *c, cJSON *req, char *eb, size_t el)
 {
-    struct fxc_out *o = NULL;
     char *text = NULL;
-    size_t n = 0;
+    int ok = 0;
     if (c->state == FXC_CLOSED || c->closing) {
         fxws_set_err(eb, el, "%s", c->err[0] ? c->err : "connection closed");
-    } else if (c->n_out >= FXC_MAX_QUEUED_SENDS) {
+    } else if (c->out.n >= FXC_MAX_QUEUED_SENDS) {
         fxws_set_err(eb, el, "%d requests already wait to be sent", FXC_MAX_QUEUED_SENDS);
     } else {
         cJSON_DeleteItemFromObjectCaseSensitive(req, "id");
-        if (cJSON_AddNumberToObject(req, "id", (double)(c->next_id + 1)) && (text = cJSON_PrintUnformatted(req)))
-            n = strlen(text);
-        if (!text || !(o = malloc(sizeof *o + LWS_PRE + n))) fxws_set_err(eb, el, "out of memory");
+        ok = cJSON_AddNumberToObject(req, "id", (double)(c->next_id + 1)) && (text = cJSON_PrintUnformatted(req)) &&
+             !fxws_outq_push(&c->out, text, strlen(text));
+        if (!ok) fxws_set_err(eb, el, "out of memory");
     }
     cJSON_Delete(req);
-    if (!o) {
-        free(text);
-        return -1;
-    }
-    o->next = NULL;
-    o->len = n;
-    memcpy(o->data + LWS_PRE, text, n);
     free(text);
-    if (c->out_tail) c->out_tail->next = o;
-    else c->out_head = o;
-    c->out_tail = o;
-    c->n_out++;
+    if (!ok) return -1;
     if (c->established && c->wsi) lws_callback_on_writable(c->wsi);
     return ++c->next_id;
 }

@@ -36,12 +36,6 @@ struct fxp_target {
     int probed, probe_errno; /* fxws_probe_errno done once per target */
 };
 
-struct fxp_out {
-    struct fxp_out *next;
-    size_t len;
-    unsigned char data[]; /* LWS_PRE, then the text */
-};
-
 #define FXP_CONN_MAGIC 0x66787063u /* "fxpc": tells our conns from other user pointers */
 
 struct fxp_conn {
@@ -53,8 +47,7 @@ struct fxp_conn {
     struct fxp_conn *prev, *next;  /* pool->conns */
     struct fxp_conn *next_ended;   /* pool->ended */
     struct fxws_rx rx;
-    struct fxp_out *out_head, *out_tail;
-    int n_out;
+    struct fxws_outq out;
     unsigned tcp_up : 1, established : 1, hello : 1, closing : 1, ended : 1, by_client : 1;
     int close_code;
     char why[200];
@@ -96,11 +89,7 @@ static void fxp_conn_free(struct fxp_conn *c)
     if (c->prev) c->prev->next = c->next;
     else p->conns = c->next;
     if (c->next) c->next->prev = c->prev;
-    while (c->out_head) {
-        struct fxp_out *o = c->out_head;
-        c->out_head = o->next;
-        free(o);
-    }
+    fxws_outq_free(&c->out);
     fxws_rx_free(&c->rx);
     p->live--;
     c->magic = 0;
@@ -190,25 +179,6 @@ static void fxp_on_connect_error(struct fxp_conn *c, const char *why)
     fxws_connect_error(&t->u, c->tcp_up, w, e, c->why, sizeof c->why);
 }
 
-static int fxp_on_writeable(struct fxp_conn *c, struct lws *wsi)
-{
-    struct fxp_out *o = c->out_head;
-    int n;
-    if (c->closing) return -1; /* lws_close_reason was set: lws sends the close frame */
-    if (!o) return 0;
-    c->out_head = o->next;
-    if (!c->out_head) c->out_tail = NULL;
-    c->n_out--;
-    n = lws_write(wsi, o->data + LWS_PRE, o->len, LWS_WRITE_TEXT);
-    free(o);
-    if (n < 0) {
-        fxws_set_err(c->why, sizeof c->why, "write to server failed");
-        return -1;
-    }
-    if (c->out_head) lws_callback_on_writable(wsi);
-    return 0;
-}
-
 static int fxp_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
 {
     struct fxp_conn *c = user ? user : (wsi ? lws_get_opaque_user_data(wsi) : NULL);
@@ -228,12 +198,13 @@ static int fxp_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         c->target->probed = 0;
         c->pool->stats.established++;
         if (c->closing) lws_callback_on_writable(wsi);
-        else if (c->out_head) lws_callback_on_writable(wsi);
+        else if (c->out.head) lws_callback_on_writable(wsi);
         return 0;
     case LWS_CALLBACK_CLIENT_RECEIVE:
         return fxp_on_receive(c, wsi, in, len);
     case LWS_CALLBACK_CLIENT_WRITEABLE:
-        return fxp_on_writeable(c, wsi);
+        if (c->closing) return -1; /* lws_close_reason was set: lws sends the close frame */
+        return fxws_outq_write(&c->out, wsi, c->why, sizeof c->why);
     case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE:
         if (!c->closing)
             fxws_peer_close(in, len, &c->close_code, c->why, sizeof c->why, NULL, 0);
@@ -400,16 +371,7 @@ int fxp_connect(struct fxp_pool *p, const char *url, void *user, struct fxp_conn
 
 int fxp_send_text(struct fxp_conn *c, const char *text, size_t len)
 {
-    struct fxp_out *o;
-    if (c->ended || c->closing || c->n_out >= FXP_MAX_QUEUED) return -1;
-    if (!(o = malloc(sizeof *o + LWS_PRE + len))) return -1;
-    o->next = NULL;
-    o->len = len;
-    memcpy(o->data + LWS_PRE, text, len);
-    if (c->out_tail) c->out_tail->next = o;
-    else c->out_head = o;
-    c->out_tail = o;
-    c->n_out++;
+    if (c->ended || c->closing || c->out.n >= FXP_MAX_QUEUED || fxws_outq_push(&c->out, text, len)) return -1;
     if (c->established && c->wsi) lws_callback_on_writable(c->wsi);
     return 0;
 }

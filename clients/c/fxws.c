@@ -194,6 +194,56 @@ void fxws_peer_close(const uint8_t *in, size_t len, int *code, char *out, size_t
     else fxws_set_err(reason_out, reason_len, "%s", "");
 }
 
+/* ---- outgoing text ------------------------------------------------------------ */
+
+struct fxws_out {
+    struct fxws_out *next;
+    size_t len;
+    unsigned char data[]; /* LWS_PRE, then the text */
+};
+
+int fxws_outq_push(struct fxws_outq *q, const char *text, size_t len)
+{
+    struct fxws_out *o = malloc(sizeof *o + LWS_PRE + len);
+    if (!o) return -1;
+    o->next = NULL;
+    o->len = len;
+    memcpy(o->data + LWS_PRE, text, len);
+    if (q->tail) q->tail->next = o;
+    else q->head = o;
+    q->tail = o;
+    q->n++;
+    return 0;
+}
+
+int fxws_outq_write(struct fxws_outq *q, struct lws *wsi, char *err, size_t errlen)
+{
+    struct fxws_out *o = q->head;
+    int n;
+    if (!o) return 0;
+    q->head = o->next;
+    if (!q->head) q->tail = NULL;
+    q->n--;
+    n = lws_write(wsi, o->data + LWS_PRE, o->len, LWS_WRITE_TEXT);
+    free(o);
+    if (n < 0) {
+        fxws_set_err(err, errlen, "write to server failed");
+        return -1;
+    }
+    if (q->head) lws_callback_on_writable(wsi);
+    return 0;
+}
+
+void fxws_outq_free(struct fxws_outq *q)
+{
+    while (q->head) {
+        struct fxws_out *o = q->head;
+        q->head = o->next;
+        free(o);
+    }
+    memset(q, 0, sizeof *q);
+}
+
 /* ---- reassembly ------------------------------------------------------------- */
 
 int fxws_rx_append(struct fxws_rx *rx, struct lws *wsi, const void *in, size_t len, size_t max_bytes, size_t keep,

@@ -5,7 +5,8 @@
  * fxload's) speak the same handshake to the same server, so what they must agree on lives here
  * once: parsing ws:// URLs, resolving and diagnosing failed connects, the checks and
  * one-line messages of the handshake (subprotocol fxstream.v1), decoding the server's
- * close frame, reassembling fragmented messages under a size bound, and keeping
+ * close frame, queueing outgoing text, reassembling fragmented messages under a size bound,
+ * and keeping
  * libwebsockets quiet unless fxc_set_log asked otherwise (its one global). Everything else
  * here is plain functions over caller-owned structs: no lws context. */
 #ifndef FXWS_H
@@ -97,6 +98,22 @@ const char *fxws_scheme(const struct fxws_url *u);
  * LWS_CALLBACK_CLIENT_APPEND_HANDSHAKE_HEADER (its in/len). token NULL or "": nothing.
  * Returns 0, or -1 when it does not fit (the handshake then fails). */
 int fxws_append_auth(struct lws *wsi, void *in, size_t len, const char *token);
+
+/* Text messages waiting for the socket, oldest first: each one lws_write in its own
+ * writeable callback, as lws wants. */
+struct fxws_out;
+struct fxws_outq {
+    struct fxws_out *head, *tail;
+    int n;
+};
+
+/* Queues a copy of text (len bytes). 0, or -1 when memory runs out. */
+int fxws_outq_push(struct fxws_outq *q, const char *text, size_t len);
+/* From LWS_CALLBACK_CLIENT_WRITEABLE: writes the oldest message to wsi and asks for another
+ * turn while more wait. 0, or -1 with "write to server failed" in err (the callback returns
+ * it: lws closes the connection). */
+int fxws_outq_write(struct fxws_outq *q, struct lws *wsi, char *err, size_t errlen);
+void fxws_outq_free(struct fxws_outq *q);
 
 /* Reassembly of one message from its fragments. */
 struct fxws_rx {
