@@ -651,6 +651,10 @@ int fxc_wait(struct fxc_client *c, int64_t id, struct fxc_event *reply, int time
     struct fxc_node *n, *prev = NULL;
     int r = 1;
     memset(reply, 0, sizeof *reply);
+    if (id <= 0 || id > c->next_id) {
+        fxws_set_err(eb, el, "no request has id %lld", (long long)id);
+        return -1;
+    }
     for (n = c->head; n && !(n->ev.type == FXC_EVENT_TEXT && n->ev.id == id); prev = n, n = n->next) {}
     if (n) {
         c->reply = fxc_queue_unlink(c, prev, n);

@@ -200,8 +200,8 @@ FXC_API int fxc_poll(struct fxc_client *c, struct fxc_event *ev, int timeout_ms,
 
 /* Waits up to timeout_ms (< 0: no limit) for the reply to request `id`, queueing what else
  * arrives. Returns 0 with the reply in *reply, 1 when the server answered with an error
- * (*reply holds it, errbuf "code: message (param P)"), -1 on timeout or a closed connection
- * (*reply zeroed; a reply that comes later arrives through fxc_poll). */
+ * (*reply holds it, errbuf "code: message (param P)"), -1 on timeout, a closed connection
+ * or an id no request got (*reply zeroed; a reply that comes later arrives through fxc_poll). */
 FXC_API int fxc_wait(struct fxc_client *c, int64_t id, struct fxc_event *reply, int timeout_ms, char *errbuf,
                      size_t errlen);
 

@@ -156,6 +156,9 @@ static void check_requests(struct fxc_client *c, int64_t rev)
     check(fxc_send(c, "[1]", err, sizeof err) == -1 && strstr(err, "\"op\""), "fxc_send of an array: %s", err);
     check(fxc_set(c, "energy", "[1]", err, sizeof err) == -1 && strstr(err, "object"), "fxc_set of an array: %s", err);
     check(fxc_subscribe(c, NULL, 0, err, sizeof err) == -1 && strstr(err, "no stream"), "fxc_subscribe(NULL): %s", err);
+    check(fxc_wait(c, -1, &ev, 1000, err, sizeof err) == -1 && fxc_wait(c, 1000, &ev, 1000, err, sizeof err) == -1 &&
+              strstr(err, "no request has id 1000"),
+          "fxc_wait for an id no request got: -1 at once (%s)", err);
     id = fxc_get(c, "energy", err, sizeof err);
     r = fxc_wait(c, id, &ev, 10000, err, sizeof err);
     check(r == 0 && ev.rev == rev + 1, "the connection is still usable after refused input");

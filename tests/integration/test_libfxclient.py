@@ -5,7 +5,7 @@ PKG_CONFIG_SYSROOT_DIR) gives flags into D only; the shared library exports fxcl
 FXC_API functions and nothing else; the header compiles as C99 and as C++. Built from those
 installed files alone: clients/c/examples/flame_count.c subscribes to a real daemon's flame
 and prints particle counts that match the frame headers, with nothing on stderr (quiet by
-default), linked to the shared library and to the static one; the static library links into
+default; clean under valgrind), linked to the shared library and to the static one; the static library links into
 a shared object (a game plugin needs position-independent code); README's smallest program
 compiles and runs; tests/integration/fxc_api_check.c checks the API call by call."""
 import os
@@ -118,6 +118,10 @@ def check_example(t, ins, tmp, daemon):
     t.check(r.stderr == "", "nothing on stderr: quiet by default, no libwebsockets banner (%r)" % r.stderr[:200])
     poll = re.search(r"longest fxc_poll call: ([0-9.]+) ms", r.stdout)
     print("info example's longest fxc_poll(..., 0, ...) call: %s ms (wall clock)" % (poll.group(1) if poll else "?"))
+    r = run(["valgrind", "-q", "--leak-check=full", "--errors-for-leak-kinds=definite,indirect", "--error-exitcode=9",
+             exe, daemon.url, "5"], env=env, timeout=120)
+    ok = r.returncode == 0 and len(frame_lines(r.stdout)) == 5 and r.stderr == ""
+    t.check(ok, "under valgrind: no memory error, nothing leaked" + ("" if ok else ": exit %d %s" % (r.returncode, r.stderr[-800:])))
     r = run([exe, "ws://127.0.0.1:1/v1/ws", "1"], env=env, timeout=30)
     t.check(r.returncode == 1 and "connection refused by 127.0.0.1:1" in r.stderr,
             "against a closed port it says so and exits 1 (%s)" % r.stderr.strip())
