@@ -100,7 +100,11 @@ FXC_API void fxc_set_log(int levels, void (*emit)(int level, const char *line));
 
 struct fxc_client;
 
-enum fxc_state { FXC_CONNECTING = 0, FXC_OPEN = 1, FXC_CLOSED = 2 };
+enum fxc_state {
+    FXC_CONNECTING = 0, /* fxc_open returned; the hello has not arrived yet */
+    FXC_OPEN = 1,       /* the server's hello arrived */
+    FXC_CLOSED = 2,     /* ended or never came up: fxc_error says why */
+};
 
 /* Optional connection settings (PROTOCOL.md §3.11, README "Security"). Strings are copied. */
 struct fxc_options {
