@@ -24,11 +24,21 @@ LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
 PROTO_SRC   := $(wildcard protocol/*.c)
 SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c)) $(PROTO_SRC)
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
-FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c
+FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c clients/c/fxctl_save.c clients/c/fxctl_sub.c clients/c/png.c
 FXLOAD_SRC  := $(wildcard clients/c/fxload*.c)
 CLIENT_MAIN := $(FXCTL_SRC) $(FXLOAD_SRC)
+# libfxclient: every other clients/c/*.c and the codecs, compiled once position-independent
+# with hidden visibility into both libraries: the static one links into fxctl, fxload, the
+# tests and a game plugin (a shared object itself); the shared one exports only fxclient.h's
+# FXC_API (soname libfxclient.so.MAJOR, the version from fxclient.h).
 CLIENT_SRC  := $(filter-out $(CLIENT_MAIN),$(wildcard clients/c/*.c)) $(PROTO_SRC)
-CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/obj/%.o)
+CLIENT_OBJ  := $(CLIENT_SRC:%.c=$(BUILD)/pic/%.o)
+FXC_VERSION := $(shell sed -n 's/^\#define FXC_VERSION "\(.*\)"$$/\1/p' clients/c/fxclient.h)
+FXC_SOMAJOR := $(firstword $(subst ., ,$(FXC_VERSION)))
+CLIENT_SO   := $(BUILD)/libfxclient.so.$(FXC_VERSION)
+CLIENT_LIBS := $(shell pkg-config --libs libwebsockets libcjson libzstd 2>/dev/null) -lm -lpthread
+# What make install puts in PREFIX/include/fxclient: the public API and the headers it includes.
+CLIENT_HDR  := clients/c/fxclient.h protocol/fxs_frame.h protocol/fxs_bytes.h
 REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
 UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
 BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))
@@ -50,7 +60,7 @@ NPM_STAMP   := node_modules/.package-lock.json
 
 .PHONY: all deps run test bench screenshots clean unit web fuzz fuzz-libs install uninstall pkgs-present
 .SECONDARY: # keep object files of tests and benches between runs
-all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(WEB_OUT)
+all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(CLIENT_SO) $(WEB_OUT)
 
 deps:
 	@deploy/install-deps.sh
@@ -96,12 +106,17 @@ screenshots: deps
 unit: $(UNIT_BIN)
 
 # make install [PREFIX=/usr/local] [DESTDIR=...] [SYSCONFDIR=PREFIX/etc]: the three programs,
-# the web client (as the daemon serves it: the pages and the esbuild bundle, without its
+# libfxclient (shared and static, its headers in PREFIX/include/fxclient, fxclient.pc), the
+# web client (as the daemon serves it: the pages and the esbuild bundle, without its
 # sources), the systemd unit and an example configuration that points the daemon there.
 # Kernels are embedded in fxstreamd, nothing else to install. An existing config is kept.
 # Paths in deploy/fxstreamd.service and deploy/fxstreamd.json are written for /usr/local.
+# Installed by root without DESTDIR, ldconfig then finds the new shared library.
 PREFIX     ?= /usr/local
 BINDIR     ?= $(PREFIX)/bin
+LIBDIR     ?= $(PREFIX)/lib
+INCLUDEDIR ?= $(PREFIX)/include
+PKGCONFIGDIR ?= $(LIBDIR)/pkgconfig
 SYSCONFDIR ?= $(PREFIX)/etc
 FXDATADIR  ?= $(PREFIX)/share/fxstream
 DOCDIR     ?= $(PREFIX)/share/doc/fxstream
@@ -112,8 +127,17 @@ FX_PATHS   := -e 's|/usr/local/bin|$(BINDIR)|g' -e 's|/usr/local/etc|$(SYSCONFDI
 
 install: all
 	install -d $(DESTDIR)$(BINDIR) $(DESTDIR)$(FXDATADIR)/web $(DESTDIR)$(SYSCONFDIR)/fxstream \
-	    $(DESTDIR)$(UNITDIR) $(DESTDIR)$(DOCDIR)
+	    $(DESTDIR)$(UNITDIR) $(DESTDIR)$(DOCDIR) $(DESTDIR)$(LIBDIR) $(DESTDIR)$(INCLUDEDIR)/fxclient \
+	    $(DESTDIR)$(PKGCONFIGDIR)
 	install -m 0755 $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(DESTDIR)$(BINDIR)/
+	install -m 0755 $(CLIENT_SO) $(DESTDIR)$(LIBDIR)/
+	ln -sf libfxclient.so.$(FXC_VERSION) $(DESTDIR)$(LIBDIR)/libfxclient.so.$(FXC_SOMAJOR)
+	ln -sf libfxclient.so.$(FXC_SOMAJOR) $(DESTDIR)$(LIBDIR)/libfxclient.so
+	install -m 0644 $(BUILD)/libfxclient.a $(DESTDIR)$(LIBDIR)/
+	install -m 0644 $(CLIENT_HDR) $(DESTDIR)$(INCLUDEDIR)/fxclient/
+	sed -e 's|@VERSION@|$(FXC_VERSION)|' -e 's|@LIBDIR@|$(LIBDIR)|' -e 's|@INCLUDEDIR@|$(INCLUDEDIR)|' \
+	    clients/c/fxclient.pc.in > $(DESTDIR)$(PKGCONFIGDIR)/fxclient.pc
+	@if [ -z "$(DESTDIR)" ] && [ "$$(id -u)" -eq 0 ] && command -v ldconfig >/dev/null; then ldconfig; fi
 	install -m 0644 $(WEB_FILES) $(DESTDIR)$(FXDATADIR)/web/
 	cp -R clients/web/dist $(DESTDIR)$(FXDATADIR)/web/ && chmod -R u=rwX,go=rX $(DESTDIR)$(FXDATADIR)/web/dist
 	sed $(FX_PATHS) deploy/fxstreamd.service > $(DESTDIR)$(UNITDIR)/fxstreamd.service
@@ -128,8 +152,9 @@ install: all
 # Keeps SYSCONFDIR/fxstream (the configuration and tokens are the operator's).
 uninstall:
 	rm -f $(DESTDIR)$(BINDIR)/fxstreamd $(DESTDIR)$(BINDIR)/fxctl $(DESTDIR)$(BINDIR)/fxload \
-	    $(DESTDIR)$(UNITDIR)/fxstreamd.service
-	rm -rf $(DESTDIR)$(FXDATADIR) $(DESTDIR)$(DOCDIR)
+	    $(DESTDIR)$(UNITDIR)/fxstreamd.service $(DESTDIR)$(LIBDIR)/libfxclient.so* $(DESTDIR)$(LIBDIR)/libfxclient.a \
+	    $(DESTDIR)$(PKGCONFIGDIR)/fxclient.pc
+	rm -rf $(DESTDIR)$(FXDATADIR) $(DESTDIR)$(DOCDIR) $(DESTDIR)$(INCLUDEDIR)/fxclient
 
 clean:
 	rm -rf $(BUILD) clients/web/dist
@@ -146,6 +171,10 @@ $(BUILD)/obj/%.o: %.c | pkgs-present
 	@mkdir -p $(@D)
 	$(CC_ALL) -c $< -o $@
 
+$(BUILD)/pic/%.o: %.c | pkgs-present
+	@mkdir -p $(@D)
+	$(CC_ALL) -fPIC -fvisibility=hidden -c $< -o $@
+
 # make all (or a single target) does not install: name what is missing instead of a compiler error.
 pkgs-present:
 	@pkg-config --exists $(PKGS) OpenEXR || { deploy/install-deps.sh --check; exit 1; }
@@ -157,6 +186,9 @@ $(BUILD)/libfxserver.a: $(SERVER_OBJ)
 $(BUILD)/libfxclient.a: $(CLIENT_OBJ)
 	@rm -f $@
 	ar rcs $@ $^
+
+$(CLIENT_SO): $(CLIENT_OBJ)
+	$(LINK) -shared -Wl,-soname,libfxclient.so.$(FXC_SOMAJOR) -Wl,--no-undefined $^ -o $@ $(CLIENT_LIBS)
 
 $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)

@@ -33,6 +33,12 @@ enum fxs_kind {
 #define FXS_MAX_FPS_MIN 0.01
 #define FXS_MAX_FPS_MAX 1000.0
 
+/* Codecs of kind 1 (particles) payloads (PROTOCOL.md §7.5; protocol/fxs_particles.h). */
+enum fxs_particle_codec {
+    FXS_CODEC_PARTICLES = 2,        /* one block */
+    FXS_CODEC_PARTICLES_BLOCKS = 3, /* several blocks back to back (§7.5.8), read alike */
+};
+
 /* Codecs of kind 2 (texture) payloads. */
 enum fxs_texture_codec {
     FXS_CODEC_EXR = 1, /* payload is a complete OpenEXR file */

@@ -78,12 +78,24 @@ size_t fxs_lut_encode(const struct fxs_lut_info *info, struct fxs_lut_product *p
     return n;
 }
 
-int fxs_lut_entry(const uint8_t *p, size_t len, int i, struct fxs_lut_product *out, char *msg, size_t cap)
+/* Checks the container's magic and that its directory lies inside the payload: the directory's
+ * offset, entry count and entry size, or -1 with msg. */
+static int lut_directory(const uint8_t *p, size_t len, uint32_t *hb, uint32_t *count, uint32_t *eb, char *msg,
+                         size_t cap)
 {
     if (len < 12 || memcmp(p, FXS_LUT_MAGIC, 4)) return snprintf(msg, cap, "not an FXL1 container"), -1;
-    uint32_t hb = fxs_get_u16(p + 6), count = fxs_get_u16(p + 8), eb = fxs_get_u16(p + 10);
-    if (hb < FXS_LUT_HEADER_BYTES || eb < 48 || hb + (size_t)count * eb > len)
+    *hb = fxs_get_u16(p + 6);
+    *count = fxs_get_u16(p + 8);
+    *eb = fxs_get_u16(p + 10);
+    if (*hb < FXS_LUT_HEADER_BYTES || *eb < 48 || *hb + (size_t)*count * *eb > len)
         return snprintf(msg, cap, "container directory runs past the payload"), -1;
+    return 0;
+}
+
+int fxs_lut_entry(const uint8_t *p, size_t len, int i, struct fxs_lut_product *out, char *msg, size_t cap)
+{
+    uint32_t hb, count, eb;
+    if (lut_directory(p, len, &hb, &count, &eb, msg, cap)) return -1;
     if (i < 0 || (uint32_t)i >= count) return snprintf(msg, cap, "no product %d", i), -1;
     const uint8_t *e = p + hb + (size_t)i * eb;
     memset(out, 0, sizeof *out);
@@ -103,20 +115,61 @@ int fxs_lut_entry(const uint8_t *p, size_t len, int i, struct fxs_lut_product *o
     return (int)count;
 }
 
-uint8_t *fxs_lut_texels(const uint8_t *p, size_t len, const struct fxs_lut_product *e, char *msg, size_t cap)
+int fxs_lut_header(const uint8_t *p, size_t len, struct fxs_lut_info *info, char *msg, size_t cap)
+{
+    uint32_t hb, count, eb;
+    if (lut_directory(p, len, &hb, &count, &eb, msg, cap)) return -1;
+    if (fxs_get_u16(p + 4) != FXS_LUT_VERSION)
+        return snprintf(msg, cap, "unsupported FXL1 version %u", (unsigned)fxs_get_u16(p + 4)), -1;
+    info->lattice = fxs_get_u32(p + 12);
+    info->tile_h = fxs_get_f32(p + 16);
+    info->lens_radius = fxs_get_f32(p + 20);
+    info->refractive_index = fxs_get_f32(p + 24);
+    info->pigment_depth = fxs_get_f32(p + 28);
+    info->max_passes = fxs_get_u32(p + 32);
+    info->cells = fxs_get_u32(p + 36);
+    info->dirs = fxs_get_u32(p + 40);
+    info->gutter = fxs_get_u32(p + 44);
+    info->supersample = fxs_get_u32(p + 48);
+    return (int)count;
+}
+
+int fxs_lut_texels_into(const uint8_t *p, size_t len, const struct fxs_lut_product *e, uint8_t *out, size_t cap,
+                        char *msg, size_t msgcap)
 {
     if (e->format != FXS_LUT_FORMAT_RGBA8 || e->codec != FXS_LUT_CODEC_ZSTD || (uint64_t)e->width * e->height * 4 != e->raw) {
-        snprintf(msg, cap, "product %s: unsupported format %u / codec %u", e->name, e->format, e->codec);
-        return NULL;
+        snprintf(msg, msgcap, "product %s: unsupported format %u / codec %u", e->name, e->format, e->codec);
+        return -1;
+    }
+    if (e->raw > FXS_LUT_MAX_RAW) {
+        snprintf(msg, msgcap, "product %s: %u bytes of texels, over the limit of %u", e->name, e->raw, FXS_LUT_MAX_RAW);
+        return -1;
     }
     if ((size_t)e->offset + e->stored > len) {
-        snprintf(msg, cap, "product %s runs past the payload", e->name);
-        return NULL;
+        snprintf(msg, msgcap, "product %s runs past the payload", e->name);
+        return -1;
     }
-    uint8_t *out = malloc(e->raw ? e->raw : 1);
-    size_t n = out ? ZSTD_decompress(out, e->raw, p + e->offset, e->stored) : 0;
-    if (!out || ZSTD_isError(n) || n != e->raw) {
-        snprintf(msg, cap, "product %s: %s", e->name, out && ZSTD_isError(n) ? ZSTD_getErrorName(n) : "size mismatch");
+    unsigned long long content = ZSTD_getFrameContentSize(p + e->offset, e->stored);
+    if (content == ZSTD_CONTENTSIZE_ERROR || (content != ZSTD_CONTENTSIZE_UNKNOWN && content != e->raw)) {
+        snprintf(msg, msgcap, "product %s: %s", e->name, content == ZSTD_CONTENTSIZE_ERROR ? "not a zstd frame"
+                                                                                          : "zstd frame of another size");
+        return -1;
+    }
+    if (!out || cap < e->raw) return 1;
+    size_t n = ZSTD_decompress(out, e->raw, p + e->offset, e->stored);
+    if (ZSTD_isError(n) || n != e->raw) {
+        snprintf(msg, msgcap, "product %s: %s", e->name, ZSTD_isError(n) ? ZSTD_getErrorName(n) : "size mismatch");
+        return -1;
+    }
+    return 0;
+}
+
+uint8_t *fxs_lut_texels(const uint8_t *p, size_t len, const struct fxs_lut_product *e, char *msg, size_t cap)
+{
+    uint8_t *out = NULL;
+    if (fxs_lut_texels_into(p, len, e, NULL, 0, msg, cap) < 0) return NULL; /* checked before allocating */
+    if (!(out = malloc(e->raw ? e->raw : 1))) snprintf(msg, cap, "product %s: out of memory", e->name);
+    if (out && fxs_lut_texels_into(p, len, e, out, e->raw ? e->raw : 1, msg, cap)) {
         free(out);
         return NULL;
     }

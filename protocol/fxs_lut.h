@@ -17,6 +17,9 @@
 #define FXS_LUT_ENTRY_BYTES 64
 #define FXS_LUT_FORMAT_RGBA8 1
 #define FXS_LUT_CODEC_ZSTD 1
+/* Most texels of one product a decoder inflates (the largest table, lut_dirs 64 x (lut_cells
+ * 64 + 2) squared, is 71 MB): a few kB of zstd could otherwise ask for gigabytes. */
+#define FXS_LUT_MAX_RAW (256u << 20)
 
 /* The container header's fields after the directory sizes. */
 struct fxs_lut_info {
@@ -44,6 +47,13 @@ size_t fxs_lut_encode(const struct fxs_lut_info *info, struct fxs_lut_product *p
 /* Reads entry i of a container (0..count-1). Returns the entry count (>= 0), or -1 with msg
  * when the container is malformed or i is out of range. */
 int fxs_lut_entry(const uint8_t *p, size_t len, int i, struct fxs_lut_product *out, char *msg, size_t cap);
+/* Reads the container header into info. Returns the entry count (>= 0), or -1 with msg when
+ * the container is malformed or of another version. */
+int fxs_lut_header(const uint8_t *p, size_t len, struct fxs_lut_info *info, char *msg, size_t cap);
+/* Decompresses a product into out (cap bytes). Returns 0; 1 when out is NULL or smaller than
+ * e->raw (nothing written); -1 with msg when the entry or its data is malformed. */
+int fxs_lut_texels_into(const uint8_t *p, size_t len, const struct fxs_lut_product *e, uint8_t *out, size_t cap,
+                        char *msg, size_t msgcap);
 /* Decompresses a product into a malloc'ed buffer of raw texels; NULL with msg on error. */
 uint8_t *fxs_lut_texels(const uint8_t *p, size_t len, const struct fxs_lut_product *e, char *msg, size_t cap);
 

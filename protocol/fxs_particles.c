@@ -1269,7 +1269,7 @@ static inline void fxs_pt_dec_out(const struct fxs_pt_frame *f, struct fxs_parti
 {
     for (int a = 0; a < 3; a++) p->xyz[3 * j + a] = (float)(f->lo[a] + q[3 * j + a] * f->step[a]);
     p->temp[j] = (float)(f->lo[3] + t * f->step[3]);
-    p->fuel[j] = (float)(f->lo[4] + fu * f->step[4]);
+    if (p->fuel) p->fuel[j] = (float)(f->lo[4] + fu * f->step[4]);
 }
 
 static int fxs_pt_dec_attrs0(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
@@ -1362,7 +1362,7 @@ static int fxs_pt_dec_vel(struct fxs_pt_dec *d, struct fxs_particles *p, int32_t
             c[a] = (int32_t)v;
             zb = z;
             if (!a) zx = z;
-            p->vel[3 * (size_t)j + a] = (float)(c[a] * f->vstep[a]);
+            if (p->vel) p->vel[3 * (size_t)j + a] = (float)(c[a] * f->vstep[a]);
         }
     }
     return 0;
@@ -1509,17 +1509,32 @@ uint32_t fxs_particles_codec(const uint8_t *payload, size_t len)
                                                                            : FXS_CODEC_PARTICLES;
 }
 
-int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p, char *err, size_t errlen)
+int fxs_particles_info(const uint8_t *buf, size_t len, uint32_t *n, int *vel, char *err, size_t errlen)
+{
+    const char *why;
+    *n = 0;
+    *vel = 0;
+    if (!buf) return fxs_pt_fail(err, errlen, "no input");
+    return (why = fxs_pt_blocks(buf, len, n, vel)) ? fxs_pt_fail(err, errlen, why) : 0;
+}
+
+/* The slice of a caller's array from index k, or NULL for no array (no arithmetic on NULL). */
+#define FXS_PT_AT(a, k) ((a) ? (a) + (k) : NULL)
+
+int fxs_particles_decode_into(const uint8_t *buf, size_t len, struct fxs_particles *p, uint32_t capacity, char *err,
+                              size_t errlen)
 {
     struct fxs_pt_dec *d;
-    uint32_t n = 0, rl, bl;
-    int vel = 0;
-    const char *why;
-    if (!p) return fxs_pt_fail(err, errlen, "no output given");
-    memset(p, 0, sizeof *p);
-    if (!buf) return fxs_pt_fail(err, errlen, "no input");
-    if ((why = fxs_pt_blocks(buf, len, &n, &vel))) return fxs_pt_fail(err, errlen, why);
-    if (fxs_pt_alloc_out(p, n, vel)) return fxs_pt_fail(err, errlen, "out of memory");
+    uint32_t n, rl, bl;
+    int vel;
+    const char *why = NULL;
+    if (fxs_particles_info(buf, len, &n, &vel, err, errlen)) return -1;
+    if (n > capacity) {
+        p->n = n;
+        return 1;
+    }
+    if (n && (!p->xyz || !p->temp || !p->flags)) return fxs_pt_fail(err, errlen, "no output arrays given");
+    p->n = n;
     /* each block into its slice of the output, particles in block order */
     for (size_t at = 0, blen, out = 0; !why && at < len; at += blen) {
         if (!(d = calloc(1, sizeof *d))) {
@@ -1527,14 +1542,27 @@ int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p
             break;
         }
         fxs_pt_block(buf + at, len - at, &d->f, &rl, &bl, &blen);
-        struct fxs_particles view = {d->f.n, p->xyz + 3 * out, p->temp + out, p->fuel + out, p->flags + out,
-                                     vel ? p->vel + 3 * out : NULL};
+        struct fxs_particles view = {d->f.n, FXS_PT_AT(p->xyz, 3 * out), FXS_PT_AT(p->temp, out),
+                                     FXS_PT_AT(p->fuel, out), FXS_PT_AT(p->flags, out),
+                                     vel ? FXS_PT_AT(p->vel, 3 * out) : NULL};
         why = fxs_pt_dec_body(d, buf + at, blen, rl, bl, &view);
         out += d->f.n;
         free(d);
     }
-    if (why) fxs_particles_free(p);
     return why ? fxs_pt_fail(err, errlen, why) : 0;
+}
+
+int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p, char *err, size_t errlen)
+{
+    uint32_t n;
+    int vel;
+    if (!p) return fxs_pt_fail(err, errlen, "no output given");
+    memset(p, 0, sizeof *p);
+    if (fxs_particles_info(buf, len, &n, &vel, err, errlen)) return -1;
+    if (fxs_pt_alloc_out(p, n, vel)) return fxs_pt_fail(err, errlen, "out of memory");
+    if (!fxs_particles_decode_into(buf, len, p, n, err, errlen)) return 0;
+    fxs_particles_free(p);
+    return -1;
 }
 
 void fxs_particles_free(struct fxs_particles *p)

@@ -9,10 +9,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Codec ids of kind 1 payloads in the frame header: one block, or several blocks back to
- * back (PROTOCOL.md §7.5.8), which the decoder reads alike. */
-#define FXS_CODEC_PARTICLES 2u
-#define FXS_CODEC_PARTICLES_BLOCKS 3u
+#include "fxs_frame.h" /* the codec ids: FXS_CODEC_PARTICLES, FXS_CODEC_PARTICLES_BLOCKS */
 
 /* Particles as the encoder takes them and the decoder returns them. */
 struct fxs_particles {
@@ -70,6 +67,15 @@ uint32_t fxs_particles_codec(const uint8_t *payload, size_t len);
  * fxs_particles_free). Returns 0, or -1 with a message: truncated, corrupt or oversized input
  * never reads out of bounds. */
 int fxs_particles_decode(const uint8_t *buf, size_t len, struct fxs_particles *p, char *err, size_t errlen);
+/* The particle count of a payload and whether it carries velocities, from its block headers
+ * (checked, the sections not decoded). 0, or -1 with a message. */
+int fxs_particles_info(const uint8_t *buf, size_t len, uint32_t *n, int *vel, char *err, size_t errlen);
+/* Decodes into the caller's arrays of `capacity` particles: p->xyz, p->temp and p->flags are
+ * required, p->fuel and p->vel may be NULL (not written). Returns 0 with p->n set; 1 when the
+ * payload holds more than capacity particles (p->n = how many, nothing written); -1 with a
+ * message as fxs_particles_decode. */
+int fxs_particles_decode_into(const uint8_t *buf, size_t len, struct fxs_particles *p, uint32_t capacity, char *err,
+                              size_t errlen);
 void fxs_particles_free(struct fxs_particles *p);
 
 #endif

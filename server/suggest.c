@@ -6,23 +6,26 @@
 
 #define SUGGEST_MAX 64 /* longer names are compared by their first 64 characters */
 
-/* Levenshtein distance of a[0..n) and b[0..m), n, m <= SUGGEST_MAX. */
+/* Optimal string alignment distance of a[0..n) and b[0..m), n, m <= SUGGEST_MAX: insertions,
+ * deletions, substitutions and swaps of two adjacent characters (k_bou for k_buo) each count
+ * one edit. Three rows: the one before the previous is what a swap extends. */
 static int suggest_distance(const char *a, size_t n, const char *b, size_t m)
 {
-    int row[SUGGEST_MAX + 1];
-    for (size_t j = 0; j <= m; j++) row[j] = (int)j;
+    int rows[3][SUGGEST_MAX + 1];
+    for (size_t j = 0; j <= m; j++) rows[0][j] = (int)j;
     for (size_t i = 1; i <= n; i++) {
-        int diag = row[0];
-        row[0] = (int)i;
+        int *cur = rows[i % 3], *prev = rows[(i - 1) % 3], *prev2 = rows[(i + 1) % 3];
+        cur[0] = (int)i;
         for (size_t j = 1; j <= m; j++) {
-            int up = row[j], best = diag + (a[i - 1] != b[j - 1]);
-            if (up + 1 < best) best = up + 1;
-            if (row[j - 1] + 1 < best) best = row[j - 1] + 1;
-            diag = up;
-            row[j] = best;
+            int best = prev[j - 1] + (a[i - 1] != b[j - 1]);
+            if (prev[j] + 1 < best) best = prev[j] + 1;
+            if (cur[j - 1] + 1 < best) best = cur[j - 1] + 1;
+            if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] && prev2[j - 2] + 1 < best)
+                best = prev2[j - 2] + 1;
+            cur[j] = best;
         }
     }
-    return row[m];
+    return rows[n % 3][m];
 }
 
 void suggest_init(struct suggest *s, const char *word)

@@ -1,6 +1,8 @@
-/* suggest.h — "did you mean": the known name nearest to a misspelt one (edit distance), for
- * the error messages of unknown parameters, ops, effects and streams, so a client or a person
- * at fxctl sees `alpa: unknown parameter (did you mean "alpha"?)`. */
+/* suggest.h — "did you mean": the known name nearest to a misspelt one, for the error messages
+ * of unknown parameters, ops, effects, streams and presets and for fxctl's commands, so a client
+ * or a person at fxctl sees `alpa: unknown parameter (did you mean "alpha"?)`. The distance is
+ * optimal string alignment: a dropped, added or changed letter and a swap of two adjacent ones
+ * (`alhpa`) each count one edit. */
 #ifndef FX_SUGGEST_H
 #define FX_SUGGEST_H
 

@@ -1,32 +1,29 @@
-/* fxctl.c — the command-line client of fxstreamd, built on libfxclient.
+/* fxctl.c — the command-line client of fxstreamd, built on libfxclient's public API
+ * (fxclient.h), as any program outside the tree would be.
  *
  * Owns argument parsing, turning one command into one fxstream.v1 request, and
  * printing: on a terminal, replies for people (fxctl_print.h); with --json or when
  * stdout is not a terminal, every reply is one line of JSON (easy to pipe into jq or a
  * script). Every failure is one line on stderr with exit status 1 (server or
  * transport) or 2 (usage); notes (a set that restarts the simulation, a stale first
- * frame) go to stderr too. `subscribe` also owns writing frames to disk. */
+ * frame) go to stderr too. `subscribe` counts steps in fxctl_sub.h, which prints and
+ * writes the frames with fxctl_save.h. */
 #include <errno.h>
-#include <inttypes.h>
-#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <libwebsockets.h>
+#include <cjson/cJSON.h>
 
 #include "fxclient.h"
 #include "fxctl_print.h"
-#include "fxs_particles.h"
-#include "fxs_lut.h"
-#include "png.h"
+#include "fxctl_sub.h"
 #include "suggest.h"
 
 #define FXCTL_DEFAULT_URL "ws://127.0.0.1:7681/v1/ws"
 #define FXCTL_DEFAULT_TIMEOUT_MS 10000
-#define FXCTL_STALE_MS 1000 /* a first frame older than this gets a note */
 
 enum { FXCTL_OK = 0, FXCTL_FAIL = 1, FXCTL_USAGE = 2 };
 
@@ -34,7 +31,7 @@ struct fxctl_opts {
     const char *url;
     int timeout_ms;
     struct fxc_options conn; /* token, CA file */
-    long frames;       /* subscribe --frames, 0 when not given */
+    long frames;       /* subscribe --frames: steps, or frames of --kind; 0 when not given */
     long count;        /* watch --count, 0 = until interrupted */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
@@ -59,9 +56,11 @@ static const char fxctl_help[] =
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
     "  subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]\n"
-    "                                receive N frames of NAME (only of kind K, 1..4,\n"
-    "                                with --kind); prints the subscribed\n"
-    "                                reply, then one JSON line per frame (stream,\n"
+    "                                receive N steps of NAME (a step: the frames computed\n"
+    "                                together, e.g. energy's texture and its light rig),\n"
+    "                                or with --kind N frames of kind K (1 particles,\n"
+    "                                2 texture, 3 light rig, 4 look-up table); prints the\n"
+    "                                subscribed reply, then one JSON line per frame (stream,\n"
     "                                channel, kind, seq, param_rev, sim_time,\n"
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
     "                                width and height, or count, flags) and any params\n"
@@ -99,17 +98,20 @@ static const char fxctl_help[] =
     "  --ca-file F    PEM bundle that signs a wss:// server's certificate\n"
     "                 (default $FXSTREAM_CA_FILE, else the system's)\n"
     "  --json         print every reply as one line of JSON (the default when stdout\n"
-    "                 is not a terminal; on a terminal describe, get, set, list and\n"
-    "                 presets print tables)\n"
+    "                 is not a terminal; on a terminal replies print for people, below)\n"
     "  --timeout MS   limit for connecting, for each reply and, with subscribe, for\n"
-    "                 each frame (with watch --count, each event; default 10000)\n"
+    "                 each step (frame of --kind: other kinds and events do not extend\n"
+    "                 it; the error names the kinds that came); with watch --count,\n"
+    "                 for each event (default 10000)\n"
     "  --help, -h     this text\n"
     "\n"
     "output: on a terminal, describe is a table per parameter group, get is aligned\n"
-    "name = value, set shows the values it changed and the new rev, list and presets are\n"
-    "tables; otherwise (or with --json) each reply is one line of JSON (the server's\n"
-    "reply object without the request id). A set that restarts the simulation and a\n"
-    "first frame older than 1 s are noted on stderr. Errors go to stderr as\n"
+    "name = value, set shows the values it changed and the new rev, preset load the\n"
+    "values that changed and what they were, list and presets are tables, create,\n"
+    "destroy, reset and preset save/delete one sentence; otherwise (or with --json) each\n"
+    "reply is one line of JSON (the server's reply object without the request id). A\n"
+    "set that restarts the simulation and a first frame older than 1 s are noted on\n"
+    "stderr. Errors go to stderr as\n"
     "\"fxctl: CODE: MESSAGE\" for server errors or \"fxctl: WHAT\" for transport errors.\n"
     "exit status: 0 success, 1 server or transport error, 2 usage error (bad URL too).\n"
     "environment: FXCTL_URL default URL; FXSTREAM_TOKEN, FXSTREAM_CA_FILE as above;\n"
@@ -345,221 +347,31 @@ static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, 
 
 /* ---- output -------------------------------------------------------------------------- */
 
-static void fxctl_print_json(FILE *f, cJSON *j)
+static void fxctl_print_json(FILE *f, const cJSON *j)
 {
     char *s = cJSON_PrintUnformatted(j);
     if (s) fprintf(f, "%s\n", s);
     free(s);
 }
 
-/* Shortest of %.15g / %.17g that reads back as v (cJSON's rule); non-finite as 0. */
-static void fxctl_fmt_double(char *buf, size_t len, double v)
+/* Sends req and parses its reply: the reply object without its id, or NULL (with `report`,
+ * after printing the error, "fxctl: code: message" or the transport's, on stderr). */
+static cJSON *fxctl_ask(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req, int report)
 {
-    if (!isfinite(v)) v = 0;
-    snprintf(buf, len, "%.15g", v);
-    if (strtod(buf, NULL) != v) snprintf(buf, len, "%.17g", v);
+    struct fxc_event ev;
+    char err[512], *text = cJSON_PrintUnformatted(req);
+    cJSON *reply = NULL;
+    int r = text ? fxc_request(c, text, &ev, o->timeout_ms, err, sizeof err) : -1;
+    if (!text) snprintf(err, sizeof err, "out of memory");
+    if (!r && !(reply = cJSON_Parse(ev.json))) snprintf(err, sizeof err, "out of memory");
+    if (!reply && report) fprintf(stderr, "fxctl: %s\n", err);
+    cJSON_DeleteItemFromObjectCaseSensitive(reply, "id");
+    fxc_event_free(&ev);
+    free(text);
+    return reply;
 }
 
-/* Milliseconds from the frame's server time to its arrival. */
-static double fxctl_age_ms(const struct fxc_msg *m)
-{
-    return ((double)m->recv_time_us - (double)m->header.server_time_us) / 1000.0;
-}
-
-/* Formats one frame's header as a JSON line (no newline) into buf. */
-static void fxctl_frame_line(char *buf, size_t len, const char *stream, const struct fxc_msg *m)
-{
-    const struct fxs_header *h = &m->header;
-    cJSON *name = cJSON_CreateString(stream);
-    char *qname = cJSON_PrintUnformatted(name);
-    char size[96], sim[32];
-    if (h->kind == FXS_KIND_TEXTURE || h->kind == FXS_KIND_LUT)
-        snprintf(size, sizeof size, "\"width\":%" PRIu32 ",\"height\":%" PRIu32, h->count_or_width, h->height);
-    else
-        snprintf(size, sizeof size, "\"count\":%" PRIu32, h->count_or_width);
-    fxctl_fmt_double(sim, sizeof sim, h->sim_time);
-    snprintf(buf, len,
-             "{\"stream\":%s,\"channel\":%" PRIu32 ",\"kind\":%u,\"seq\":%" PRIu64 ",\"param_rev\":%" PRIu32
-             ",\"sim_time\":%s,\"server_time_us\":%" PRIu64 ",\"latency_ms\":%.3f,\"codec\":%" PRIu32
-             ",\"payload_bytes\":%" PRIu32 ",%s,\"flags\":%" PRIu32 "}",
-             qname ? qname : "null", h->channel, (unsigned)h->kind, h->seq, h->param_rev,
-             sim, h->server_time_us,
-             fxctl_age_ms(m), h->codec, h->payload_bytes,
-             size, h->flags);
-    free(qname);
-    cJSON_Delete(name);
-}
-
-static int fxctl_write_file(const char *path, const void *data, size_t len)
-{
-    FILE *f = fopen(path, "wb");
-    int ok = f && fwrite(data, 1, len, f) == len;
-    if (f && fclose(f)) ok = 0;
-    if (!ok) fprintf(stderr, "fxctl: cannot write %s: %s\n", path, strerror(errno));
-    return ok ? 0 : -1;
-}
-
-/* Writes decoded particles as binary little-endian PLY: float x y z temperature fuel, uchar
- * flags, then float vx vy vz when the frame carries velocities. */
-static int fxctl_write_ply(const char *path, const struct fxs_particles *p)
-{
-    FILE *f = fopen(path, "wb");
-    int ok = f != NULL;
-    size_t size = p->vel ? 33 : 21;
-    if (ok)
-        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec 2\nelement vertex %" PRIu32
-                        "\nproperty float x\nproperty float y\nproperty float z\nproperty float temperature\n"
-                        "property float fuel\nproperty uchar flags\n%send_header\n", p->n,
-                     p->vel ? "property float vx\nproperty float vy\nproperty float vz\n" : "") > 0;
-    for (uint32_t i = 0; ok && i < p->n; i++) {
-        uint8_t rec[33];
-        float v[8] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], p->fuel[i], 0, 0, 0 };
-        if (p->vel) memcpy(v + 5, p->vel + 3 * (size_t)i, 12);
-        for (int c = 0; c < (p->vel ? 8 : 5); c++) { /* the flags byte sits between fuel and vx */
-            uint32_t u;
-            memcpy(&u, &v[c], 4);
-            fxs_put_u32(rec + 4 * c + (c >= 5), u);
-        }
-        rec[20] = p->flags[i];
-        ok = fwrite(rec, 1, size, f) == size;
-    }
-    if (f && fclose(f)) ok = 0;
-    if (!ok) fprintf(stderr, "fxctl: cannot write %s: %s\n", path, strerror(errno));
-    return ok ? 0 : -1;
-}
-
-static int fxctl_is_particles(const struct fxs_header *h)
-{
-    return h->kind == FXS_KIND_PARTICLES && (h->codec == FXS_CODEC_PARTICLES || h->codec == FXS_CODEC_PARTICLES_BLOCKS);
-}
-
-/* Decodes a particle frame; checks the count against the header. */
-static int fxctl_decode_particles(const struct fxc_msg *m, struct fxs_particles *p)
-{
-    char err[256];
-    if (fxs_particles_decode(m->payload, m->header.payload_bytes, p, err, sizeof err)) {
-        fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", m->header.seq, err);
-        return -1;
-    }
-    if (p->n != m->header.count_or_width) {
-        fprintf(stderr, "fxctl: frame %" PRIu64 ": header count %" PRIu32 " but %" PRIu32 " particles in the payload\n",
-                m->header.seq, m->header.count_or_width, p->n);
-        fxs_particles_free(p);
-        return -1;
-    }
-    return 0;
-}
-
-/* Writes each product of a look-up table container (kind 4 codec 1) as BASE-NAME.png. */
-static int fxctl_write_lut(const char *base, const struct fxc_msg *m)
-{
-    char msg[160] = "", path[4300];
-    struct fxs_lut_product e;
-    const uint8_t *p = m->payload;
-    size_t len = m->header.payload_bytes;
-    int count = fxs_lut_entry(p, len, 0, &e, msg, sizeof msg);
-    for (int i = 0; i < count && !msg[0]; i++) {
-        uint8_t *px = fxs_lut_entry(p, len, i, &e, msg, sizeof msg) < 0 ? NULL : fxs_lut_texels(p, len, &e, msg, sizeof msg);
-        if (!px) break;
-        snprintf(path, sizeof path, "%s-%s.png", base, e.name);
-        if (png_write_rgba8(path, px, e.width, e.height)) snprintf(msg, sizeof msg, "cannot write %.100s: %.40s", path, strerror(errno));
-        free(px);
-    }
-    if (!msg[0]) return 0;
-    fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", m->header.seq, msg);
-    return -1;
-}
-
-/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 2, decoded, and
- * the payload as received in .bin, for other decoders to compare) or .bin, plus one PNG per
- * product of a look-up table (kind 4 codec 1). */
-static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const struct fxs_particles *p)
-{
-    const struct fxs_header *h = &m->header;
-    int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
-    char path[4200], raw[4200];
-    snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr ? "exr" : "bin");
-    snprintf(raw, sizeof raw, "%s.bin", base);
-    if (h->kind == FXS_KIND_LUT && h->codec == FXS_CODEC_LUT_PACK && fxctl_write_lut(base, m)) return -1;
-    if (p && fxctl_write_ply(path, p)) return -1;
-    return fxctl_write_file(p ? raw : path, m->payload, h->payload_bytes);
-}
-
-/* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json; a light-rig frame (kind 3) is
- * sent with its texture under the same seq, so it goes to DIR/STREAM-SEQ-rig.{bin,json}. */
-static int fxctl_save_frame(const char *dir, const char *stream, const struct fxc_msg *m, const char *line,
-                            const struct fxs_particles *p)
-{
-    const struct fxs_header *h = &m->header;
-    char path[4096], *safe = strdup(stream);
-    int r;
-    if (!safe) return -1;
-    for (char *c = safe; *c; c++)
-        if (*c == '/') *c = '_';
-    snprintf(path, sizeof path, "%s/%s-%" PRIu64 "%s", dir, safe, h->seq, h->kind == FXS_KIND_LIGHT_RIG ? "-rig" : "");
-    free(safe);
-    r = fxctl_save_payload(path, m, p);
-    strncat(path, ".json", sizeof path - strlen(path) - 1);
-    if (!r) {
-        char *text = malloc(strlen(line) + 2);
-        r = text ? 0 : -1;
-        if (text) {
-            sprintf(text, "%s\n", line);
-            r = fxctl_write_file(path, text, strlen(text));
-            free(text);
-        }
-    }
-    return r;
-}
-
-/* ---- subscribe --------------------------------------------------------------------------- */
-
-struct fxctl_sub {
-    const struct fxctl_opts *o;
-    const char *stream;
-    uint32_t channel;
-    long got;
-};
-
-static int fxctl_on_frame(struct fxctl_sub *s, const struct fxc_msg *m)
-{
-    char line[1024];
-    struct fxs_particles p = { 0 };
-    int particles = s->o->out_dir && fxctl_is_particles(&m->header), r = 0;
-    if (m->header.channel != s->channel || (s->o->kind && m->header.kind != s->o->kind)) return 0;
-    if (particles && fxctl_decode_particles(m, &p)) return FXCTL_FAIL;
-    fxctl_frame_line(line, sizeof line, s->stream, m);
-    printf("%s\n", line);
-    fflush(stdout);
-    if (!s->got++ && fxctl_age_ms(m) > FXCTL_STALE_MS)
-        fprintf(stderr, "fxctl: note: the first frame is %.1f s old (the stream's newest, sent at once on subscribe: it "
-                        "only sends on change, or it is paused)\n", fxctl_age_ms(m) / 1000);
-    if (s->o->out_dir && fxctl_save_frame(s->o->out_dir, s->stream, m, line, particles ? &p : NULL)) r = FXCTL_FAIL;
-    fxs_particles_free(&p);
-    return r;
-}
-
-/* Prints the stream's params events; fails when the stream goes away. */
-static int fxctl_on_event(struct fxctl_sub *s, cJSON *ev)
-{
-    const char *op = cJSON_GetObjectItemCaseSensitive(ev, "op")->valuestring;
-    const cJSON *st = cJSON_GetObjectItemCaseSensitive(ev, "stream");
-    const cJSON *why = cJSON_GetObjectItemCaseSensitive(ev, "reason");
-    int mine = cJSON_IsString(st) && !strcmp(st->valuestring, s->stream);
-    if (!mine) return 0;
-    if (!strcmp(op, "params")) {
-        fxctl_print_json(stdout, ev);
-        fflush(stdout);
-    } else if (!strcmp(op, "unsubscribed")) {
-        fprintf(stderr, "fxctl: unsubscribed from stream \"%s\" (%s) after %ld of %ld frames\n", s->stream,
-                cJSON_IsString(why) ? why->valuestring : "no reason given", s->got, s->o->frames);
-        return FXCTL_FAIL;
-    } else if (!strcmp(op, "error")) {
-        fprintf(stderr, "fxctl: stream \"%s\" reported: ", s->stream);
-        fxctl_print_json(stderr, ev);
-    }
-    return 0;
-}
+/* ---- subscribe and watch ------------------------------------------------------------- */
 
 static int fxctl_make_dir(const char *dir)
 {
@@ -568,32 +380,14 @@ static int fxctl_make_dir(const char *dir)
     return FXCTL_FAIL;
 }
 
-static int fxctl_subscribe(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *reply)
+/* After the subscribed reply: fxctl_sub.h. */
+static int fxctl_frames(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *reply)
 {
     const cJSON *ch = cJSON_GetObjectItemCaseSensitive(reply, "channel");
-    struct fxctl_sub s = { o, o->args[0], 0, 0 };
-    char err[512];
-    int r = 0;
-    if (!cJSON_IsNumber(ch)) {
-        fprintf(stderr, "fxctl: subscribed reply without a channel\n");
-        return FXCTL_FAIL;
-    }
-    s.channel = (uint32_t)ch->valuedouble;
-    while (!r && s.got < o->frames) {
-        struct fxc_msg m;
-        int n = fxc_next(c, &m, o->timeout_ms, err, sizeof err);
-        if (n <= 0) {
-            if (n == 0)
-                fprintf(stderr, "fxctl: timeout after %d ms waiting for frame %ld of %ld of \"%s\"\n",
-                        o->timeout_ms, s.got + 1, o->frames, s.stream);
-            else
-                fprintf(stderr, "fxctl: %s\n", err);
-            return FXCTL_FAIL;
-        }
-        r = m.type == FXC_MSG_FRAME ? fxctl_on_frame(&s, &m) : fxctl_on_event(&s, m.event);
-        fxc_msg_free(&m);
-    }
-    return r;
+    struct fxctl_sub_opts so = { o->args[0], o->frames, o->kind, o->timeout_ms, o->out_dir };
+    if (cJSON_IsNumber(ch)) return fxctl_subscribe(c, &so, (uint32_t)ch->valuedouble) ? FXCTL_FAIL : 0;
+    fprintf(stderr, "fxctl: subscribed reply without a channel\n");
+    return FXCTL_FAIL;
 }
 
 /* After the list reply: prints created/destroyed events until o->count of them (each within
@@ -602,45 +396,56 @@ static int fxctl_watch(struct fxc_client *c, const struct fxctl_opts *o)
 {
     char err[512];
     for (long seen = 0; !o->count || seen < o->count;) {
-        struct fxc_msg m;
-        int n = fxc_next(c, &m, o->count ? o->timeout_ms : 1000, err, sizeof err);
+        struct fxc_event ev;
+        int n = fxc_poll(c, &ev, o->count ? o->timeout_ms : 1000, err, sizeof err);
         if (n == 0 && !o->count) continue;
         if (n <= 0) {
             if (n == 0) fprintf(stderr, "fxctl: timeout after %d ms waiting for event %ld of %ld\n", o->timeout_ms, seen + 1, o->count);
             else fprintf(stderr, "fxctl: %s\n", err);
             return FXCTL_FAIL;
         }
-        if (m.type == FXC_MSG_EVENT) {
-            const char *op = cJSON_GetObjectItemCaseSensitive(m.event, "op")->valuestring;
-            if (!strcmp(op, "created") || !strcmp(op, "destroyed")) {
-                fxctl_print_json(stdout, m.event);
-                fflush(stdout);
-                seen++;
-            }
+        if (ev.type == FXC_EVENT_TEXT && !ev.id && (!strcmp(ev.op, "created") || !strcmp(ev.op, "destroyed"))) {
+            printf("%s\n", ev.json);
+            fflush(stdout);
+            seen++;
         }
-        fxc_msg_free(&m);
+        fxc_event_free(&ev);
     }
     return 0;
+}
+
+/* The first element of obj's array or object `name`, or NULL. */
+static const cJSON *fxctl_first(const cJSON *obj, const char *name)
+{
+    const cJSON *a = cJSON_GetObjectItemCaseSensitive(obj, name);
+    return a ? a->child : NULL;
+}
+
+/* The effect of stream (from list), or NULL; *list keeps the reply that owns it. */
+static const char *fxctl_effect_of(struct fxc_client *c, const struct fxctl_opts *o, const char *stream, cJSON **list)
+{
+    cJSON *q = cJSON_CreateObject();
+    cJSON_AddStringToObject(q, "op", "list");
+    *list = fxctl_ask(c, o, q, 0);
+    cJSON_Delete(q);
+    for (const cJSON *s = fxctl_first(*list, "streams"); s; s = s->next)
+        if (!strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "stream")), stream))
+            return cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "effect"));
+    return NULL;
 }
 
 /* After an accepted set: a note on stderr naming the parameters whose change restarted the
  * simulation (describe's `update`). Best effort: a failed lookup prints nothing. */
 static void fxctl_restart_note(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req)
 {
-    const char *stream = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring, *effect = NULL;
-    cJSON *list = NULL, *desc = NULL, *q = cJSON_CreateObject();
-    char err[256], names[512] = "";
-    cJSON_AddStringToObject(q, "op", "list");
-    if (!fxc_request(c, q, &list, o->timeout_ms, err, sizeof err))
-        for (const cJSON *s = cJSON_GetObjectItemCaseSensitive(list, "streams")->child; s; s = s->next)
-            if (!strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "stream")), stream))
-                effect = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(s, "effect"));
-    cJSON_Delete(q);
-    q = cJSON_CreateObject();
+    const char *stream = cJSON_GetObjectItemCaseSensitive(req, "stream")->valuestring;
+    cJSON *list, *desc = NULL, *q = cJSON_CreateObject();
+    const char *effect = fxctl_effect_of(c, o, stream, &list);
+    char names[512] = "";
     cJSON_AddStringToObject(q, "op", "describe");
     cJSON_AddStringToObject(q, "effect", effect ? effect : "");
-    if (effect && !fxc_request(c, q, &desc, o->timeout_ms, err, sizeof err))
-        for (const cJSON *p = cJSON_GetObjectItemCaseSensitive(desc, "params")->child; p; p = p->next) {
+    if (effect && (desc = fxctl_ask(c, o, q, 0)))
+        for (const cJSON *p = fxctl_first(desc, "params"); p; p = p->next) {
             const char *name = cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(p, "name"));
             if (cJSON_GetObjectItemCaseSensitive(cJSON_GetObjectItemCaseSensitive(req, "params"), name) &&
                 !strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(p, "update")), "restart"))
@@ -654,30 +459,65 @@ static void fxctl_restart_note(struct fxc_client *c, const struct fxctl_opts *o,
 
 /* ---- main ------------------------------------------------------------------------------------ */
 
+/* A preset load on a terminal: the stream's parameters before it, for the diff; NULL else
+ * (or when the get fails: the load then reports the error). */
+static cJSON *fxctl_params_before(struct fxc_client *c, const struct fxctl_opts *o, const cJSON *req)
+{
+    cJSON *q, *reply;
+    if (!o->human || strcmp(cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(req, "op")), "preset_load")) return NULL;
+    q = cJSON_CreateObject();
+    cJSON_AddStringToObject(q, "op", "get");
+    cJSON_AddStringToObject(q, "stream", cJSON_GetStringValue(cJSON_GetObjectItemCaseSensitive(req, "stream")));
+    reply = fxctl_ask(c, o, q, 0);
+    cJSON_Delete(q);
+    return reply;
+}
+
+/* The names of the parameters whose values differ between before's and reply's documents. */
+static cJSON *fxctl_changed(const cJSON *before, const cJSON *reply)
+{
+    const cJSON *old = cJSON_GetObjectItemCaseSensitive(before, "params");
+    cJSON *names = cJSON_CreateObject();
+    for (const cJSON *p = fxctl_first(reply, "params"); p && names; p = p->next)
+        if (!cJSON_Compare(p, cJSON_GetObjectItemCaseSensitive(old, p->string), 1)) cJSON_AddTrueToObject(names, p->string);
+    return names;
+}
+
+/* Prints the reply: for people on a terminal (a set's values, a preset load's changes), else
+ * as one line of JSON. */
+static void fxctl_print_reply(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req,
+                              const cJSON *reply, const cJSON *before)
+{
+    const cJSON *only = !strcmp(cmd->name, "set") ? cJSON_GetObjectItemCaseSensitive(req, "params") : NULL;
+    cJSON *changed = before ? fxctl_changed(before, reply) : NULL;
+    if (!o->human ||
+        !fxctl_print_human(stdout, reply, changed ? changed : only, before ? cJSON_GetObjectItemCaseSensitive(before, "params") : NULL))
+        fxctl_print_json(stdout, reply);
+    fflush(stdout);
+    cJSON_Delete(changed);
+}
+
 static int fxctl_run(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, const cJSON *req)
 {
     struct fxc_client *c;
-    cJSON *reply;
+    cJSON *reply, *before;
     char err[512];
-    int r;
+    int r = 0;
     if (o->out_dir && fxctl_make_dir(o->out_dir)) return FXCTL_FAIL;
-    if ((r = fxc_connect_with(&c, o->url, &o->conn, o->timeout_ms, err, sizeof err))) {
+    if ((r = fxc_connect(&c, o->url, &o->conn, o->timeout_ms, err, sizeof err))) {
         fprintf(stderr, "fxctl: %s\n", err);
         return r == -2 ? FXCTL_USAGE : FXCTL_FAIL;
     }
-    r = fxc_request(c, req, &reply, o->timeout_ms, err, sizeof err);
-    if (r) {
-        fprintf(stderr, "fxctl: %s\n", err);
+    before = fxctl_params_before(c, o, req);
+    if (!(reply = fxctl_ask(c, o, req, 1))) {
         r = FXCTL_FAIL;
     } else {
-        cJSON_DeleteItemFromObjectCaseSensitive(reply, "id");
-        const cJSON *only = !strcmp(cmd->name, "set") ? cJSON_GetObjectItemCaseSensitive(req, "params") : NULL;
-        if (!o->human || !fxctl_print_human(stdout, reply, only)) fxctl_print_json(stdout, reply);
-        fflush(stdout);
+        fxctl_print_reply(o, cmd, req, reply, before);
         if (!strcmp(cmd->name, "set")) fxctl_restart_note(c, o, req);
-        if (!strcmp(cmd->name, "subscribe")) r = fxctl_subscribe(c, o, reply);
+        if (!strcmp(cmd->name, "subscribe")) r = fxctl_frames(c, o, reply);
         if (!strcmp(cmd->name, "watch")) r = fxctl_watch(c, o);
     }
+    cJSON_Delete(before);
     cJSON_Delete(reply);
     fxc_close(c);
     return r;
@@ -693,7 +533,7 @@ int main(int argc, char **argv)
     o.url = getenv("FXCTL_URL") && *getenv("FXCTL_URL") ? getenv("FXCTL_URL") : FXCTL_DEFAULT_URL;
     o.conn.token = getenv("FXSTREAM_TOKEN");
     o.conn.ca_file = getenv("FXSTREAM_CA_FILE");
-    lws_set_log_level(log ? atoi(log) : 0, NULL);
+    if (log) fxc_set_log(atoi(log), NULL);
     if (!(o.args = calloc((size_t)argc, sizeof *o.args))) return FXCTL_FAIL;
     r = fxctl_parse_args(&o, argc, argv);
     if (r == 0 && !(cmd = fxctl_find_cmd(o.cmd))) r = fxctl_unknown_cmd(o.cmd);

@@ -10,6 +10,7 @@
 #define FXP_MAX_COLS 8
 #define FXP_VALUE_MAX 70   /* characters of a value shown after "=" */
 #define FXP_DEFAULT_MAX 28 /* ... and of a default in describe's table */
+#define FXP_WAS_INLINE 40  /* a value and what it was this long share a line */
 
 struct fxp_table {
     int ncols, nrows, cap;
@@ -160,21 +161,53 @@ static void fxp_describe(FILE *f, const cJSON *r)
     }
 }
 
-/* params (get, set): "STREAM · rev N", then name = value for each (or each of `only`). */
-static void fxp_params(FILE *f, const cJSON *r, const cJSON *only)
+/* params (get, set, preset load): "STREAM · rev N", then name = value for each (or each of
+ * `only`), with what it was from `before` when given: "(was OLD)" after a short value, else on
+ * a row of its own; "(no value changed)" when `only` leaves nothing. */
+static void fxp_params(FILE *f, const cJSON *r, const cJSON *only, const cJSON *before)
 {
     fprintf(f, "%s · rev %.0f\n", fxp_str(r, "stream"), fxp_num(r, "rev"));
     const cJSON *params = cJSON_GetObjectItemCaseSensitive(r, "params");
     struct fxp_table t = {.ncols = 2};
     for (const cJSON *p = params ? params->child : NULL; p; p = p->next) {
         if (only && !cJSON_GetObjectItemCaseSensitive(only, p->string)) continue;
-        char name[96], val[FXP_VALUE_MAX + 8], shown[FXP_VALUE_MAX + 16];
+        char name[96], val[FXP_VALUE_MAX + 8], old[FXP_VALUE_MAX + 8], shown[2 * FXP_VALUE_MAX + 32];
+        const cJSON *prev = cJSON_GetObjectItemCaseSensitive(before, p->string);
         snprintf(name, sizeof name, "  %s", p->string);
         fxp_value(p, val, sizeof val, FXP_VALUE_MAX);
-        snprintf(shown, sizeof shown, "= %s", val);
+        if (prev) fxp_value(prev, old, sizeof old, FXP_VALUE_MAX);
+        else snprintf(old, sizeof old, "unset");
+        int one_line = !before || fxp_len(val) + fxp_len(old) <= FXP_WAS_INLINE;
+        snprintf(shown, sizeof shown, "= %s%s%s%s", val, before && one_line ? "  (was " : "", before && one_line ? old : "",
+                 before && one_line ? ")" : "");
         fxp_add(&t, (const char *[]){name, shown});
+        if (one_line) continue;
+        snprintf(shown, sizeof shown, "  was %s", old);
+        fxp_add(&t, (const char *[]){"", shown});
     }
+    if (only && !t.nrows) fprintf(f, "  (no value changed)\n");
     fxp_print(f, &t);
+}
+
+/* The replies that are one sentence: created, destroyed, reset, preset_saved, preset_deleted.
+ * False for another op. */
+static bool fxp_sentence(FILE *f, const cJSON *r, const char *op)
+{
+    const char *stream = fxp_str(r, "stream"), *effect = fxp_str(r, "effect"), *name = fxp_str(r, "name");
+    if (!strcmp(op, "created"))
+        fprintf(f, "created stream %s (effect %s, rev %.0f)\n", stream, effect, fxp_num(r, "rev"));
+    else if (!strcmp(op, "destroyed"))
+        fprintf(f, "destroyed stream %s\n", stream);
+    else if (!strcmp(op, "reset"))
+        fprintf(f, "reset stream %s: its simulation starts over (sim_time 0)\n", stream);
+    else if (!strcmp(op, "preset_saved"))
+        fprintf(f, "saved preset %s of %s%s\n", name, effect,
+                cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(r, "replaced")) ? ", replacing the one saved before" : "");
+    else if (!strcmp(op, "preset_deleted"))
+        fprintf(f, "deleted preset %s of %s\n", name, effect);
+    else
+        return false;
+    return true;
 }
 
 static void fxp_list(FILE *f, const cJSON *r)
@@ -202,13 +235,13 @@ static void fxp_presets(FILE *f, const cJSON *r)
     fxp_print(f, &t);
 }
 
-bool fxctl_print_human(FILE *f, const cJSON *reply, const cJSON *only)
+bool fxctl_print_human(FILE *f, const cJSON *reply, const cJSON *only, const cJSON *before)
 {
     const char *op = fxp_str(reply, "op");
     if (!strcmp(op, "describe")) fxp_describe(f, reply);
-    else if (!strcmp(op, "params")) fxp_params(f, reply, only);
+    else if (!strcmp(op, "params")) fxp_params(f, reply, only, before);
     else if (!strcmp(op, "list")) fxp_list(f, reply);
     else if (!strcmp(op, "presets")) fxp_presets(f, reply);
-    else return false;
+    else return fxp_sentence(f, reply, op);
     return true;
 }

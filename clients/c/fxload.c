@@ -12,8 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include <libwebsockets.h>
-
+#include "fxclient.h"
 #include "fxload.h"
 #include "fxws.h"
 
@@ -191,7 +190,7 @@ int main(int argc, char **argv)
     int r;
     o.token = getenv("FXSTREAM_TOKEN");
     o.ca_file = getenv("FXSTREAM_CA_FILE");
-    lws_set_log_level(log ? atoi(log) : 0, NULL);
+    if (log) fxc_set_log(atoi(log), NULL);
     ld.o = &o;
     r = ld_prepare(&ld, &o, argc, argv);
     if (!r) r = ld_run(&ld);

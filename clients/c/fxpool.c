@@ -27,7 +27,6 @@
 #define FXP_KEEP_HEADER 256           /* bytes of a message kept when payloads are off */
 #define FXP_RX_KEEP_CAP (64 * 1024)   /* a bigger reassembly buffer is freed after use */
 #define FXP_RX_CHUNK (16 * 1024)      /* lws's per-connection receive buffer */
-#define FXP_READ_BUF (128 * 1024)     /* lws's per-thread read size */
 #define FXP_REARM_US 1000
 
 struct fxp_target {
@@ -35,12 +34,6 @@ struct fxp_target {
     char *url;
     struct fxws_url u;
     int probed, probe_errno; /* fxws_probe_errno done once per target */
-};
-
-struct fxp_out {
-    struct fxp_out *next;
-    size_t len;
-    unsigned char data[]; /* LWS_PRE, then the text */
 };
 
 #define FXP_CONN_MAGIC 0x66787063u /* "fxpc": tells our conns from other user pointers */
@@ -54,8 +47,7 @@ struct fxp_conn {
     struct fxp_conn *prev, *next;  /* pool->conns */
     struct fxp_conn *next_ended;   /* pool->ended */
     struct fxws_rx rx;
-    struct fxp_out *out_head, *out_tail;
-    int n_out;
+    struct fxws_outq out;
     unsigned tcp_up : 1, established : 1, hello : 1, closing : 1, ended : 1, by_client : 1;
     int close_code;
     char why[200];
@@ -97,11 +89,7 @@ static void fxp_conn_free(struct fxp_conn *c)
     if (c->prev) c->prev->next = c->next;
     else p->conns = c->next;
     if (c->next) c->next->prev = c->prev;
-    while (c->out_head) {
-        struct fxp_out *o = c->out_head;
-        c->out_head = o->next;
-        free(o);
-    }
+    fxws_outq_free(&c->out);
     fxws_rx_free(&c->rx);
     p->live--;
     c->magic = 0;
@@ -191,25 +179,6 @@ static void fxp_on_connect_error(struct fxp_conn *c, const char *why)
     fxws_connect_error(&t->u, c->tcp_up, w, e, c->why, sizeof c->why);
 }
 
-static int fxp_on_writeable(struct fxp_conn *c, struct lws *wsi)
-{
-    struct fxp_out *o = c->out_head;
-    int n;
-    if (c->closing) return -1; /* lws_close_reason was set: lws sends the close frame */
-    if (!o) return 0;
-    c->out_head = o->next;
-    if (!c->out_head) c->out_tail = NULL;
-    c->n_out--;
-    n = lws_write(wsi, o->data + LWS_PRE, o->len, LWS_WRITE_TEXT);
-    free(o);
-    if (n < 0) {
-        fxws_set_err(c->why, sizeof c->why, "write to server failed");
-        return -1;
-    }
-    if (c->out_head) lws_callback_on_writable(wsi);
-    return 0;
-}
-
 static int fxp_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *user, void *in, size_t len)
 {
     struct fxp_conn *c = user ? user : (wsi ? lws_get_opaque_user_data(wsi) : NULL);
@@ -229,12 +198,13 @@ static int fxp_lws_cb(struct lws *wsi, enum lws_callback_reasons reason, void *u
         c->target->probed = 0;
         c->pool->stats.established++;
         if (c->closing) lws_callback_on_writable(wsi);
-        else if (c->out_head) lws_callback_on_writable(wsi);
+        else if (c->out.head) lws_callback_on_writable(wsi);
         return 0;
     case LWS_CALLBACK_CLIENT_RECEIVE:
         return fxp_on_receive(c, wsi, in, len);
     case LWS_CALLBACK_CLIENT_WRITEABLE:
-        return fxp_on_writeable(c, wsi);
+        if (c->closing) return -1; /* lws_close_reason was set: lws sends the close frame */
+        return fxws_outq_write(&c->out, wsi, c->why, sizeof c->why);
     case LWS_CALLBACK_WS_PEER_INITIATED_CLOSE:
         if (!c->closing)
             fxws_peer_close(in, len, &c->close_code, c->why, sizeof c->why, NULL, 0);
@@ -314,9 +284,10 @@ int fxp_pool_create(struct fxp_pool **out, const struct fxp_callbacks *cb, const
     info.gid = (gid_t)-1;
     info.uid = (uid_t)-1;
     info.fd_limit_per_thread = (unsigned)need;
-    info.pt_serv_buf_size = FXP_READ_BUF;
+    info.pt_serv_buf_size = FXWS_READ_BUF;
     info.user = p;
     fxws_tls_context(&info, o->ca_file); /* any target may be wss:// */
+    fxws_log_default();
     if (!(p->ctx = lws_create_context(&info))) {
         free(p);
         fxws_set_err(eb, el, "cannot create a libwebsockets context for %d connections", o->max_connections);
@@ -400,16 +371,7 @@ int fxp_connect(struct fxp_pool *p, const char *url, void *user, struct fxp_conn
 
 int fxp_send_text(struct fxp_conn *c, const char *text, size_t len)
 {
-    struct fxp_out *o;
-    if (c->ended || c->closing || c->n_out >= FXP_MAX_QUEUED) return -1;
-    if (!(o = malloc(sizeof *o + LWS_PRE + len))) return -1;
-    o->next = NULL;
-    o->len = len;
-    memcpy(o->data + LWS_PRE, text, len);
-    if (c->out_tail) c->out_tail->next = o;
-    else c->out_head = o;
-    c->out_tail = o;
-    c->n_out++;
+    if (c->ended || c->closing || c->out.n >= FXP_MAX_QUEUED || fxws_outq_push(&c->out, text, len)) return -1;
     if (c->established && c->wsi) lws_callback_on_writable(c->wsi);
     return 0;
 }

@@ -1,4 +1,4 @@
-/* fxpool.h — libfxclient's event-driven API: many fxstream.v1 connections, one thread.
+/* fxpool.h — libfxclient's internal event-driven API: many fxstream.v1 connections, one thread.
  *
  * Owns ONE libwebsockets context serviced in the caller's thread and any number of
  * client connections on it (up to fxp_options.max_connections, 10,000 and more: the
@@ -17,9 +17,10 @@
  * Pointers passed to callbacks (hello, msg, header, payload, close info) are valid only
  * during the callback. Callbacks may send, close, and open connections.
  *
- * fxclient.h's blocking client stays the right tool for one connection; this is for
- * load generators, bots and proxies. It shares URL parsing, the handshake (subprotocol
- * fxstream.v1 at /v1/ws by default) and the error messages with it (fxws.h).
+ * fxclient.h's client (the installed API) is the tool for one connection; this is for
+ * load generators (fxload) and is internal: not installed, hidden in the shared library. It
+ * shares URL parsing, the handshake (subprotocol fxstream.v1 at /v1/ws by default) and the
+ * error messages with it (fxws.h).
  *
  * Memory per connection is small and bounded: with payloads off only the first bytes of
  * each message are kept (the rest is counted); with payloads on, one reassembly buffer

@@ -10,6 +10,7 @@
 
 #include <netdb.h>
 #include <poll.h>
+#include <pthread.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -26,6 +27,24 @@ void fxws_set_err(char *buf, size_t len, const char *fmt, ...)
     vsnprintf(buf, len, fmt, ap);
     va_end(ap);
 }
+
+/* ---- logging ---------------------------------------------------------------- */
+
+static int fxws_log_chosen; /* fxws_log_set was called: fxws_log_default leaves lws alone */
+static pthread_once_t fxws_log_once = PTHREAD_ONCE_INIT;
+
+void fxws_log_set(int levels, void (*emit)(int level, const char *line))
+{
+    __atomic_store_n(&fxws_log_chosen, 1, __ATOMIC_RELEASE);
+    lws_set_log_level(levels, emit ? emit : lwsl_emit_stderr);
+}
+
+static void fxws_log_quiet(void)
+{
+    if (!__atomic_load_n(&fxws_log_chosen, __ATOMIC_ACQUIRE)) lws_set_log_level(0, NULL);
+}
+
+void fxws_log_default(void) { pthread_once(&fxws_log_once, fxws_log_quiet); }
 
 /* ---- URL ------------------------------------------------------------------ */
 
@@ -173,6 +192,56 @@ void fxws_peer_close(const uint8_t *in, size_t len, int *code, char *out, size_t
         fxws_set_err(out, outlen, "server closed the connection (no close code)");
     if (len >= 2) fxws_set_err(reason_out, reason_len, "%.*s", (int)(len - 2), (const char *)in + 2);
     else fxws_set_err(reason_out, reason_len, "%s", "");
+}
+
+/* ---- outgoing text ------------------------------------------------------------ */
+
+struct fxws_out {
+    struct fxws_out *next;
+    size_t len;
+    unsigned char data[]; /* LWS_PRE, then the text */
+};
+
+int fxws_outq_push(struct fxws_outq *q, const char *text, size_t len)
+{
+    struct fxws_out *o = malloc(sizeof *o + LWS_PRE + len);
+    if (!o) return -1;
+    o->next = NULL;
+    o->len = len;
+    memcpy(o->data + LWS_PRE, text, len);
+    if (q->tail) q->tail->next = o;
+    else q->head = o;
+    q->tail = o;
+    q->n++;
+    return 0;
+}
+
+int fxws_outq_write(struct fxws_outq *q, struct lws *wsi, char *err, size_t errlen)
+{
+    struct fxws_out *o = q->head;
+    int n;
+    if (!o) return 0;
+    q->head = o->next;
+    if (!q->head) q->tail = NULL;
+    q->n--;
+    n = lws_write(wsi, o->data + LWS_PRE, o->len, LWS_WRITE_TEXT);
+    free(o);
+    if (n < 0) {
+        fxws_set_err(err, errlen, "write to server failed");
+        return -1;
+    }
+    if (q->head) lws_callback_on_writable(wsi);
+    return 0;
+}
+
+void fxws_outq_free(struct fxws_outq *q)
+{
+    while (q->head) {
+        struct fxws_out *o = q->head;
+        q->head = o->next;
+        free(o);
+    }
+    memset(q, 0, sizeof *q);
 }
 
 /* ---- reassembly ------------------------------------------------------------- */

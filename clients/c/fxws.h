@@ -1,11 +1,14 @@
-/* fxws.h — WebSocket client helpers shared by libfxclient's two front ends.
+/* fxws.h — WebSocket client helpers shared by libfxclient's two front ends (internal: not
+ * installed, its symbols hidden in the shared library).
  *
- * fxclient.c (one blocking connection) and fxpool.c (many event-driven connections)
- * speak the same handshake to the same server, so what they must agree on lives here
+ * fxclient.c (one connection, the public API) and fxpool.c (many event-driven connections,
+ * fxload's) speak the same handshake to the same server, so what they must agree on lives here
  * once: parsing ws:// URLs, resolving and diagnosing failed connects, the checks and
  * one-line messages of the handshake (subprotocol fxstream.v1), decoding the server's
- * close frame, and reassembling fragmented messages under a size bound. Everything
- * here is plain functions over caller-owned structs: no lws context, no globals. */
+ * close frame, queueing outgoing text, reassembling fragmented messages under a size bound,
+ * and keeping
+ * libwebsockets quiet unless fxc_set_log asked otherwise (its one global). Everything else
+ * here is plain functions over caller-owned structs: no lws context. */
 #ifndef FXWS_H
 #define FXWS_H
 
@@ -19,6 +22,13 @@ struct addrinfo;
 #define FXWS_DEFAULT_PORT 7681
 #define FXWS_DEFAULT_PATH "/v1/ws"
 #define FXWS_SUBPROTOCOL "fxstream.v1"
+#define FXWS_READ_BUF (128 * 1024) /* lws's per-thread read size: bytes one service reads */
+
+/* libwebsockets logs levels (LLL_* bits) through emit (NULL: stderr), process-wide: fxc_set_log. */
+void fxws_log_set(int levels, void (*emit)(int level, const char *line));
+/* Before a context is created: silences libwebsockets (its banner included) unless
+ * fxws_log_set was called. Once per process. */
+void fxws_log_default(void);
 
 /* printf into buf (len bytes; either may be NULL/0: nothing is written): the one-line
  * error messages of libfxclient. */
@@ -88,6 +98,22 @@ const char *fxws_scheme(const struct fxws_url *u);
  * LWS_CALLBACK_CLIENT_APPEND_HANDSHAKE_HEADER (its in/len). token NULL or "": nothing.
  * Returns 0, or -1 when it does not fit (the handshake then fails). */
 int fxws_append_auth(struct lws *wsi, void *in, size_t len, const char *token);
+
+/* Text messages waiting for the socket, oldest first: each one lws_write in its own
+ * writeable callback, as lws wants. */
+struct fxws_out;
+struct fxws_outq {
+    struct fxws_out *head, *tail;
+    int n;
+};
+
+/* Queues a copy of text (len bytes). 0, or -1 when memory runs out. */
+int fxws_outq_push(struct fxws_outq *q, const char *text, size_t len);
+/* From LWS_CALLBACK_CLIENT_WRITEABLE: writes the oldest message to wsi and asks for another
+ * turn while more wait. 0, or -1 with "write to server failed" in err (the callback returns
+ * it: lws closes the connection). */
+int fxws_outq_write(struct fxws_outq *q, struct lws *wsi, char *err, size_t errlen);
+void fxws_outq_free(struct fxws_outq *q);
 
 /* Reassembly of one message from its fragments. */
 struct fxws_rx {

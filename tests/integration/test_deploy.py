@@ -173,7 +173,7 @@ def test_unit_filters(t):
         if not t.check(port is not None, "daemon starts under strace"):
             return
         r = subprocess.run([FXCTL, "--url", "ws://127.0.0.1:%d/v1/ws" % port, "--timeout", "40000",
-                            "subscribe", "e", "--frames", "2"], capture_output=True, text=True, timeout=60)
+                            "subscribe", "e", "--frames", "2", "--kind", "2"], capture_output=True, text=True, timeout=60)
         t.check(r.returncode == 0 and r.stdout.count('"seq"') == 2, "frames computed under strace")
     finally:
         stop(proc)

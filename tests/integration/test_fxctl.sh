@@ -94,17 +94,44 @@ check_subscribe() {
     fi
 }
 
-# Without --kind, energy's light-rig frames (kind 3, same seq as their texture) are saved
-# beside the textures under their own names: one .json per frame, nothing overwritten.
+# Without --kind, --frames counts steps: energy's 6 textures each with its light rig (kind 3,
+# same seq and sim_time), saved beside the textures under their own names: one .json per
+# frame, nothing overwritten.
 check_subscribe_rig() {
     out=$tmp/mixed
     fx subscribe energy --frames 6 --out "$out"; check "subscribe energy --frames 6 (textures and rigs)" 0 '"kind":3'
     nrig=$(ls "$out"/energy-*-rig.bin 2>/dev/null | wc -l)
     njson=$(ls "$out"/energy-*.json 2>/dev/null | wc -l)
     nexr=$(ls "$out"/energy-*.exr 2>/dev/null | wc -l)
-    if [ "$nrig" -ge 2 ] && [ "$njson" -eq 6 ] && [ $((nrig + nexr)) -eq 6 ]; then pass "rig frames to NAME-SEQ-rig.bin, 6 .json"
-    else fail "rig frames to NAME-SEQ-rig.bin, 6 .json ($nrig rig, $nexr exr, $njson json)"; fi
+    if [ "$nexr" -eq 6 ] && [ "$nrig" -ge 2 ] && [ "$njson" -eq $((nrig + nexr)) ]; then
+        pass "6 steps: 6 textures, rig frames to NAME-SEQ-rig.bin, a .json each"
+    else fail "6 steps: 6 textures, rig frames to NAME-SEQ-rig.bin, a .json each ($nrig rig, $nexr exr, $njson json)"; fi
     fx subscribe energy --frames 1 --kind 5; check "--kind 5 is a usage error" 2 "" "--kind needs a frame kind"
+}
+
+# --frames counts steps, not frames: 5 steps of energy are 5 textures, and each light rig
+# printed belongs to one of them (a rig shares its texture's seq).
+check_subscribe_steps() {
+    fx subscribe energy --frames 5; check "subscribe energy --frames 5" 0 '"kind":2'
+    ntex=$(grep '"kind":2' "$tmp/out" | grep -o '"seq":[0-9]*' | sort -u | wc -l)
+    nrig=$(grep -c '"kind":3' "$tmp/out")
+    orphan=$(grep '"kind":3' "$tmp/out" | grep -o '"seq":[0-9]*,' | while read -r q; do
+        grep '"kind":2' "$tmp/out" | grep -q -- "$q" || echo "$q"; done)
+    if [ "$ntex" -eq 5 ] && [ "$nrig" -ge 1 ] && [ -z "$orphan" ]; then
+        pass "--frames 5 on energy: 5 steps, 5 textures and $nrig light rigs of those steps"
+    else fail "--frames 5 on energy: 5 steps ($ntex textures, $nrig rigs, rigs of other steps: $orphan)"; fi
+}
+
+# The timeout bounds the whole wait: frames of a kind filtered out do not restart it, and a
+# kind the stream never sends is named with what it sent instead.
+check_subscribe_timeout() {
+    start=$(date +%s)
+    timeout 20 "$FXCTL" --timeout 2000 subscribe flame --frames 1 --kind 2 >"$tmp/out" 2>"$tmp/err"; rc=$?
+    took=$(($(date +%s) - start))
+    check "--kind 2 of the flame: exit 1, the kinds named" 1 "" \
+        'no frame of kind 2 (texture) came; the stream sent [0-9]* of kind 1 (particles)'
+    if [ "$rc" -eq 1 ] && [ "$took" -le 6 ]; then pass "... after the 2 s timeout ($took s), not reset by particle frames"
+    else fail "... after the 2 s timeout (exit $rc after $took s)"; fi
 }
 
 # Particle frames to PLY: x y z temperature fuel flags, and vx vy vz after them once the
@@ -187,10 +214,28 @@ check_human() {
     fxtty set flame h=0.004; check "a set that restarts the simulation says so" 0 "changing h restarted the simulation of flame"
     fx set flame h=0.0035 k_buo=0.01 fps=30; check "piped set: JSON on stdout, the restart note on stderr" 0 '^{"op":"params"' "restarted the simulation"
     fxtty --json get flame; check "tty --json: one JSON line" 0 '^{"op":"params","stream":"flame"'
+    fx set flame k_buo=0.02 fps=25; check "piped set before a preset load" 0
+    fxtty preset load flame candle; check "tty preset load: each value it changed, with what it was" 0 \
+        '^  k_buo  *= 0.01  *(was 0.02)'
+    n=$(grep -c ' = \|^ *= ' "$tmp/out")
+    if grep -q '^  fps  *= 30  *(was 25)' "$tmp/out" && [ "$n" -lt 10 ] && ! grep -q '"op"' "$tmp/out"; then
+        pass "tty preset load: only those ($n of 37 parameters), no JSON"
+    else fail "tty preset load: only those ($n of 37 parameters)"; fi
+    fxtty preset load flame candle; check "tty preset load of the same values: nothing changed" 0 '(no value changed)'
+    fxtty create energy_wave fxctl_h width=32 height=32; check "tty create: a sentence" 0 '^created stream fxctl_h (effect energy_wave, rev 1)'
+    fxtty reset fxctl_h; check "tty reset: a sentence" 0 '^reset stream fxctl_h: its simulation starts over'
+    fxtty destroy fxctl_h; check "tty destroy: a sentence" 0 '^destroyed stream fxctl_h'
+    fxtty preset save flame fxctl-tty; ! grep -q replacing "$tmp/out" || rc=9
+    check "tty preset save: a sentence" 0 '^saved preset fxctl-tty of flame'
+    fxtty preset save flame fxctl-tty; check "tty preset save again: it says it replaced" 0 '^saved preset fxctl-tty of flame, replacing'
+    fxtty preset delete flame fxctl-tty; check "tty preset delete: a sentence" 0 '^deleted preset fxctl-tty of flame'
     fxtty list; check "tty list: a table" 0 '^flame  *flame  *[0-9]'
     fx set flame k_buo=0.01 k_buo=0.02; check "the same parameter twice: usage error" 2 "" "parameter given twice: k_buo"
     fx sett flame; check "an unknown command: did you mean" 2 "" 'did you mean "set"'
     fx set flame alpa=1; check "an unknown parameter: the server's did you mean" 1 "" 'unknown parameter'
+    fx set flame k_bou=0.01; check "swapped letters: did you mean k_buo" 1 "" 'did you mean "k_buo"'
+    fx set energy alhpa=2; check "swapped letters: did you mean alpha" 1 "" 'did you mean "alpha"'
+    fx lsit; check "a command with swapped letters: did you mean list" 2 "" 'did you mean "list"'
     fx subscribe eye --frames 1; sleep 1.5
     fx subscribe eye --frames 1; check "a stale first frame is noted" 0 '"kind":4' "the first frame is [0-9.]* s old"
 }
@@ -212,6 +257,8 @@ check_params
 check_streams
 check_subscribe
 check_subscribe_rig
+check_subscribe_steps
+check_subscribe_timeout
 check_subscribe_ply
 check_destroyed
 check_watch

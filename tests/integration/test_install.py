@@ -1,5 +1,6 @@
 """test_install.py — `make install` and `make uninstall`: the files land where README and
-deploy/README.md say (DESTDIR staging with the default PREFIX), the web client is the one
+deploy/README.md say (DESTDIR staging with the default PREFIX; the client library's own
+checks are test_libfxclient.py's), the web client is the one
 the daemon serves (every file its pages reference is there, no sources), and a copy
 installed under a real PREFIX starts with its installed configuration and serves the
 page, its bundle and /healthz. Bounded: make install with everything built takes seconds."""
@@ -52,6 +53,10 @@ def test_destdir(t):
         p = d + "/usr/local"
         t.check(all(os.access("%s/bin/%s" % (p, b), os.X_OK) for b in ("fxstreamd", "fxctl", "fxload")),
                 "fxstreamd, fxctl, fxload in PREFIX/bin")
+        t.check(os.path.islink(p + "/lib/libfxclient.so") and os.path.isfile(p + "/lib/libfxclient.a") and
+                os.path.isfile(p + "/include/fxclient/fxclient.h") and os.path.isfile(p + "/lib/pkgconfig/fxclient.pc"),
+                "libfxclient in PREFIX/lib, its headers in PREFIX/include/fxclient, fxclient.pc "
+                "(test_libfxclient.py builds against them)")
         web = p + "/share/fxstream/web"
         t.check(os.path.isfile(web + "/index.html") and os.path.isfile(web + "/dist/app.js"),
                 "web client (index.html, dist/app.js) in PREFIX/share/fxstream/web")

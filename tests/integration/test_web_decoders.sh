@@ -18,7 +18,7 @@ trap cleanup EXIT
 mkdir -p "$tmp/vec" "$tmp/real" "$tmp/eye" "$tmp/flame"
 build/tests/test_light_rig --dump "$tmp/vec" >/dev/null || summary_fail "dump failed"
 
-# A real daemon: energy with the light rig on, 6 frames (3 of each kind) captured by fxctl.
+# A real daemon: energy with the light rig on, 3 steps (a texture and its rig each) captured by fxctl.
 build/fxstreamd --port 0 --state-dir "$tmp/state" --log-level warn >"$tmp/d.out" 2>"$tmp/d.err" &
 pid=$!
 i=0
@@ -28,7 +28,7 @@ port=$(sed -n 's/.*127\.0\.0\.1:\([0-9]*\)\/.*/\1/p' "$tmp/d.out" | head -n 1)
 url="ws://127.0.0.1:$port"
 timeout 20 build/fxctl --url "$url" set energy light_rig=true 'ramp=[{"m_min":-1,"color":[0.1,0.2,0.3]},{"m_min":0.25,"color":[1,0.5,0]}]' >/dev/null \
     || summary_fail "set light_rig failed"
-timeout 30 build/fxctl --url "$url" subscribe energy --frames 6 --out "$tmp/real" >"$tmp/real/lines.txt" 2>"$tmp/real/err.txt"
+timeout 30 build/fxctl --url "$url" subscribe energy --frames 3 --out "$tmp/real" >"$tmp/real/lines.txt" 2>"$tmp/real/err.txt"
 # Two compound eyes in mode lut (small tables): one kind 4 frame each, payload + C-decoded PNGs.
 for spec in "eyesq lattice=square lut_cells=12 lut_dirs=10" "eyehex lattice=hex lut_cells=8 lut_dirs=12 lens_radius=1.2"; do
     set -- $spec
