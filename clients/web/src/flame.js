@@ -43,7 +43,7 @@ const BB_RGB = [[1, 0.059, 0], [1, 0.116, 0], [1, 0.189, 0], [1, 0.314, 0.009], 
   [1, 0.638, 0.283], [1, 0.778, 0.503], [1, 0.914, 0.783], [1, 1, 1]];
 
 // volume: kernel diameter in particle spacings, and the emission → opacity gain of 1 − e^(−gain·E)
-const VOLUME_KERNEL = 7, VOLUME_GAIN = 0.4, VOLUME_SMOKE_GAIN = 0.25, VOLUME_HEAT_SCALE = 1.35, VOLUME_TONGUES = 2.2;
+const VOLUME_KERNEL = 7, VOLUME_GAIN = 0.4, VOLUME_SMOKE_GAIN = 0.4, VOLUME_HEAT_SCALE = 1.35, VOLUME_TONGUES = 2.2;
 export const FLAME_MODES = ['volume', 'pbvr', 'hdr'];
 export const FLAME_DEFAULTS = {
   mode: 'volume', rl: 15, threshold: 0.3, intensity: 1.0, smoke: true, smokeT: 1000, smokeColor: '#595959',
