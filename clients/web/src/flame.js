@@ -29,8 +29,9 @@
 //   for smoke) fading from the particle to the tip, fainter for cooler particles, so the
 //   flow reads as streaks rather than a hairball.
 // hdr: soft round additive sprites whose emission is the blackbody colour times a luminance
-//   that grows with heat, in linear HDR, tone-mapped with three's ACES filmic curve and an
-//   exposure control: a hot core is bright but rolls off instead of clipping.
+//   that grows with heat, in linear HDR, tone-mapped with three's ACES filmic curve on the
+//   luminance (the hue kept) and an exposure control: a hot core is bright but rolls off
+//   instead of clipping.
 import * as THREE from 'three';
 import { decode, payloadOf } from '../fxs_particles.js';
 import { ACES_GLSL, SRGB_GLSL, fullscreenQuad } from './gl.js';
@@ -102,6 +103,7 @@ function spriteTexture(holey) {
 
 const COMMON_VERT = /* glsl */ `
 uniform float tAmb, tMax, radius, pointScale;
+uniform vec3 upW, clipPoint;   // nothing is drawn below the sources' plane (what leaks under the plate)
 uniform vec3 bbRGB[10];
 uniform float bbT[10];
 attribute float slot;
@@ -122,7 +124,8 @@ void place(vec3 p, float size) {
   gl_Position = projectionMatrix * mv;
   gl_PointSize = clamp(pointScale * size / max(-mv.z, 1e-4), 1.0, 96.0);
 }
-void hide() { gl_Position = vec4(2.0, 2.0, 2.0, 1.0); gl_PointSize = 0.0; }`;
+void hide() { gl_Position = vec4(2.0, 2.0, 2.0, 1.0); gl_PointSize = 0.0; }
+bool belowClip(vec3 p) { return dot(p - clipPoint, upW) < -radius; }`;
 
 const PBVR_VERT = /* glsl */ `${COMMON_VERT}
 uniform sampler2D randTex;
@@ -134,7 +137,7 @@ void main() {
   bool hot = itemp >= smokeT;
   float smoke = clamp((itemp - tAmb) / max(smokeT - tAmb, 1.0), 0.0, 1.0);
   float n = hot ? floor(nmax * heatOf(itemp) + u) : smokeOn * floor(0.5 * nmax * smoke + u);
-  if (slot >= n) { hide(); return; }
+  if (slot >= n || belowClip(ipos)) { hide(); return; }
   place(ipos + radius * (2.0 * rnd.xyz - 1.0), 3.0 * radius);
   vColor = hot ? blackbody(itemp) : smokeColor;
   vAlphaP = hot ? clamp(itemp / tMax, 0.0, 1.0) : smokeAlpha;
@@ -176,9 +179,9 @@ void main() { gl_FragColor = vec4(linearToSRGB(vColor) * vA, 1.0); }  // additiv
 const HDR_VERT = /* glsl */ `${COMMON_VERT}
 void main() {
   float heat = heatOf(itemp);
-  if (heat <= 0.0) { hide(); return; }
+  if (heat <= 0.0 || belowClip(ipos)) { hide(); return; }
   place(ipos, 5.0 * radius);
-  vColor = blackbody(itemp) * heat * heat;  // emission grows with heat; colour from the table
+  vColor = blackbody(min(itemp, 0.75 * tMax)) * heat * heat;  // emission grows with heat; the hottest pale yellow, not white
   vAlphaP = 1.0;
 }`;
 
@@ -194,8 +197,7 @@ void main() {
 // emission × heat, smoke density, 1). Below the clip plane (the plate under the sources)
 // the kernel is cut with a short fade, so no light is drawn under the base.
 const SPLAT_VERT = /* glsl */ `${COMMON_VERT}
-uniform float smokeT, smokeOn, kernel, clipH;
-uniform vec3 upW, clipPoint;
+uniform float smokeT, smokeOn, kernel;
 uniform vec2 upScreen;   // world-up component of the camera's right and up vectors
 varying vec4 vW;
 varying vec3 vClip;      // the particle's height above the clip plane, its change across the sprite (x, y)
@@ -301,6 +303,7 @@ export class FlameView {
     this.scene.add(this.stage);
     const common = {
       tAmb: { value: 300 }, tMax: { value: 3000 }, radius: { value: 0.002 }, pointScale: { value: 500 },
+      upW: { value: new THREE.Vector3(0, 0, 1) }, clipPoint: { value: new THREE.Vector3(0, 0, -1e9) },
       bbT: { value: BB_T }, bbRGB: { value: BB_RGB.map((c) => new THREE.Vector3(...c)) },
     };
     this.pbvr = new THREE.ShaderMaterial({
@@ -321,7 +324,7 @@ export class FlameView {
       vertexShader: SPLAT_VERT, fragmentShader: SPLAT_FRAG,
       uniforms: {
         ...common, smokeT: { value: 1000 }, smokeOn: { value: 1 }, kernel: { value: VOLUME_KERNEL }, clipFade: { value: 0.001 },
-        upW: { value: new THREE.Vector3(0, 0, 1) }, clipPoint: { value: new THREE.Vector3() }, upScreen: { value: new THREE.Vector2() },
+        upScreen: { value: new THREE.Vector2() },
       },
       depthTest: false, depthWrite: false, transparent: true, blending: THREE.CustomBlending,
       blendEquation: THREE.AddEquation, blendSrc: THREE.OneFactor, blendDst: THREE.OneFactor,
@@ -365,7 +368,11 @@ export class FlameView {
       ${ACES_GLSL}
       void main() {
         vec3 c = texture2D(src, vUv).rgb * scale;
-        gl_FragColor = vec4(linearToSRGB(aces == 1 ? acesFilmic(c) : c), 1.0);
+        if (aces == 1) { // ACES on the luminance only, so bright gas keeps its hue instead of going grey-white
+          float L = dot(c, vec3(0.2126, 0.7152, 0.0722));
+          c = L > 1e-6 ? c * (acesFilmic(vec3(L)).g / L) : c;
+        }
+        gl_FragColor = vec4(linearToSRGB(c), 1.0);
       }`, { src: { value: null }, scale: { value: 1 }, aces: { value: 0 } });
     this.orbit = null;
   }
@@ -494,7 +501,9 @@ export class FlameView {
   }
 
   setUniforms(w, h) {
-    const pr = this.params || {}, s = this.settings, { scale, d } = this.frameOf();
+    const pr = this.params || {}, s = this.settings, { scale, d, up, base } = this.frameOf();
+    this.pbvr.uniforms.upW.value.copy(up); // the uniforms every material shares
+    this.pbvr.uniforms.clipPoint.value.copy(this.clipPoint(up, base, scale));
     for (const m of [this.pbvr, this.hdr, this.splat]) {
       m.uniforms.tAmb.value = pr.T_amb ?? 300;
       m.uniforms.tMax.value = s.whiteT;
@@ -543,9 +552,7 @@ export class FlameView {
     this.camera.updateMatrixWorld();
     const right = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 0);
     const camUp = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1);
-    su.upW.value.copy(up);
     su.upScreen.value.set(right.dot(up), camUp.dot(up));
-    su.clipPoint.value.copy(this.clipPoint(up, base, scale));
     su.clipFade.value = (s.baseFade ?? 1) * d;
     su.kernel.value = s.kernel;
     su.pointScale.value = sh / (2 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
