@@ -54,7 +54,7 @@ KERNELS     := $(wildcard kernels/*.cl)
 KERNEL_LAYOUTS := $(wildcard kernels/*_layout.h)
 # The browser client: npm packages from the committed lock file (npm ci), bundled by esbuild
 # into clients/web/dist/ (git-ignored), which fxstreamd serves with the rest of clients/web.
-WEB_SRC     := $(wildcard clients/web/src/*.js) clients/web/fxs_particles.js clients/web/build.mjs
+WEB_SRC     := $(wildcard clients/web/src/*.js clients/web/test/*.js) clients/web/fxs_particles.js clients/web/build.mjs
 WEB_OUT     := clients/web/dist/app.js
 NPM_STAMP   := node_modules/.package-lock.json
 
@@ -139,7 +139,8 @@ install: all
 	    clients/c/fxclient.pc.in > $(DESTDIR)$(PKGCONFIGDIR)/fxclient.pc
 	@if [ -z "$(DESTDIR)" ] && [ "$$(id -u)" -eq 0 ] && command -v ldconfig >/dev/null; then ldconfig; fi
 	install -m 0644 $(WEB_FILES) $(DESTDIR)$(FXDATADIR)/web/
-	cp -R clients/web/dist $(DESTDIR)$(FXDATADIR)/web/ && chmod -R u=rwX,go=rX $(DESTDIR)$(FXDATADIR)/web/dist
+	cp -R clients/web/dist $(DESTDIR)$(FXDATADIR)/web/ && rm -f $(DESTDIR)$(FXDATADIR)/web/dist/app-test.js && \
+	    chmod -R u=rwX,go=rX $(DESTDIR)$(FXDATADIR)/web/dist
 	sed $(FX_PATHS) deploy/fxstreamd.service > $(DESTDIR)$(UNITDIR)/fxstreamd.service
 	sed $(FX_PATHS) deploy/fxstreamd.json > $(DESTDIR)$(DOCDIR)/fxstreamd.json
 	test -e $(DESTDIR)$(SYSCONFDIR)/fxstream/fxstreamd.json || \

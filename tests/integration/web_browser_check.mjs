@@ -473,6 +473,9 @@ try {
   const url = `http://127.0.0.1:${port}/?rl=2&aa=0&drawfps=1`;
   const resp = await page.goto(url, { timeout: 20000 });
   check(resp && resp.ok(), 'page served at / by fxstreamd');
+  const product = await (await fetch(`http://127.0.0.1:${port}/dist/app.js`)).text();
+  check(product.length > 1000 && !product.includes('window.fxs') && !product.includes('FXS_TEST=!0'),
+    'the product bundle carries no test hooks (the tests load dist/app-test.js in its place)');
   const connected = await until(() => page.evaluate(() => document.body.dataset.conn === 'connected'), 20000);
   check(connected, 'connects (state shown: connected)');
   const subscribed = await until(() => page.evaluate(() => document.body.dataset.subscribed), 30000);

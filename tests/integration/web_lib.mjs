@@ -70,12 +70,17 @@ export function stopDaemon(d) {
 // build/fxctl against the daemon on port; returns its stdout.
 export const fxctlAt = (port) => (...a) => execFileSync(join(ROOT, 'build', 'fxctl'), ['--url', `ws://127.0.0.1:${port}`, ...a], { timeout: 15000 });
 
-export function launchBrowser(profile, viewport) {
-  return chromium.launchPersistentContext(profile, {
+// Every page of the context gets the test bundle (dist/app-test.js: the page with the tests'
+// hooks, window.fxs) in place of the product's dist/app.js.
+export async function launchBrowser(profile, viewport) {
+  const ctx = await chromium.launchPersistentContext(profile, {
     executablePath: '/usr/bin/chromium', headless: true, viewport,
     args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
       '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
   });
+  await ctx.route(/\/dist\/app\.js(\?.*)?$/, (route) =>
+    route.fulfill({ path: join(ROOT, 'clients', 'web', 'dist', 'app-test.js'), contentType: 'text/javascript' }));
+  return ctx;
 }
 
 // Console errors and page errors of `page`, without the GL driver's performance notes.

@@ -1,0 +1,87 @@
+// hooks.js — the browser tests' window into the page (tests/integration/web_*_check.mjs): the
+// test bundle, dist/app-test.js, is this file; it marks the page as under test (the drawing
+// buffer is kept for read-back), runs the page (src/main.js) and puts `window.fxs` on it: the
+// streams and their stats, each view's info and pixel samples. The tests serve it in place of
+// dist/app.js (web_lib.mjs openPage); the product bundle has none of this.
+import './test_mode.js';
+import { app } from '../src/main.js';
+
+// The drawn pixels of the first view of `kind` (and `stream`, if given): {entry, w, h, px},
+// RGBA rows from the bottom (readPixels), or null when there is no such view.
+function viewPixels(kind, stream) {
+  const entry = app.layout.find((e) => e.view.kind === kind && (!stream || e.view.stream === stream));
+  if (!entry) return null;
+  const pr = app.renderer.getPixelRatio(), r = entry.rect;
+  const x = Math.round(r.x * pr), y = Math.round(r.y * pr), w = Math.round(r.w * pr), h = Math.round(r.h * pr);
+  const gl = app.renderer.getContext(), px = new Uint8Array(w * h * 4);
+  gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  gl.readPixels(x, y, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  return { entry, w, h, px };
+}
+
+function sample(kind, stream) {
+  const v = viewPixels(kind, stream);
+  if (!v) return null;
+  const { entry, w, h, px } = v;
+  let sr = 0, sg = 0, sb = 0, lit = 0, bright = 0, warm = 0, max = 0;
+  const n = w * h;
+  for (let i = 0; i < n; i++) {
+    const R = px[4 * i], G = px[4 * i + 1], B = px[4 * i + 2];
+    sr += R; sg += G; sb += B;
+    const l = 0.2126 * R + 0.7152 * G + 0.0722 * B;
+    if (l > 24) lit++;
+    if (l > 128) bright++;
+    if (R > 96 && R >= G && G >= B && R > B + 32) warm++;
+    if (l > max) max = l;
+  }
+  let hash = 0;
+  for (let i = 0; i < px.length; i += 97) hash = (hash * 31 + px[i]) >>> 0;
+  return { w, h, mean: [sr / n, sg / n, sb / n], lit: lit / n, bright: bright / n, warm: warm / n, max, hash, css: entry.css };
+}
+
+// The flame view's look, for issue 13's checks: of the flame's pixels brighter than 10%, the
+// share with every channel >= 0.98 (blown out), and the mean colour of the lower and upper
+// thirds of their rows (hotter = a larger G/R, towards yellow and white), and a hash. Flame
+// pixels are warm (R > B) or near white; the stage's bluish grid and grey smoke are not.
+function flameLook() {
+  const v = viewPixels('flame');
+  if (!v) return null;
+  const { w, h, px } = v;
+  const lit = (R, G, B) => 0.2126 * R + 0.7152 * G + 0.0722 * B > 25.5 && (R > B + 8 || Math.min(R, G, B) >= 200);
+  const rows = [];
+  let bright = 0, white = 0, hash = 0;
+  for (let i = 0; i < w * h; i++) {
+    const R = px[4 * i], G = px[4 * i + 1], B = px[4 * i + 2];
+    if (!lit(R, G, B)) continue;
+    bright++;
+    if (R >= 250 && G >= 250 && B >= 250) white++;
+    rows.push(Math.floor(i / w));
+  }
+  for (let i = 0; i < px.length; i += 97) hash = (hash * 31 + px[i]) >>> 0;
+  if (!bright) return { bright: 0, white: 0, hash };
+  rows.sort((a, b) => a - b); // rows counted from the bottom (readPixels)
+  const lo = rows[Math.floor(0.02 * (rows.length - 1))], hi = rows[Math.ceil(0.98 * (rows.length - 1))];
+  const third = (a, b) => {
+    const m = [0, 0, 0, 0];
+    for (let row = a; row < b; row++)
+      for (let c = 0; c < w; c++) {
+        const i = 4 * (row * w + c), R = px[i], G = px[i + 1], B = px[i + 2];
+        if (!lit(R, G, B)) continue;
+        m[0] += R; m[1] += G; m[2] += B; m[3]++;
+      }
+    return m[3] ? { rgb: m.slice(0, 3).map((v) => v / m[3]), gr: m[1] / Math.max(1, m[0]), n: m[3] } : null;
+  };
+  const t = (hi - lo) / 3;
+  return { bright: bright / (w * h), white: white / bright, lower: third(lo, Math.round(lo + t)), upper: third(Math.round(hi - t), hi + 1), hash, rows: [lo, hi, h] };
+}
+
+const { conn, streams, flameSettings } = app;
+window.fxs = {
+  conn, streams, get views() { return app.views.map((v) => `${v.stream}:${v.kind}`); }, sample,
+  stats: () => Object.fromEntries([...streams.values()].map((s) => [s.name, { rev: s.rev, channel: s.channel, maxFps: s.maxFps, latency: s.stats.rate.latency, frames: s.stats.totalFrames, drawn: s.stats.totalDrawn, kinds: [...s.stats.kindsSeen], skipped: s.stats.skipped, error: s.error }])),
+  flame: () => app.views.find((x) => x.kind === 'flame')?.info() ?? null,
+  flameLook,
+  flameSettings,
+  scene: () => { const v = app.views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
+  eye: (stream) => app.views.find((x) => x.kind === 'eye' && x.stream === stream)?.info() ?? null,
+};
