@@ -40,7 +40,6 @@ const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
 // The flame's look (FlameView.settings, shared by every flame view): ?flame=hdr picks the mode.
 const flameSettings = { ...FLAME_DEFAULTS, mode: q.get('flame') === 'hdr' ? 'hdr' : 'pbvr', rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
 const waveSettings = { ...WAVE_DEFAULTS }; // WaveView.settings, shared by every wave view
-const viewSettings = { waveBlack: 0.55, waveGain: 1.6 };
 const vf = gui.addFolder('view (this page only)');
 const ff = vf.addFolder('flame');
 ff.add(flameSettings, 'mode', ['pbvr', 'hdr']).name('mode');
@@ -58,8 +57,9 @@ ff.add(flameSettings, 'whiteT', 1500, 8000, 50).name('white point T_max (K)');
 ff.add(flameSettings, 'exposure', 0.05, 8, 0.01).name('hdr: exposure');
 vf.add(waveSettings, 'bloom', 0, 3, 0.01).name('wave bloom');
 vf.add(waveSettings, 'exposure', 0.1, 8, 0.01).name('wave exposure');
-vf.add(viewSettings, 'waveBlack', 0, 2, 0.01).name('wave black level (B)');
-vf.add(viewSettings, 'waveGain', 0.1, 5, 0.01).name('wave level gain');
+vf.add(waveSettings, 'floor', 0, 2, 0.01).name('wave floor removed (x border B)');
+vf.add(waveSettings, 'gain', 0.1, 5, 0.01).name('wave level gain');
+vf.add(waveSettings, 'contrast', 1, 4, 0.01).name('wave contrast (glow falloff)');
 vf.close();
 
 const streams = new Map(); // name -> {name, effect, channel, params, rev, views, panel, stats, error}
@@ -94,7 +94,7 @@ function makeViews(st) {
     case 'energy_wave': {
       const w = new WaveView(st.name);
       w.settings = waveSettings;
-      vs = [w, new SceneView(st.name, w.wt)];
+      vs = [w, new SceneView(st.name, w)];
       break;
     }
     case 'compound_eye': vs = [new EyeView(st.name)]; break;
@@ -330,11 +330,6 @@ function frame(t) {
   const drawnStreams = new Set();
   for (const { view, rect, css } of lastLayout) {
     const v = view;
-    for (const m of [v.kind === 'wave' ? v.material : null, v.billboardMat]) {
-      if (!m) continue;
-      m.uniforms.blackLevel.value = viewSettings.waveBlack;
-      m.uniforms.levelGain.value = viewSettings.waveGain;
-    }
     renderer.setViewport(rect.x, rect.y, rect.w, rect.h);
     renderer.setScissor(rect.x, rect.y, rect.w, rect.h);
     renderer.setScissorTest(true);
@@ -456,6 +451,8 @@ window.fxs = {
   flame: () => views.find((x) => x.kind === 'flame')?.info() ?? null,
   flameLook,
   flameSettings,
-  scene: () => { const v = views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
+  waveSettings,
+  scene: (stream) => views.find((x) => x.kind === 'scene' && (!stream || x.stream === stream))?.info() ?? null,
   eye: (stream) => views.find((x) => x.kind === 'eye' && x.stream === stream)?.info() ?? null,
+  wave: (stream) => views.find((x) => x.kind === 'wave' && (!stream || x.stream === stream))?.info() ?? null,
 };
