@@ -76,9 +76,12 @@ async function waveLook(page, rev) {
   return { img, m: waveMetrics(img, { x0: b.x0 * img.w, x1: b.x1 * img.w, y0: b.y0 * img.h, y1: b.y1 * img.h }) };
 }
 
+// A screenshot of one view, without its stats label (its figures would be stale in a picture).
 async function shot(page, kind, stream, name) {
   const css = await page.evaluate(([k, s]) => window.fxs.sample(k, s).css, [kind, stream]);
+  await page.evaluate(() => { document.getElementById('labels').style.visibility = 'hidden'; });
   await page.screenshot({ path: join(ART, name), clip: { x: css.left, y: css.top, width: css.w, height: css.h } });
+  await page.evaluate(() => { document.getElementById('labels').style.visibility = ''; });
 }
 
 async function waveChecks(page, set, p0) {
@@ -178,7 +181,7 @@ async function eyeChecks(main, port) {
     await page.mouse.up();
     await sleep(1500);
     const e = eyeMetrics(await grabView(page, 'eye', 'eye'), EYE_BG);
-    await page.screenshot({ path: join(ART, `look-eye-${deg}.png`), clip: { x: css.left, y: css.top, width: css.w, height: css.h } });
+    await shot(page, 'eye', 'eye', `look-eye-${deg}.png`);
     check(e.area > 0 && round(e), `closed: a full round disc after turning it ${deg}° (no open cut)`, `fill ${e.fill}, aspect ${e.aspect}`);
   }
 }
