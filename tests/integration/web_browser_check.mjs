@@ -13,14 +13,12 @@
 // change the picture, and a view-only page is told instead); the page reconnects after a
 // daemon restart.
 // Screenshots go to build/artifacts/. Every wait is bounded. Last line: "test_web_browser: N passed, M failed".
-import { chromium } from 'playwright-core';
-import { spawn, execFileSync } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import { mkdtempSync, mkdirSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
-import { join, resolve, dirname } from 'node:path';
-import { fileURLToPath } from 'node:url';
+import { join } from 'node:path';
+import { ROOT, sleep, until, startDaemon, stopDaemon, launchChromium } from './browser_lib.mjs';
 
-const ROOT = resolve(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const ART = join(ROOT, 'build', 'artifacts');
 const LOOK_ONLY = process.argv.includes('--look'); // screenshots only (development)
 mkdirSync(ART, { recursive: true });
@@ -30,13 +28,6 @@ function check(ok, name, detail = '') {
   name = `${name} [${((Date.now() - T0) / 1000).toFixed(1)} s]`;
   if (ok) { passed++; console.log('ok   ' + name); } else { failed++; console.log('FAIL ' + name + (detail ? ': ' + detail : '')); }
 }
-const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
-async function until(fn, ms, step = 200) { // bounded polling; returns the last value
-  const end = Date.now() + ms;
-  let v;
-  while (Date.now() < end) { try { v = await fn(); if (v) return v; } catch { /* retry */ } await sleep(step); }
-  return v;
-}
 // Bounded: about 210 s on an idle 2-core machine (SwiftShader renders every view); the limit
 // leaves room for a loaded one.
 const hardStop = setTimeout(() => { console.log('FAIL overall time limit (420 s)'); finish(1); }, 420000);
@@ -45,27 +36,6 @@ const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
 let daemon = null, ctx = null;
 
-function startDaemon(port, env = {}) {
-  return new Promise((res, rej) => {
-    const p = spawn(join(ROOT, 'build', 'fxstreamd'), ['--port', String(port), '--state-dir', stateDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'], env: { ...process.env, ...env } });
-    let out = '';
-    const t = setTimeout(() => rej(new Error('daemon did not start: ' + out)), 15000);
-    p.stdout.on('data', (d) => {
-      out += d;
-      const m = out.match(/127\.0\.0\.1:(\d+)\//);
-      if (m) { clearTimeout(t); res({ proc: p, port: Number(m[1]) }); }
-    });
-    p.on('exit', () => rej(new Error('daemon exited: ' + out)));
-  });
-}
-function stopDaemon(d) {
-  return new Promise((res) => {
-    if (!d || d.proc.exitCode !== null) { res(); return; }
-    const t = setTimeout(() => { d.proc.kill('SIGKILL'); res(); }, 5000);
-    d.proc.once('exit', () => { clearTimeout(t); res(); });
-    d.proc.kill('SIGTERM');
-  });
-}
 async function finish(code) {
   clearTimeout(hardStop);
   try { await ctx?.close(); } catch { /* ignore */ }
@@ -496,18 +466,14 @@ async function flameChecks(ctx, port, fxctl) {
 }
 
 try {
-  daemon = await startDaemon(0);
+  daemon = await startDaemon(0, stateDir);
   const port = daemon.port;
   // The default streams, made cheaper for a 2-core machine running software WebGL, and the
   // wave's pulse off so the billboard is never momentarily dark.
   const fxctl = (...a) => execFileSync(join(ROOT, 'build', 'fxctl'), ['--url', `ws://127.0.0.1:${port}`, ...a], { timeout: 15000 });
   fxctl('set', 'flame', 'fps=8');
   fxctl('set', 'energy', 'fps=3', 'animate=false');
-  ctx = await chromium.launchPersistentContext(profile, {
-    executablePath: '/usr/bin/chromium', headless: true, viewport: { width: 800, height: 480 },
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
-      '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
-  });
+  ctx = await launchChromium(profile, { viewport: { width: 800, height: 480 } });
   const page = ctx.pages()[0] || await ctx.newPage();
   const logs = [];
   page.on('console', (m) => { if ((m.type() === 'error' || m.type() === 'warning') && !m.text().includes('GL Driver Message')) logs.push(m.text()); });
@@ -607,7 +573,7 @@ try {
   await stopDaemon(daemon);
   const down = await until(() => page.evaluate(() => document.body.dataset.conn !== 'connected'), 10000);
   check(down, 'shows the lost connection');
-  daemon = await startDaemon(port);
+  daemon = await startDaemon(port, stateDir);
   const framesBefore = await page.evaluate(() => window.fxs.stats().flame?.frames ?? 0);
   const back = await until(async () => {
     const s = await page.evaluate(() => ({ c: document.body.dataset.conn, f: window.fxs.stats().flame?.frames ?? 0 }));
@@ -618,7 +584,7 @@ try {
   // With access tokens (PROTOCOL.md §3.11): no token says so; ?token= authenticates and leaves the address bar.
   await stopDaemon(daemon);
   const token = 'web-view-token-0123456789';
-  daemon = await startDaemon(port, { FXSTREAMD_TOKENS: `view:${token}` });
+  daemon = await startDaemon(port, stateDir, { FXSTREAMD_TOKENS: `view:${token}` });
   const p3 = await ctx.newPage();
   const revView = await healthRev(port, 'flame');
   await p3.goto(`http://127.0.0.1:${port}/`);
