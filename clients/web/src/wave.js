@@ -10,8 +10,8 @@
 // stream's: eye, center, up, size (PROTOCOL.md §11.1).
 //
 // Display levels, a choice of this page (the thesis gives none). The 1/d field never falls to
-// zero inside the billboard: B at its border is a third of the peak or more, and integrated
-// along a ray it falls off only like log(1/d) around a source. So each frame the page
+// zero inside the billboard (B at its border is a quarter of the peak for the default ring),
+// and integrated along a ray it falls off only like log(1/d) around a source. So each frame the page
 // measures that floor F, the median B over the texture's outer 2% of rows and columns, and
 // shows B' = gain · F · max(B/F − floor, 0)^contrast: the floor removed (a little more than
 // the median, `floor` = 1.15) and the log profile steepened into a glow (`contrast` 2). B and
