@@ -68,11 +68,11 @@ const struct param_def compound_eye_params[] = {
                         "colour) or absorb (pigment colour)")},
     EYE_FRAC("dot_radius", "0.2", 0.05, 0.5, "pigment dot radius", .group = "pigment"),
     EYE_FRAC("dot_softness", "0.03", 0.0, 0.2, "width of the dot's smoothstep edge", .group = "pigment"),
-    EYE_COLOR("dot_color", "[0.02,0.02,0.02]", "pigment dot colour", .group = "pigment"),
-    EYE_COLOR("base_color", "[0.8,0.78,0.72]", "pigment-free (body fluid) colour, also what missed rays see", .group = "pigment"),
-    EYE_FRAC("ring_inner", "0", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)", .group = "pigment"),
-    EYE_FRAC("ring_outer", "0", 0.0, 0.5, "outer radius of the optional pigment ring", .group = "pigment"),
-    EYE_COLOR("ring_color", "[0.25,0.1,0.05]", "ring colour", .group = "pigment"),
+    EYE_COLOR("dot_color", "[0.03,0.008,0.005]", "pigment dot colour", .group = "pigment"),
+    EYE_COLOR("base_color", "[0.42,0.06,0.03]", "pigment-free (body fluid) colour, also what missed rays see", .group = "pigment"),
+    EYE_FRAC("ring_inner", "0.21", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)", .group = "pigment"),
+    EYE_FRAC("ring_outer", "0.3", 0.0, 0.5, "outer radius of the optional pigment ring", .group = "pigment"),
+    EYE_COLOR("ring_color", "[0.16,0.03,0.015]", "ring colour", .group = "pigment"),
     EYE_FRAC("glow_radius", "0", 0.0, 0.5, "radius of an optional additive central glow (0: off)", .group = "pigment"),
     EYE_COLOR("glow_color", "[0.6,0.15,0.05]", "central glow colour (added)", .group = "pigment"),
     {.name = "pigment_res", .group = "pigment", .type = PARAM_INT, .def = "128", .min = 32, .max = 256, .unit = "texels",
@@ -109,19 +109,22 @@ const struct param_def compound_eye_params[] = {
 
 /* Built-in presets (presets.h): the thesis's settings (digest 004 §3: square lattice, R_t 300,
  * n 1.491, texture plane at 2r, the slice-plane search and 3-candidate neighbour rule, l of the
- * order of 10), its Fig. 6.18 density sweep at 50, and artist looks on the default hex eye. */
+ * order of 10) with the digest's plain pigment (a black dot on pale grey, §8.3), its Fig. 6.18
+ * density sweep at 50, and artist looks on the default hex eye (a red-brown fly eye). */
+#define EYE_PLAIN_PIGMENT "\"base_color\":[0.8,0.78,0.72],\"dot_color\":[0.02,0.02,0.02],\"ring_inner\":0,\"ring_outer\":0"
 static const struct effect_preset compound_eye_presets[] = {
     {"thesis", "the thesis's settings: square lattice, R_t 300, n 1.491, slice search, thesis4 neighbours, l = 10",
      "{\"lattice\":\"square\",\"density\":300,\"refractive_index\":1.491,\"pigment_depth\":2.0,"
-     "\"sphere_search\":\"slices\",\"neighbor_select\":\"thesis4\",\"max_passes\":10}"},
+     "\"sphere_search\":\"slices\",\"neighbor_select\":\"thesis4\",\"max_passes\":10," EYE_PLAIN_PIGMENT "}"},
     {"thesis-fig6.18-r50", "Fig. 6.18 at R_t 50: the thesis's square lattice, coarse enough to see each lens",
      "{\"lattice\":\"square\",\"density\":50,\"sphere_search\":\"slices\",\"neighbor_select\":\"thesis4\","
-     "\"max_passes\":10}"},
-    {"insect-hex", "hex lattice at density 60: one central and six side pseudopupils (the default stream)", "{}"},
+     "\"max_passes\":10," EYE_PLAIN_PIGMENT "}"},
+    {"insect-hex", "a red-brown fly eye, hex lattice at density 60: one central and six side pseudopupils, dark-ringed "
+                   "(the default stream)", "{}"},
     {"jewel-beetle", "artist look: green-gold lenses with a soft inner glow and a glossy highlight",
-     "{\"base_color\":[0.16,0.42,0.22],\"dot_color\":[0.01,0.04,0.02],\"glow_radius\":0.16,"
+     "{\"base_color\":[0.16,0.42,0.22],\"dot_color\":[0.01,0.04,0.02],\"ring_inner\":0,\"ring_outer\":0,\"glow_radius\":0.16,"
      "\"glow_color\":[0.35,0.55,0.1],\"ks\":0.6,\"shininess\":80}"},
-    {"fly-red", "artist look: a red fly eye with dark-ringed pupils",
+    {"fly-red", "artist look: a brighter orange-red fly eye with dark-ringed pupils",
      "{\"base_color\":[0.55,0.1,0.06],\"dot_color\":[0.04,0.01,0.01],\"ring_inner\":0.21,\"ring_outer\":0.3,"
      "\"ring_color\":[0.22,0.04,0.02]}"},
     {0},

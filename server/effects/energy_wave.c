@@ -81,22 +81,20 @@ static const struct param_def ew_band_fields[] = {
     {0},
 };
 
-/* Default scene: two C1-joined Bezier curves (as thesis Figs 5.3-5.6), W of Fig 5.6
- * (right) and b = 8.0, with the eq. (5.1) pulse running along each. */
-static const char ew_default_curves[] =
-    "[{\"p0\":[-13.2,-4.2,1.8],\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":8.0,"
-    "\"W\":[1.0,0.2,0.6,1.0,0.5,0.8,1.0]},"
-    "{\"p0\":[0,0,0],\"p1\":[6.6,-9.0,1.8],\"p2\":[13.2,4.2,-1.8],\"coef\":8.0,"
-    "\"W\":[1.0,0.8,0.5,1.0,0.6,0.2,1.0]}]";
+/* Default scene: the torus of thesis Fig. 5.2 (R 3.0, t_i 7.4) seen at 45 degrees, a ring that
+ * reads at once as an energy effect and is smooth everywhere (a curve with a non-uniform W, or
+ * the pulse, has B jump across its medial axis: digest 000 §2.3), framed by a 7.5-wide
+ * billboard, in an electric blue. The thesis's joined curves are the preset thesis-fig5.6. */
+static const char ew_default_tori[] = "[{\"center\":[0,0,0],\"axis\":[0,1,1],\"R\":3.0,\"coef\":7.4}]";
 
 const struct param_def energy_wave_params[] = {
     {.name = "points", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC, .fields = ew_point_fields,
      .unit = "", .doc = "point sources 1/max(eps,|P-M|)"},
     {.name = "lines", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC, .fields = ew_line_fields,
      .unit = "", .doc = "infinite line sources"},
-    {.name = "tori", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC, .fields = ew_torus_fields,
+    {.name = "tori", .group = "sources", .type = PARAM_OBJECT_LIST, .def = ew_default_tori, .max_len = WAVE_MAX_SRC, .fields = ew_torus_fields,
      .unit = "", .doc = "torus sources: 1/distance to the centre circle of radius R"},
-    {.name = "curves", .group = "sources", .type = PARAM_OBJECT_LIST, .def = ew_default_curves, .max_len = WAVE_MAX_SRC,
+    {.name = "curves", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[]", .max_len = WAVE_MAX_SRC,
      .fields = ew_curve_fields, .unit = "", .doc = "quadratic Bezier sources with B-spline strength W"},
     {.name = "epsilon", .group = "sources", .type = PARAM_FLOAT, .def = "0.05", .min = 1e-5, .max = 0.5, .unit = "world units",
      .doc = "distance floor of every kernel 1/max(eps, d)"},
@@ -114,7 +112,7 @@ const struct param_def energy_wave_params[] = {
     EW_POS("eye", "[0,0,48]", "camera position V", .group = "camera"),
     EW_POS("center", "[0,0,18]", "billboard centre C; rays start on the billboard and look away from eye", .group = "camera"),
     EW_DIR("up", "[0,1,0]", "camera up vector, not parallel to eye->center", .group = "camera"),
-    {.name = "size", .group = "camera", .type = PARAM_FLOAT, .def = "20.4", .min = 0.01, .max = 1000, .unit = "world units",
+    {.name = "size", .group = "camera", .type = PARAM_FLOAT, .def = "7.5", .min = 0.01, .max = 1000, .unit = "world units",
      .doc = "billboard width l (height l*height/width)"},
     {.name = "width", .group = "camera", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
      .doc = "texture width"},
@@ -130,7 +128,7 @@ const struct param_def energy_wave_params[] = {
      .doc = "OpenEXR compression of the texture frames (rle: lossless and fast; zip: smallest; b44a: lossy)"},
     {.name = "output", .group = "output", .type = PARAM_ENUM, .def = "\"Y\"", .choices = ew_output_names, .unit = "",
      .doc = "Y: raw luminance B (HDR, half float); RGBA: colour map clamp((1-B)Cb + B Ce), A = clamp(B)"},
-    {.name = "color_energy", .group = "output", .type = PARAM_COLOR, .def = "[0.35,0.75,1.0]", .min = 0, .max = 1, .unit = "linear RGB",
+    {.name = "color_energy", .group = "output", .type = PARAM_COLOR, .def = "[0.05,0.35,1.0]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "energy colour C_e of the RGBA colour map (eq. 4.8)"},
     {.name = "color_background", .group = "output", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "background colour C_b of the RGBA colour map (eq. 4.8)"},
@@ -152,7 +150,7 @@ const struct param_def energy_wave_params[] = {
     {.name = "ramp", .group = "light rig", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = FXS_RIG_MAX_BANDS,
      .fields = ew_band_fields, .unit = "",
      .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5); empty: three bands "
-            "that follow color_energy C_e (0.4 C_e from -1, 0.2 + 0.7 C_e from -0.3, 0.75 + 0.25 C_e from 0)"},
+            "that follow color_energy C_e (0.3 C_e from -1, 0.05 + 0.6 C_e from -0.3, 0.2 + 0.8 C_e from 0)"},
     {.name = "features", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "light rig: multiply the feature texture onto the toon colour (eq. 2.6)"},
     {.name = "outline", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
@@ -177,29 +175,33 @@ const struct param_def energy_wave_params[] = {
 
 /* Built-in presets (presets.h): the thesis's ch. 5 figures where the digest gives the values
  * (000 §4: torus R and t_i of Figs 5.1/5.2, curve b_i of Figs 5.3/5.4/5.6, W of Fig 5.6); the
- * camera, billboard size and control points are not given and are ours (the default scene's).
- * The billboard (20.4 wide at 30 units from the eye) is narrowed to frame the smaller tori. */
+ * camera, billboard size and control points are not given and are ours. A preset is loaded
+ * over the defaults (a torus on a 7.5-wide billboard), so the curve scenes drop the torus and
+ * widen the billboard to 20.4 (at 30 units from the eye) to frame the joined curves. */
 #define EW_JOINED_CURVES(coef, w0, w1)                                                                      \
-    "[{\"p0\":[-13.2,-4.2,1.8],\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":" coef ",\"W\":" w0 "},"     \
+    "\"tori\":[],\"size\":20.4,"                                                                           \
+    "\"curves\":[{\"p0\":[-13.2,-4.2,1.8],\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":" coef ",\"W\":" w0 "}," \
     "{\"p0\":[0,0,0],\"p1\":[6.6,-9.0,1.8],\"p2\":[13.2,4.2,-1.8],\"coef\":" coef ",\"W\":" w1 "}]"
 #define EW_FLAT_W "[1,1,1,1,1,1,1]"
+#define EW_FIG56 EW_JOINED_CURVES("8.0", "[1.0,0.2,0.6,1.0,0.5,0.8,1.0]", "[1.0,0.8,0.5,1.0,0.6,0.2,1.0]")
 static const struct effect_preset energy_wave_presets[] = {
     {"thesis-fig5.1", "Fig. 5.1: a torus with R 0.9 and t_i 5.1, seen at an angle (the hole partly filled by glow)",
      "{\"curves\":[],\"tori\":[{\"R\":0.9,\"coef\":5.1,\"axis\":[0,1,1]}],\"size\":3.6}"},
-    {"thesis-fig5.2", "Fig. 5.2: a torus with R 3.0 and t_i 7.4, seen at an angle (a clear ring)",
+    {"thesis-fig5.2", "Fig. 5.2: a torus with R 3.0 and t_i 7.4, seen at an angle (a clear ring; the default stream's "
+                      "scene)",
      "{\"curves\":[],\"tori\":[{\"R\":3.0,\"coef\":7.4,\"axis\":[0,1,1]}],\"size\":7.5}"},
     {"thesis-fig5.3", "Fig. 5.3: two C1-joined Bezier curves, b_i 5.0, all strengths at maximum, no pulse",
-     "{\"curves\":" EW_JOINED_CURVES("5.0", EW_FLAT_W, EW_FLAT_W) ",\"animate\":false}"},
+     "{" EW_JOINED_CURVES("5.0", EW_FLAT_W, EW_FLAT_W) ",\"animate\":false}"},
     {"thesis-fig5.4", "Fig. 5.4: the same curves with b_i 7.5",
-     "{\"curves\":" EW_JOINED_CURVES("7.5", EW_FLAT_W, EW_FLAT_W) ",\"animate\":false}"},
-    {"thesis-fig5.6", "Fig. 5.6 (right) and 5.7: b_i 8.0, W = [1.0,0.2,0.6,1.0,0.5,0.8,1.0], the eq. 5.1 pulse "
-                      "running (the default stream)",
-     "{}"},
+     "{" EW_JOINED_CURVES("7.5", EW_FLAT_W, EW_FLAT_W) ",\"animate\":false}"},
+    {"thesis-fig5.6", "Fig. 5.6 (right) and 5.7: the joined curves with b_i 8.0, W = [1.0,0.2,0.6,1.0,0.5,0.8,1.0], "
+                      "the eq. 5.1 pulse running",
+     "{" EW_FIG56 "}"},
     {"plasma-ring", "artist look: a magenta torus ring, R 2, lit surroundings in its colour",
      "{\"curves\":[],\"tori\":[{\"R\":2.0,\"coef\":6.5,\"axis\":[0.3,1,0.8]}],\"size\":6,"
      "\"color_energy\":[1.0,0.3,0.85]}"},
-    {"ember-arc", "artist look: the joined curves as a warm orange arc with a slower pulse",
-     "{\"color_energy\":[1.0,0.45,0.12],\"anim_rate\":20}"},
+    {"ember-arc", "artist look: the joined curves of Fig. 5.6 as a warm orange arc with a slower pulse",
+     "{" EW_FIG56 ",\"color_energy\":[1.0,0.45,0.12],\"anim_rate\":20}"},
     {0},
 };
 

@@ -1,8 +1,8 @@
 /* bench_energy.c — performance of effect energy_wave through PoCL (or any OpenCL device).
  *
  * Reproduces the thesis's tables 5.2 (torus) and 5.3 (Bezier) — 128²/256²/512² × 64/128/256
- * divisions in mode simpson — then the same scenes in mode adaptive, the default
- * (animated) scene at 256² per mode, and accuracy against the converged double-precision
+ * divisions in mode simpson — then the same scenes in mode adaptive, the thesis's animated
+ * Fig. 5.6 scene (the joined curves with the eq. 5.1 pulse) at 256² per mode, and accuracy against the converged double-precision
  * reference (tests/ref/energy_ref) so speed-ups are compared at equal accuracy. Times are
  * whole frames as the engine sees them: uploads, kernel and read-back (the thesis's
  * "redraws per second"). One line per figure. */
@@ -16,13 +16,13 @@
 #include "ocl.h"
 #include "params.h"
 #include "../ref/energy_ref.h"
+#include "../unit/wave_scenes.h"
 
 #define BENCH_ACC_GRID 24 /* accuracy samples per axis */
 #define BENCH_ACC_FLOOR 0.01 /* relative error denominator floor (B units) */
 
 static const char *const bench_torus =
     "{\"curves\":[],\"tori\":[{\"center\":[0,0,0],\"axis\":[0,0.5,1],\"R\":5.4,\"coef\":5.1}],\"animate\":false}";
-static const char *const bench_bezier = "{\"animate\":false}";
 
 static double bench_now(void)
 {
@@ -54,8 +54,21 @@ static cJSON *bench_doc(const char *scene, const char *fmt, ...)
     return b;
 }
 
+/* The Fig. 5.6 scene (wave_scenes.h) with extra_json over it, as JSON text (free it). */
+static char *bench_fig56(const char *extra_json)
+{
+    cJSON *p = wave_fig56_partial(extra_json);
+    char *text = p ? cJSON_PrintUnformatted(p) : NULL;
+    cJSON_Delete(p);
+    if (!text) {
+        fprintf(stderr, "bench_energy: no thesis-fig5.6 preset\n");
+        exit(1);
+    }
+    return text;
+}
+
 /* Best-of-`reps` ms per frame, averaging over `frames` stream times 0.33 s apart from
- * 0.5 s (spread over the default animation's 3.1 s sweep, so the pulse is everywhere). */
+ * 0.5 s (spread over the animation's 3.1 s sweep, so the pulse is everywhere). */
 static double bench_ms(struct energy_wave *ew, float *img, int reps, int frames)
 {
     struct fx_err err;
@@ -142,8 +155,8 @@ static void bench_reference(const cJSON *doc, double t, double *ref)
             ref[n++] = energy_ref_texel_converged(&sc, (gi * w + w / 2) / BENCH_ACC_GRID, (gj * h + h / 2) / BENCH_ACC_GRID);
 }
 
-/* The default document (animated) at 256² per mode, with accuracy at t = 1 s. */
-static void bench_default(struct ocl *ocl, float **img)
+/* The animated scene at 256² per mode, with accuracy at t = 1 s. */
+static void bench_animated(struct ocl *ocl, const char *scene, float **img)
 {
     static const struct { const char *mode; int div; } runs[] = {
         {"simpson", 200}, {"simpson", 400}, {"adaptive", 0},
@@ -151,11 +164,11 @@ static void bench_default(struct ocl *ocl, float **img)
     const double t = 1.0;
     static double ref[BENCH_ACC_GRID * BENCH_ACC_GRID];
     struct fx_err err;
-    cJSON *base = bench_doc("{}", "{}");
+    cJSON *base = bench_doc(scene, "{}");
     bench_reference(base, t, ref);
     double ms[3];
     for (int r = 0; r < 3; r++) {
-        cJSON *doc = bench_doc("{}", "{\"mode\":\"%s\",\"divisions\":%d}", runs[r].mode, runs[r].div ? runs[r].div : 200);
+        cJSON *doc = bench_doc(scene, "{\"mode\":\"%s\",\"divisions\":%d}", runs[r].mode, runs[r].div ? runs[r].div : 200);
         int adaptive = runs[r].div == 0;
         ms[r] = bench_run(ocl, doc, img, adaptive ? 3 : 1, 8);
         struct energy_wave *ew = energy_wave_new(ocl, doc, &err);
@@ -166,12 +179,12 @@ static void bench_default(struct ocl *ocl, float **img)
         energy_wave_free(ew);
         char label[64];
         snprintf(label, sizeof label, "%s%s", runs[r].mode, adaptive ? "" : (runs[r].div == 200 ? " n=200" : " n=400"));
-        printf("energy 256x256 bezier default scene fps mode=%s: %.1f fps (%.1f ms/frame), rms rel err %.3f%%\n", label,
+        printf("energy 256x256 bezier fig5.6 scene fps mode=%s: %.1f fps (%.1f ms/frame), rms rel err %.3f%%\n", label,
                1e3 / ms[r], ms[r], 100 * bench_rms(doc, *img, ref));
         fflush(stdout);
         cJSON_Delete(doc);
     }
-    printf("energy 256x256 bezier default scene speed-up adaptive vs simpson n=200: %.1fx, vs n=400: %.1fx\n",
+    printf("energy 256x256 bezier fig5.6 scene speed-up adaptive vs simpson n=200: %.1fx, vs n=400: %.1fx\n",
            ms[0] / ms[2], ms[1] / ms[2]);
     cJSON_Delete(base);
 }
@@ -186,9 +199,12 @@ int main(void)
         return 1;
     }
     printf("energy device: %s\n", ocl_device_name(ocl));
-    bench_default(ocl, &img);
+    char *animated = bench_fig56(NULL), *still = bench_fig56("{\"animate\":false}");
+    bench_animated(ocl, animated, &img);
     bench_tables(ocl, "torus", bench_torus, &img);
-    bench_tables(ocl, "bezier", bench_bezier, &img);
+    bench_tables(ocl, "bezier", still, &img);
+    free(animated);
+    free(still);
     free(img);
     ocl_close(ocl);
     return 0;

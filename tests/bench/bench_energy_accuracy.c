@@ -15,6 +15,7 @@
 #include <time.h>
 
 #include "../ref/energy_ref.h"
+#include "../unit/wave_scenes.h"
 #include "effects/energy_wave.h"
 #include "ocl.h"
 #include "params.h"
@@ -172,8 +173,6 @@ static void bea_scene(const char *scene, const char *json, const struct param_de
 static const char bea_torus[] =
     "{\"points\":[],\"lines\":[],\"curves\":[],\"animate\":false,\"width\":256,\"height\":256,\"size\":1.8,"
     "\"tori\":[{\"center\":[0,0,0],\"axis\":[0,0.6,0.8],\"R\":0.9,\"coef\":5.1}]}";
-/* The default document's two joined Beziers (b = 8, Fig 5.6 W) without animation. */
-static const char bea_bezier[] = "{\"animate\":false,\"width\":256,\"height\":256}";
 
 int main(void)
 {
@@ -192,7 +191,16 @@ int main(void)
     }
     printf("energy_accuracy device: %s\n", ocl_device_name(bea_ocl));
     bea_scene("torus", bea_torus, mode_def);
-    bea_scene("bezier", bea_bezier, mode_def);
+    /* the two joined Beziers of Fig. 5.6 (b = 8, its W) without animation */
+    cJSON *fig56 = wave_fig56_partial("{\"animate\":false,\"width\":256,\"height\":256}");
+    char *bezier = fig56 ? cJSON_PrintUnformatted(fig56) : NULL;
+    cJSON_Delete(fig56);
+    if (!bezier) {
+        fprintf(stderr, "bench_energy_accuracy: no thesis-fig5.6 preset\n");
+        return 1;
+    }
+    bea_scene("bezier", bezier, mode_def);
+    free(bezier);
     cJSON_Delete(bea_defaults);
     ocl_close(bea_ocl);
     return 0;

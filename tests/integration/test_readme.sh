@@ -35,12 +35,12 @@ done <"$tmp/examples"
 # What the comments promise, from each example's own output ($tmp/out.N) or the state after it.
 out_of() { cp "$tmp/out.$(grep -n -- "$1" "$tmp/examples" | head -n 1 | cut -d: -f1)" "$tmp/out"; rc=0; }
 get() { timeout 20 "$FXCTL" get "$1" >"$tmp/out" 2>"$tmp/err"; rc=$?; }
-out_of "set energy alpha=2"; check "set energy: alpha 2 and the orange colour" 0 '"alpha":2,.*"color_energy":\[1,0.55,0.2\]'
+out_of "set energy alpha=2"; check "set energy: alpha 2 and the orange colour" 0 '"alpha":2,.*"color_energy":\[1,0.3,0.05\]'
 test "$(ls "$tmp"/frames/energy-*.exr | wc -l)" -ge 10; rc=$?; check "subscribe --kind 2 --out: 10 textures and more" 0
 ls "$tmp"/frames/energy-*-rig.bin >/dev/null 2>&1; rc=$?; check "subscribe --out without --kind: light rigs too" 0
 out_of "frames 10 --out"; test "$(grep -c '"kind":2' "$tmp/out")" -eq 10 && grep -q '"kind":3' "$tmp/out"; rc=$?
 check "subscribe --frames 10 without --kind: 10 steps, 10 textures with their rigs" 0
-get ring; check "create ring: a torus of R 3 alone (no default curves)" 0 '"axis":\[0,1,1\],"R":3,"coef":7.4}\],"curves":\[\]'
+get arc; check "create arc: one curve, no torus" 0 '"tori":\[\],"curves":\[{"p0":\[-5,-2.5,0\],"p1":\[0,5,0\],"p2":\[5,-2.5,0\],"coef":8,'
 get flame; check "set flame: the wind" 0 '"wind_velocity":\[2,0,0\]'
 test "$(ls "$tmp"/flame/flame-*.ply | wc -l)" -eq 5; rc=$?; check "subscribe flame --out: 5 PLY files" 0
 get flame; check "set flame velocities=true" 0 '"velocities":true'

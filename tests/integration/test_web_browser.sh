@@ -1,10 +1,4 @@
 #!/bin/sh
 # test_web_browser.sh — the browser client in headless chromium (see web_browser_check.mjs).
-# Needs the bundle (make web), node_modules (npm ci) and /usr/bin/chromium (deploy/install-deps.sh).
 cd "$(dirname "$0")/../.." || exit 1
-summary_fail() { echo "test_web_browser: $1"; echo "test_web_browser: 0 passed, 1 failed"; exit 1; }
-command -v node >/dev/null 2>&1 || summary_fail "node not found"
-[ -x /usr/bin/chromium ] || summary_fail "/usr/bin/chromium missing (deploy/install-deps.sh)"
-[ -f clients/web/dist/app-test.js ] || summary_fail "clients/web/dist/app-test.js missing (make web)"
-[ -d node_modules/playwright-core ] || summary_fail "node_modules missing (npm ci)"
-timeout 440 node tests/integration/web_browser_check.mjs
+exec sh tests/integration/browser_suite.sh test_web_browser tests/integration/web_browser_check.mjs 440

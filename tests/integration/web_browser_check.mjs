@@ -192,7 +192,9 @@ async function defaultEyeCheck(ctx, port) {
 
 async function eyeChecks(ctx, port, fxctl, url) {
   await defaultEyeCheck(ctx, port);
-  const same = ['density=40', 'lattice=square', 'eye=[0.4,0.3,3]', 'light=[0.4,0.6,1]'];
+  // black dots on a pale base, ringless: the checks below tell pupils from lenses by brightness
+  const same = ['density=40', 'lattice=square', 'eye=[0.4,0.3,3]', 'light=[0.4,0.6,1]', 'base_color=[0.8,0.78,0.72]',
+    'dot_color=[0.02,0.02,0.02]', 'ring_inner=0', 'ring_outer=0'];
   fxctl('create', 'compound_eye', 'eyelut', ...same);
   fxctl('create', 'compound_eye', 'eyebake', 'mode=bake', 'bake_size=512', ...same);
   const page = await ctx.newPage();
@@ -246,7 +248,8 @@ async function eyeChecks(ctx, port, fxctl, url) {
   const hex = await eyeImages(page);
   await page.screenshot({ path: join(ART, 'web-eye-hex.png') });
   console.log('eye hex', JSON.stringify(hex));
-  check(hex.lut.std > 15 && hex.lut.dark > 0.02 && hex.period.c > 0.1, 'hex lut view: facets with pigment', JSON.stringify({ lut: hex.lut, period: hex.period }));
+  // (the look-up is a one-texel tent since issue 25, against speckles: pupils a little softer)
+  check(hex.lut.std > 15 && hex.lut.dark > 0.015 && hex.period.c > 0.1, 'hex lut view: facets with pigment', JSON.stringify({ lut: hex.lut, period: hex.period }));
   check(hex.corr > 0.75, 'hex: lut and bake views agree', `correlation ${hex.corr}`);
 
   // Orbit the lut view with the mouse: the pseudopupils move with the camera and nothing is
@@ -345,11 +348,11 @@ async function panelChecks(ctx, page, port, url) {
   check(alpha, 'the ↺ button puts one parameter back to its default (alpha 1)');
 
   // Presets: a thesis figure loads all or nothing over the defaults.
-  await action(page, 'energy', 'preset').locator('select').selectOption('thesis-fig5.2');
+  await action(page, 'energy', 'preset').locator('select').selectOption('thesis-fig5.1');
   check(await action(page, 'energy', 'delete').locator('button').isDisabled(), 'a built-in preset cannot be deleted (button disabled)');
   await action(page, 'energy', 'load').locator('button').click();
-  const loaded = await until(async () => { const p = await pageParams(page, 'energy'); return p.tori?.[0]?.R === 3 && p.curves.length === 0 ? p : null; }, 10000);
-  check(!!loaded && loaded.beta === 1, 'load preset: Fig. 5.2 (a torus with R 3) over the defaults (beta back to 1)', JSON.stringify(loaded?.tori));
+  const loaded = await until(async () => { const p = await pageParams(page, 'energy'); return p.tori?.[0]?.R === 0.9 && p.curves.length === 0 ? p : null; }, 10000);
+  check(!!loaded && loaded.beta === 1, 'load preset: Fig. 5.1 (a torus with R 0.9) over the defaults (beta back to 1)', JSON.stringify(loaded?.tori));
   const page2 = await ctx.newPage();
   await page2.setViewportSize({ width: 560, height: 420 });
   await page2.goto(url.replace('drawfps=1', 'drawfps=0.5'), { timeout: 20000 });
@@ -370,8 +373,8 @@ async function panelChecks(ctx, page, port, url) {
   // Every parameter back to its defaults in one set.
   const rev0 = (await serverParams(port, 'energy')).rev;
   await action(page, 'energy', 'defaults').locator('button').click();
-  const back = await until(async () => { const p = await pageParams(page, 'energy'); return p.tori.length === 0 && p.curves.length === 2 ? p : null; }, 10000);
-  check(!!back && (await serverParams(port, 'energy')).rev === rev0 + 1, 'all parameters to defaults: the default curves, in one set');
+  const back = await until(async () => { const p = await pageParams(page, 'energy'); return p.tori[0]?.R === 3 && p.curves.length === 0 ? p : null; }, 10000);
+  check(!!back && (await serverParams(port, 'energy')).rev === rev0 + 1, 'all parameters to defaults: the default torus (R 3), in one set');
 }
 
 // The flame view alone: the volume mode by default (its look is test_web_look's); PBVR not blown out (of the flame's pixels
@@ -460,7 +463,7 @@ async function flameChecks(ctx, port, fxctl) {
 }
 
 try {
-  daemon = await startDaemon(0);
+  daemon = await startDaemon(0, stateDir);
   const port = daemon.port;
   // The default streams, made cheaper for a 2-core machine running software WebGL, and the
   // wave's pulse off so the billboard is never momentarily dark.
@@ -495,11 +498,12 @@ try {
   check(flame && flame.warm > 0.003 && flame.max > 180 && flame.mean[0] > 1.1 * flame.mean[2], 'flame region is bright and warm', JSON.stringify(flame));
   check(wave && wave.lit > 0.01 && wave.mean[2] > wave.mean[0], 'wave billboard is not empty (and blue, C_e)', JSON.stringify(wave));
   const rig = await page.evaluate(() => window.fxs.scene());
-  check(rig && rig.rig && rig.nSeg === 16, 'toon scene has the light rig (16 segments, constants)', JSON.stringify(rig));
+  check(rig && rig.rig && rig.nSeg === 12, 'toon scene has the light rig (12 segments of the torus, constants)', JSON.stringify(rig));
   check(rig && rig.shadows.length === 4 && rig.shadows.every((s) => s.k[1] < 0), 'every model casts a shadow downwards', JSON.stringify(rig?.shadows));
   check(scene && scene.lit > 0.3, 'toon scene is lit', JSON.stringify(scene));
   const sceneLum = scene ? 0.2126 * scene.mean[0] + 0.7152 * scene.mean[1] + 0.0722 * scene.mean[2] : 0;
-  check(sceneLum > 50 && sceneLum < 145, 'toon scene exposure: a mid-grey ground, not a white sheet (mean luminance 50-145; was 158)',
+  // (the home view frames the whole floor disc since issue 25, with the dark background around it)
+  check(sceneLum > 30 && sceneLum < 145, 'toon scene exposure: a mid-grey ground, not a white sheet (mean luminance 30-145; was 158)',
     sceneLum.toFixed(1));
   check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
   // The overlay: skipped frames by who skipped them and per kind, every figure defined in a tooltip.
@@ -552,9 +556,9 @@ try {
   }), 10000);
   check(seen, 'a change made in a second page appears in the first');
   // A value the server refuses: the error shows next to the field.
-  await setNumber(page2, 'energy', 'curves[0].W', '2, 2, 2');
+  await setNumber(page2, 'energy', 'tori[0].R', 500); // the default torus's radius, over its 100
   const err = await until(() => page2.evaluate(() => document.querySelector('.fxs-param-error')?.textContent), 10000);
-  check(err && err.includes('curves[0].W') && err.includes('bad_param'), 'a server error shows next to its field', String(err));
+  check(err && err.includes('tori[0].R') && err.includes('bad_param'), 'a server error shows next to its field', String(err));
   await page2.screenshot({ path: join(ART, 'web-panel-error.png') });
   await page2.close();
 
@@ -567,7 +571,7 @@ try {
   await stopDaemon(daemon);
   const down = await until(() => page.evaluate(() => document.body.dataset.conn !== 'connected'), 10000);
   check(down, 'shows the lost connection');
-  daemon = await startDaemon(port);
+  daemon = await startDaemon(port, stateDir);
   const framesBefore = await page.evaluate(() => window.fxs.stats().flame?.frames ?? 0);
   const back = await until(async () => {
     const s = await page.evaluate(() => ({ c: document.body.dataset.conn, f: window.fxs.stats().flame?.frames ?? 0 }));
@@ -578,7 +582,7 @@ try {
   // With access tokens (PROTOCOL.md §3.11): no token says so; ?token= authenticates and leaves the address bar.
   await stopDaemon(daemon);
   const token = 'web-view-token-0123456789';
-  daemon = await startDaemon(port, { FXSTREAMD_TOKENS: `view:${token}` });
+  daemon = await startDaemon(port, stateDir, { FXSTREAMD_TOKENS: `view:${token}` });
   const p3 = await ctx.newPage();
   const revView = await healthRev(port, 'flame');
   await p3.goto(`http://127.0.0.1:${port}/`);

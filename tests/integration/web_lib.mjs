@@ -72,9 +72,9 @@ export const fxctlAt = (port) => (...a) => execFileSync(join(ROOT, 'build', 'fxc
 
 // Every page of the context gets the test bundle (dist/app-test.js: the page with the tests'
 // hooks, window.fxs) in place of the product's dist/app.js.
-export async function launchBrowser(profile, viewport) {
+export async function launchBrowser(profile, viewport, options = {}) {
   const ctx = await chromium.launchPersistentContext(profile, {
-    executablePath: '/usr/bin/chromium', headless: true, viewport,
+    executablePath: '/usr/bin/chromium', headless: true, viewport, ...options,
     args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
       '--disable-component-update', '--disable-sync', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
   });
@@ -89,4 +89,23 @@ export function collectErrors(page) {
   page.on('console', (m) => { if ((m.type() === 'error' || m.type() === 'warning') && !m.text().includes('GL Driver Message')) logs.push(m.text()); });
   page.on('pageerror', (e) => logs.push('pageerror: ' + e.message));
   return logs;
+}
+
+/** The pixels of the view of `kind` (and `stream`) as drawn: {w, h, px: RGBA bytes, rows from
+ *  the top, css: the view's rectangle in CSS pixels}, at the canvas's own resolution. */
+export async function grabView(page, kind, stream) {
+  const g = await page.evaluate(([kind, name]) => {
+    const s = window.fxs.sample(kind, name), c = document.getElementById('view'), pr = c.width / c.clientWidth;
+    const x = Math.round(s.css.left * pr), y = Math.round(s.css.top * pr);
+    const w = Math.min(c.width, Math.round((s.css.left + s.css.w) * pr)) - x, h = Math.min(c.height, Math.round((s.css.top + s.css.h) * pr)) - y;
+    const g = document.createElement('canvas');
+    g.width = w; g.height = h;
+    const ctx = g.getContext('2d');
+    ctx.drawImage(c, x, y, w, h, 0, 0, w, h);
+    const px = ctx.getImageData(0, 0, w, h).data;
+    let bin = '';
+    for (let i = 0; i < px.length; i += 8192) bin += String.fromCharCode(...px.subarray(i, i + 8192));
+    return { w, h, b64: btoa(bin), css: s.css };
+  }, [kind, stream]);
+  return { w: g.w, h: g.h, px: Buffer.from(g.b64, 'base64'), css: g.css };
 }

@@ -19,16 +19,25 @@
 #include "fxs_frame.h"
 #include "../ref/energy_ref.h"
 #include "../ref/light_ref.h"
+#include "wave_scenes.h"
 
-static cJSON *rig_params(const char *partial_json)
+static cJSON *rig_doc(cJSON *partial)
 {
     struct fx_err err = {0};
-    cJSON *partial = partial_json ? cJSON_Parse(partial_json) : NULL;
     cJSON *doc = effect_params(&energy_wave_effect, NULL, partial, &err);
     cJSON_Delete(partial);
     if (!doc) fprintf(stderr, "  params: %s\n", err.message);
     return doc;
 }
+
+/* The defaults with partial_json over them. */
+static cJSON *rig_params(const char *partial_json)
+{
+    return rig_doc(partial_json ? cJSON_Parse(partial_json) : NULL);
+}
+
+/* The thesis's joined curves with the pulse (wave_scenes.h), extra_json over them. */
+static cJSON *rig_curves(const char *extra_json) { return rig_doc(wave_fig56_partial(extra_json)); }
 
 /* The rig energy_wave sends for document p at stream time t (its step's path: sources and
  * settings read once, the frame's weights, then the segments). */
@@ -214,12 +223,12 @@ static void test_bspline(void)
     CHECK_NEAR(light_rig_bspline(7, w, 1.0), 1.0, 1e-12); /* end span closed: S(1) = w[n-1] */
 }
 
-/* Segments of the default scene: 2 curves x curve_segments chords on the Bezier, strength =
+/* Segments of the joined curves: 2 curves x curve_segments chords on the Bezier, strength =
  * coef x S(t_mid) with the pulse at the frame's time (as the texture's kernel sees it). */
 static void test_segments_curves(void)
 {
-    cJSON *p = rig_params("{\"curve_segments\":8}");
-    CHECK(p != NULL, "defaults");
+    cJSON *p = rig_curves("{\"curve_segments\":8}");
+    CHECK(p != NULL, "joined curves");
     if (!p) return;
     static struct fxs_rig rig;
     const double times[] = {0.0, 0.4, 1.3, 2.9};
@@ -263,14 +272,14 @@ static void test_segments_curves(void)
     for (int i = 0; i < 16; i++) differ |= fabs(rig.seg[i].strength - r2.seg[i].strength) > 1e-3;
     CHECK(differ, "the pulse does not move the strengths");
     cJSON_Delete(p);
-    p = rig_params("{\"animate\":false}");
+    p = rig_curves("{\"animate\":false}");
     rig_at(p, 1.3, &rig);
     CHECK_NEAR(rig.seg[0].strength, 8 * energy_ref_bspline(7, (double[]){1.0, 0.2, 0.6, 1.0, 0.5, 0.8, 1.0}, 1.0 / 16),
                1e-9);
     cJSON_Delete(p);
 }
 
-/* Issue 14: with the default (animated) parameters the rig never switches off: at every frame
+/* Issue 14: with the joined curves and their pulse the rig never switches off: at every frame
  * of several loops the total segment strength is at least 30% of its median (measured: 48%;
  * the texture's total energy, test_energy_kernel, keeps 63%). It used to reach 0. */
 static int rig_cmp(const void *a, const void *b)
@@ -281,11 +290,11 @@ static int rig_cmp(const void *a, const void *b)
 
 static void test_loop_never_dark(void)
 {
-    cJSON *p = rig_params("{}");
-    CHECK(p != NULL, "defaults");
+    cJSON *p = rig_curves(NULL);
+    CHECK(p != NULL, "joined curves");
     if (!p) return;
     static struct fxs_rig rig;
-    enum { FRAMES = 240 }; /* 8 s at 30 frames/s: several loops of every default curve */
+    enum { FRAMES = 240 }; /* 8 s at 30 frames/s: several loops of every curve */
     double total[FRAMES], sorted[FRAMES];
     for (int f = 0; f < FRAMES; f++) {
         rig_at(p, f / params_num(p, "anim_rate"), &rig);
@@ -313,10 +322,11 @@ static void test_ramp_follows_energy_colour(void)
     rig_at(pb, 0, &b);
     rig_at(pc, 0, &c);
     CHECK(a.k.n_bands == 3 && b.k.n_bands == 3 && a.k.bands[1].m_min == -0.3, "three default bands");
-    CHECK(fabs(a.k.bands[1].rgb[2] - 0.9) < 1e-12 && fabs(b.k.bands[1].rgb[0] - 0.9) < 1e-12 &&
-              fabs(b.k.bands[1].rgb[2] - 0.27) < 1e-12,
-          "the lit band is 0.2 + 0.7 C_e: blue for the default C_e, orange for an orange one (%g %g %g)",
-          b.k.bands[1].rgb[0], b.k.bands[1].rgb[1], b.k.bands[1].rgb[2]);
+    CHECK(fabs(a.k.bands[2].rgb[2] - 1.0) < 1e-12 && fabs(a.k.bands[2].rgb[0] - 0.24) < 1e-12 &&
+              fabs(b.k.bands[2].rgb[0] - 1.0) < 1e-12 && fabs(b.k.bands[2].rgb[2] - 0.28) < 1e-12 &&
+              fabs(b.k.bands[1].rgb[0] - 0.65) < 1e-12 && fabs(b.k.bands[0].rgb[1] - 0.09) < 1e-12,
+          "the bands are 0.3 C_e, 0.05 + 0.6 C_e, 0.2 + 0.8 C_e: blue for the default C_e, orange for an orange "
+          "one (lit %g %g %g)", b.k.bands[2].rgb[0], b.k.bands[2].rgb[1], b.k.bands[2].rgb[2]);
     CHECK(c.k.n_bands == 1 && c.k.bands[0].rgb[1] == 1.0, "an explicit ramp is used as given");
     cJSON_Delete(pa);
     cJSON_Delete(pb);
@@ -375,7 +385,7 @@ static float le_f32(const uint8_t *p)
 
 static void test_encoding(void)
 {
-    cJSON *p = rig_params("{\"light_rig\":true}");
+    cJSON *p = rig_curves("{\"light_rig\":true}");
     CHECK(p != NULL, "params");
     if (!p) return;
     static struct fxs_rig rig, back;
@@ -403,7 +413,7 @@ static void test_encoding(void)
     CHECK(le_f32(k + 24) == (float)(M_PI / 3) && le_f32(k + 28) == 0.65f, "theta in radians, opacity");
     CHECK(le_f32(k + 48) == -9.0f && le_f32(k + 60) == 1.0f, "plane I, Y");
     CHECK(le_f32(k + 68) == 1.0f && le_f32(k + 88) == 1.0f, "plane X, Z");
-    CHECK(le_f32(k + 96 + 16) == -0.3f && le_f32(k + 96 + 16 + 12) == 0.9f, "band 1");
+    CHECK(le_f32(k + 96 + 16) == -0.3f && le_f32(k + 96 + 16 + 12) == 0.65f, "band 1");
     uint32_t id;
     int hc;
     CHECK(fxs_rig_decode(buf, n, &back, &id, &hc) == 0 && hc && id == h, "decode");

@@ -1,15 +1,17 @@
 // eye.js — the `compound_eye` stream (PROTOCOL.md §11.3, digest 004) on a 3D eye model.
 // Mode `lut`: kind 4 frames carry the FXL1 container of §7.6 (PIGM / LLUT / LMAC RGBA8
 // tables, each one zstd frame, decompressed here with fzstd); a ShaderMaterial does the
-// §7.6 lookup per pixel (bilinear inside a direction tile and across the 4 nearest tiles,
-// LMAC blended in by fwidth of the lattice coordinate) and shades with eq. 5.31 and the
-// lens normal, so the pseudopupils follow the camera (the stream's `eye`, a live parameter
-// that changes nothing on the wire in this mode) with no round trip. Mode `bake`: kind 2
-// EXR frames are the model's texture in its own UV space as seen from `eye`, so they go
-// on the same model by uv, seen from `eye`. The built-in models mirror eye_model.c (rings,
-// segments, stereographic uv); per vertex the tangent frame is the analytic ∂P/∂u, ∂P/∂v,
-// so density·uv is the lattice coordinate of eq. 5.1. An OBJ model (not sent to clients)
-// falls back to the hemisphere in mode lut and to the uv square in mode bake.
+// §7.6 lookup per pixel (a one-texel tent inside a direction tile, bilinear across the 4
+// nearest tiles; LMAC and the surface normal blended in as the lenses shrink below a few
+// pixels) and shades with eq. 5.31 and the lens normal, so the pseudopupils follow the
+// camera (the stream's `eye`, a live parameter that changes nothing on the wire in this
+// mode) with no round trip. Mode `bake`: kind 2 EXR frames are the model's texture in its
+// own UV space as seen from `eye`, so they go on the same model by uv, seen from `eye`. The
+// built-in models mirror eye_model.c (rings, segments, stereographic uv); per vertex the
+// tangent frame is the analytic ∂P/∂u, ∂P/∂v, so density·uv is the lattice coordinate of
+// eq. 5.1; the ellipsoids are closed behind by a head of dark chitin (their back half). An
+// OBJ model (not sent to clients) falls back to the hemisphere in mode lut and to the uv
+// square in mode bake.
 import * as THREE from 'three';
 import { ViewOrbit } from './orbit.js';
 import { decompress } from 'fzstd';
@@ -118,6 +120,16 @@ function ellipsoidGeometry(ax) {
   return frameGeometry(pos, uv, nrm, du, dv, index);
 }
 
+// The back half (z ≤ 0) of the same ellipsoid, positions and normals only: the head behind
+// the eye, so that no view into the open half-shell shows (drawn with CAP_FRAG).
+function backGeometry(ax) {
+  const g = new THREE.SphereGeometry(1, SEGMENTS, RINGS / 2, 0, 2 * Math.PI, Math.PI / 2, Math.PI / 2);
+  g.rotateX(Math.PI / 2); // three's sphere has its pole on +y; here the eye looks along +z
+  g.scale(...ax);
+  g.computeVertexNormals();
+  return g;
+}
+
 // The 2 × 2 square in z = 0 with uv the square (the built-in `plane`; also the fallback
 // that shows a bake of an OBJ model as its uv layout).
 function planeGeometry() {
@@ -137,9 +149,10 @@ function frameGeometry(pos, uv, nrm, du, dv, index) {
   return g;
 }
 
-function modelGeometry(name, mode) {
-  if (ELLIPSOIDS[name]) return ellipsoidGeometry(ELLIPSOIDS[name]);
-  return name === 'plane' || mode === 'bake' ? planeGeometry() : ellipsoidGeometry(ELLIPSOIDS.hemisphere);
+// The semi-axes of the ellipsoid drawn for a model in a mode, or null for the plane.
+function modelAxes(name, mode) {
+  if (ELLIPSOIDS[name]) return ELLIPSOIDS[name];
+  return name === 'plane' || mode === 'bake' ? null : ELLIPSOIDS.hemisphere;
 }
 
 // ---- shaders --------------------------------------------------------------------------
@@ -163,15 +176,20 @@ void main() {
 const LUT_FRAG = /* glsl */ `
 uniform sampler2D llut, lmac;
 uniform vec2 atlas;
-uniform float D, C, gutter, tileH, density, r, ka, kd, ks, shininess;
+uniform float D, C, gutter, tileH, density, r, ka, kd, ks, shininess, pixelRatio;
 uniform bool hex, lensNormal;
 uniform vec3 eyePos, light;
 varying vec2 vUv;
 varying vec3 vWorld, vT, vB, vN;
 ${SRGB_GLSL}
-vec4 lut(vec2 tile, vec2 q) {                          // bilinear inside one direction tile
-  vec2 texel = tile * (C + 2.0 * gutter) + gutter + q * C;
-  return texture(llut, texel / atlas);
+// One direction tile at in-cell position q: four bilinear taps half a texel apart, a tent of
+// one texel, so a lone texel that one ray of the table saw dark (a speck of pigment seen
+// through a grazing multi-lens path) shows as a quarter of its contrast, not as a black
+// speckle (the taps stay in the tile's one-texel gutter).
+vec4 lut(vec2 tile, vec2 q) {
+  vec2 texel = tile * (C + 2.0 * gutter) + gutter + q * C, h = vec2(0.5, -0.5);
+  return 0.25 * (texture(llut, (texel + h.xx) / atlas) + texture(llut, (texel + h.xy) / atlas) +
+                 texture(llut, (texel + h.yx) / atlas) + texture(llut, (texel + h.yy) / atlas));
 }
 // Offset (pitches) from the lens centre nearest to in-cell position q.
 vec2 lensOffset(vec2 q) {
@@ -196,10 +214,15 @@ void main() {
   vec2 i0 = floor(f), k = f - i0, i1 = min(i0 + 1.0, D - 1.0);
   vec4 ct = mix(mix(lut(i0, q), lut(vec2(i1.x, i0.y), q), k.x),
                 mix(lut(vec2(i0.x, i1.y), q), lut(i1, q), k.x), k.y);
-  float cellsPerPixel = length(fwidth(a));
-  ct = mix(ct, texture(lmac, (f + 0.5) / D), smoothstep(0.5, 1.0, cellsPerPixel));
+  // Minification (towards the rim the lattice is foreshortened to less than a pixel a lens):
+  // the lens's picture gives way to the macro map, its per-direction mean, and the lens
+  // normal to the surface's, before either can alias into a moiré ring. The measure is lenses
+  // per CSS pixel along the more foreshortened axis, so the look is the same on every screen.
+  float cellsPerPixel = max(length(dFdx(a)), length(dFdy(a))) * pixelRatio;
+  ct = mix(ct, texture(lmac, (f + 0.5) / D), smoothstep(0.2, 0.45, cellsPerPixel));
   vec2 c = lensOffset(q);
   vec3 Nl = lensNormal ? normalize(c.x * T + c.y * B + sqrt(max(r * r - dot(c, c), 0.0)) * N) : N;
+  Nl = normalize(mix(Nl, N, smoothstep(0.15, 0.35, cellsPerPixel)));
   vec3 L = normalize(light);
   vec3 col = ct.rgb * (ka + kd * max(dot(Nl, L), 0.0)) + ks * pow(max(dot(Nl, normalize(L + w)), 0.0), shininess);
   gl_FragColor = vec4(linearToSRGB(col), 1.0);
@@ -215,6 +238,26 @@ void main() {
   vec4 t = texture(bake, vUv);
   gl_FragColor = vec4(linearToSRGB(t.rgb * t.a), 1.0);
 }`;
+
+// The head behind the eye: dark chitin with a soft highlight, lit by the stream's light.
+const CAP_VERT = /* glsl */ `
+varying vec3 vWorld, vN;
+void main() {
+  vec4 w = modelMatrix * vec4(position, 1.0);
+  vWorld = w.xyz;
+  vN = mat3(modelMatrix) * normal;
+  gl_Position = projectionMatrix * viewMatrix * w;
+}`;
+const CAP_FRAG = /* glsl */ `
+uniform vec3 color, light, eyePos;
+varying vec3 vWorld, vN;
+${SRGB_GLSL}
+void main() {
+  vec3 N = normalize(vN), L = normalize(light), V = normalize(eyePos - vWorld);
+  vec3 col = color * (0.45 + 0.55 * max(dot(N, L), 0.0)) + 0.12 * pow(max(dot(N, normalize(L + V)), 0.0), 24.0);
+  gl_FragColor = vec4(linearToSRGB(col), 1.0);
+}`;
+const CHITIN = [0.04, 0.028, 0.022];
 
 // ---- textures ----------------------------------------------------------------------------
 
@@ -233,7 +276,7 @@ function tableTexture(t) {
 // ---- the view ----------------------------------------------------------------------------
 
 const LUT_UNIFORMS = ['llut', 'lmac', 'atlas', 'D', 'C', 'gutter', 'tileH', 'r', 'hex', 'density', 'ka', 'kd', 'ks', 'shininess',
-  'lensNormal', 'eyePos', 'light'];
+  'lensNormal', 'eyePos', 'light', 'pixelRatio'];
 
 export class EyeView {
   constructor(stream) {
@@ -254,6 +297,12 @@ export class EyeView {
     this.bakeMat = new THREE.ShaderMaterial({ vertexShader: VERT, fragmentShader: BAKE_FRAG, uniforms: { bake: { value: null } } });
     this.mesh = new THREE.Mesh(new THREE.BufferGeometry(), this.lutMat);
     this.scene.add(this.mesh);
+    this.capMat = new THREE.ShaderMaterial({
+      vertexShader: CAP_VERT, fragmentShader: CAP_FRAG,
+      uniforms: { color: { value: new THREE.Color(...CHITIN) }, light: { value: new THREE.Vector3(0, 0, 1) }, eyePos: { value: this.camera.position } },
+    });
+    this.cap = new THREE.Mesh(new THREE.BufferGeometry(), this.capMat);
+    this.scene.add(this.cap);
     this.modelKey = '';
   }
 
@@ -297,8 +346,14 @@ export class EyeView {
   useModel() {
     const key = `${this.params.model}:${this.mode}`;
     if (key === this.modelKey) return;
+    const ax = modelAxes(this.params.model, this.mode);
     this.mesh.geometry.dispose();
-    this.mesh.geometry = modelGeometry(this.params.model, this.mode);
+    this.mesh.geometry = ax ? ellipsoidGeometry(ax) : planeGeometry();
+    this.cap.geometry.dispose();
+    this.cap.geometry = ax ? backGeometry(ax) : new THREE.BufferGeometry();
+    this.cap.visible = !!ax;
+    // what the camera frames and turns around: the closed ellipsoid, or the model alone
+    this.bounds = ax ? new THREE.Sphere(new THREE.Vector3(), Math.max(...ax)) : this.mesh.geometry.boundingSphere;
     this.modelKey = key;
   }
 
@@ -308,8 +363,8 @@ export class EyeView {
   // follow the mouse with no message to the server (mode bake shows the texture baked for `eye`).
   placeCamera(aspect) {
     const eye = new THREE.Vector3(...this.params.eye);
-    const bs = this.mesh.geometry.boundingSphere, dist = Math.max(eye.distanceTo(bs.center), 1.05 * bs.radius);
-    const half = Math.asin(Math.min(bs.radius / dist, 0.99)) * 1.08;
+    const bs = this.bounds, dist = Math.max(eye.distanceTo(bs.center), 1.05 * bs.radius);
+    const half = Math.asin(Math.min(bs.radius / dist, 0.99)) * 1.2;
     const cam = this.camera;
     cam.fov = THREE.MathUtils.radToDeg(2 * Math.atan(Math.tan(half) / Math.min(aspect, 1)));
     cam.aspect = aspect;
@@ -331,13 +386,13 @@ export class EyeView {
   // Mouse control on the shared canvas; css() gives this view's rectangle.
   attachControls(canvas, css) { this.orbit = new ViewOrbit(this.camera, canvas, css); this.homeKey = null; }
 
-  lutUniforms() {
+  lutUniforms(pixelRatio) {
     const l = this.lut, p = this.params, u = this.lutMat.uniforms;
     const values = {
       llut: this.textures.LLUT, lmac: this.textures.LMAC, atlas: new THREE.Vector2(l.tables.LLUT.width, l.tables.LLUT.height),
       D: l.dirs, C: l.cells, gutter: l.gutter, tileH: l.tileH, r: l.lensRadius, hex: l.lattice === 1,
       density: p.density, ka: p.ka, kd: p.kd, ks: p.ks, shininess: p.shininess, lensNormal: p.shading_normal !== 'object',
-      eyePos: this.camera.position, light: new THREE.Vector3(...p.light),
+      eyePos: this.camera.position, light: new THREE.Vector3(...p.light), pixelRatio,
     };
     for (const [k, v] of Object.entries(values)) u[k].value = v;
   }
@@ -348,12 +403,13 @@ export class EyeView {
     this.useModel();
     this.placeCamera(rect.w / rect.h);
     if (this.mode === 'lut') {
-      this.lutUniforms();
+      this.lutUniforms(renderer.getPixelRatio());
       this.mesh.material = this.lutMat;
     } else {
       this.bakeMat.uniforms.bake.value = this.bake.texture;
       this.mesh.material = this.bakeMat;
     }
+    this.capMat.uniforms.light.value.set(...this.params.light);
     renderer.setClearColor(0x080a10, 1);
     renderer.clear();
     renderer.render(this.scene, this.camera);
@@ -366,6 +422,8 @@ export class EyeView {
     for (const t of Object.values(this.textures)) t.dispose();
     this.bake.texture?.dispose();
     this.mesh.geometry.dispose();
+    this.cap.geometry.dispose();
+    this.capMat.dispose();
     this.lutMat.dispose();
     this.bakeMat.dispose();
     this.orbit?.dispose();

@@ -1,6 +1,7 @@
 // gl.js — small shared pieces of the renderers: the linear → sRGB encoding every
-// ShaderMaterial applies itself (they bypass three's colour management), and a
-// full-screen quad for composite passes, and ACES filmic tone mapping.
+// ShaderMaterial applies itself (they bypass three's colour management), a full-screen
+// quad for composite passes, ACES filmic tone mapping, and the glow tone map of the
+// energy wave.
 import * as THREE from 'three';
 
 export const SRGB_GLSL = /* glsl */ `
@@ -31,4 +32,15 @@ vec3 acesFilmic(vec3 color) {
   vec3 a = color * (color + 0.0245786) - 0.000090537;
   vec3 b = color * (0.983729 * color + 0.4329510) + 0.238081;
   return clamp(outMat * (a / b), 0.0, 1.0);
+}`;
+
+// The energy wave's display map: hue-preserving, for additive glows. The strongest channel m
+// goes through 1 − e^(−m), the others keep their ratio to it, so a colour never clips channel
+// by channel (ACES and a per-channel clamp turn an orange glow beige or yellow); only light
+// far above the display's range, the hot core, turns white (the thesis's white-out, eq. 4.8).
+export const GLOW_TONE_GLSL = /* glsl */ `
+vec3 glowTone(vec3 c) {
+  float m = max(max(c.r, c.g), c.b);
+  if (m <= 1e-6) return vec3(0.0);
+  return (1.0 - exp(-m)) * mix(c / m, vec3(1.0), smoothstep(2.0, 10.0, m));
 }`;

@@ -43,7 +43,6 @@ const gui = new GUI({ container: $('panel'), title: 'streams', width: 320 });
 // The flame's look (FlameView.settings, shared by every flame view): ?flame=hdr picks the mode.
 const flameSettings = { ...FLAME_DEFAULTS, mode: FLAME_MODES.includes(q.get('flame')) ? q.get('flame') : FLAME_DEFAULTS.mode, rl: Number(q.get('rl')) || FLAME_DEFAULTS.rl };
 const waveSettings = { ...WAVE_DEFAULTS }; // WaveView.settings, shared by every wave view
-const viewSettings = { waveBlack: 0.55, waveGain: 1.6 };
 const velNote = Object.assign(document.createElement('div'), { className: 'fxs-doc fxs-vel-note' });
 
 // The page's own settings of each effect's views, for its panel: the look folder's and the
@@ -76,8 +75,9 @@ function viewControls(effect) {
       look: [{ obj: w, key: 'bloom', min: 0, max: 3, step: 0.01, label: 'bloom', doc: 'glow around the bright core' }],
       display: [
         { obj: w, key: 'exposure', min: 0.1, max: 8, step: 0.01, label: 'exposure' },
-        { obj: viewSettings, key: 'waveBlack', min: 0, max: 2, step: 0.01, label: 'toon scene: black level (B)' },
-        { obj: viewSettings, key: 'waveGain', min: 0.1, max: 5, step: 0.01, label: 'toon scene: level gain' },
+        { obj: w, key: 'floor', min: 0, max: 2, step: 0.01, label: 'floor removed (x border B)', doc: 'the field\'s level at the billboard\'s border, taken away so the glow fades to black' },
+        { obj: w, key: 'gain', min: 0.1, max: 5, step: 0.01, label: 'level gain' },
+        { obj: w, key: 'contrast', min: 1, max: 4, step: 0.01, label: 'contrast (glow falloff)' },
       ],
     };
     default: return { look: [], display: [] };
@@ -116,7 +116,7 @@ function makeViews(st) {
     case 'energy_wave': {
       const w = new WaveView(st.name);
       w.settings = waveSettings;
-      vs = [w, new SceneView(st.name, w.wt)];
+      vs = [w, new SceneView(st.name, w)];
       break;
     }
     case 'compound_eye': vs = [new EyeView(st.name)]; break;
@@ -353,11 +353,6 @@ function frame(t) {
   const drawnStreams = new Set();
   for (const { view, rect, css } of lastLayout) {
     const v = view;
-    for (const m of [v.kind === 'wave' ? v.material : null, v.billboardMat]) {
-      if (!m) continue;
-      m.uniforms.blackLevel.value = viewSettings.waveBlack;
-      m.uniforms.levelGain.value = viewSettings.waveGain;
-    }
     renderer.setViewport(rect.x, rect.y, rect.w, rect.h);
     renderer.setScissor(rect.x, rect.y, rect.w, rect.h);
     renderer.setScissorTest(true);
@@ -405,7 +400,7 @@ health();
 // ---- what the browser tests read (clients/web/test/hooks.js; not used by the page) -------
 
 export const app = {
-  conn, streams, renderer, flameSettings,
+  conn, streams, renderer, flameSettings, waveSettings,
   get views() { return views; },
   get layout() { return lastLayout; },
 };

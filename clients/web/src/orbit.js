@@ -29,9 +29,10 @@ export class ViewOrbit {
     this.moved = false; // the user has moved the camera since it last went home
   }
 
-  // Sets the camera's home (position, target, up) and goes there. OrbitControls orbits around
-  // the camera's up as it was when the controls were made, so a new up makes new controls.
-  setHome(position, target, up = this.camera.up) {
+  // Sets the camera's home (position, target, up) and goes there (unless go is false).
+  // OrbitControls orbits around the camera's up as it was when the controls were made, so a
+  // new up makes new controls.
+  setHome(position, target, up = this.camera.up, go = true) {
     if (!this.controls || !this.up.equals(up)) {
       this.controls?.dispose();
       this.up.copy(up);
@@ -41,7 +42,7 @@ export class ViewOrbit {
       this.controls.addEventListener('start', () => { this.moved = true; });
     }
     this.homeState = { position: position.clone(), target: target.clone() };
-    this.home();
+    if (go) this.home();
   }
 
   home() {

@@ -6,6 +6,8 @@
 // back faces pushed out by d·|R_z| in view space; each model casts one clamped planar
 // shadow (direction from rig.js shadowDir, with the sign fix), t < 0 discarded, each pixel
 // darkened once (stencil). The wave itself is the stream's billboard, facing this camera.
+// The home view frames the whole ground disc, every model and the wave for the view's
+// aspect (fitHome).
 import * as THREE from 'three';
 import { ViewOrbit } from './orbit.js';
 import { SRGB_GLSL } from './gl.js';
@@ -94,8 +96,10 @@ void main() {
 // eq. 2.32, and only on the ground disc (centred at planeI): a long shadow ends at its edge.
 const SHADOW_FRAG = `uniform vec3 color; uniform float opacity, groundR; varying float vT; varying vec3 vOnGround; ${SRGB_GLSL}
 void main() { if (vT < 0.0 || length(vOnGround) > groundR) discard; gl_FragColor = vec4(linearToSRGB(color), opacity); }`;
-const GROUND_R = 26;
-const SCENE_HOME = { position: new THREE.Vector3(26, 10, 44), target: new THREE.Vector3(0, -4, 0) }; // the default view
+const GROUND_R = 17;
+// The home view looks from HOME_DIR (27° above the ground) at the middle of what it frames.
+const HOME_DIR = new THREE.Vector3(0.45, 0.45, 0.77).normalize(), HOME_MARGIN = 0.92;
+const boxCorners = (b) => [0, 1, 2, 3, 4, 5, 6, 7].map((k) => new THREE.Vector3(k & 1 ? b.max.x : b.min.x, k & 2 ? b.max.y : b.min.y, k & 4 ? b.max.z : b.min.z));
 
 function canvasTexture(w, h, draw) {
   const c = document.createElement('canvas');
@@ -139,18 +143,17 @@ const groundTexture = () => {
 };
 
 export class SceneView {
-  constructor(stream, waveTexture) {
+  constructor(stream, wave) {
     this.stream = stream;
     this.kind = 'scene';
-    this.wt = waveTexture;
+    this.wave = wave; // the stream's WaveView: its decoded texture and display settings
+    this.wt = wave.wt;
     this.rigState = new RigState();
     this.rig = null;
     this.params = null;
     this.newFrame = false;
     this.scene = new THREE.Scene();
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.5, 500);
-    this.camera.position.copy(SCENE_HOME.position);
-    this.camera.lookAt(SCENE_HOME.target);
     this.orbit = null;
     this.segData = new Float32Array(3 * MAX_SEG * 4);
     this.segTex = new THREE.DataTexture(this.segData, 3, MAX_SEG, THREE.RGBAFormat, THREE.FloatType);
@@ -314,19 +317,62 @@ export class SceneView {
     for (const m of this.models) if (m !== this.ground) m.group.position.y = (m.baseY ??= m.group.position.y) + base;
   }
 
-  // Mouse control on the shared canvas (orbit.js); home is the scene's default view.
-  attachControls(canvas, css) {
-    this.orbit = new ViewOrbit(this.camera, canvas, css);
-    this.orbit.setHome(SCENE_HOME.position, SCENE_HOME.target, new THREE.Vector3(0, 1, 0));
+  // Mouse control on the shared canvas (orbit.js); home is fitHome's view.
+  attachControls(canvas, css) { this.orbit = new ViewOrbit(this.camera, canvas, css); }
+
+  // What the home view must show: the ground disc's rim, every model's box and the wave's
+  // billboard (world points).
+  framedPoints() {
+    const pts = [], I = this.ground.group.position, q = this.ground.group.quaternion;
+    for (let k = 0; k < 32; k++) {
+      const a = (2 * Math.PI * k) / 32;
+      pts.push(new THREE.Vector3(GROUND_R * Math.cos(a), 0, GROUND_R * Math.sin(a)).applyQuaternion(q).add(I));
+    }
+    for (const m of this.models) if (m !== this.ground) pts.push(...boxCorners(new THREE.Box3().setFromObject(m.group)));
+    if (this.billboard.visible) {
+      const { x, y } = this.billboard.scale, c = this.billboard.position, r = Math.hypot(x, y) / 2;
+      for (const d of [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]]) pts.push(c.clone().addScaledVector(new THREE.Vector3(...d), r));
+    }
+    return pts;
+  }
+
+  // The home view for this aspect: from HOME_DIR, at the distance where every framed point
+  // lies within HOME_MARGIN of the view's edges, aimed so that they sit in the middle (a few
+  // rounds of: fit the distance, then move the target by the off-centre of the points'
+  // projection). It is recomputed when the aspect or what it frames changes; the camera goes
+  // there unless the user has moved it (a double-click takes it to the new home).
+  fitHome(aspect) {
+    const pts = this.framedPoints(), box = new THREE.Box3().setFromPoints(pts), target = box.getCenter(new THREE.Vector3());
+    const key = `${aspect.toFixed(3)}|${box.min.toArray().map((v) => v.toFixed(2))}|${box.max.toArray().map((v) => v.toFixed(2))}`;
+    if (key === this.homeKey) return;
+    this.homeKey = key;
+    const up = new THREE.Vector3(0, 1, 0), right = new THREE.Vector3().crossVectors(up, HOME_DIR).normalize();
+    const camUp = new THREE.Vector3().crossVectors(HOME_DIR, right);
+    const ty = Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)) * HOME_MARGIN, tx = ty * aspect;
+    let dist = 0;
+    for (let round = 0; round < 4; round++) {
+      dist = 0;
+      for (const p of pts) {
+        const q = p.clone().sub(target), depth = q.dot(HOME_DIR);
+        dist = Math.max(dist, depth + Math.abs(q.dot(right)) / tx, depth + Math.abs(q.dot(camUp)) / ty);
+      }
+      const x = [Infinity, -Infinity], y = [Infinity, -Infinity];
+      for (const p of pts) {
+        const q = p.clone().sub(target), z = dist - q.dot(HOME_DIR);
+        const px = q.dot(right) / z, py = q.dot(camUp) / z;
+        x[0] = Math.min(x[0], px); x[1] = Math.max(x[1], px); y[0] = Math.min(y[0], py); y[1] = Math.max(y[1], py);
+      }
+      target.addScaledVector(right, (dist * (x[0] + x[1])) / 2).addScaledVector(camUp, (dist * (y[0] + y[1])) / 2);
+    }
+    const position = target.clone().addScaledVector(HOME_DIR, dist);
+    if (!this.orbit) { this.camera.position.copy(position); this.camera.lookAt(target); }
+    else this.orbit.setHome(position, target, up, !this.orbit.moved);
   }
 
   render(renderer, rect, t) {
     if (!this.params) return false;
-    this.orbit?.update();
     this.placeOnPlane();
     this.updateShadows();
-    this.camera.aspect = rect.w / rect.h;
-    this.camera.updateProjectionMatrix();
     // the wave's billboard, moved along the stream's view ray to the depth of its centre line
     // and turned to face this camera
     if (this.wt.texture && this.rig && this.rig.nSeg) {
@@ -343,16 +389,33 @@ export class SceneView {
       const rho = Math.max(0.05, cen.clone().sub(eye).dot(f) / fl);
       this.billboard.position.copy(eye).addScaledVector(ctr.clone().sub(eye), rho);
       this.billboard.scale.set(p.size * rho, p.size * rho * this.wt.height / this.wt.width, 1);
-      this.billboard.quaternion.copy(this.camera.quaternion);
-      applyWaveUniforms(this.billboardMat, this.wt, p);
+      applyWaveUniforms(this.billboardMat, this.wt, p, this.wave.settings);
       this.billboard.visible = true;
     } else this.billboard.visible = false;
+    this.camera.aspect = rect.w / rect.h;
+    this.camera.updateProjectionMatrix();
+    this.fitHome(this.camera.aspect);
+    this.orbit?.update();
+    this.billboard.quaternion.copy(this.camera.quaternion);
     renderer.setClearColor(0x0a0c12, 1);
     renderer.clear(true, true, true);
     renderer.render(this.scene, this.camera);
     const drew = this.newFrame;
     this.newFrame = false;
     return drew;
+  }
+
+  /** State for the page's test hooks: the rig, each model's shadow, and where the models and
+   *  the wave's billboard are in the view (boxes as shares of its width and height from the
+   *  top left, as last drawn). */
+  info() {
+    const rect = (pts) => {
+      const v = pts.map((p) => p.clone().project(this.camera)), xs = v.map((p) => (p.x + 1) / 2), ys = v.map((p) => (1 - p.y) / 2);
+      return { x0: Math.min(...xs), x1: Math.max(...xs), y0: Math.min(...ys), y1: Math.max(...ys) };
+    };
+    const models = this.models.filter((m) => m !== this.ground).map((m) => ({ name: m.name, ...rect(boxCorners(new THREE.Box3().setFromObject(m.group))) }));
+    const bb = this.billboard.visible ? rect([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]].map(([x, y]) => new THREE.Vector3(x, y, 0).applyMatrix4(this.billboard.matrixWorld))) : null;
+    return { rig: !!this.rig?.constants, nSeg: this.rig?.nSeg ?? 0, shadows: this.shadowInfo ?? [], models, billboard: bb, home: !this.orbit?.moved };
   }
 
   dispose() { this.segTex.dispose(); this.orbit?.dispose(); }

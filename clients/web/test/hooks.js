@@ -82,6 +82,8 @@ window.fxs = {
   flame: () => app.views.find((x) => x.kind === 'flame')?.info() ?? null,
   flameLook,
   flameSettings,
-  scene: () => { const v = app.views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
+  waveSettings: app.waveSettings,
+  scene: (stream) => app.views.find((x) => x.kind === 'scene' && (!stream || x.stream === stream))?.info() ?? null,
   eye: (stream) => app.views.find((x) => x.kind === 'eye' && x.stream === stream)?.info() ?? null,
+  wave: (stream) => app.views.find((x) => x.kind === 'wave' && (!stream || x.stream === stream))?.info() ?? null,
 };
