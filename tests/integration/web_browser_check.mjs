@@ -16,7 +16,7 @@
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { ART, checker, collectErrors, fxctlAt, launchBrowser, sleep, startDaemon as start, stopDaemon, until } from './web_lib.mjs';
+import { ART, checker, collectErrors, fxctlAt, launchBrowser, sleep, startDaemon, stopDaemon, until } from './web_lib.mjs';
 
 const LOOK_ONLY = process.argv.includes('--look'); // screenshots only (development)
 const checks = checker('test_web_browser');
@@ -28,7 +28,6 @@ const hardStop = setTimeout(() => { console.log('FAIL overall time limit (420 s)
 const stateDir = mkdtempSync(join(tmpdir(), 'fxs-web-state-'));
 const profile = mkdtempSync(join(tmpdir(), 'fxs-web-profile-'));
 let daemon = null, ctx = null;
-const startDaemon = (port, env = {}) => start(port, stateDir, env);
 
 async function finish(code) {
   clearTimeout(hardStop);
