@@ -15,10 +15,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fxs_frame.h" /* FXS_CODEC_ENGINE, the frame header's codec of these payloads */
 #include "fxs_particles.h"
-
-/* The frame header's codec of an engine-encoded kind 1 or kind 2 payload. */
-#define FXS_CODEC_ENGINE 16u
 
 #define FXS_ENGINE_MAGIC "FXE1"
 #define FXS_ENGINE_VERSION 1u

@@ -17,8 +17,10 @@
 
 #include <libwebsockets.h>
 
+#include "codec/exr.h"
 #include "fxclient.h"
 #include "fxctl_print.h"
+#include "fxs_engine.h"
 #include "fxs_particles.h"
 #include "fxs_lut.h"
 #include "png.h"
@@ -38,6 +40,7 @@ struct fxctl_opts {
     long count;        /* watch --count, 0 = until interrupted */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
+    const char *encoding; /* subscribe --encoding, NULL when not given */
     const char *out_dir;
     int human;         /* stdout is a terminal and no --json: print for people */
     const char *cmd;
@@ -58,19 +61,22 @@ static const char fxctl_help[] =
     "  get NAME                      complete parameters of NAME with their rev\n"
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
-    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]\n"
+    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--out DIR]\n"
     "                                receive N frames of NAME (only of kind K, 1..4,\n"
-    "                                with --kind); prints the subscribed\n"
+    "                                with --kind; particles and textures in encoding\n"
+    "                                E, default or engine); prints the subscribed\n"
     "                                reply, then one JSON line per frame (stream,\n"
     "                                channel, kind, seq, param_rev, sim_time,\n"
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
     "                                width and height, or count, flags) and any params\n"
     "                                event of NAME; with --out writes the payload to\n"
-    "                                DIR/NAME-SEQ.exr (texture, codec 1), DIR/NAME-SEQ-PROD.png\n"
+    "                                DIR/NAME-SEQ.exr (texture; the engine encoding's\n"
+    "                                halves as an EXR), DIR/NAME-SEQ-PROD.png\n"
     "                                per look-up-table product (kind 4), the decoded\n"
-    "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 2:\n"
-    "                                binary PLY, x y z temperature fuel flags, then\n"
-    "                                vx vy vz if the stream sends velocities, and the\n"
+    "                                particles to DIR/NAME-SEQ.ply (kind 1, binary PLY,\n"
+    "                                x y z temperature fuel flags, or x y z temperature\n"
+    "                                in the engine encoding, then vx vy vz if the\n"
+    "                                stream sends velocities, and the\n"
     "                                payload as received to .bin) or the\n"
     "                                payload to .bin (others), and the line to\n"
     "                                DIR/NAME-SEQ.json; a light-rig frame (kind 3),\n"
@@ -159,6 +165,9 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
     } else if (!strcmp(name, "--kind")) {
         if (fxctl_parse_long(val, 1, &n) || n > FXS_KIND_MAX) return fxctl_usage("--kind needs a frame kind, 1..4", val);
         o->kind = (int)n;
+    } else if (!strcmp(name, "--encoding")) {
+        if (strcmp(val, "default") && strcmp(val, "engine")) return fxctl_usage("--encoding needs default or engine", val);
+        o->encoding = val;
     } else if (!strcmp(name, "--count")) {
         if (fxctl_parse_long(val, 1, &o->count)) return fxctl_usage("--count needs a positive integer", val);
     } else if (!strcmp(name, "--out")) {
@@ -250,7 +259,7 @@ static const struct fxctl_cmd fxctl_cmds[] = {
     { "get", 1, 1, "stream", "get NAME" },
     { "set", 2, -1, "stream", "set NAME K=V [K=V ...]" },
     { "reset", 1, 1, "stream", "reset NAME" },
-    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]" },
+    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--out DIR]" },
     { "watch", 0, 0, NULL, "watch [--count N]" },
     { "presets", 0, 1, "effect", "presets [EFFECT]" },
     { "preset", 3, 4, NULL, "preset load NAME PRESET | preset save NAME PRESET [DOC] | preset delete EFFECT PRESET" },
@@ -298,8 +307,8 @@ static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cm
         fprintf(stderr, "fxctl: wrong number of arguments; usage: fxctl %s\nTry 'fxctl --help'.\n", cmd->synopsis);
         return FXCTL_USAGE;
     }
-    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->out_dir))
-        return fxctl_usage("--frames, --max-fps, --kind and --out go with subscribe only", NULL);
+    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->encoding || o->out_dir))
+        return fxctl_usage("--frames, --max-fps, --kind, --encoding and --out go with subscribe only", NULL);
     if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
     if (o->count && strcmp(cmd->name, "watch")) return fxctl_usage("--count goes with watch only", NULL);
     if (!strcmp(cmd->name, "preset")) {
@@ -338,6 +347,7 @@ static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, 
     if (cmd->first_field && o->nargs) cJSON_AddStringToObject(req, cmd->first_field, o->args[0]);
     if (!strcmp(cmd->name, "create")) cJSON_AddStringToObject(req, "stream", o->args[i++]);
     if (o->max_fps >= 0) cJSON_AddNumberToObject(req, "max_fps", o->max_fps);
+    if (o->encoding) cJSON_AddStringToObject(req, "encoding", o->encoding);
     if (i < o->nargs) params = cJSON_AddObjectToObject(req, "params");
     for (; i < o->nargs && !r; i++) r = fxctl_add_kv(params, o->args[i]);
     return r;
@@ -399,28 +409,31 @@ static int fxctl_write_file(const char *path, const void *data, size_t len)
     return ok ? 0 : -1;
 }
 
-/* Writes decoded particles as binary little-endian PLY: float x y z temperature fuel, uchar
- * flags, then float vx vy vz when the frame carries velocities. */
-static int fxctl_write_ply(const char *path, const struct fxs_particles *p)
+/* Writes decoded particles as binary little-endian PLY: float x y z temperature, then float
+ * fuel and uchar flags when the frame carries them (codecs 2 and 3, not the engine encoding),
+ * then float vx vy vz when it carries velocities. */
+static int fxctl_write_ply(const char *path, uint32_t codec, const struct fxs_particles *p)
 {
     FILE *f = fopen(path, "wb");
-    int ok = f != NULL;
-    size_t size = p->vel ? 33 : 21;
+    int ok = f != NULL, attrs = p->fuel && p->flags;
+    size_t size = 16 + (attrs ? 5 : 0) + (p->vel ? 12 : 0);
     if (ok)
-        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec 2\nelement vertex %" PRIu32
+        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec %" PRIu32 "\nelement vertex %" PRIu32
                         "\nproperty float x\nproperty float y\nproperty float z\nproperty float temperature\n"
-                        "property float fuel\nproperty uchar flags\n%send_header\n", p->n,
+                        "%s%send_header\n", codec, p->n, attrs ? "property float fuel\nproperty uchar flags\n" : "",
                      p->vel ? "property float vx\nproperty float vy\nproperty float vz\n" : "") > 0;
     for (uint32_t i = 0; ok && i < p->n; i++) {
-        uint8_t rec[33];
-        float v[8] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], p->fuel[i], 0, 0, 0 };
-        if (p->vel) memcpy(v + 5, p->vel + 3 * (size_t)i, 12);
-        for (int c = 0; c < (p->vel ? 8 : 5); c++) { /* the flags byte sits between fuel and vx */
+        uint8_t rec[33], *r = rec;
+        float v[8] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temp[i], attrs ? p->fuel[i] : 0 };
+        int nv = attrs ? 5 : 4;
+        if (p->vel) memcpy(v + nv, p->vel + 3 * (size_t)i, 12);
+        for (int c = 0; c < nv + (p->vel ? 3 : 0); c++) {
             uint32_t u;
             memcpy(&u, &v[c], 4);
-            fxs_put_u32(rec + 4 * c + (c >= 5), u);
+            fxs_put_u32(r, u);
+            r += 4;
+            if (attrs && c == 4) *r++ = p->flags[i]; /* the flags byte sits between fuel and vx */
         }
-        rec[20] = p->flags[i];
         ok = fwrite(rec, 1, size, f) == size;
     }
     if (f && fclose(f)) ok = 0;
@@ -430,14 +443,18 @@ static int fxctl_write_ply(const char *path, const struct fxs_particles *p)
 
 static int fxctl_is_particles(const struct fxs_header *h)
 {
-    return h->kind == FXS_KIND_PARTICLES && (h->codec == FXS_CODEC_PARTICLES || h->codec == FXS_CODEC_PARTICLES_BLOCKS);
+    return h->kind == FXS_KIND_PARTICLES && (h->codec == FXS_CODEC_PARTICLES || h->codec == FXS_CODEC_PARTICLES_BLOCKS ||
+                                             h->codec == FXS_CODEC_ENGINE);
 }
 
-/* Decodes a particle frame; checks the count against the header. */
+/* Decodes a particle frame (codec 2, 3 or the engine encoding); checks the count against the header. */
 static int fxctl_decode_particles(const struct fxc_msg *m, struct fxs_particles *p)
 {
     char err[256];
-    if (fxs_particles_decode(m->payload, m->header.payload_bytes, p, err, sizeof err)) {
+    int rc = m->header.codec == FXS_CODEC_ENGINE
+                 ? fxs_engine_decode_particles(m->payload, m->header.payload_bytes, p, err, sizeof err)
+                 : fxs_particles_decode(m->payload, m->header.payload_bytes, p, err, sizeof err);
+    if (rc) {
         fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", m->header.seq, err);
         return -1;
     }
@@ -470,19 +487,47 @@ static int fxctl_write_lut(const char *base, const struct fxc_msg *m)
     return -1;
 }
 
-/* Writes the frame's data file: .exr (texture codec 1), .ply (particles codec 2, decoded, and
- * the payload as received in .bin, for other decoders to compare) or .bin, plus one PNG per
- * product of a look-up table (kind 4 codec 1). */
+/* Writes an engine-encoded texture (kind 2 codec 16) as the EXR of its halves, the same pixels
+ * the default encoding's EXR holds (uncompressed). Checks its size against the header. */
+static int fxctl_write_engine_exr(const char *path, const struct fxc_msg *m)
+{
+    const struct fxs_header *h = &m->header;
+    struct fxs_engine_info info;
+    struct fx_buf exr = { 0 };
+    struct fx_err e = { 0 };
+    float *texels = NULL;
+    char err[256];
+    int r = -1;
+    if (fxs_engine_decode_texture(m->payload, h->payload_bytes, &info, &texels, err, sizeof err))
+        fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", h->seq, err);
+    else if (info.width != h->count_or_width || info.height != h->height)
+        fprintf(stderr, "fxctl: frame %" PRIu64 ": header %" PRIu32 "x%" PRIu32 " but a %" PRIu32 "x%" PRIu32 " payload\n",
+                h->seq, h->count_or_width, h->height, info.width, info.height);
+    else if (exr_write_mem(&(struct exr_image){ (int)info.width, (int)info.height, info.format == FXS_ENGINE_RGBA16F ? 4 : 1,
+                                                texels, EXR_CODEC_NONE }, &exr, &e))
+        fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", h->seq, e.message);
+    else
+        r = fxctl_write_file(path, exr.data, exr.len);
+    free(texels);
+    fx_buf_free(&exr);
+    return r;
+}
+
+/* Writes the frame's data file: .exr (texture codec 1, or the decoded engine encoding), .ply
+ * (particles, decoded, and the payload as received in .bin, for other decoders to compare) or
+ * .bin, plus one PNG per product of a look-up table (kind 4 codec 1). */
 static int fxctl_save_payload(const char *base, const struct fxc_msg *m, const struct fxs_particles *p)
 {
     const struct fxs_header *h = &m->header;
     int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
+    int engine_exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_ENGINE;
     char path[4200], raw[4200];
-    snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr ? "exr" : "bin");
+    snprintf(path, sizeof path, "%s.%s", base, p ? "ply" : exr || engine_exr ? "exr" : "bin");
     snprintf(raw, sizeof raw, "%s.bin", base);
     if (h->kind == FXS_KIND_LUT && h->codec == FXS_CODEC_LUT_PACK && fxctl_write_lut(base, m)) return -1;
-    if (p && fxctl_write_ply(path, p)) return -1;
-    return fxctl_write_file(p ? raw : path, m->payload, h->payload_bytes);
+    if (p && fxctl_write_ply(path, h->codec, p)) return -1;
+    if (engine_exr && fxctl_write_engine_exr(path, m)) return -1;
+    return fxctl_write_file(p || engine_exr ? raw : path, m->payload, h->payload_bytes);
 }
 
 /* Writes DIR/STREAM-SEQ.{exr|ply|bin} and DIR/STREAM-SEQ.json; a light-rig frame (kind 3) is
