@@ -64,8 +64,11 @@ static void engine_header(const struct fxs_engine_info *in, uint32_t zbytes, uin
     fxs_put_u32(h + 20, in->count);
     fxs_put_u32(h + 24, in->raw_bytes);
     fxs_put_u32(h + 28, zbytes);
-    for (int k = 0; k < 3; k++) fxs_put_f32(h + 32 + 4 * k, in->origin[k]);
-    fxs_put_u32(h + 44, in->flags);
+    for (int k = 0; k < 3; k++) {
+        fxs_put_f32(h + 32 + 4 * k, in->origin[k]);
+        fxs_put_f32(h + 44 + 4 * k, in->extent[k]);
+    }
+    fxs_put_u32(h + 56, in->flags);
 }
 
 /* Compresses the raw texels behind the header of `in` into a new payload. */
@@ -94,8 +97,9 @@ static int engine_put_half(uint8_t *p, float v)
     return (h & 0x7c00u) == 0x7c00u ? -1 : 0;
 }
 
-/* The centre of the particles' bounds, in the payload's float; -1 when a position is not finite. */
-static int engine_origin(const struct fxs_particles *p, float origin[3])
+/* The centre of the particles' bounds and half their size (rounded up, so every offset lies
+ * within it); -1 when a position is not finite. */
+static int engine_bounds(const struct fxs_particles *p, float origin[3], float extent[3])
 {
     for (int k = 0; k < 3; k++) {
         float lo = INFINITY, hi = -INFINITY;
@@ -106,6 +110,7 @@ static int engine_origin(const struct fxs_particles *p, float origin[3])
             hi = fmaxf(hi, v);
         }
         origin[k] = p->n ? (float)(0.5 * ((double)lo + (double)hi)) : 0.0f;
+        extent[k] = p->n ? nextafterf((float)fmax((double)hi - origin[k], (double)origin[k] - lo), INFINITY) : 0.0f;
     }
     return 0;
 }
@@ -120,7 +125,7 @@ int fxs_engine_encode_particles(const struct fxs_particles *p, int zstd_level, u
     in.height = p->n ? (p->n + in.width - 1) / in.width : 1;
     size_t layer = (size_t)in.width * in.height * 8;
     in.raw_bytes = (uint32_t)(layer * in.layers);
-    if (engine_origin(p, in.origin)) return snprintf(err, errlen, "a particle position is not finite"), -1;
+    if (engine_bounds(p, in.origin, in.extent)) return snprintf(err, errlen, "a particle position is not finite"), -1;
     uint8_t *raw = calloc(in.raw_bytes, 1);
     if (!raw) return snprintf(err, errlen, "out of memory (%u bytes)", in.raw_bytes), -1;
     for (uint32_t i = 0; i < p->n; i++) {
@@ -159,7 +164,8 @@ int fxs_engine_encode_texture(const float *texels, uint32_t width, uint32_t heig
 int fxs_engine_info(const uint8_t *buf, size_t len, struct fxs_engine_info *in, char *err, size_t errlen)
 {
     if (len < FXS_ENGINE_HEADER_BYTES)
-        return snprintf(err, errlen, "engine payload of %zu bytes: shorter than its %u-byte header", len, FXS_ENGINE_HEADER_BYTES), -1;
+        return snprintf(err, errlen, "engine payload of %zu bytes: shorter than its %u-byte header", len,
+                        FXS_ENGINE_HEADER_BYTES), -1;
     if (memcmp(buf, FXS_ENGINE_MAGIC, 4)) return snprintf(err, errlen, "not an engine payload (magic is not FXE1)"), -1;
     if (fxs_get_u16(buf + 4) != FXS_ENGINE_VERSION)
         return snprintf(err, errlen, "engine payload version %u (this decoder reads %u)", fxs_get_u16(buf + 4), FXS_ENGINE_VERSION), -1;
@@ -172,11 +178,15 @@ int fxs_engine_info(const uint8_t *buf, size_t len, struct fxs_engine_info *in, 
     in->count = fxs_get_u32(buf + 20);
     in->raw_bytes = fxs_get_u32(buf + 24);
     uint32_t zbytes = fxs_get_u32(buf + 28);
-    for (int k = 0; k < 3; k++) in->origin[k] = fxs_get_f32(buf + 32 + 4 * k);
-    in->flags = fxs_get_u32(buf + 44);
+    for (int k = 0; k < 3; k++) {
+        in->origin[k] = fxs_get_f32(buf + 32 + 4 * k);
+        in->extent[k] = fxs_get_f32(buf + 44 + 4 * k);
+    }
+    in->flags = fxs_get_u32(buf + 56);
     uint64_t texels = (uint64_t)in->width * in->height * in->layers;
     if (in->header_bytes < FXS_ENGINE_HEADER_BYTES || in->header_bytes > len)
-        return snprintf(err, errlen, "engine header_bytes %u: 48 up to the payload's %zu", in->header_bytes, len), -1;
+        return snprintf(err, errlen, "engine header_bytes %u: %u up to the payload's %zu", in->header_bytes,
+                        FXS_ENGINE_HEADER_BYTES, len), -1;
     if (in->format != FXS_ENGINE_RGBA16F && in->format != FXS_ENGINE_R16F)
         return snprintf(err, errlen, "engine texel format %u is unknown", in->format), -1;
     if (in->flags & ~FXS_ENGINE_FLAG_VELOCITIES) return snprintf(err, errlen, "engine flags 0x%x: unknown bits", in->flags), -1;
@@ -190,8 +200,9 @@ int fxs_engine_info(const uint8_t *buf, size_t len, struct fxs_engine_info *in, 
                         engine_texel_bytes(in->format)), -1;
     if (in->count > (uint64_t)in->width * in->height)
         return snprintf(err, errlen, "count %u beyond the %ux%u image", in->count, in->width, in->height), -1;
-    if (!isfinite(in->origin[0]) || !isfinite(in->origin[1]) || !isfinite(in->origin[2]))
-        return snprintf(err, errlen, "engine origin is not finite"), -1;
+    for (int k = 0; k < 3; k++)
+        if (!isfinite(in->origin[k]) || !(in->extent[k] >= 0) || !isfinite(in->extent[k]))
+            return snprintf(err, errlen, "engine origin or extent is not finite (or the extent negative)"), -1;
     const uint8_t *z = buf + in->header_bytes;
     size_t zlen = len - in->header_bytes, frame = ZSTD_findFrameCompressedSize(z, zlen);
     if (zbytes != zlen || ZSTD_isError(frame) || frame != zlen)

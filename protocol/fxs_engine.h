@@ -20,7 +20,7 @@
 
 #define FXS_ENGINE_MAGIC "FXE1"
 #define FXS_ENGINE_VERSION 1u
-#define FXS_ENGINE_HEADER_BYTES 48u
+#define FXS_ENGINE_HEADER_BYTES 64u
 /* Texels a row of a particle payload: within every GPU's texture limits up to 2^22 particles. */
 #define FXS_ENGINE_PARTICLE_WIDTH 1024u
 /* Most texels (width x height x layers) one payload may hold; decoders reject more. */
@@ -43,7 +43,8 @@ struct fxs_engine_info {
     uint32_t count;    /* particles (kind 1); 0 for textures */
     uint32_t raw_bytes;/* width x height x layers x bytes a texel: the decompressed size */
     uint32_t flags;    /* FXS_ENGINE_FLAG_VELOCITIES */
-    float origin[3];   /* particles: what the positions are offsets from; textures: 0 */
+    float origin[3];   /* particles: the centre of their bounds, what positions are offsets from */
+    float extent[3];   /* particles: half the size of their bounds (a culling box); textures: 0 */
     uint32_t header_bytes;
 };
 

@@ -3,7 +3,7 @@
  * Half floats: every half converts to float and back to itself, floats round to the nearest
  * half (ties to even, denormals, overflow to infinity). Particles: round trips of sets of
  * 0 .. 10 000 particles, with and without velocities, near and far from the world's origin,
- * within half a half-float step of each value's offset; the layout (1024-texel rows, padding,
+ * within half a half-float step of each value's offset, inside the header's box; the layout (1024-texel rows, padding,
  * the velocity layer below). Textures: one and four channels, exactly the halves of the
  * input. Malformed payloads are rejected with a message and without reading out of bounds:
  * every cut, wrong sizes, bad magic or version, absurd counts, trailing bytes, unknown
@@ -115,6 +115,7 @@ static void round_trip(uint32_t n, bool vel, double centre, double extent)
         for (int k = 0; k < 3; k++) {
             double x = in.xyz[3 * i + k], off = x - info.origin[k];
             bad += fabs(out.xyz[3 * i + k] - x) > half_tol(off, x);
+            bad += fabs(off) > info.extent[k]; /* the culling box holds every particle */
             if (vel) bad += fabs(out.vel[3 * i + k] - in.vel[3 * i + k]) > half_tol(in.vel[3 * i + k], 0);
         }
         bad += fabs(out.temp[i] - in.temp[i]) > half_tol(in.temp[i], 0);
@@ -148,7 +149,7 @@ static void test_particles_layout(void)
     struct fxs_engine_info info;
     fxs_engine_info(buf, len, &info, err, sizeof err);
     uint8_t *raw = malloc(info.raw_bytes);
-    CHECK(ZSTD_decompress(raw, info.raw_bytes, buf + 48, len - 48) == info.raw_bytes, "decompress");
+    CHECK(ZSTD_decompress(raw, info.raw_bytes, buf + 64, len - 64) == info.raw_bytes, "decompress");
     size_t layer = 1024 * 2 * 8;
     const uint8_t *t = raw + 8 * 1499, *v = t + layer;
     CHECK_NEAR(fxs_half_to_float(fxs_get_u16(t + 2)) + info.origin[1], in.xyz[3 * 1499 + 1], 1e-4);
@@ -267,9 +268,9 @@ static void test_malformed(void)
     fxs_put_u16(c + 8, FXS_ENGINE_R16F);
     CHECK(!decodes(c, len, err, sizeof err), "R16F particles: %s", err);
     fxs_put_u16(c + 8, 1);
-    fxs_put_u16(c + 6, 40);
-    CHECK(!decodes(c, len, err, sizeof err) && strstr(err, "header_bytes"), "header_bytes 40: %s", err);
     fxs_put_u16(c + 6, 48);
+    CHECK(!decodes(c, len, err, sizeof err) && strstr(err, "header_bytes"), "header_bytes 40: %s", err);
+    fxs_put_u16(c + 6, 64);
     fxs_put_u16(c + 10, 1);
     CHECK(!decodes(c, len, err, sizeof err) && strstr(err, "layers"), "one layer with the velocity flag: %s", err);
     free(c);
@@ -279,8 +280,9 @@ static void test_malformed(void)
     CHECK(!decodes_with_u32(buf, len, 20, 1025, err, sizeof err) && strstr(err, "count"), "count beyond the image: %s", err);
     CHECK(!decodes_with_u32(buf, len, 24, 2 * 1024 * 8 - 2, err, sizeof err), "raw_bytes off by 2: %s", err);
     CHECK(!decodes_with_u32(buf, len, 28, (uint32_t)len, err, sizeof err), "zstd_bytes: %s", err);
-    CHECK(!decodes_with_u32(buf, len, 44, 3, err, sizeof err) && strstr(err, "flags"), "unknown flag: %s", err);
+    CHECK(!decodes_with_u32(buf, len, 56, 3, err, sizeof err) && strstr(err, "flags"), "unknown flag: %s", err);
     CHECK(!decodes_with_u32(buf, len, 32, 0x7f800000u, err, sizeof err) && strstr(err, "origin"), "infinite origin: %s", err);
+    CHECK(!decodes_with_u32(buf, len, 48, 0xbf800000u, err, sizeof err) && strstr(err, "extent"), "negative extent: %s", err);
     free(buf);
 }
 
@@ -290,12 +292,12 @@ static void test_nonfinite_particle(void)
     uint8_t raw[1024 * 8] = {0};
     fxs_put_u16(raw + 2, 0x7e00);
     struct fxs_engine_info in = {.format = 1, .layers = 1, .width = 1024, .height = 1, .count = 1, .raw_bytes = sizeof raw};
-    uint8_t buf[48 + 512];
-    size_t z = ZSTD_compress(buf + 48, sizeof buf - 48, raw, sizeof raw, 1);
-    memset(buf, 0, 48);
+    uint8_t buf[64 + 512];
+    size_t z = ZSTD_compress(buf + 64, sizeof buf - 64, raw, sizeof raw, 1);
+    memset(buf, 0, 64);
     memcpy(buf, "FXE1", 4);
     fxs_put_u16(buf + 4, 1);
-    fxs_put_u16(buf + 6, 48);
+    fxs_put_u16(buf + 6, 64);
     fxs_put_u16(buf + 8, (uint16_t)in.format);
     fxs_put_u16(buf + 10, 1);
     fxs_put_u32(buf + 12, 1024);
@@ -304,9 +306,9 @@ static void test_nonfinite_particle(void)
     fxs_put_u32(buf + 24, sizeof raw);
     fxs_put_u32(buf + 28, (uint32_t)z);
     char err[200] = "";
-    CHECK(!ZSTD_isError(z) && !decodes(buf, 48 + z, err, sizeof err) && strstr(err, "not finite"), "NaN particle: %s", err);
+    CHECK(!ZSTD_isError(z) && !decodes(buf, 64 + z, err, sizeof err) && strstr(err, "not finite"), "NaN particle: %s", err);
     fxs_put_u32(buf + 20, 0); /* count 0: the NaN is padding, never read */
-    CHECK(decodes(buf, 48 + z, err, sizeof err), "padding is not read: %s", err);
+    CHECK(decodes(buf, 64 + z, err, sizeof err), "padding is not read: %s", err);
 }
 
 int main(void)
