@@ -50,7 +50,8 @@ static const char *const cluster_scripts[CS_COUNT] = {
                    "redis.call('ZREM', KEYS[2], ARGV[1])\n"
                    "local p = '" CLUSTER_KEY "'\n"
                    "redis.call('DEL', p .. 'lease:' .. ARGV[1], p .. 'want:' .. ARGV[1], p .. 'frame:' .. ARGV[1] .. ':1',\n"
-                   "           p .. 'frame:' .. ARGV[1] .. ':2', p .. 'frame:' .. ARGV[1] .. ':3', p .. 'frame:' .. ARGV[1] .. ':4')\n"
+                   "           p .. 'frame:' .. ARGV[1] .. ':2', p .. 'frame:' .. ARGV[1] .. ':3', p .. 'frame:' .. ARGV[1] .. ':4',\n"
+                   "           p .. 'frame:' .. ARGV[1] .. ':1:engine', p .. 'frame:' .. ARGV[1] .. ':2:engine')\n"
                    "local seq = redis.call('INCR', KEYS[3])\n" CLUSTER_PUBLISH("2", "3") "return {'ok', seq}\n",
     /* KEYS stream, streams, seq; ARGV name, event, channel (as CS_DESTROY's) */
     [CS_RESET] = "if redis.call('EXISTS', KEYS[1]) == 0 then return {'gone'} end\n"

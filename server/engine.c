@@ -124,15 +124,14 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
 }
 
 /* The encodings wanted of a stream's frames (bits 1 << enum fxs_encoding): those its subscribers
- * take; the default also while nobody subscribes (a stream that runs idle keeps its newest frame
- * for the next subscriber, PROTOCOL.md §8.3) and while subscribers on other daemons read it. */
+ * here and on other daemons take (cluster mode); the default also while nobody subscribes (a
+ * stream that runs idle keeps its newest frame for the next subscriber, PROTOCOL.md §8.3). */
 static unsigned engine_wanted(const struct stream_status *st)
 {
-    unsigned m = 0;
+    unsigned m = st->lease.remote_demand;
     for (int e = 0; e < FXS_ENCODING_COUNT; e++)
         if (st->subscribers_by[e] > 0) m |= 1u << e;
-    if (st->subscribers == 0 || st->lease.remote_demand) m |= 1u << FXS_ENCODING_DEFAULT;
-    return m;
+    return m ? m : 1u << FXS_ENCODING_DEFAULT;
 }
 
 /* The payload of an output in an encoding: the effect's (made now when deferred) or the engine

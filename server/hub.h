@@ -33,9 +33,11 @@
  * (CLOCK_MONOTONIC seconds; the lease's TTL counted from before its last renewal was sent, so a
  * daemon that was paused past it stops by itself; INFINITY while Redis is unreachable: the
  * owner keeps serving its own subscribers), continuing the frame numbers of the previous owner
- * from seq_from; remote_demand: another daemon has subscribers of it. */
+ * from seq_from; remote_demand: the encodings other daemons' subscribers of it take (bits
+ * 1 << enum fxs_encoding; 0: none). */
 struct stream_lease {
-    bool owned, remote_demand;
+    bool owned;
+    unsigned remote_demand;
     uint64_t gen;
     double until;
     uint64_t seq_from[FXS_KIND_MAX + 1];

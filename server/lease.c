@@ -24,26 +24,33 @@
 enum { LS_TICK, LS_PUBLISH, LS_RELEASE, LS_COUNT };
 
 static const char *const lease_scripts[LS_COUNT] = {
-    /* ARGV node, compute (1/0), load, ttl ms, then n + the names wanted here, n + (name, token)
+    /* ARGV node, compute (1/0), load, ttl ms, then n + (name, field) wanted here (field: the node,
+     * for subscribers of the default encoding, or NODE|engine), n + (name, token)
      * of the leases held, n + the names this daemon could compute. A lease held is kept while
      * nobody else has taken it; it is written again once its stream exists (a Redis that lost
      * its data is seeded again by the daemons a moment later: no stream changes owner then). Returns one entry per held
      * or taken lease: {'held', name, token, demand} {'lost', name} {'taken', name, token, demand,
-     * seq1, seq2, seq3, seq4} (seqK: the 8 bytes of the latest frame's number, or ""). */
+     * seq1, seq2, seq3, seq4, seq1e, seq2e} (demand: the encodings other daemons want, bit 0 the
+     * default, bit 1 the engine encoding; seqK: the 8 bytes of the latest frame's number, or "";
+     * seqKe: of the latest engine-encoded frame of kind K). */
     [LS_TICK] =
         "local P, node, compute, ttl = '" CLUSTER_KEY "', ARGV[1], ARGV[2] == '1', tonumber(ARGV[4])\n"
         "local t = redis.call('TIME')\n"
         "local now = tonumber(t[1]) * 1000 + math.floor(tonumber(t[2]) / 1000)\n"
         "local i = 5\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
-        "  i = i + 1\n"
-        "  redis.call('HSET', P .. 'want:' .. ARGV[i], node, now + ttl)\n"
-        "  redis.call('PEXPIRE', P .. 'want:' .. ARGV[i], ttl)\n"
+        "  redis.call('HSET', P .. 'want:' .. ARGV[i + 1], ARGV[i + 2], now + ttl)\n"
+        "  redis.call('PEXPIRE', P .. 'want:' .. ARGV[i + 1], ttl)\n"
+        "  i = i + 2\n"
         "end\n"
         "local function demand(name)\n"
-        "  local h = redis.call('HGETALL', P .. 'want:' .. name)\n"
-        "  for j = 1, #h, 2 do if h[j] ~= node and tonumber(h[j + 1]) > now then return 1 end end\n"
-        "  return 0\n"
+        "  local h, d = redis.call('HGETALL', P .. 'want:' .. name), 0\n"
+        "  for j = 1, #h, 2 do\n"
+        "    if h[j] ~= node and h[j] ~= node .. '|engine' and tonumber(h[j + 1]) > now then\n"
+        "      d = bit.bor(d, string.sub(h[j], -7) == '|engine' and 2 or 1)\n"
+        "    end\n"
+        "  end\n"
+        "  return d\n"
         "end\n"
         "local out, held = {}, 0\n"
         "i = i + 1\n"
@@ -87,6 +94,7 @@ static const char *const lease_scripts[LS_COUNT] = {
         "    redis.call('SET', k, token, 'PX', ttl)\n"
         "    local e = {'taken', name, token, demand(name)}\n"
         "    for kind = 1, 4 do e[#e + 1] = redis.call('GETRANGE', P .. 'frame:' .. name .. ':' .. kind, 16, 23) end\n"
+        "    for kind = 1, 2 do e[#e + 1] = redis.call('GETRANGE', P .. 'frame:' .. name .. ':' .. kind .. ':engine', 16, 23) end\n"
         "    out[#out + 1] = e\n"
         "    score = score + " LEASE_STREAM_COST "\n"
         "    redis.call('ZADD', P .. 'computes', score, node)\n"
@@ -197,7 +205,7 @@ static redisReply *lease_eval(struct lease *l, int s, int nkeys, int argc, const
 struct lease_args {
     const char **v;
     char (*tokens)[96];
-    char counts[3][16], load[32], ttl[16];
+    char counts[3][16], load[32], ttl[16], engine_field[STREAM_NAME_MAX + 8];
     int n;
 };
 
@@ -220,7 +228,7 @@ static double lease_load(struct lease *l)
 static int lease_args_build(struct lease *l, struct stream **ss, int n, struct lease_args *a)
 {
     bool compute = l->cfg->role != CLUSTER_ROLE_EDGE;
-    a->v = calloc((size_t)(7 + 4 * n), sizeof *a->v);
+    a->v = calloc((size_t)(7 + 7 * n), sizeof *a->v);
     a->tokens = calloc((size_t)n + 1, sizeof *a->tokens);
     if (!a->v || !a->tokens) return -1;
     snprintf(a->load, sizeof a->load, "%.4f", compute ? lease_load(l) : 0.0);
@@ -231,9 +239,12 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
     a->v[a->n++] = a->ttl;
     struct stream_status st[n > 0 ? n : 1];
     for (int i = 0; i < n; i++) hub_status(&l->srv->hub, ss[i], &st[i]);
-    int at = a->n++, k = 0; /* wanted here */
-    for (int i = 0; i < n; i++)
-        if (st[i].subscribers > 0) a->v[a->n++] = ss[i]->name, k++;
+    int at = a->n++, k = 0; /* wanted here, per encoding */
+    snprintf(a->engine_field, sizeof a->engine_field, "%s|engine", l->cfg->node_id);
+    for (int i = 0; i < n; i++) {
+        if (st[i].subscribers_by[FXS_ENCODING_DEFAULT] > 0) a->v[a->n++] = ss[i]->name, a->v[a->n++] = l->cfg->node_id, k++;
+        if (st[i].subscribers_by[FXS_ENCODING_ENGINE] > 0) a->v[a->n++] = ss[i]->name, a->v[a->n++] = a->engine_field, k++;
+    }
     snprintf(a->counts[0], sizeof a->counts[0], "%d", k);
     a->v[at] = a->counts[0];
     at = a->n++, k = 0; /* held */
@@ -252,6 +263,18 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
 }
 
 static uint64_t lease_gen_of(const char *token) { return strtoull(token, NULL, 10); }
+
+/* A tick's demand: the encodings other daemons want (bits 1 << enum fxs_encoding). */
+static unsigned lease_demand(const redisReply *r)
+{
+    return r->type == REDIS_REPLY_INTEGER ? (unsigned)r->integer & ((1u << FXS_ENCODING_COUNT) - 1) : 0;
+}
+
+/* The frame number a tick read from a latest frame (its 8 header bytes), 0 when none. */
+static uint64_t lease_seq(const redisReply *q)
+{
+    return q->type == REDIS_REPLY_STRING && q->len == 8 ? fxs_get_u64((const uint8_t *)q->str) : 0;
+}
 
 /* One entry of the tick's reply, into the hub. */
 static void lease_apply(struct lease *l, const redisReply *e, double until)
@@ -272,13 +295,14 @@ static void lease_apply(struct lease *l, const redisReply *e, double until)
         log_warn("cluster: stream %s: lost its lease (another daemon computes it now)", name);
     } else if (!strcmp(what, "held") && e->elements == 4) {
         nl.until = until;
-        nl.remote_demand = e->element[3]->integer != 0;
-    } else if (!strcmp(what, "taken") && e->elements == 8) {
+        nl.remote_demand = lease_demand(e->element[3]);
+    } else if (!strcmp(what, "taken") && e->elements == 10) {
         nl = (struct stream_lease){.owned = true, .gen = lease_gen_of(e->element[2]->str), .until = until,
-                                   .remote_demand = e->element[3]->integer != 0};
-        for (int k = 1; k <= FXS_KIND_MAX; k++) {
-            const redisReply *q = e->element[3 + k];
-            nl.seq_from[k] = q->type == REDIS_REPLY_STRING && q->len == 8 ? fxs_get_u64((const uint8_t *)q->str) : 0;
+                                   .remote_demand = lease_demand(e->element[3])};
+        for (int k = 1; k <= FXS_KIND_MAX; k++) { /* on from the newest of either encoding */
+            nl.seq_from[k] = lease_seq(e->element[3 + k]);
+            if (fxs_kind_has_engine_form(k) && lease_seq(e->element[7 + k]) > nl.seq_from[k])
+                nl.seq_from[k] = lease_seq(e->element[7 + k]);
         }
         atomic_fetch_add(&c->cluster_leases_taken, 1);
         log_info("cluster: stream %s: took its lease (generation %llu)", name, (unsigned long long)nl.gen);
@@ -318,12 +342,16 @@ static void lease_tick(struct lease *l)
 
 /* ---- frames ---- */
 
+static enum fxs_encoding lease_encoding(const struct frame *f) { return fxs_frame_encoding(f->hdr.kind, f->hdr.codec); }
+
 void lease_export(void *ctx, struct stream *s, uint64_t lease_gen, struct frame *f)
 {
     struct lease *l = ctx;
     pthread_mutex_lock(&l->mu);
     int i = 0;
-    while (i < l->nout && !(l->out[i].s == s && l->out[i].f->hdr.kind == f->hdr.kind)) i++;
+    while (i < l->nout && !(l->out[i].s == s && l->out[i].f->hdr.kind == f->hdr.kind &&
+                            lease_encoding(l->out[i].f) == lease_encoding(f)))
+        i++;
     if (i == l->nout && l->nout == l->capout) {
         int cap = l->capout ? 2 * l->capout : 16;
         struct lease_out *p = realloc(l->out, (size_t)cap * sizeof *p);
@@ -360,7 +388,8 @@ static void lease_publish(struct lease *l, const struct lease_out *o)
 {
     char lease_key[96], frame_key[100], channel[112], token[96];
     snprintf(lease_key, sizeof lease_key, CLUSTER_KEY "lease:%s", o->s->name);
-    snprintf(frame_key, sizeof frame_key, CLUSTER_KEY "frame:%s:%u", o->s->name, (unsigned)o->f->hdr.kind);
+    snprintf(frame_key, sizeof frame_key, CLUSTER_KEY "frame:%s:%u%s", o->s->name, (unsigned)o->f->hdr.kind,
+             lease_encoding(o->f) == FXS_ENCODING_ENGINE ? ":engine" : "");
     snprintf(channel, sizeof channel, CLUSTER_FRAMES_CHANNEL "%d:%s", l->cfg->db, o->s->name);
     lease_token(token, sizeof token, o->gen, l->cfg->node_id);
     const char *v[] = {lease_key, frame_key, token, channel, (const char *)o->f->bytes};

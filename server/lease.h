@@ -17,10 +17,14 @@
  * What it learns goes to the hub (hub_set_lease), which the engine follows. Streams move only
  * when their owner stops holding them: a running stream is never taken from a live owner.
  *
+ * The demand records which encodings (PROTOCOL.md §3.5) the subscribers here take: field NODE
+ * of fxs:want:NAME for the default, NODE|engine for the engine encoding; the owner makes the
+ * frames of every encoding another daemon wants.
+ *
  * Frames: the engine hands every frame it makes to lease_export (it never waits on Redis:
- * latest frame wins per stream and kind while the agent is busy). The agent publishes each on
- * the stream's channel fxs:frames:DB:NAME and keeps it in fxs:frame:NAME:KIND (a new subscriber
- * anywhere gets it at once, relay.h), through a script that first checks that the lease is
+ * latest frame wins per stream, kind and encoding while the agent is busy). The agent publishes
+ * each on the stream's channel fxs:frames:DB:NAME and keeps it in fxs:frame:NAME:KIND, or
+ * fxs:frame:NAME:KIND:engine (a new subscriber anywhere gets it at once, relay.h), through a script that first checks that the lease is
  * still the one the frame was computed under: fencing. A paused owner whose lease was taken
  * meanwhile is refused at Redis (fxs_cluster_frames_fenced_total), and its engine stopped
  * computing by itself when the lease's time ran out locally.
