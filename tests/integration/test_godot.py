@@ -9,7 +9,8 @@ what the engine cannot do from inside:
   precision and codec 2's quantisation;
 * serves malformed input (cut frames, wrong sizes, unknown kind and codec, corrupt zstd,
   invalid JSON) and then synthetic 100 000-particle frames from a fake server;
-* kills the daemon (SIGKILL) when the scene asks and restarts it on the same port.
+* kills the daemon (SIGKILL) when the scene asks and restarts it on the same port;
+* opens clients/godot/demo in the editor (headless) and instances its scene.
 
 The scene's own checks (ok/FAIL lines) count in this suite's summary; its exit status is
 their failures, so a crashed engine fails the suite. Prints the scene's measurements: client
@@ -239,6 +240,24 @@ def big_frame(url, tmp):
     return engine_particles(big_xyz.astype(np.float32), big_t, seq=2)
 
 
+def check_demo(tmp, env):
+    """The demo opens in the editor (it imports, loads the plugin and parses every script) and
+    its scene instances with the add-on's nodes."""
+    demo = os.path.join(tmp, "demo")
+    shutil.copytree(os.path.join(ROOT, "clients", "godot", "demo"), demo, symlinks=False)
+    p = subprocess.run([GODOT, "-e", "--path", demo, "--quit"], capture_output=True, text=True, env=env, timeout=120)
+    bad = [l for l in (p.stdout + p.stderr).splitlines() if "SCRIPT ERROR" in l or "Parse Error" in l]
+    check(p.returncode == 0 and not bad, "the demo project opens in the editor without script errors %s" % bad[:2])
+    with open(os.path.join(demo, "check_demo.gd"), "w") as f:
+        f.write('extends SceneTree\nfunc _initialize():\n\tvar d = load("res://demo.tscn").instance()\n'
+                '\troot.add_child(d)\n\tprint("demo nodes: ", d.get_node("Flame").stream, " ", d.get_node("Wave").stream, " ",'
+                ' d.get_node("Rig").stream, " ", d.get_node("UI/Tuning").get_child_count())\n\tquit(0)\n')
+    p = subprocess.run([GODOT, "--path", demo, "-s", "res://check_demo.gd"], capture_output=True, text=True,
+                       env=dict(env, FXSTREAM_URL="ws://127.0.0.1:1/v1/ws"), timeout=60)
+    check(p.returncode == 0 and "demo nodes: flame energy energy 1" in p.stdout,
+          "the demo scene instances: flame, energy wave, light rig, tuning panel")
+
+
 def run():
     if not check(GODOT is not None, "godot3-server is installed (deploy/install-deps.sh)"):
         return
@@ -296,6 +315,7 @@ def run():
     if not check(rc == nfail and any(l.startswith("test_godot_scene:") for l in scene),
                  "the scene ran to its end (exit status %s, %d failed checks)" % (rc, nfail)):
         print("\n".join(scene[-40:]))
+    check_demo(tmp, env)
     compare_dumps(out, eng_dir, def_dir)
     bytes_per_particle(eng_dir, def_dir)
     shutil.rmtree(tmp, ignore_errors=True)

@@ -2,17 +2,18 @@
 # Godot OmniLights that follow it every frame, so the wave lights the scene around it. Each
 # segment that lights (strength > 0) is a light source along the wave's centre line: the
 # max_lights strongest become lights at their segments' middles (a point or an endless line:
-# its start point), with energy light_energy × strength / the strongest's, in the colour of
-# the toon ramp's brightest band (or light_color). Positions are the stream's scene units in
-# the node's space: scale and place the node as the stream's texture is placed (FxTexture).
+# its start point), with energy light_energy × strength / the strongest's, in light_color (or,
+# with use_band_color, the stream's toon ramp's brightest band). Positions are the stream's
+# scene units in the node's space: scale and place the node as the stream's texture is placed
+# (FxTexture).
 extends "fx_stream_node.gd"
 
 export var max_lights := 8
 export var light_energy := 2.0
-# Light range in the node's units (the stream's scene units).
-export var light_range := 12.0
-export var use_band_color := true
-export var light_color := Color(1.0, 0.6, 0.3)
+# Each light's omni_range.
+export var light_range := 5.0
+export var light_color := Color(1.0, 0.55, 0.2)
+export var use_band_color := false
 export var shadows := false
 
 # The latest frame: segments that light, and the lights shown.
