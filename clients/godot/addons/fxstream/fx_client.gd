@@ -4,7 +4,8 @@
 # signal, every frame decoded by FxFrame (fx_frame.gd) as frame_received. When the connection
 # drops it reconnects with backoff (reconnect_min_s doubling up to reconnect_max_s) and makes
 # its subscriptions again, so a restarted daemon resumes its streams without the game doing
-# anything. Requests made while disconnected wait for the next connection.
+# anything. Requests made while disconnected wait for the next connection; one in flight when
+# the connection drops gets no reply.
 #
 # Of the frames of one stream and kind that arrive within one game frame only the newest is
 # decoded (latest frame wins, as the daemon does). Frames and messages that do not follow the
@@ -71,10 +72,10 @@ var _resolve_id := -1
 var _backoff := 0.0
 var _retry_at := 0
 var _next_id := 1
-var _queue := []          # requests made while not connected (text)
+var _queue := []          # requests made while not connected: [id, op, text]
 var _subs := {}           # stream -> {max_fps, encoding}: what is (re)subscribed on connect
 var _channels := {}       # channel -> stream, from the subscribed replies of this connection
-var _pending := {}        # request id -> op
+var _pending := {}        # id -> op of the requests sent on this connection and not answered
 
 
 func _ready() -> void:
@@ -109,6 +110,7 @@ func close() -> void:
 		_ws.disconnect_from_host(1000, "client closed")
 		_ws = null
 	_channels.clear()
+	_pending.clear()
 	state = State.IDLE
 
 
@@ -147,7 +149,7 @@ func preset_load(stream: String, preset: String) -> int:
 # subscribe to one stream: the latest call's settings apply, and the subscription lasts until
 # each has called unsubscribe.
 func subscribe(stream: String, max_fps := 0.0, encoding := ENCODING_ENGINE) -> int:
-	var id := _take_id("subscribe")
+	var id := _take_id()
 	var users: int = _subs[stream]["users"] if _subs.has(stream) else 0
 	_subs[stream] = {"max_fps": max_fps, "encoding": encoding, "id": id, "sent_id": 0, "users": users + 1}
 	if is_open():
@@ -171,22 +173,25 @@ func unsubscribe(stream: String) -> int:
 # Any request: {"op": op, "id": id} + fields. Queued until connected.
 func send_request(op: String, fields: Dictionary) -> int:
 	var req := fields.duplicate()
-	var id := _take_id(op)
+	var id := _take_id()
 	req["op"] = op
 	req["id"] = id
 	var text := to_json(req)
 	if is_open():
-		_send_text(text)
+		_send_request(id, op, text)
 	else:
-		_queue.append(text)
+		_queue.append([id, op, text])
 	return id
 
 
-func _take_id(op: String) -> int:
-	var id := _next_id
+func _take_id() -> int:
 	_next_id += 1
+	return _next_id - 1
+
+
+func _send_request(id: int, op: String, text: String) -> void:
 	_pending[id] = op
-	return id
+	_send_text(text)
 
 
 # ---- the game loop ----
@@ -251,6 +256,7 @@ func _lost(why: String) -> void:
 	_ws = null
 	hello = {}
 	_channels.clear()
+	_pending.clear() # requests in flight get no reply: the daemon may not have read them
 	if not reconnect:
 		state = State.IDLE
 	else:
@@ -277,6 +283,7 @@ func _send_subscribe(stream: String) -> void:
 		req["id"] = s["id"]
 		s["sent_id"] = s["id"]
 		s["id"] = 0
+		_pending[req["id"]] = "subscribe"
 	_send_text(to_json(req))
 
 
@@ -385,8 +392,8 @@ func _on_hello(m: Dictionary) -> void:
 		_send_text(to_json({"op": "auth", "token": token}))
 	for stream in _subs.keys():
 		_send_subscribe(stream)
-	for text in _queue:
-		_send_text(text)
+	for q in _queue:
+		_send_request(q[0], q[1], q[2])
 	_queue.clear()
 	emit_signal("connected", hello)
 
