@@ -40,6 +40,8 @@ signal reply(request_id, message)
 
 const ENCODING_ENGINE = "engine"
 const ENCODING_DEFAULT = "default"
+# Requests kept while disconnected; beyond this the oldest is dropped (with a warning).
+const QUEUE_MAX = 256
 
 export var url := "ws://127.0.0.1:7681/v1/ws"
 # An access token (README "Security"), sent with `auth` after hello; empty without tokens.
@@ -170,7 +172,7 @@ func unsubscribe(stream: String) -> int:
 	return send_request("unsubscribe", {"stream": stream}) if is_open() else 0
 
 
-# Any request: {"op": op, "id": id} + fields. Queued until connected.
+# Any request: {"op": op, "id": id} + fields. Queued until connected (at most QUEUE_MAX).
 func send_request(op: String, fields: Dictionary) -> int:
 	var req := fields.duplicate()
 	var id := _take_id()
@@ -179,8 +181,11 @@ func send_request(op: String, fields: Dictionary) -> int:
 	var text := to_json(req)
 	if is_open():
 		_send_request(id, op, text)
-	else:
-		_queue.append([id, op, text])
+		return id
+	if _queue.size() >= QUEUE_MAX:
+		_warn("dropped the oldest of %d requests waiting for a connection (%s)" % [QUEUE_MAX, _queue[0][1]])
+		_queue.pop_front()
+	_queue.append([id, op, text])
 	return id
 
 
