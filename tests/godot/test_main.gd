@@ -316,6 +316,16 @@ func _test_set() -> void:
 	while wave.last_frame.param_rev < rev0 + 1 and OS.get_ticks_msec() < end:
 		yield(self, "idle_frame")
 	check(wave.last_frame.param_rev == rev0 + 1, "energy frames then carry the new rev")
+	# Velocity lines: the stream's velocities on, a second layer in the texture, a line per particle.
+	flame.velocity_lines = true
+	a.set_params("flame", {"velocities": true})
+	end = _seconds(15)
+	while not (flame.last_frame != null and flame.last_frame.velocities) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var f = flame.last_frame
+	var lines: MultiMesh = flame._lines.multimesh
+	check(f.velocities and f.image.get_height() == 2 * f.rows and lines.visible_instance_count == f.count and f.count > 0,
+			"velocities: the frame's second layer and a velocity line per particle (%d)" % lines.visible_instance_count)
 
 
 static func _unknown(args: Array, _x) -> bool:
