@@ -17,6 +17,7 @@ var last_frame = null
 var last_update_usec := 0
 
 var client: Node = null
+var _subscribed := false
 
 
 func _ready() -> void:
@@ -28,14 +29,26 @@ func _ready() -> void:
 	client.connect("frame_received", self, "_on_frame_received")
 	client.connect("params", self, "_on_params")
 	client.connect("connected", self, "_on_connected")
-	client.subscribe(stream, max_fps)
-	if client.is_open():
-		client.get_params(stream)
+	_subscribe()
+
+
+# Back in the tree after a removal (_ready runs only once).
+func _enter_tree() -> void:
+	if client != null and not _subscribed:
+		_subscribe()
 
 
 func _exit_tree() -> void:
-	if client != null:
+	if client != null and _subscribed:
 		client.unsubscribe(stream)
+		_subscribed = false
+
+
+func _subscribe() -> void:
+	client.subscribe(stream, max_fps)
+	_subscribed = true
+	if client.is_open():
+		client.get_params(stream)
 
 
 func _on_connected(_hello) -> void:
