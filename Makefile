@@ -194,8 +194,9 @@ $(CLIENT_SO): $(CLIENT_OBJ)
 $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
-# fxctl's "did you mean" for commands is the daemon's (server/suggest.c).
-$(BUILD)/fxctl: $(FXCTL_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/suggest.o $(BUILD)/libfxclient.a
+# fxctl's "did you mean" for commands is the daemon's (server/suggest.c); it writes engine-encoded
+# textures as EXR with the daemon's writer (server/codec/exr.c).
+$(BUILD)/fxctl: $(FXCTL_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/suggest.o $(BUILD)/obj/server/codec/exr.o $(BUILD)/libfxclient.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/fxload: $(FXLOAD_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/libfxclient.a

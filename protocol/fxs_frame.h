@@ -39,6 +39,34 @@ enum fxs_particle_codec {
     FXS_CODEC_PARTICLES_BLOCKS = 3, /* several blocks back to back (§7.5.8), read alike */
 };
 
+/* A subscription's encoding (PROTOCOL.md §3.5): the default codecs, or the engine encoding of
+ * kinds 1 and 2 (FXS_CODEC_ENGINE, §7.8). Kinds 3 and 4 have one form, the same in both. */
+enum fxs_encoding {
+    FXS_ENCODING_DEFAULT = 0,
+    FXS_ENCODING_ENGINE = 1,
+};
+#define FXS_ENCODING_COUNT 2
+/* The encoding's name in subscribe's `encoding`. */
+static inline const char *fxs_encoding_name(enum fxs_encoding e)
+{
+    return e == FXS_ENCODING_ENGINE ? "engine" : "default";
+}
+
+/* The codec of kind 1 and kind 2 payloads in the engine encoding (fxs_engine.h). */
+#define FXS_CODEC_ENGINE 16u
+
+/* Whether frames of a kind differ between encodings (kinds 1 and 2). */
+static inline int fxs_kind_has_engine_form(int kind)
+{
+    return kind == FXS_KIND_PARTICLES || kind == FXS_KIND_TEXTURE;
+}
+
+/* The encoding a frame of this kind and codec is a form of. */
+static inline enum fxs_encoding fxs_frame_encoding(int kind, uint32_t codec)
+{
+    return fxs_kind_has_engine_form(kind) && codec == FXS_CODEC_ENGINE ? FXS_ENCODING_ENGINE : FXS_ENCODING_DEFAULT;
+}
+
 /* Codecs of kind 2 (texture) payloads. */
 enum fxs_texture_codec {
     FXS_CODEC_EXR = 1, /* payload is a complete OpenEXR file */

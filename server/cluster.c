@@ -99,7 +99,8 @@ static const char *const cluster_scripts[CS_COUNT] = {
                    "redis.call('ZREM', KEYS[5], ARGV[5])\n"
                    "local p = '" CLUSTER_KEY "'\n"
                    "redis.call('DEL', p .. 'lease:' .. ARGV[5], p .. 'want:' .. ARGV[5], p .. 'frame:' .. ARGV[5] .. ':1',\n"
-                   "           p .. 'frame:' .. ARGV[5] .. ':2', p .. 'frame:' .. ARGV[5] .. ':3', p .. 'frame:' .. ARGV[5] .. ':4')\n"
+                   "           p .. 'frame:' .. ARGV[5] .. ':2', p .. 'frame:' .. ARGV[5] .. ':3', p .. 'frame:' .. ARGV[5] .. ':4',\n"
+                   "           p .. 'frame:' .. ARGV[5] .. ':1:engine', p .. 'frame:' .. ARGV[5] .. ':2:engine')\n"
                    CLUSTER_NEXT CLUSTER_MADE,
     /* KEYS stream (streams and ARGV name, as CS_DESTROY's, unused) */
     [CS_RESET] = CLUSTER_BEGIN

@@ -86,7 +86,7 @@ enum cluster_bad {
     CLUSTER_BAD_STREAM,  /* fxs:stream:NAME (its rev, effect or params) */
     CLUSTER_BAD_LEASE,   /* fxs:lease:NAME, fxs:leasegen, fxs:want:NAME, fxs:node:NAME, fxs:member:NODE */
     CLUSTER_BAD_MESSAGE, /* messages on fxs:events:DB */
-    CLUSTER_BAD_FRAME,   /* frames on fxs:frames:DB:NAME and in fxs:frame:NAME:KIND */
+    CLUSTER_BAD_FRAME,   /* frames on fxs:frames:DB:NAME and in fxs:frame:NAME:KIND[:engine] */
     CLUSTER_BAD_COUNT
 };
 const char *cluster_bad_name(enum cluster_bad what);

@@ -2,9 +2,10 @@
  *
  * An effect owns its simulation or generator state and its OpenCL objects; it runs
  * only on the engine thread and never sees sockets. It declares its parameters as a
- * param_def table (params.h), and each step emits zero or more encoded payloads
- * through a callback; the engine wraps each one into a frame (header + payload) once,
- * and the hub fans that frame out to every subscriber. */
+ * param_def table (params.h), and each step emits zero or more outputs through a
+ * callback: each with its content (particles, texels) and its default payload, made at
+ * once or on demand. The engine makes one frame (header + payload) of each encoding
+ * subscribers take (PROTOCOL.md §3.5), once, and the hub fans it out to them. */
 #ifndef FX_EFFECT_H
 #define FX_EFFECT_H
 
@@ -13,21 +14,41 @@
 #include <cjson/cJSON.h>
 
 #include "err.h"
+#include "fxs_particles.h"
 #include "params.h"
 
 struct ocl;
 
-/* One encoded output of a step. The payload is copied by the engine before emit returns. */
+/* One output of a step. The engine copies what it sends before emit returns; payload,
+ * particles and texels stay valid until the effect emits another frame of the kind (or is
+ * applied, reset or destroyed), so the engine may encode the output again for a subscriber
+ * that asks for another encoding later. */
 struct effect_frame {
     uint16_t kind;           /* enum fxs_kind */
-    uint32_t codec;          /* kind-specific codec id (protocol/PROTOCOL.md) */
+    uint32_t codec;          /* kind-specific codec id of payload (protocol/PROTOCOL.md) */
     uint32_t count_or_width; /* particles, or texture width */
     uint32_t height;         /* texture height, or 0 */
     uint32_t flags;
-    const void *payload;
+    const void *payload;     /* the default encoding, or NULL: encode makes it when wanted */
     size_t payload_bytes;
     double encode_ms;        /* time spent encoding this payload, for /metrics */
+    /* The default payload made on demand (payload NULL): sets codec, payload, payload_bytes
+     * and encode_ms of fr, valid as payload is above. Called only while a subscriber takes
+     * the default encoding (so a costly codec costs nothing while nobody reads it). */
+    int (*encode)(void *self, struct effect_frame *fr, struct fx_err *err);
+    void *self;
+    /* The content the engine encoding is made of (fxs_engine.h): kind 1 its particles; kind 2
+     * its texels, count_or_width x height x channels floats, row 0 at the top. */
+    struct fxs_particles particles;
+    const float *texels;
+    uint32_t channels;
 };
+
+/* Makes the default payload of a frame whose effect defers it (no-op otherwise): 0, or -1 with err. */
+static inline int effect_frame_encode(struct effect_frame *fr, struct fx_err *err)
+{
+    return fr->payload || !fr->encode ? 0 : fr->encode(fr->self, fr, err);
+}
 
 /* A built-in preset (presets.h): a partial document over the effect's defaults. */
 struct effect_preset {

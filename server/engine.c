@@ -5,7 +5,14 @@
  * the stream pauses ENGINE_BACKOFF_MIN_S before its next step, doubling up to
  * ENGINE_BACKOFF_MAX_S while the failures repeat, so a broken kernel or a lost device
  * costs a few error events and log lines, not a busy loop. A `set` or `reset` retries at
- * once. Each failure reaches the stream's subscribers, the log and /metrics. */
+ * once. Each failure reaches the stream's subscribers, the log and /metrics.
+ *
+ * Encodings (PROTOCOL.md §3.5): each output of a step becomes one frame per encoding that
+ * subscribers take, all with the output's seq; an encoding nobody takes is not made, and its
+ * older frames leave the hub (a subscriber never gets a frame older than the newest of the
+ * kind). The slot keeps each kind's latest output (struct engine_kept), so a subscriber asking
+ * for an encoding not made yet gets that frame at once, not at the next change of a stream
+ * that emits only on change (the compound eye). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -14,10 +21,20 @@
 
 #include "clock.h"
 #include "engine.h"
+#include "fxs_engine.h"
 #include "log.h"
 
 #define ENGINE_BACKOFF_MIN_S 0.5
 #define ENGINE_BACKOFF_MAX_S 30.0
+
+/* The latest output of a kind as the effect emitted it (its pointers valid as effect.h says),
+ * the header its frames carry, and the encodings published of it (bits 1 << enum fxs_encoding). */
+struct engine_kept {
+    bool valid;
+    unsigned published;
+    struct effect_frame ef;
+    struct fxs_header hdr;
+};
 
 struct engine_slot {
     struct stream *s;
@@ -28,6 +45,7 @@ struct engine_slot {
     uint64_t failed_gen; /* creation failed at this params_gen: wait for a change */
     uint64_t reset_gen;
     uint64_t seq[FXS_KIND_MAX + 1];
+    struct engine_kept kept[FXS_KIND_MAX + 1];
     uint64_t lease_gen;  /* the lease the slot computes under (cluster mode; 0 on a single node) */
     bool running;
     int fails;           /* consecutive failures (steps, creations): the pause after the last */
@@ -37,8 +55,15 @@ struct engine_slot {
     double rt_wall, rt_sim; /* start of the current real-time factor window */
 };
 
+/* The effect's outputs are about to change (apply, reset, re-creation): nothing kept is valid. */
+static void engine_forget(struct engine_slot *sl)
+{
+    for (int k = 0; k <= FXS_KIND_MAX; k++) sl->kept[k].valid = false;
+}
+
 static void engine_drop_fx(struct engine_slot *sl)
 {
+    engine_forget(sl);
     if (sl->state) sl->s->effect->destroy(sl->state);
     sl->state = NULL;
     cJSON_Delete(sl->params);
@@ -75,6 +100,7 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
 
     cJSON *doc = hub_get_params(eng->hub, s, &rev);
     struct fx_err err = {0};
+    engine_forget(sl);
     bool restart = !sl->state || params_restart_changed(s->effect->params, sl->params, doc);
     if (!restart && s->effect->apply(sl->state, doc, &err) == 0) {
         cJSON_Delete(sl->params);
@@ -97,35 +123,125 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
     return 0;
 }
 
+/* The encodings wanted of a stream's frames (bits 1 << enum fxs_encoding): those its subscribers
+ * here and on other daemons take (cluster mode); the default also while nobody subscribes (a
+ * stream that runs idle keeps its newest frame for the next subscriber, PROTOCOL.md §8.3). */
+static unsigned engine_wanted(const struct stream_status *st)
+{
+    unsigned m = st->lease.remote_demand;
+    for (int e = 0; e < FXS_ENCODING_COUNT; e++)
+        if (st->subscribers_by[e] > 0) m |= 1u << e;
+    return m ? m : 1u << FXS_ENCODING_DEFAULT;
+}
+
+/* The payload of an output in an encoding: the effect's (made now when deferred) or the engine
+ * encoding, then *buf (free()) holds it. 0, or -1 with err. */
+static int engine_payload(struct engine_kept *k, enum fxs_encoding enc, struct fxs_header *h, const void **payload,
+                          size_t *len, uint8_t **buf, double *encode_ms, struct fx_err *err)
+{
+    struct effect_frame *ef = &k->ef;
+    *buf = NULL;
+    if (enc == FXS_ENCODING_DEFAULT || !fxs_kind_has_engine_form(ef->kind)) {
+        if (!ef->payload && effect_frame_encode(ef, err)) return -1;
+        if (!ef->payload) return fx_fail(err, "internal", "", "an output of kind %u without a payload", ef->kind);
+        *encode_ms += ef->encode_ms;
+        h->codec = ef->codec;
+        *payload = ef->payload;
+        *len = ef->payload_bytes;
+        return 0;
+    }
+    char msg[200];
+    double t0 = clock_now();
+    int rc = ef->kind == FXS_KIND_PARTICLES
+                 ? fxs_engine_encode_particles(&ef->particles, FXS_ENGINE_ZSTD_LEVEL, buf, len, msg, sizeof msg)
+             : ef->texels ? fxs_engine_encode_texture(ef->texels, ef->count_or_width, ef->height, ef->channels,
+                                                      FXS_ENGINE_ZSTD_LEVEL, buf, len, msg, sizeof msg)
+                          : (snprintf(msg, sizeof msg, "the effect gave no texels"), -1);
+    if (rc) return fx_fail(err, "internal", "", "engine encoding of a kind %u frame: %s", ef->kind, msg);
+    *encode_ms += (clock_now() - t0) * 1e3;
+    h->codec = FXS_CODEC_ENGINE;
+    *payload = *buf;
+    return 0;
+}
+
+/* Publishes the kept output of a kind in one encoding (to the hub, and to export in cluster mode). */
+static int engine_publish(struct engine *eng, struct engine_slot *sl, struct engine_kept *k, enum fxs_encoding enc,
+                          double *encode_ms, struct fx_err *err)
+{
+    struct fxs_header h = k->hdr;
+    const void *payload = NULL;
+    size_t len = 0;
+    uint8_t *buf;
+    if (engine_payload(k, enc, &h, &payload, &len, &buf, encode_ms, err)) return -1;
+    h.server_time_us = clock_wall_us();
+    struct frame *f = frame_new(&h, payload, len);
+    free(buf);
+    if (!f) return fx_fail(err, "internal", "", "out of memory for a frame of %zu bytes", len);
+    k->published |= 1u << enc;
+    if (eng->export_frame) eng->export_frame(eng->export_ctx, sl->s, sl->lease_gen, frame_ref(f));
+    hub_publish(eng->hub, sl->s, f);
+    return 0;
+}
+
+/* Publishes the kept output of a kind in each wanted encoding not yet published; the hub drops
+ * older frames of the encodings not wanted. */
+static int engine_publish_wanted(struct engine *eng, struct engine_slot *sl, int kind, double *encode_ms,
+                                 struct fx_err *err)
+{
+    struct engine_kept *k = &sl->kept[kind];
+    struct stream_status st;
+    hub_status(eng->hub, sl->s, &st);
+    unsigned want = fxs_kind_has_engine_form(kind) ? engine_wanted(&st) : 1u << FXS_ENCODING_DEFAULT;
+    for (int e = 0; e < FXS_ENCODING_COUNT; e++) {
+        if (!(want >> e & 1)) hub_drop(eng->hub, sl->s, (enum fxs_encoding)e, kind, k->hdr.seq);
+        else if (!(k->published >> e & 1) && engine_publish(eng, sl, k, (enum fxs_encoding)e, encode_ms, err)) return -1;
+    }
+    return 0;
+}
+
 struct engine_emit_ctx {
     struct engine *eng;
     struct engine_slot *sl;
     double encode_ms;
+    struct fx_err err; /* why emit failed (the effect returns -1 without a message of its own) */
 };
 
 static int engine_emit(void *ctx, const struct effect_frame *ef)
 {
     struct engine_emit_ctx *c = ctx;
     if (ef->kind < 1 || ef->kind > FXS_KIND_MAX) return -1;
-    struct fxs_header h = {
+    struct engine_slot *sl = c->sl;
+    struct engine_kept *k = &sl->kept[ef->kind];
+    *k = (struct engine_kept){.valid = true, .ef = *ef};
+    k->hdr = (struct fxs_header){
         .kind = ef->kind,
-        .channel = c->sl->s->channel,
-        .param_rev = c->sl->rev,
-        .seq = ++c->sl->seq[ef->kind],
-        .sim_time = c->sl->sim_time,
-        .server_time_us = clock_wall_us(),
-        .codec = ef->codec,
+        .channel = sl->s->channel,
+        .param_rev = sl->rev,
+        .seq = ++sl->seq[ef->kind],
+        .sim_time = sl->sim_time,
         .count_or_width = ef->count_or_width,
         .height = ef->height,
         .flags = ef->flags,
     };
-    struct frame *f = frame_new(&h, ef->payload, ef->payload_bytes);
-    if (!f) return -1;
-    c->encode_ms += ef->encode_ms;
-    if (ef->kind == FXS_KIND_PARTICLES) atomic_store(&c->sl->s->particles, ef->count_or_width);
-    if (c->eng->export_frame) c->eng->export_frame(c->eng->export_ctx, c->sl->s, c->sl->lease_gen, frame_ref(f));
-    hub_publish(c->eng->hub, c->sl->s, f);
-    return 0;
+    if (ef->kind == FXS_KIND_PARTICLES) atomic_store(&sl->s->particles, ef->count_or_width);
+    return engine_publish_wanted(c->eng, sl, ef->kind, &c->encode_ms, &c->err);
+}
+
+/* Publishes the kept outputs in the encodings subscribers started to take since they were
+ * emitted (a failure is reported as a failed step would be, without pausing the stream). */
+static void engine_catch_up(struct engine *eng, struct engine_slot *sl)
+{
+    for (int kind = 1; kind <= FXS_KIND_MAX; kind++) {
+        struct fx_err err = {0};
+        double ms = 0;
+        if (!sl->kept[kind].valid || !fxs_kind_has_engine_form(kind)) continue;
+        if (engine_publish_wanted(eng, sl, kind, &ms, &err)) {
+            sl->kept[kind].valid = false;
+            log_error("stream %s: %s", sl->s->name, err.message);
+            hub_stream_error(eng->hub, sl->s, err.message);
+        }
+        if (ms > 0) hist_observe(&sl->s->encode_time, ms * 1e-3);
+    }
 }
 
 /* Updates the stream's real-time factor once a second: effect-simulated seconds per
@@ -153,6 +269,7 @@ static void engine_step_failed(struct engine *eng, struct engine_slot *sl, const
     struct fx_err reset_err = {0};
     char then[200];
     double pause = engine_backoff(++sl->fails);
+    engine_forget(sl);
     if (sl->s->effect->reset(sl->state, &reset_err) == 0) {
         snprintf(then, sizeof then, "state reset, next step in %.1f s", pause);
     } else {
@@ -176,6 +293,7 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     hub_status(eng->hub, s, &st);
     uint64_t reset_gen = st.reset_gen;
     if (reset_gen != sl->reset_gen) {
+        engine_forget(sl);
         sl->reset_gen = reset_gen;
         sl->sim_time = 0;
         if (s->effect->reset(sl->state, &err)) engine_fail(eng, sl, &err, NULL);
@@ -184,10 +302,11 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
     double dt = fmin(fmax(now - sl->last_wall, 0.0), 0.25); /* a long stall does not jump time */
     sl->last_wall = now;
     sl->sim_time += dt;
-    struct engine_emit_ctx ctx = {eng, sl, 0};
+    struct engine_emit_ctx ctx = {.eng = eng, .sl = sl};
     double t0 = clock_now();
     int rc = s->effect->step(sl->state, sl->sim_time, dt, engine_emit, &ctx, &err);
     double ms = (clock_now() - t0) * 1e3;
+    if (rc && ctx.err.code[0]) err = ctx.err;
     if (rc) {
         engine_step_failed(eng, sl, &err);
     } else if (sl->fails) {
@@ -286,6 +405,7 @@ static double engine_run_due(struct engine *eng)
         }
         if (sl->fails && (gen != sl->fail_gen || reset_gen != sl->fail_reset))
             sl->next_due = now; /* a set or reset retries at once */
+        engine_catch_up(eng, sl);
         if (now >= sl->next_due) {
             bool failed = engine_step(eng, sl, now) != 0;
             double period = 1.0 / (fps > 0 ? fps : 1.0);

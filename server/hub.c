@@ -164,7 +164,8 @@ void stream_ref(struct stream *s) { atomic_fetch_add(&s->refs, 1); }
 void stream_unref(struct stream *s)
 {
     if (!s || atomic_fetch_sub(&s->refs, 1) != 1) return;
-    for (int k = 0; k <= FXS_KIND_MAX; k++) frame_unref(s->latest[k]);
+    for (int e = 0; e < FXS_ENCODING_COUNT; e++)
+        for (int k = 0; k <= FXS_KIND_MAX; k++) frame_unref(s->latest[e][k]);
     cJSON_Delete(s->params);
     free(s);
 }
@@ -197,6 +198,7 @@ void hub_status(struct hub *hub, struct stream *s, struct stream_status *out)
                                   .error_gen = s->error_gen, .lease = s->lease,
                                   .subscribers = s->subscribers, .fps = s->fps, .realtime = s->realtime,
                                   .failing = s->failing};
+    memcpy(out->subscribers_by, s->subscribers_by, sizeof out->subscribers_by);
     memcpy(out->error, s->error, sizeof out->error);
     pthread_mutex_unlock(&hub->mu);
 }
@@ -237,23 +239,37 @@ void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease 
     pthread_mutex_unlock(&hub->mu);
 }
 
-void hub_add_subscriber(struct hub *hub, struct stream *s, int delta)
+void hub_add_subscriber(struct hub *hub, struct stream *s, enum fxs_encoding enc, int delta)
 {
     pthread_mutex_lock(&hub->mu);
     s->subscribers += delta;
+    s->subscribers_by[enc] += delta;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
 }
 
 void hub_publish(struct hub *hub, struct stream *s, struct frame *f)
 {
+    struct frame **slot = &s->latest[fxs_frame_encoding(f->hdr.kind, f->hdr.codec)][f->hdr.kind];
     pthread_mutex_lock(&hub->mu);
-    struct frame *old = s->latest[f->hdr.kind];
-    s->latest[f->hdr.kind] = f;
+    struct frame *old = *slot;
+    *slot = f;
     pthread_mutex_unlock(&hub->mu);
     frame_unref(old);
     atomic_fetch_add(&s->frames_produced, 1);
     if (hub->notify) hub->notify(hub->notify_ctx);
+}
+
+void hub_drop(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind, uint64_t seq)
+{
+    struct frame **slot = &s->latest[enc][kind], *old = NULL;
+    pthread_mutex_lock(&hub->mu);
+    if (*slot && (*slot)->hdr.seq < seq) {
+        old = *slot;
+        *slot = NULL;
+    }
+    pthread_mutex_unlock(&hub->mu);
+    frame_unref(old);
 }
 
 void hub_stream_error(struct hub *hub, struct stream *s, const char *message)
@@ -273,19 +289,37 @@ void hub_stream_recovered(struct hub *hub, struct stream *s)
     pthread_mutex_unlock(&hub->mu);
 }
 
-struct frame *hub_latest(struct hub *hub, struct stream *s, int kind)
+/* The slot of a kind's frames in an encoding: kinds 3 and 4 have one form (the default's). */
+static struct frame **hub_slot(struct stream *s, enum fxs_encoding enc, int kind)
+{
+    return &s->latest[fxs_kind_has_engine_form(kind) ? enc : FXS_ENCODING_DEFAULT][kind];
+}
+
+struct frame *hub_latest(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind)
 {
     pthread_mutex_lock(&hub->mu);
-    struct frame *f = s->latest[kind] ? frame_ref(s->latest[kind]) : NULL;
+    struct frame *f = *hub_slot(s, enc, kind);
+    if (f) frame_ref(f);
     pthread_mutex_unlock(&hub->mu);
     return f;
 }
 
-uint64_t hub_latest_seq(struct hub *hub, struct stream *s, int kind)
+uint64_t hub_latest_seq_of(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind)
 {
     pthread_mutex_lock(&hub->mu);
-    uint64_t seq = s->latest[kind] ? s->latest[kind]->hdr.seq : 0;
+    struct frame *f = *hub_slot(s, enc, kind);
+    uint64_t seq = f ? f->hdr.seq : 0;
     pthread_mutex_unlock(&hub->mu);
+    return seq;
+}
+
+uint64_t hub_latest_seq(struct hub *hub, struct stream *s, int kind)
+{
+    uint64_t seq = 0;
+    for (int e = 0; e < FXS_ENCODING_COUNT; e++) {
+        uint64_t q = hub_latest_seq_of(hub, s, (enum fxs_encoding)e, kind);
+        if (q > seq) seq = q;
+    }
     return seq;
 }
 

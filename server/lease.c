@@ -37,17 +37,20 @@ enum { LS_TICK, LS_PUBLISH, LS_RELEASE, LS_COUNT };
 
 static const char *const lease_scripts[LS_COUNT] = {
     /* ARGV node, compute (1/0), load, ttl ms, this daemon's claim on its node id and its ttl ms
-     * (cluster.h), then n + the names wanted here, n + (name, token) of the leases held, n + the
-     * names this daemon could compute. The claim is renewed first: when another daemon holds
-     * the node id, nothing else is done and the reply is {{'node_taken', claim}}. A lease held is
-     * kept while nobody else has taken it; it is written again once its stream exists (a Redis
-     * that lost its data is seeded again by the daemons a moment later: no stream changes owner
-     * then, and fxs:leasegen is raised to the generations held). Returns {'unseeded'} first when
-     * Redis lost its data (no fxs:seeded), then one entry per held or taken lease: {'held', name,
-     * token, demand} {'lost', name} {'taken', name, token, demand, head1, head2, head3, head4}
-     * (headK: the first 24 bytes of the latest frame, or ""), and {'bad', key, value as read,
-     * what was done} per value that was not what this script writes (lease_ok, a demand's
-     * expiry, a start time or generation that is not a number, a claim that is not one). */
+     * (cluster.h), then n + (name, field) wanted here (field: the node, for subscribers of the
+     * default encoding, or NODE|engine), n + (name, token) of the leases held, n + the names this
+     * daemon could compute. The claim is renewed first: when another daemon holds the node id,
+     * nothing else is done and the reply is {{'node_taken', claim}}. A lease held is kept while
+     * nobody else has taken it; it is written again once its stream exists (a Redis that lost its
+     * data is seeded again by the daemons a moment later: no stream changes owner then, and
+     * fxs:leasegen is raised to the generations held). Returns {'unseeded'} first when Redis lost
+     * its data (no fxs:seeded), then one entry per held or taken lease: {'held', name, token,
+     * demand} {'lost', name} {'taken', name, token, demand, head1, head2, head3, head4, head1e,
+     * head2e} (demand: the encodings other daemons want, bit 0 the default, bit 1 the engine
+     * encoding; headK: the first 24 bytes of the latest frame of kind K, or ""; headKe: of the
+     * latest engine-encoded one), and {'bad', key, value as read, what was done} per value that
+     * was not what this script writes (lease_ok, a demand's expiry, a start time or generation
+     * that is not a number, a claim that is not one). */
     [LS_TICK] =
         "local P, node, compute, ttl = '" CLUSTER_KEY "', ARGV[1], ARGV[2] == '1', tonumber(ARGV[4])\n"
         LEASE_LUA_OK
@@ -68,18 +71,18 @@ static const char *const lease_scripts[LS_COUNT] = {
         "if redis.call('EXISTS', P .. 'seeded') == 0 then table.insert(out, 1, {'unseeded'}) end\n"
         "local i = 7\n"
         "for _ = 1, tonumber(ARGV[i]) do\n"
-        "  i = i + 1\n"
-        "  local w = P .. 'want:' .. ARGV[i]\n"
-        "  local r = redis.pcall('HSET', w, node, now + ttl)\n"
+        "  local w, f = P .. 'want:' .. ARGV[i + 1], ARGV[i + 2]\n"
+        "  i = i + 2\n"
+        "  local r = redis.pcall('HSET', w, f, now + ttl)\n"
         "  if type(r) == 'table' and r.err then\n"
         "    bad(w, nil, redis.call('TYPE', w).ok, 'removed')\n"
         "    redis.call('DEL', w)\n"
-        "    redis.call('HSET', w, node, now + ttl)\n"
+        "    redis.call('HSET', w, f, now + ttl)\n"
         "  end\n"
         "  redis.call('PEXPIRE', w, ttl)\n"
         "end\n"
         "local function demand(name)\n"
-        "  local w = P .. 'want:' .. name\n"
+        "  local w, d = P .. 'want:' .. name, 0\n"
         "  local h = redis.pcall('HGETALL', w)\n"
         "  if h.err then return 0 end\n"
         "  for j = 1, #h, 2 do\n"
@@ -87,9 +90,11 @@ static const char *const lease_scripts[LS_COUNT] = {
         "    if not e or e > now + ttl then\n"
         "      bad(w .. ' ' .. h[j], h[j + 1], nil, 'removed')\n"
         "      redis.call('HDEL', w, h[j])\n"
-        "    elseif h[j] ~= node and e > now then return 1 end\n"
+        "    elseif h[j] ~= node and h[j] ~= node .. '|engine' and e > now then\n"
+        "      d = bit.bor(d, string.sub(h[j], -7) == '|engine' and 2 or 1)\n"
+        "    end\n"
         "  end\n"
-        "  return 0\n"
+        "  return d\n"
         "end\n"
         "local gk = P .. 'leasegen'\n"
         "local g, gt = fxs_get(gk)\n"
@@ -147,6 +152,7 @@ static const char *const lease_scripts[LS_COUNT] = {
         "    redis.call('SET', k, token, 'PX', ttl)\n"
         "    local e = {'taken', name, token, demand(name)}\n"
         "    for kind = 1, 4 do e[#e + 1] = redis.call('GETRANGE', P .. 'frame:' .. name .. ':' .. kind, 0, 23) end\n"
+        "    for kind = 1, 2 do e[#e + 1] = redis.call('GETRANGE', P .. 'frame:' .. name .. ':' .. kind .. ':engine', 0, 23) end\n"
         "    out[#out + 1] = e\n"
         "    score = score + " LEASE_STREAM_COST "\n"
         "    redis.call('ZADD', P .. 'computes', score, node)\n"
@@ -267,7 +273,7 @@ static redisReply *lease_eval(struct lease *l, int s, int nkeys, int argc, const
 struct lease_args {
     const char **v;
     char (*tokens)[96];
-    char counts[3][16], load[32], ttl[16], member_ttl[16];
+    char counts[3][16], load[32], ttl[16], member_ttl[16], engine_field[STREAM_NAME_MAX + 8];
     int n;
 };
 
@@ -290,7 +296,7 @@ static double lease_load(struct lease *l)
 static int lease_args_build(struct lease *l, struct stream **ss, int n, struct lease_args *a)
 {
     bool compute = l->cfg->role != CLUSTER_ROLE_EDGE;
-    a->v = calloc((size_t)(9 + 4 * n), sizeof *a->v);
+    a->v = calloc((size_t)(9 + 7 * n), sizeof *a->v);
     a->tokens = calloc((size_t)n + 1, sizeof *a->tokens);
     if (!a->v || !a->tokens) return -1;
     snprintf(a->load, sizeof a->load, "%.4f", compute ? lease_load(l) : 0.0);
@@ -304,9 +310,12 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
     a->v[a->n++] = a->member_ttl;
     struct stream_status st[n > 0 ? n : 1];
     for (int i = 0; i < n; i++) hub_status(&l->srv->hub, ss[i], &st[i]);
-    int at = a->n++, k = 0; /* wanted here */
-    for (int i = 0; i < n; i++)
-        if (st[i].subscribers > 0) a->v[a->n++] = ss[i]->name, k++;
+    int at = a->n++, k = 0; /* wanted here, per encoding */
+    snprintf(a->engine_field, sizeof a->engine_field, "%s|engine", l->cfg->node_id);
+    for (int i = 0; i < n; i++) {
+        if (st[i].subscribers_by[FXS_ENCODING_DEFAULT] > 0) a->v[a->n++] = ss[i]->name, a->v[a->n++] = l->cfg->node_id, k++;
+        if (st[i].subscribers_by[FXS_ENCODING_ENGINE] > 0) a->v[a->n++] = ss[i]->name, a->v[a->n++] = a->engine_field, k++;
+    }
     snprintf(a->counts[0], sizeof a->counts[0], "%d", k);
     a->v[at] = a->counts[0];
     at = a->n++, k = 0; /* held */
@@ -326,17 +335,24 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
 
 static uint64_t lease_gen_of(const char *token) { return strtoull(token, NULL, 10); }
 
-/* The number of the latest frame of kind k in Redis, from its first 24 bytes (h): a taken
- * stream's frames go on from there. 0 when there is none, or it is not a frame of that kind
- * (counted) or its number is past CLUSTER_SEQ_MAX (counted: not trusted). */
-static uint64_t lease_seq_from(struct lease *l, const char *name, int k, const redisReply *h)
+/* A tick's demand: the encodings other daemons want (bits 1 << enum fxs_encoding). */
+static unsigned lease_demand(const redisReply *r)
+{
+    return r->type == REDIS_REPLY_INTEGER ? (unsigned)r->integer & ((1u << FXS_ENCODING_COUNT) - 1) : 0;
+}
+
+/* The number of the latest frame of kind k in encoding enc in Redis, from its first 24 bytes
+ * (h): a taken stream's frames go on from there. 0 when there is none, or it is not a frame of
+ * that kind (counted) or its number is past CLUSTER_SEQ_MAX (counted: not trusted). */
+static uint64_t lease_seq_from(struct lease *l, const char *name, int k, enum fxs_encoding enc, const redisReply *h)
 {
     if (h->type != REDIS_REPLY_STRING || h->len == 0) return 0;
     const uint8_t *b = (const uint8_t *)h->str;
     uint64_t seq = h->len == 24 ? fxs_get_u64(b + 16) : 0;
     if (h->len == 24 && !memcmp(b, FXS_MAGIC, 4) && fxs_get_u16(b + 6) == k && seq < CLUSTER_SEQ_MAX) return seq;
-    cluster_bad(l->srv->cluster, CLUSTER_BAD_FRAME, CLUSTER_KEY "frame:%s:%d in %s is not a frame of that kind, or its "
-                "number is out of range: the stream's frames are numbered from 1", name, k, l->cfg->url);
+    cluster_bad(l->srv->cluster, CLUSTER_BAD_FRAME, CLUSTER_KEY "frame:%s:%d%s in %s is not a frame of that kind, or "
+                "its number is out of range: the stream's frames are numbered from 1", name, k,
+                enc == FXS_ENCODING_ENGINE ? ":engine" : "", l->cfg->url);
     return 0;
 }
 
@@ -359,11 +375,16 @@ static void lease_apply(struct lease *l, const redisReply *e, double until)
         log_warn("cluster: stream %s: lost its lease (another daemon computes it now)", name);
     } else if (!strcmp(what, "held") && e->elements == 4) {
         nl.until = until;
-        nl.remote_demand = e->element[3]->integer != 0;
-    } else if (!strcmp(what, "taken") && e->elements == 8) {
+        nl.remote_demand = lease_demand(e->element[3]);
+    } else if (!strcmp(what, "taken") && e->elements == 10) {
         nl = (struct stream_lease){.owned = true, .gen = lease_gen_of(e->element[2]->str), .until = until,
-                                   .remote_demand = e->element[3]->integer != 0};
-        for (int k = 1; k <= FXS_KIND_MAX; k++) nl.seq_from[k] = lease_seq_from(l, name, k, e->element[3 + k]);
+                                   .remote_demand = lease_demand(e->element[3])};
+        for (int k = 1; k <= FXS_KIND_MAX; k++) { /* on from the newest of either encoding */
+            nl.seq_from[k] = lease_seq_from(l, name, k, FXS_ENCODING_DEFAULT, e->element[3 + k]);
+            uint64_t engine = fxs_kind_has_engine_form(k)
+                                  ? lease_seq_from(l, name, k, FXS_ENCODING_ENGINE, e->element[7 + k]) : 0;
+            if (engine > nl.seq_from[k]) nl.seq_from[k] = engine;
+        }
         atomic_fetch_add(&c->cluster_leases_taken, 1);
         log_info("cluster: stream %s: took its lease (generation %llu)", name, (unsigned long long)nl.gen);
     }
@@ -431,12 +452,16 @@ static void lease_tick(struct lease *l)
 
 /* ---- frames ---- */
 
+static enum fxs_encoding lease_encoding(const struct frame *f) { return fxs_frame_encoding(f->hdr.kind, f->hdr.codec); }
+
 void lease_export(void *ctx, struct stream *s, uint64_t lease_gen, struct frame *f)
 {
     struct lease *l = ctx;
     pthread_mutex_lock(&l->mu);
     int i = 0;
-    while (i < l->nout && !(l->out[i].s == s && l->out[i].f->hdr.kind == f->hdr.kind)) i++;
+    while (i < l->nout && !(l->out[i].s == s && l->out[i].f->hdr.kind == f->hdr.kind &&
+                            lease_encoding(l->out[i].f) == lease_encoding(f)))
+        i++;
     if (i == l->nout && l->nout == l->capout) {
         int cap = l->capout ? 2 * l->capout : 16;
         struct lease_out *p = realloc(l->out, (size_t)cap * sizeof *p);
@@ -473,7 +498,8 @@ static void lease_publish(struct lease *l, const struct lease_out *o)
 {
     char lease_key[96], frame_key[100], channel[112], token[96];
     snprintf(lease_key, sizeof lease_key, CLUSTER_KEY "lease:%s", o->s->name);
-    snprintf(frame_key, sizeof frame_key, CLUSTER_KEY "frame:%s:%u", o->s->name, (unsigned)o->f->hdr.kind);
+    snprintf(frame_key, sizeof frame_key, CLUSTER_KEY "frame:%s:%u%s", o->s->name, (unsigned)o->f->hdr.kind,
+             lease_encoding(o->f) == FXS_ENCODING_ENGINE ? ":engine" : "");
     snprintf(channel, sizeof channel, CLUSTER_FRAMES_CHANNEL "%d:%s", l->cfg->db, o->s->name);
     lease_token(token, sizeof token, o->gen, l->cfg->node_id);
     char ttl[16];

@@ -5,11 +5,12 @@
  * Redis connection runs, every LEASE_TICK_S, one script that atomically
  *   - renews this daemon's claim on its node id (cluster.h); when another daemon holds it now,
  *     does nothing else, and this daemon stops (cluster_node_taken);
- *   - records which streams have subscribers here (fxs:want:NAME, node -> expiry in ms), so
- *     their owners compute them even with no subscriber of their own;
+ *   - records which streams have subscribers here and in which encodings (PROTOCOL.md §3.5):
+ *     fxs:want:NAME, field NODE (the default encoding) or NODE|engine -> expiry in ms, so their
+ *     owners compute them, in those encodings, even with no subscriber of their own;
  *   - renews the leases this daemon holds and says which it lost (taken by another daemon after
  *     this one stopped renewing: it was paused, or cut off from Redis), and for each held one
- *     whether another daemon has subscribers of it;
+ *     which encodings other daemons' subscribers of it take;
  *   - on a compute daemon (--role compute or both) that is the least loaded live one and has
  *     been live for a TTL (after a Redis that lost its data, the owners renew first), takes
  *     the streams nobody holds: a new generation from fxs:leasegen, and the frame numbers the
@@ -20,10 +21,11 @@
  * when their owner stops holding them: a running stream is never taken from a live owner.
  *
  * Frames: the engine hands every frame it makes to lease_export (it never waits on Redis:
- * latest frame wins per stream and kind while the agent is busy). The agent publishes each on
- * the stream's channel fxs:frames:DB:NAME and keeps it in fxs:frame:NAME:KIND (a new subscriber
- * anywhere gets it at once, relay.h), through a script that first checks that the lease is
- * still the one the frame was computed under: fencing. A paused owner whose lease was taken
+ * latest frame wins per stream, kind and encoding while the agent is busy). The agent publishes
+ * each on the stream's channel fxs:frames:DB:NAME and keeps it in fxs:frame:NAME:KIND, or
+ * fxs:frame:NAME:KIND:engine (a new subscriber anywhere gets it at once, relay.h), through a
+ * script that first checks that the lease is still the one the frame was computed under:
+ * fencing. A paused owner whose lease was taken
  * meanwhile is refused at Redis (fxs_cluster_frames_fenced_total), and its engine stopped
  * computing by itself when the lease's time ran out locally.
  *

@@ -23,10 +23,11 @@
 /* A stream whose channel this daemon is subscribed to, and how its frames are numbered here:
  * each kind's numbers go on increasing from the newest frame the hub had when the subscription
  * started (sessions send only frames newer than their last), shifted up when an owner numbers
- * from lower down (after a Redis that lost its data, the latest frames are gone with it). */
+ * from lower down (after a Redis that lost its data, the latest frames are gone with it). The
+ * encodings of one frame share its number (and so one shift); each counts its own last. */
 struct relay_sub {
     char name[STREAM_NAME_MAX];
-    uint64_t last[FXS_KIND_MAX + 1], shift[FXS_KIND_MAX + 1];
+    uint64_t last[FXS_ENCODING_COUNT][FXS_KIND_MAX + 1], shift[FXS_KIND_MAX + 1];
 };
 
 struct relay {
@@ -58,12 +59,13 @@ static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream 
                     "or its number is out of range: skipped", s->name, r->cfg->url, len);
         return;
     }
-    if (h.seq + sub->shift[h.kind] <= sub->last[h.kind]) {
+    uint64_t *last = &sub->last[fxs_frame_encoding(h.kind, h.codec)][h.kind];
+    if (h.seq + sub->shift[h.kind] <= *last) {
         if (latest) return; /* the hub has it, or newer */
-        sub->shift[h.kind] = sub->last[h.kind] + 1 - h.seq;
+        sub->shift[h.kind] = *last + 1 - h.seq;
     }
     h.seq += sub->shift[h.kind];
-    sub->last[h.kind] = h.seq;
+    *last = h.seq;
     h.channel = s->channel;
     struct frame *f = frame_new(&h, bytes + h.header_bytes, h.payload_bytes);
     if (!f) return;
@@ -115,12 +117,19 @@ static int relay_fetch_latest(struct relay *r, struct relay_sub *sub, struct str
         redisFree(r->get);
         if (!(r->get = cluster_dial(r->srv->cluster, why, sizeof why))) return -1;
     }
-    for (int k = 1; k <= FXS_KIND_MAX; k++) sub->last[k] = hub_latest_seq(&r->srv->hub, s, k);
+    for (int k = 1; k <= FXS_KIND_MAX; k++)
+        for (int e = 0; e < FXS_ENCODING_COUNT; e++) sub->last[e][k] = hub_latest_seq(&r->srv->hub, s, k);
     for (int k = 1; k <= FXS_KIND_MAX; k++) {
-        redisReply *q = redisCommand(r->get, "GET " CLUSTER_KEY "frame:%s:%d", sub->name, k);
-        if (!q) return -1;
-        if (q->type == REDIS_REPLY_STRING) relay_deliver(r, sub, s, (const uint8_t *)q->str, q->len, true);
-        freeReplyObject(q);
+        uint64_t newest_default = 0;
+        for (int e = 0; e < (fxs_kind_has_engine_form(k) ? FXS_ENCODING_COUNT : 1); e++) {
+            redisReply *q = redisCommand(r->get, "GET " CLUSTER_KEY "frame:%s:%d%s", sub->name, k,
+                                         e == FXS_ENCODING_ENGINE ? ":engine" : "");
+            if (!q) return -1;
+            uint64_t seq = q->type == REDIS_REPLY_STRING && q->len >= FXS_HEADER_BYTES ? fxs_get_u64((const uint8_t *)q->str + 16) : 0;
+            if (e == FXS_ENCODING_DEFAULT) newest_default = seq;
+            if (seq && seq >= newest_default) relay_deliver(r, sub, s, (const uint8_t *)q->str, q->len, true);
+            freeReplyObject(q);
+        }
     }
     return 0;
 }

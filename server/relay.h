@@ -3,8 +3,10 @@
  *
  * One thread with two Redis connections of its own: one SUBSCRIBEd to the frame channels
  * (fxs:frames:DB:NAME, lease.h) of the streams that have subscribers here and whose lease this
- * daemon does not hold, one to read a stream's latest frames (fxs:frame:NAME:KIND) when its
- * subscription starts, so a new subscriber gets a picture at once. Every frame goes into the hub
+ * daemon does not hold, one to read a stream's latest frames (fxs:frame:NAME:KIND and, in the
+ * engine encoding, fxs:frame:NAME:KIND:engine) when its subscription starts, so a new subscriber
+ * gets a picture at once (an engine frame older than the default one of its kind is left out:
+ * nobody made it since). Every frame goes into the hub
  * exactly as the engine's do (hub_publish, with this daemon's channel number in its header), so
  * subscribers here are served by the same latest-frame-wins path: a slow daemon skips frames,
  * it never backs Redis up. The set of channels follows the hub every RELAY_POLL_S. The delay

@@ -112,6 +112,9 @@ static cJSON *session_hello(struct server *srv)
     cJSON *names = cJSON_AddArrayToObject(h, "effects");
     for (const struct effect_ops *const *e = effect_all(); *e; e++)
         cJSON_AddItemToArray(names, cJSON_CreateString((*e)->name));
+    cJSON *encs = cJSON_AddArrayToObject(h, "encodings");
+    for (int i = 0; i < FXS_ENCODING_COUNT; i++)
+        cJSON_AddItemToArray(encs, cJSON_CreateString(fxs_encoding_name((enum fxs_encoding)i)));
     cJSON *lim = cJSON_AddObjectToObject(h, "limits");
     cJSON_AddNumberToObject(lim, "max_connections", l->max_connections);
     cJSON_AddNumberToObject(lim, "max_queued_messages", l->max_queued_messages);
@@ -150,7 +153,7 @@ void session_open(struct session *ss, struct server *srv, enum access_role role)
 
 static void session_drop_sub(struct session *ss, int i)
 {
-    hub_add_subscriber(&ss->srv->hub, ss->subs[i].s, -1);
+    hub_add_subscriber(&ss->srv->hub, ss->subs[i].s, ss->subs[i].enc, -1);
     stream_unref(ss->subs[i].s);
     ss->subs[i] = ss->subs[--ss->nsubs];
 }
@@ -379,14 +382,33 @@ static int session_op_destroy(struct session *ss, const cJSON *req, const cJSON 
     return 0;
 }
 
+/* subscribe's `encoding` (absent: the default), or -1 with err. */
+static int session_encoding(const cJSON *req, struct fx_err *err)
+{
+    const cJSON *e = cJSON_GetObjectItemCaseSensitive(req, "encoding");
+    if (!e) return FXS_ENCODING_DEFAULT;
+    if (!cJSON_IsString(e)) return fx_fail(err, "bad_request", "encoding", "encoding must be a string: \"default\" or \"engine\"");
+    struct suggest sg;
+    char hint[96];
+    suggest_init(&sg, e->valuestring);
+    for (int i = 0; i < FXS_ENCODING_COUNT; i++) {
+        if (!strcmp(e->valuestring, fxs_encoding_name((enum fxs_encoding)i))) return i;
+        suggest_offer(&sg, fxs_encoding_name((enum fxs_encoding)i));
+    }
+    return fx_fail(err, "bad_request", "encoding", "encoding must be \"default\" or \"engine\", got \"%.64s\"%s",
+                   e->valuestring, suggest_text(&sg, hint, sizeof hint));
+}
+
 static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
-    static const char *const allowed[] = {"stream", "max_fps", NULL};
+    static const char *const allowed[] = {"stream", "max_fps", "encoding", NULL};
     if (session_only(req, "subscribe", allowed, err)) return -1;
     const cJSON *mf = cJSON_GetObjectItemCaseSensitive(req, "max_fps");
     if (mf && !(cJSON_IsNumber(mf) && mf->valuedouble >= FXS_MAX_FPS_MIN && mf->valuedouble <= FXS_MAX_FPS_MAX))
         return fx_fail(err, "bad_request", "max_fps", "max_fps must be a number in [%g, %g]", FXS_MAX_FPS_MIN,
                        FXS_MAX_FPS_MAX);
+    int enc = session_encoding(req, err);
+    if (enc < 0) return -1;
     struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
     int i = session_find_sub(ss, s);
@@ -405,20 +427,30 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
         i = ss->nsubs++;
         memset(&p[i], 0, sizeof p[i]);
         p[i].s = s; /* the reference passes to the subscription */
+        p[i].enc = (enum fxs_encoding)enc;
         p[i].step_time = NAN; /* no step sent yet: the first frame (sim_time 0 too) starts one */
         struct stream_status st;
         hub_status(&ss->srv->hub, s, &st);
         p[i].error_gen = st.error_gen;
         if (ss->srv->cfg.pause_idle && !st.subscribers && !st.lease.remote_demand) /* paused: its frames are old */
             for (int k = 1; k <= FXS_KIND_MAX; k++) p[i].paused_seq[k] = hub_latest_seq(&ss->srv->hub, s, k);
-        hub_add_subscriber(&ss->srv->hub, s, +1);
+        hub_add_subscriber(&ss->srv->hub, s, p[i].enc, +1);
     } else {
-        stream_unref(s); /* already subscribed: only max_fps changes */
+        stream_unref(s); /* already subscribed: only max_fps and the encoding change */
+        struct sub *sub = &ss->subs[i];
+        if (sub->enc != (enum fxs_encoding)enc) { /* the newest frames again, in the new encoding */
+            hub_add_subscriber(&ss->srv->hub, sub->s, sub->enc, -1);
+            hub_add_subscriber(&ss->srv->hub, sub->s, (enum fxs_encoding)enc, +1);
+            sub->enc = (enum fxs_encoding)enc;
+            memset(sub->last_seq, 0, sizeof sub->last_seq);
+            sub->step_time = NAN;
+        }
     }
     ss->subs[i].min_interval = mf ? 1.0 / mf->valuedouble : 0;
     cJSON *r = session_reply("subscribed", id);
     cJSON_AddStringToObject(r, "stream", ss->subs[i].s->name);
     cJSON_AddNumberToObject(r, "channel", ss->subs[i].s->channel);
+    cJSON_AddStringToObject(r, "encoding", fxs_encoding_name(ss->subs[i].enc));
     session_send(ss, r);
     if (ss->srv->wake) ss->srv->wake(ss); /* the current frame goes out right away */
     return 0;

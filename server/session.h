@@ -19,6 +19,7 @@
 
 struct sub {
     struct stream *s;
+    enum fxs_encoding enc; /* which form of kinds 1 and 2 it takes (subscribe's `encoding`) */
     double min_interval;  /* 1 / max_fps, 0 = unlimited */
     double last_sent;     /* CLOCK_MONOTONIC seconds of the last step's first frame sent */
     double step_time;     /* that step's sim_time (NAN before the first): its other kinds are not held back by max_fps */

@@ -573,9 +573,20 @@ static cJSON *fxc_stream_req(const char *op, const char *stream, char *eb, size_
 
 int64_t fxc_subscribe(struct fxc_client *c, const char *stream, double max_fps, char *eb, size_t el)
 {
+    return fxc_subscribe_encoding(c, stream, max_fps, FXS_ENCODING_DEFAULT, eb, el);
+}
+
+int64_t fxc_subscribe_encoding(struct fxc_client *c, const char *stream, double max_fps, enum fxs_encoding enc,
+                               char *eb, size_t el)
+{
+    if ((unsigned)enc >= FXS_ENCODING_COUNT) {
+        fxws_set_err(eb, el, "subscribe: encoding %d is none of FXS_ENCODING_*", (int)enc);
+        return -1;
+    }
     cJSON *req = fxc_stream_req("subscribe", stream, eb, el);
     if (!req) return -1;
-    if (max_fps > 0 && !cJSON_AddNumberToObject(req, "max_fps", max_fps)) {
+    if ((max_fps > 0 && !cJSON_AddNumberToObject(req, "max_fps", max_fps)) ||
+        (enc != FXS_ENCODING_DEFAULT && !cJSON_AddStringToObject(req, "encoding", fxs_encoding_name(enc)))) {
         cJSON_Delete(req);
         fxws_set_err(eb, el, "out of memory");
         return -1;

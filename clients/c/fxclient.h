@@ -1,7 +1,7 @@
 /* fxclient.h — libfxclient, the C client library of fxstreamd (protocol fxstream.v1).
  *
  * The public API: what `make install` puts in PREFIX/include/fxclient/ with fxs_frame.h (the
- * 64-byte frame header and the kind and codec numbers) and fxs_bytes.h, and what the shared
+ * 64-byte frame header, the kind and codec numbers and the encodings) and fxs_bytes.h, and what the shared
  * library libfxclient.so.MAJOR exports (every other symbol is hidden). Build and link with
  * `pkg-config --cflags --libs fxclient`. C99 and C++ alike; no type of a dependency (cJSON,
  * libwebsockets) appears here: requests and replies are JSON text, frames are bytes, and the
@@ -154,6 +154,12 @@ FXC_API int64_t fxc_send(struct fxc_client *c, const char *json, char *errbuf, s
 /* Typed requests: each builds the request and returns fxc_send's result. */
 /* {"op":"subscribe","stream",max_fps}; max_fps <= 0: none (no cap beyond the stream's fps). */
 FXC_API int64_t fxc_subscribe(struct fxc_client *c, const char *stream, double max_fps, char *errbuf, size_t errlen);
+/* fxc_subscribe in an encoding (PROTOCOL.md §3.5): FXS_ENCODING_ENGINE asks for kind 1 and 2
+ * frames in the engine encoding (codec 16, read by fxc_decode_particles and fxc_decode_texture);
+ * FXS_ENCODING_DEFAULT is fxc_subscribe. Subscribing again to the same stream changes the
+ * encoding (and max_fps) of the subscription. */
+FXC_API int64_t fxc_subscribe_encoding(struct fxc_client *c, const char *stream, double max_fps,
+                                       enum fxs_encoding enc, char *errbuf, size_t errlen);
 FXC_API int64_t fxc_unsubscribe(struct fxc_client *c, const char *stream, char *errbuf, size_t errlen);
 /* {"op":"get","stream"}: the reply is `params` (read values with fxc_param_number/_json). */
 FXC_API int64_t fxc_get(struct fxc_client *c, const char *stream, char *errbuf, size_t errlen);
@@ -247,21 +253,41 @@ FXC_API void fxc_stats(const struct fxc_client *c, struct fxc_stats *out);
  * The counts are also in the header (count_or_width, height), so arrays sized from it once
  * decode in one call. */
 
-/* Kind 1, codecs 2 and 3 (PROTOCOL.md §7.5): particles in the order of the payload (not the
- * simulation's). */
+/* Kind 1 (PROTOCOL.md §7.5, §7.8): particles in the order of the payload (not the simulation's).
+ * Codecs 2 and 3, the default encoding, carry every array. Codec 16, the engine encoding
+ * (fxc_subscribe_encoding with FXS_ENCODING_ENGINE), carries positions, temperatures
+ * and velocities as half floats (about 3 significant digits; positions relative to the centre
+ * of the frame's bounds, so their precision follows the flame's size) and neither flags nor
+ * fuel: has_flags and has_fuel are 0 and those arrays are neither needed nor written. */
 struct fxc_particles {
     uint32_t capacity;   /* in: particles each array holds */
     float *xyz;          /* in: 3 * capacity floats, x y z per particle (metres) */
     float *temperature;  /* in: capacity floats, kelvin */
     uint8_t *flags;      /* in: capacity bytes: bits 0-1 type (0 gas, 1 burning source, 2 obstacle),
-                            bit 2 flame (PROTOCOL.md §11.2) */
+                            bit 2 flame (PROTOCOL.md §11.2); needed for codecs 2 and 3, not written
+                            for codec 16 (may be NULL) */
     float *fuel;         /* in, optional: capacity floats, or NULL: not written */
     float *velocity;     /* in, optional: 3 * capacity floats (m/s), or NULL: not written */
     uint32_t count;      /* out: particles in the frame */
     int has_velocity;    /* out: the frame carries velocities (the stream's `velocities`) */
+    int has_flags;       /* out: the frame carries flags (codecs 2 and 3; not the engine encoding) */
+    int has_fuel;        /* out: the frame carries fuel (codecs 2 and 3; not the engine encoding) */
 };
 FXC_API int fxc_decode_particles(const struct fxs_header *h, const uint8_t *payload, struct fxc_particles *out,
                                  char *errbuf, size_t errlen);
+
+/* Kind 2, codec 16 (PROTOCOL.md §7.8): a texture of the engine encoding (the energy wave's), as
+ * floats from its half floats. The default encoding's kind 2 frames are OpenEXR files (codec 1):
+ * read those with OpenEXR; this decoder refuses them. */
+struct fxc_texture {
+    size_t capacity;     /* in: floats texels holds */
+    float *texels;       /* in: width * height * channels floats, a texel's channels together, row 0
+                            (the top) first */
+    uint32_t width, height; /* out: texels */
+    uint32_t channels;   /* out: 1 (R) or 4 (RGBA) */
+};
+FXC_API int fxc_decode_texture(const struct fxs_header *h, const uint8_t *payload, struct fxc_texture *out,
+                               char *errbuf, size_t errlen);
 
 /* Kind 3, codec 1 (PROTOCOL.md §7.7): the energy wave's light rig. */
 #define FXC_RIG_MAX_SEGMENTS 64

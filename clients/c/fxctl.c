@@ -35,6 +35,7 @@ struct fxctl_opts {
     long count;        /* watch --count, 0 = until interrupted */
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
+    const char *encoding; /* subscribe --encoding, NULL when not given */
     const char *out_dir;
     int human;         /* stdout is a terminal and no --json: print for people */
     const char *cmd;
@@ -55,22 +56,26 @@ static const char fxctl_help[] =
     "  get NAME                      complete parameters of NAME with their rev\n"
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
-    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]\n"
+    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--out DIR]\n"
     "                                receive N steps of NAME (a step: the frames computed\n"
     "                                together, e.g. energy's texture and its light rig),\n"
     "                                or with --kind N frames of kind K (1 particles,\n"
-    "                                2 texture, 3 light rig, 4 look-up table); prints the\n"
+    "                                2 texture, 3 light rig, 4 look-up table); with\n"
+    "                                --encoding engine particles and textures come in\n"
+    "                                the engine encoding (PROTOCOL.md §7.8); prints the\n"
     "                                subscribed reply, then one JSON line per frame (stream,\n"
     "                                channel, kind, seq, param_rev, sim_time,\n"
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
     "                                width and height, or count, flags) and any params\n"
     "                                event of NAME; with --out writes the payload to\n"
-    "                                DIR/NAME-SEQ.exr (texture, codec 1), DIR/NAME-SEQ-PROD.png\n"
-    "                                per look-up-table product (kind 4), the decoded\n"
-    "                                particles to DIR/NAME-SEQ.ply (kind 1, codec 2:\n"
-    "                                binary PLY, x y z temperature fuel flags, then\n"
-    "                                vx vy vz if the stream sends velocities, and the\n"
-    "                                payload as received to .bin) or the\n"
+    "                                DIR/NAME-SEQ.exr (texture: codec 1 as received, the\n"
+    "                                engine encoding's halves as an EXR, its payload to\n"
+    "                                .bin), DIR/NAME-SEQ-PROD.png per look-up-table\n"
+    "                                product (kind 4), the decoded particles to\n"
+    "                                DIR/NAME-SEQ.ply (kind 1: binary PLY, x y z\n"
+    "                                temperature fuel flags, or x y z temperature in the\n"
+    "                                engine encoding, then vx vy vz if the stream sends\n"
+    "                                velocities, and the payload as received to .bin) or the\n"
     "                                payload to .bin (others), and the line to\n"
     "                                DIR/NAME-SEQ.json; a light-rig frame (kind 3),\n"
     "                                which shares its texture's SEQ, goes to\n"
@@ -161,6 +166,9 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
     } else if (!strcmp(name, "--kind")) {
         if (fxctl_parse_long(val, 1, &n) || n > FXS_KIND_MAX) return fxctl_usage("--kind needs a frame kind, 1..4", val);
         o->kind = (int)n;
+    } else if (!strcmp(name, "--encoding")) {
+        if (strcmp(val, "default") && strcmp(val, "engine")) return fxctl_usage("--encoding needs default or engine", val);
+        o->encoding = val;
     } else if (!strcmp(name, "--count")) {
         if (fxctl_parse_long(val, 1, &o->count)) return fxctl_usage("--count needs a positive integer", val);
     } else if (!strcmp(name, "--out")) {
@@ -252,7 +260,7 @@ static const struct fxctl_cmd fxctl_cmds[] = {
     { "get", 1, 1, "stream", "get NAME" },
     { "set", 2, -1, "stream", "set NAME K=V [K=V ...]" },
     { "reset", 1, 1, "stream", "reset NAME" },
-    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--out DIR]" },
+    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--out DIR]" },
     { "watch", 0, 0, NULL, "watch [--count N]" },
     { "presets", 0, 1, "effect", "presets [EFFECT]" },
     { "preset", 3, 4, NULL, "preset load NAME PRESET | preset save NAME PRESET [DOC] | preset delete EFFECT PRESET" },
@@ -300,8 +308,8 @@ static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cm
         fprintf(stderr, "fxctl: wrong number of arguments; usage: fxctl %s\nTry 'fxctl --help'.\n", cmd->synopsis);
         return FXCTL_USAGE;
     }
-    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->out_dir))
-        return fxctl_usage("--frames, --max-fps, --kind and --out go with subscribe only", NULL);
+    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->encoding || o->out_dir))
+        return fxctl_usage("--frames, --max-fps, --kind, --encoding and --out go with subscribe only", NULL);
     if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
     if (o->count && strcmp(cmd->name, "watch")) return fxctl_usage("--count goes with watch only", NULL);
     if (!strcmp(cmd->name, "preset")) {
@@ -340,6 +348,7 @@ static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, 
     if (cmd->first_field && o->nargs) cJSON_AddStringToObject(req, cmd->first_field, o->args[0]);
     if (!strcmp(cmd->name, "create")) cJSON_AddStringToObject(req, "stream", o->args[i++]);
     if (o->max_fps >= 0) cJSON_AddNumberToObject(req, "max_fps", o->max_fps);
+    if (o->encoding) cJSON_AddStringToObject(req, "encoding", o->encoding);
     if (i < o->nargs) params = cJSON_AddObjectToObject(req, "params");
     for (; i < o->nargs && !r; i++) r = fxctl_add_kv(params, o->args[i]);
     return r;

@@ -10,6 +10,7 @@
 
 #include <cjson/cJSON.h>
 
+#include "codec/exr.h"
 #include "png.h"
 
 double fxctl_age_ms(const struct fxc_event *ev)
@@ -55,28 +56,32 @@ static int fxctl_write_file(const char *path, const void *data, size_t len)
     return ok ? 0 : -1;
 }
 
-/* Writes decoded particles as binary little-endian PLY: float x y z temperature fuel, uchar
- * flags, then float vx vy vz when the frame carries velocities. */
-static int fxctl_write_ply(const char *path, const struct fxc_particles *p)
+/* Writes decoded particles as binary little-endian PLY: float x y z temperature, then float
+ * fuel and uchar flags when the frame carries them (codecs 2 and 3, not the engine encoding),
+ * then float vx vy vz when it carries velocities. */
+static int fxctl_write_ply(const char *path, uint32_t codec, const struct fxc_particles *p)
 {
     FILE *f = fopen(path, "wb");
-    int ok = f != NULL;
-    size_t size = p->has_velocity ? 33 : 21;
+    int ok = f != NULL, attrs = p->has_fuel && p->has_flags;
+    size_t size = 16 + (attrs ? 5 : 0) + (p->has_velocity ? 12 : 0);
     if (ok)
-        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec 2\nelement vertex %" PRIu32
-                        "\nproperty float x\nproperty float y\nproperty float z\nproperty float temperature\n"
-                        "property float fuel\nproperty uchar flags\n%send_header\n", p->count,
+        ok = fprintf(f, "ply\nformat binary_little_endian 1.0\ncomment fxstream kind 1 codec %" PRIu32
+                        "\nelement vertex %" PRIu32 "\nproperty float x\nproperty float y\nproperty float z\n"
+                        "property float temperature\n%s%send_header\n",
+                     codec, p->count, attrs ? "property float fuel\nproperty uchar flags\n" : "",
                      p->has_velocity ? "property float vx\nproperty float vy\nproperty float vz\n" : "") > 0;
     for (uint32_t i = 0; ok && i < p->count; i++) {
-        uint8_t rec[33];
-        float v[8] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temperature[i], p->fuel[i], 0, 0, 0 };
-        if (p->has_velocity) memcpy(v + 5, p->velocity + 3 * (size_t)i, 12);
-        for (int c = 0; c < (p->has_velocity ? 8 : 5); c++) { /* the flags byte sits between fuel and vx */
+        uint8_t rec[33], *r = rec;
+        float v[8] = { p->xyz[3 * i], p->xyz[3 * i + 1], p->xyz[3 * i + 2], p->temperature[i], attrs ? p->fuel[i] : 0 };
+        int nv = attrs ? 5 : 4;
+        if (p->has_velocity) memcpy(v + nv, p->velocity + 3 * (size_t)i, 12);
+        for (int c = 0; c < nv + (p->has_velocity ? 3 : 0); c++) {
             uint32_t u;
             memcpy(&u, &v[c], 4);
-            fxs_put_u32(rec + 4 * c + (c >= 5), u);
+            fxs_put_u32(r, u);
+            r += 4;
+            if (attrs && c == 4) *r++ = p->flags[i]; /* the flags byte sits between fuel and vx */
         }
-        rec[20] = p->flags[i];
         ok = fwrite(rec, 1, size, f) == size;
     }
     if (f && fclose(f)) ok = 0;
@@ -84,7 +89,8 @@ static int fxctl_write_ply(const char *path, const struct fxc_particles *p)
     return ok ? 0 : -1;
 }
 
-/* Decodes a particle frame into arrays sized from its header and writes BASE.ply. */
+/* Decodes a particle frame (either encoding) into arrays sized from its header and writes
+ * BASE.ply. */
 static int fxctl_save_particles(const char *base, const struct fxc_event *ev)
 {
     size_t n = ev->header.count_or_width ? ev->header.count_or_width : 1;
@@ -102,9 +108,37 @@ static int fxctl_save_particles(const char *base, const struct fxc_event *ev)
     else if (fxc_decode_particles(&ev->header, ev->payload, &p, err, sizeof err) == 0) r = 0;
     if (r) fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", ev->header.seq, err);
     snprintf(path, sizeof path, "%s.ply", base);
-    if (!r) r = fxctl_write_ply(path, &p);
+    if (!r) r = fxctl_write_ply(path, ev->header.codec, &p);
     free(fl);
     free(flags);
+    return r;
+}
+
+/* Decodes an engine-encoded texture (kind 2 codec 16) and writes it as BASE.exr: the EXR of its
+ * halves, the pixels the default encoding's EXR holds (uncompressed here). */
+static int fxctl_save_engine_texture(const char *base, const struct fxc_event *ev)
+{
+    const struct fxs_header *h = &ev->header;
+    struct fxc_texture t = { 0 };
+    struct fx_buf exr = { 0 };
+    struct fx_err e = { 0 };
+    char err[sizeof e.message] = "", path[4200];
+    int r = fxc_decode_texture(h, ev->payload, &t, err, sizeof err);
+    if (r == 1) {
+        t.capacity = (size_t)t.width * t.height * t.channels;
+        r = (t.texels = malloc(t.capacity * sizeof *t.texels)) ? fxc_decode_texture(h, ev->payload, &t, err, sizeof err) : -1;
+        if (!t.texels) snprintf(err, sizeof err, "out of memory");
+    }
+    if (!r && exr_write_mem(&(struct exr_image){ (int)t.width, (int)t.height, (int)t.channels, t.texels, EXR_CODEC_NONE },
+                            &exr, &e)) {
+        snprintf(err, sizeof err, "%s", e.message);
+        r = -1;
+    }
+    if (r) fprintf(stderr, "fxctl: frame %" PRIu64 ": %s\n", h->seq, err);
+    snprintf(path, sizeof path, "%s.exr", base);
+    if (!r) r = fxctl_write_file(path, exr.data, exr.len);
+    free(t.texels);
+    fx_buf_free(&exr);
     return r;
 }
 
@@ -139,19 +173,21 @@ static int fxctl_save_lut(const char *base, const struct fxc_event *ev)
     return r ? -1 : 0;
 }
 
-/* Writes the frame's data files: .exr (texture codec 1), .ply (particles, decoded) and the
- * payload as received in .bin (for other decoders to compare), or .bin alone, plus one PNG per
- * product of a look-up table (kind 4 codec 1). */
+/* Writes the frame's data files: .exr (texture codec 1 as received, or the engine encoding's
+ * decoded), .ply (particles, decoded) and the payload as received in .bin (for other decoders
+ * to compare), or .bin alone, plus one PNG per product of a look-up table (kind 4 codec 1). */
 static int fxctl_save_payload(const char *base, const struct fxc_event *ev)
 {
     const struct fxs_header *h = &ev->header;
     int exr = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_EXR;
-    int particles = h->kind == FXS_KIND_PARTICLES &&
-                    (h->codec == FXS_CODEC_PARTICLES || h->codec == FXS_CODEC_PARTICLES_BLOCKS);
+    int engine_tex = h->kind == FXS_KIND_TEXTURE && h->codec == FXS_CODEC_ENGINE;
+    int particles = h->kind == FXS_KIND_PARTICLES && (h->codec == FXS_CODEC_PARTICLES ||
+                                                      h->codec == FXS_CODEC_PARTICLES_BLOCKS || h->codec == FXS_CODEC_ENGINE);
     char path[4200];
     snprintf(path, sizeof path, "%s.%s", base, exr ? "exr" : "bin");
     if (h->kind == FXS_KIND_LUT && h->codec == FXS_CODEC_LUT_PACK && fxctl_save_lut(base, ev)) return -1;
     if (particles && fxctl_save_particles(base, ev)) return -1;
+    if (engine_tex && fxctl_save_engine_texture(base, ev)) return -1;
     return fxctl_write_file(path, ev->payload, h->payload_bytes);
 }
 

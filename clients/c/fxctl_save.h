@@ -1,9 +1,12 @@
 /* fxctl_save.h — what `fxctl subscribe` prints and writes per frame: the frame's JSON line,
- * and with --out its files: DIR/NAME-SEQ.exr (texture, codec 1), .ply (particles, decoded
- * with libfxclient's fxc_decode_particles, and the payload as received in .bin), one
- * DIR/NAME-SEQ-PROD.png per look-up-table product (fxc_decode_lut), .bin for anything else,
- * and the line in DIR/NAME-SEQ.json; a light-rig frame shares its texture's SEQ, so it goes to
- * DIR/NAME-SEQ-rig.bin and .json. Built on fxclient.h only, like a program outside the tree. */
+ * and with --out its files: DIR/NAME-SEQ.exr (texture: codec 1 as received; the engine
+ * encoding decoded with libfxclient's fxc_decode_texture and written as the EXR of its halves,
+ * the payload as received in .bin), .ply (particles of either encoding, decoded with
+ * fxc_decode_particles, and the payload as received in .bin), one DIR/NAME-SEQ-PROD.png per
+ * look-up-table product (fxc_decode_lut), .bin for anything else, and the line in
+ * DIR/NAME-SEQ.json; a light-rig frame shares its texture's SEQ, so it goes to
+ * DIR/NAME-SEQ-rig.bin and .json. Decodes with fxclient.h only, like a program outside the
+ * tree; EXR files are written with the daemon's writer (server/codec/exr.h). */
 #ifndef FXCTL_SAVE_H
 #define FXCTL_SAVE_H
 

@@ -453,21 +453,32 @@ static int eye_emit_table(struct compound_eye *ce, effect_emit_fn emit, void *ct
     return emit(ctx, &fr);
 }
 
-static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
+/* The view texture's EXR (effect_frame.encode): made only when a subscriber takes it. */
+static int eye_encode_bake(void *self, struct effect_frame *fr, struct fx_err *err)
 {
-    if (compound_eye_bake(ce, ce->rgba, err)) return -1;
+    struct compound_eye *ce = self;
     double t0 = clock_now() * 1e3;
     struct exr_image im = {ce->size, ce->size, 4, ce->rgba, ce->compression};
     ce->exr.len = 0;
     if (exr_write_mem(&im, &ce->exr, err)) return -1;
+    fr->codec = FXS_CODEC_EXR;
+    fr->payload = ce->exr.data;
+    fr->payload_bytes = ce->exr.len;
+    fr->encode_ms = clock_now() * 1e3 - t0;
+    return 0;
+}
+
+static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
+{
+    if (compound_eye_bake(ce, ce->rgba, err)) return -1;
     struct effect_frame fr = {
         .kind = FXS_KIND_TEXTURE,
-        .codec = FXS_CODEC_EXR,
         .count_or_width = (uint32_t)ce->size,
         .height = (uint32_t)ce->size,
-        .payload = ce->exr.data,
-        .payload_bytes = ce->exr.len,
-        .encode_ms = clock_now() * 1e3 - t0,
+        .encode = eye_encode_bake,
+        .self = ce,
+        .texels = ce->rgba,
+        .channels = 4,
     };
     return emit(ctx, &fr);
 }

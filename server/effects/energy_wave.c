@@ -514,36 +514,43 @@ static int ew_check_finite(const float *img, size_t texels, struct fx_err *err)
     return 0;
 }
 
+/* The texture frame's EXR (effect_frame.encode): made only when a subscriber takes it. */
+static int ew_encode(void *self, struct effect_frame *fr, struct fx_err *err)
+{
+    struct energy_wave *ew = self;
+    double t0 = clock_now() * 1e3;
+    struct exr_image im = {ew->width, ew->height, (int)fr->channels, fr->texels, ew->compression};
+    ew->exr.len = 0;
+    if (exr_write_mem(&im, &ew->exr, err)) return -1;
+    fr->codec = FXS_CODEC_EXR;
+    fr->payload = ew->exr.data;
+    fr->payload_bytes = ew->exr.len;
+    fr->encode_ms = clock_now() * 1e3 - t0;
+    return 0;
+}
+
 static int ew_step(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err)
 {
     struct energy_wave *ew = self;
     size_t texels = (size_t)ew->width * (size_t)ew->height;
     (void)dt;
     if (energy_wave_render(ew, sim_time, ew->img, err) || ew_check_finite(ew->img, texels, err)) return -1;
-    double t0 = clock_now() * 1e3;
-    struct exr_image im = {ew->width, ew->height, 1, ew->img, ew->compression};
-    if (ew->output == 1) {
-        ew_colour_map(ew, texels);
-        im.channels = 4;
-        im.pixels = ew->rgba;
-    }
-    ew->exr.len = 0;
-    if (exr_write_mem(&im, &ew->exr, err)) return -1;
+    if (ew->output == 1) ew_colour_map(ew, texels);
     struct effect_frame fr = {
         .kind = FXS_KIND_TEXTURE,
-        .codec = FXS_CODEC_EXR,
         .count_or_width = (uint32_t)ew->width,
         .height = (uint32_t)ew->height,
-        .payload = ew->exr.data,
-        .payload_bytes = ew->exr.len,
-        .encode_ms = clock_now() * 1e3 - t0,
+        .encode = ew_encode,
+        .self = ew,
+        .texels = ew->output == 1 ? ew->rgba : ew->img,
+        .channels = ew->output == 1 ? 4 : 1,
     };
     if (emit(ctx, &fr)) return -1;
     if (!ew->light_rig) return 0;
     /* The light rig at the same time as the texture. The constants (~150 bytes with 3 bands)
      * go into every frame: the hub keeps only the newest frame per kind for late
      * subscribers, and they cost far less than the texture (PROTOCOL.md §7.7). */
-    t0 = clock_now() * 1e3;
+    double t0 = clock_now() * 1e3;
     light_rig_build(&ew->lr, &ew->src, ew->w, &ew->rig);
     struct effect_frame rf = {
         .kind = FXS_KIND_LIGHT_RIG,

@@ -270,6 +270,7 @@ struct flame {
     uint32_t *h_flags;
     uint8_t *flags8;
     int h_cap;
+    uint8_t *payload; /* the latest frame's codec 2/3 payload, made when wanted (fl_encode) */
 };
 
 static const size_t fl_sizes[8] = {16, 16, 4, 4, 8, 4, 16, 8}; /* bytes per particle of struct fl_set */
@@ -901,6 +902,7 @@ void flame_free(struct flame *fl)
     free(fl->fuel);
     free(fl->vel);
     free(fl->flags8);
+    free(fl->payload);
     free(fl);
 }
 
@@ -1014,25 +1016,22 @@ static int fl_read_frame(struct flame *fl, struct fx_err *err)
     return n;
 }
 
-/* Encodes the n particles of the frame arrays into one kind 1 frame, whose payload is *payload
- * (free()). */
-static int fl_encode(struct flame *fl, int n, struct effect_frame *fr, uint8_t **payload, struct fx_err *err)
+/* The frame's codec 2/3 payload (effect_frame.encode): made only when a subscriber takes it. */
+static int fl_encode(void *self, struct effect_frame *fr, struct fx_err *err)
 {
-    struct fxs_particles fp = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8, fl->velocities ? fl->vel : NULL};
+    struct flame *fl = self;
     struct fxs_particles_opts opts = {.pos_bits = fl->pos_bits, .vel_bits = fl->vel_bits, .threads = fl->enc_threads};
     size_t len = 0;
     char msg[160];
     double t0 = clock_now() * 1e3;
-    if (fxs_particles_encode(&fp, &opts, payload, &len, msg, sizeof msg))
+    free(fl->payload);
+    fl->payload = NULL;
+    if (fxs_particles_encode(&fr->particles, &opts, &fl->payload, &len, msg, sizeof msg))
         return fx_fail(err, "internal", "", "flame: particle encoding failed: %s", msg);
-    *fr = (struct effect_frame){
-        .kind = FXS_KIND_PARTICLES,
-        .codec = fxs_particles_codec(*payload, len),
-        .count_or_width = (uint32_t)n,
-        .payload = *payload,
-        .payload_bytes = len,
-        .encode_ms = clock_now() * 1e3 - t0,
-    };
+    fr->codec = fxs_particles_codec(fl->payload, len);
+    fr->payload = fl->payload;
+    fr->payload_bytes = len;
+    fr->encode_ms = clock_now() * 1e3 - t0;
     return 0;
 }
 
@@ -1062,11 +1061,14 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
         fl->carry -= fl->dt;
         fl->ahead = 1;
     }
-    struct effect_frame fr;
-    uint8_t *payload = NULL;
-    int ret = fl_encode(fl, n, &fr, &payload, err);
-    if (ret == 0) ret = emit(ctx, &fr);
-    free(payload);
+    struct effect_frame fr = {
+        .kind = FXS_KIND_PARTICLES,
+        .count_or_width = (uint32_t)n,
+        .encode = fl_encode,
+        .self = fl,
+        .particles = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8, fl->velocities ? fl->vel : NULL},
+    };
+    int ret = emit(ctx, &fr);
     struct fx_err end_err = {0};
     if (pre && (fl_step_end(fl, &end_err) || fl_finish(fl, &end_err)) && ret == 0) {
         *err = end_err;

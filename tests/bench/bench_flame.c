@@ -146,11 +146,14 @@ struct bench_out {
     double encode_ms;
 };
 
-static int bench_emit(void *ctx, const struct effect_frame *f)
+static int bench_emit(void *ctx, const struct effect_frame *fr)
 {
     struct bench_out *o = ctx;
-    o->bytes += f->payload_bytes;
-    o->encode_ms += f->encode_ms;
+    struct effect_frame f = *fr;
+    struct fx_err err = {0};
+    if (effect_frame_encode(&f, &err)) bench_die("encode", &err);
+    o->bytes += f.payload_bytes;
+    o->encode_ms += f.encode_ms;
     return 0;
 }
 

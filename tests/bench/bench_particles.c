@@ -15,7 +15,10 @@
  *       keeps no other attribute; its own "ms to encode/decode" figures (no file I/O);
  *   (c) zstd level 1 and 3 of the raw arrays (xyz, T, F as float32, flags u8);
  *   (d) codec 1's values (grid order, deltas) as LEB128 byte streams + zstd -3: zstd as
- *       the entropy stage of an ordered scheme, for comparison.
+ *       the entropy stage of an ordered scheme, for comparison;
+ *   (e) the engine encoding (protocol/fxs_engine.c, PROTOCOL.md §7.8: half-float texels in one
+ *       zstd frame), without and with velocities: what a game engine subscription costs the
+ *       daemon and the wire.
  * Frames: synthetic SPH-like flames (tests/unit/particles_gen.h: 10k, 50k, 200k),
  * plus every DIR/<stream>-<seq>.ply that `fxctl subscribe flame --out DIR` wrote when
  * FXS_BENCH_PLY_DIR=DIR is set (real flame frames; with velocities when the stream sent
@@ -27,6 +30,7 @@
 #include <time.h>
 #include <zstd.h>
 
+#include "fxs_engine.h"
 #include "fxs_particles.h"
 #include "../unit/particles_gen.h"
 
@@ -274,6 +278,34 @@ static void bp_zstd_transform(const char *frame, const struct fxs_particles *p, 
 /* ---- frames ---------------------------------------------------------------------------------- */
 
 /* The wire cost of velocities: the default payload without them, then with them. */
+/* ---- (e) the engine encoding ----------------------------------------------------------- */
+
+static void bp_engine(const char *frame, const struct fxs_particles *pv, int with_vel)
+{
+    struct fxs_particles d, p = *pv;
+    uint8_t *enc = NULL;
+    size_t len = 0;
+    char err[200];
+    double te = 1e9, td = 1e9;
+    if (!with_vel) p.vel = NULL;
+    for (int r = 0; r < bp_reps(p.n); r++) {
+        double t0 = bp_now();
+        free(enc);
+        if (fxs_engine_encode_particles(&p, FXS_ENGINE_ZSTD_LEVEL, &enc, &len, err, sizeof err)) {
+            printf("%s: engine encode failed: %s\n", frame, err);
+            return;
+        }
+        double t1 = bp_now();
+        if (fxs_engine_decode_particles(enc, len, &d, err, sizeof err)) printf("%s: engine decode failed: %s\n", frame, err);
+        double t2 = bp_now();
+        fxs_particles_free(&d);
+        te = t1 - t0 < te ? t1 - t0 : te;
+        td = t2 - t1 < td ? t2 - t1 : td;
+    }
+    bp_line(frame, p.n, with_vel ? "engine (FXE1, zstd 3) with vel" : "engine (FXE1, zstd 3)", (double)len, te, td);
+    free(enc);
+}
+
 static void bp_vel(const char *name, const struct fxs_particles *p)
 {
     bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = 16 });
@@ -294,6 +326,8 @@ static void bp_frame(const char *name, const struct fxs_particles *p)
         bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = bits[b], .temp_bits = 8, .fuel_bits = 8 });
     for (int t = 2; t <= 8; t *= 2) /* blocks on t threads (§7.5.8: a GPU device's frames) */
         bp_ours(name, p, &(struct fxs_particles_opts){ .pos_bits = 16, .threads = t });
+    bp_engine(name, p, 0);
+    if (p->vel) bp_engine(name, p, 1);
     for (int b = 0; b < 3; b++) bp_draco(name, p, bits[b], 7);
     bp_draco(name, p, 16, 10);
     bp_zstd_raw(name, p, 1);

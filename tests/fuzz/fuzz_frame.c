@@ -1,13 +1,15 @@
 /* fuzz_frame.c — libFuzzer target: what a client does with a binary message: the 64-byte
- * frame header (fxs_header_unpack), then the payload decoders of its kind, both the codecs'
- * own (fxs_particles, fxs_lut) and libfxclient's public ones into caller-sized arrays
- * (fxc_decode_particles, fxc_decode_rig, fxc_decode_lut, sized from the counts they report,
- * as a game plugin does). A header that parses must describe exactly the bytes given;
- * decoders must reject or decode without reading or writing out of bounds. */
+ * frame header (fxs_header_unpack), then the payload decoders of its kind and codec, both the
+ * codecs' own (fxs_particles for codecs 2 and 3, fxs_engine for the engine encoding's 16,
+ * fxs_lut) and libfxclient's public ones into caller-sized arrays (fxc_decode_particles,
+ * fxc_decode_texture, fxc_decode_rig, fxc_decode_lut, sized from the counts they report, as a
+ * game plugin does). A header that parses must describe exactly the bytes given; decoders must
+ * reject or decode without reading or writing out of bounds. */
 #include <stdint.h>
 #include <stdlib.h>
 
 #include "fxclient.h"
+#include "fxs_engine.h"
 #include "fxs_frame.h"
 #include "fxs_particles.h"
 #include "fxs_lut.h"
@@ -30,6 +32,18 @@ static void fuzz_public_particles(const struct fxs_header *h, const uint8_t *pay
     free(p.temperature);
     free(p.flags);
     free(p.velocity);
+}
+
+static void fuzz_public_texture(const struct fxs_header *h, const uint8_t *payload)
+{
+    char msg[256];
+    struct fxc_texture t = { 0 };
+    if (fxc_decode_texture(h, payload, &t, msg, sizeof msg) != 1) return;
+    t.capacity = (size_t)t.width * t.height * t.channels;
+    t.texels = malloc(4 * t.capacity + 1);
+    if (t.texels && fxc_decode_texture(h, payload, &t, msg, sizeof msg) == 1)
+        abort(); /* room for the size it reported, yet too small */
+    free(t.texels);
 }
 
 static void fuzz_public_lut(const struct fxs_header *h, const uint8_t *payload)
@@ -58,7 +72,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (h.header_bytes + (size_t)h.payload_bytes != size) abort();
     const uint8_t *payload = data + h.header_bytes;
     char msg[256];
-    if (h.kind == FXS_KIND_PARTICLES) {
+    if (h.codec == FXS_CODEC_ENGINE && h.kind == FXS_KIND_PARTICLES) {
+        struct fxs_particles p;
+        if (!fxs_engine_decode_particles(payload, h.payload_bytes, &p, msg, sizeof msg)) fxs_particles_free(&p);
+        fuzz_public_particles(&h, payload);
+    } else if (h.codec == FXS_CODEC_ENGINE && h.kind == FXS_KIND_TEXTURE) {
+        struct fxs_engine_info info;
+        float *texels;
+        if (!fxs_engine_decode_texture(payload, h.payload_bytes, &info, &texels, msg, sizeof msg)) free(texels);
+        fuzz_public_texture(&h, payload);
+    } else if (h.kind == FXS_KIND_PARTICLES) {
         struct fxs_particles p;
         if (!fxs_particles_decode(payload, h.payload_bytes, &p, msg, sizeof msg)) fxs_particles_free(&p);
         fuzz_public_particles(&h, payload);

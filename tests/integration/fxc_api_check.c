@@ -4,8 +4,9 @@
  * matched by id through fxc_poll and fxc_wait, the typed calls, the parameter readers, the
  * server's errors (with its "did you mean"), bad input refused without harm to the
  * connection, a second client's set arriving as an event, frames named by their stream and
- * decoded (particles, light rig, look-up tables), events that outlive fxc_close, the end of
- * the connection when the daemon stops, and fxc_set_log.
+ * decoded (particles, light rig, look-up tables; the engine encoding's particles and textures,
+ * as a native engine plugin reads them), events that outlive fxc_close, the end of the
+ * connection when the daemon stops, and fxc_set_log.
  *
  * Usage: fxc_api_check URL DAEMON_PID. Prints "ok   what" or "FAIL what" per check and
  * "info ..." lines; exit status 1 on any failure. Every wait is bounded. */
@@ -260,6 +261,64 @@ static void check_frames(struct fxc_client *c)
     fxc_event_free(&ev);
 }
 
+/* A frame of `kind` from `stream` in the engine encoding (codec 16). */
+static int is_engine_frame(const struct fxc_event *ev, const void *arg)
+{
+    return is_frame(ev, arg) && ev->header.codec == FXS_CODEC_ENGINE;
+}
+
+/* The engine encoding as a native plugin reads it: fxc_subscribe_encoding, particles into
+ * arrays without flags or fuel, the energy wave's texture as floats. */
+static void check_engine(struct fxc_client *c)
+{
+    struct fxc_event ev;
+    struct want_frame flame = { "flame", FXS_KIND_PARTICLES }, energy = { "energy", FXS_KIND_TEXTURE };
+    char err[256];
+    int64_t id = fxc_subscribe_encoding(c, "flame", 0, FXS_ENCODING_ENGINE, err, sizeof err);
+    int r = fxc_wait(c, id, &ev, 10000, err, sizeof err);
+    check(r == 0 && !strcmp(ev.op, "subscribed") && strstr(ev.json, "\"encoding\":\"engine\""),
+          "fxc_subscribe_encoding(flame, FXS_ENCODING_ENGINE): subscribed in the engine encoding (%s)", r ? err : "");
+    fxc_event_free(&ev);
+    check(fxc_subscribe_encoding(c, "flame", 0, (enum fxs_encoding)7, err, sizeof err) == -1 && strstr(err, "encoding 7"),
+          "an unknown encoding is refused before sending: %s", err);
+    r = wait_event(c, &ev, 20000, is_engine_frame, &flame);
+    struct fxc_particles p = { 0 };
+    int d = r == 1 ? fxc_decode_particles(&ev.header, ev.payload, &p, err, sizeof err) : -1;
+    if (d == 1) {
+        p.capacity = p.count;
+        p.xyz = malloc(sizeof(float) * 3 * (p.capacity + 1));
+        p.temperature = malloc(sizeof(float) * (p.capacity + 1));
+        d = fxc_decode_particles(&ev.header, ev.payload, &p, err, sizeof err);
+    }
+    int sane = d == 0 && p.count > 0;
+    for (uint32_t i = 0; sane && i < p.count; i++) sane = p.temperature[i] > 0 && p.temperature[i] < 10000;
+    check(sane && p.count == ev.header.count_or_width && !p.has_flags && !p.has_fuel,
+          "fxc_decode_particles reads an engine frame without flag or fuel arrays: %u particles, T in kelvin (%s)",
+          p.count, d ? err : "");
+    free(p.xyz);
+    free(p.temperature);
+    fxc_event_free(&ev);
+    check(fxc_subscribe_encoding(c, "energy", 0, FXS_ENCODING_ENGINE, err, sizeof err) > 0, "energy in the engine encoding");
+    r = wait_event(c, &ev, 20000, is_engine_frame, &energy);
+    struct fxc_texture t = { 0 };
+    d = r == 1 ? fxc_decode_texture(&ev.header, ev.payload, &t, err, sizeof err) : -1;
+    if (d == 1) {
+        t.capacity = (size_t)t.width * t.height * t.channels;
+        t.texels = malloc(sizeof(float) * t.capacity);
+        d = fxc_decode_texture(&ev.header, ev.payload, &t, err, sizeof err);
+    }
+    check(d == 0 && t.width == ev.header.count_or_width && t.height == ev.header.height &&
+              (t.channels == 1 || t.channels == 4),
+          "fxc_decode_texture: %ux%u, %u channels, as the header says (%s)", t.width, t.height, t.channels, d ? err : "");
+    free(t.texels);
+    fxc_event_free(&ev);
+    for (int i = 0; i < 2; i++) {
+        id = fxc_unsubscribe(c, i ? "energy" : "flame", err, sizeof err);
+        fxc_wait(c, id, &ev, 10000, err, sizeof err);
+        fxc_event_free(&ev);
+    }
+}
+
 /* The daemon stops: poll reports the end; an event taken before fxc_close outlives it. */
 static void check_end(struct fxc_client *c, long pid)
 {
@@ -320,6 +379,7 @@ int main(int argc, char **argv)
     check_requests(a, rev);
     check_two_clients(argv[1], a);
     check_frames(a);
+    check_engine(a);
     check_failures_and_log(argv[1]);
     check_end(a, atol(argv[2]));
     printf("info longest fxc_poll(..., 0, ...) call: %.3f ms wall, %.3f ms CPU\n", longest_poll_ms,

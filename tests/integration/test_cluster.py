@@ -544,8 +544,9 @@ async def test_flushall(t):
 
 async def test_bad_values(t):
     """What Redis holds is read like any input: a lease value that does not parse or never
-    expires, a change counter set back or not a number, a revision out of range are logged,
-    counted in fxs_cluster_bad_values_total and repaired; the cluster goes on."""
+    expires, a change counter set back or not a number, a revision out of range, a demand whose
+    expiry is not a number are logged, counted in fxs_cluster_bad_values_total and repaired; the
+    cluster goes on. A valid demand for the engine encoding is followed."""
     a = await Client.connect(A)
     for value in ("0", "abc"):
         before = bad_values("seq")
@@ -583,6 +584,23 @@ async def test_bad_values(t):
         t.check(f is not None and await owner("c1", (A, B, C)) is not None and 0 < ttl <= LEASE_TTL_S * 1000,
                 "%s in fxs:lease:c1: c1 is still computed, its lease repaired (ttl %s ms)" % (what, ttl))
         t.check(bad_values("lease") > before, "and counted (fxs_cluster_bad_values_total{what=\"lease\"})")
+    # The demand names encodings (field NODE or NODE|engine) and is checked like the rest.
+    before = bad_values("lease")
+    R.cmd("HSET", "fxs:want:c1", "ghost|engine", "soon")
+    gone = await until(lambda: R.cmd("HEXISTS", "fxs:want:c1", "ghost|engine") == 0, timeout=5)
+    t.check(gone and bad_values("lease") > before,
+            "a demand ghost|engine whose expiry is not a number: removed and counted (%s)" % gone)
+    t.check(R.cmd("EXISTS", "fxs:frame:c1:2:engine") == 0, "nobody takes c1's engine encoding: none in Redis")
+
+    def engine_kept():
+        sec, usec = R.cmd("TIME")
+        R.cmd("HSET", "fxs:want:c1", "ghost|engine", str(int(sec) * 1000 + int(usec) // 1000 + 2000))
+        return R.cmd("EXISTS", "fxs:frame:c1:2:engine") == 1
+
+    t.check(await until(engine_kept, timeout=8, step=0.5),
+            "another daemon's demand for the engine encoding (ghost|engine): c1's owner makes its engine "
+            "frames and keeps the latest in fxs:frame:c1:2:engine")
+    R.cmd("HDEL", "fxs:want:c1", "ghost|engine")
     await sub.close()
     s = await a.request("set", stream="c1", params={"alpha": 1.0})
     t.check(s.get("op") == "params", "sets go on (rev %s)" % s.get("rev"))

@@ -52,12 +52,12 @@ async def owner_of(stream, timeout=10.0):
     return await until(find, timeout=timeout, step=0.1)
 
 
-async def subscriber(d, stream=STREAM):
+async def subscriber(d, stream=STREAM, **opts):
     c = await Client.connect(d)
     # Unbounded receive queue: a subscriber that stops reading would otherwise stop reading the
     # socket too, and its close would wait out the close timeouts behind unread frames.
     c.ws.max_queue = None
-    r = await c.request("subscribe", stream=stream)
+    r = await c.request("subscribe", stream=stream, **opts)
     c.channel = r.get("channel")
     return c
 
@@ -150,6 +150,35 @@ async def test_fanout(t):
     t.check(ok, "every subscriber's frames come at rev 2")
     for c in subs.values():
         await c.close()
+    await e.close()
+
+
+async def test_encodings(t):
+    """Subscribers of the engine encoding on daemons that do not compute the stream: the owner
+    makes both encodings, the same frame has the same number in both everywhere, Redis keeps
+    the latest of each, and a new engine subscriber elsewhere gets it at once."""
+    e = await Client.connect(E)
+    await e.request("create", effect="energy_wave", stream="enc", params=SMALL)
+    eng, dft = await subscriber(E, "enc", encoding="engine"), await subscriber(E, "enc")
+    fe = await frames_after(eng, 0, n=4, timeout=15)
+    fd = await frames_after(dft, 0, n=4, timeout=15)
+    t.check(all(f["codec"] == 16 and f["payload"][:4] == b"FXE1" for f in fe) and all(f["codec"] == 1 for f in fd),
+            "the edge relays engine frames (codec 16) to one subscriber and EXR (codec 1) to the other")
+    t.check([f["seq"] for f in fe] == sorted({f["seq"] for f in fe}), "engine frames' numbers increase")
+    later = await frames_after(dft, fe[-1]["seq"] - 1, n=1, timeout=10)
+    t.check(later[0]["seq"] >= fe[-1]["seq"] and fd[0]["seq"] <= fe[-1]["seq"] + 30,
+            "both encodings number the same frames alike (engine %d, default %d..%d)" % (fe[-1]["seq"], fd[0]["seq"], later[0]["seq"]))
+    t.check(R.cmd("EXISTS", "fxs:frame:enc:2:engine") == 1 and R.cmd("EXISTS", "fxs:frame:enc:2") == 1,
+            "Redis keeps the latest frame of each encoding (fxs:frame:enc:2, fxs:frame:enc:2:engine)")
+    o = await owner_of("enc")
+    other = Q if o is P else P
+    c = await subscriber(other, "enc", encoding="engine")
+    f = await c.frame(timeout=5, kind=2)
+    t.check(f["codec"] == 16 and f["channel"] == c.channel, "a new engine subscriber on the other compute daemon gets one at once")
+    for x in (eng, dft, c):
+        await x.close()
+    await e.request("destroy", stream="enc")
+    t.check(R.cmd("EXISTS", "fxs:frame:enc:2:engine") == 0, "destroy removes the engine frames from Redis")
     await e.close()
 
 
@@ -342,7 +371,7 @@ if __name__ == "__main__":
     try:
         P, Q = compute("p"), compute("q")
         E = cluster_daemon(R, "e", "--role", "edge")
-        s.run([test_roles, test_fanout, test_spread, test_latest_frame, test_fxload, test_failover, test_fencing,
+        s.run([test_roles, test_fanout, test_spread, test_latest_frame, test_encodings, test_fxload, test_failover, test_fencing,
                test_handover, test_redis_restart, test_shutdown])
     finally:
         stop_all((P, Q, E), R)

@@ -157,6 +157,40 @@ check_subscribe_ply() {
     done
 }
 
+# --encoding engine (PROTOCOL.md §7.8): particles decoded into PLY (x y z temperature, then
+# vx vy vz with velocities), textures written as the EXR of their halves; bad names refused.
+check_subscribe_engine() {
+    for vel in true false; do
+        out=$tmp/engine-$vel
+        fx set flame velocities=$vel; check "set flame velocities=$vel" 0 '"velocities":'"$vel"
+        fx subscribe flame --frames 3 --encoding engine --out "$out"
+        check "subscribe flame --encoding engine (velocities $vel)" 0 '"codec":16'
+        last=$(ls "$out"/flame-*.ply 2>/dev/null | sort -t- -k2 -n | tail -n 1)
+        n=$(sed -n 's/^element vertex \([0-9]*\)$/\1/p' "$last" 2>/dev/null | head -n 1)
+        size=$(wc -c <"$last" 2>/dev/null || echo 0)
+        head_bytes=$(grep -a -b -m 1 '^end_header$' "$last" 2>/dev/null | cut -d: -f1)
+        rec=16
+        if [ "$vel" = true ]; then rec=28; fi
+        if [ -n "$n" ] && [ "$n" -gt 0 ] && ! grep -a -q '^property float fuel$' "$last" &&
+            [ "$size" -eq $((head_bytes + 11 + n * rec)) ]; then
+            pass "engine PLY of $n particles, $rec-byte records (velocities $vel)"
+        else
+            fail "engine PLY records (velocities $vel): n=$n, $size bytes"
+        fi
+    done
+    out=$tmp/engine-tex
+    fx subscribe energy --frames 2 --kind 2 --encoding engine --out "$out"
+    check "subscribe energy --encoding engine" 0 '"codec":16'
+    first=$(ls "$out"/energy-*.exr 2>/dev/null | head -n 1)
+    if [ -n "$first" ] && exrheader "$first" >"$tmp/out" 2>"$tmp/err" && grep -q '(0 0) - (255 255)' "$tmp/out"; then
+        pass "the engine texture as a 256x256 EXR"
+    else
+        fail "the engine texture as a 256x256 EXR"
+    fi
+    fx subscribe flame --frames 1 --encoding engin; check "--encoding engin is a usage error" 2 "" "--encoding needs default or engine"
+    fx list --encoding engine; check "--encoding outside subscribe: usage error" 2 "" "go with subscribe only"
+}
+
 # A subscriber prints its stream's params broadcasts and fails clearly when the
 # stream is destroyed under it.
 check_destroyed() {
@@ -260,6 +294,7 @@ check_subscribe_rig
 check_subscribe_steps
 check_subscribe_timeout
 check_subscribe_ply
+check_subscribe_engine
 check_destroyed
 check_watch
 check_presets

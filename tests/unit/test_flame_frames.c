@@ -24,14 +24,16 @@ struct tff_seen {
     struct fxs_particles last;
 };
 
-static int tff_emit(void *ctx, const struct effect_frame *f)
+static int tff_emit(void *ctx, const struct effect_frame *fr)
 {
     struct tff_seen *s = ctx;
+    struct effect_frame f = *fr;
+    struct fx_err err = {0};
     char msg[160];
     s->frames++;
     fxs_particles_free(&s->last);
-    if (f->kind != FXS_KIND_PARTICLES || fxs_particles_decode(f->payload, f->payload_bytes, &s->last, msg, sizeof msg) ||
-        s->last.n != f->count_or_width)
+    if (f.kind != FXS_KIND_PARTICLES || effect_frame_encode(&f, &err) ||
+        fxs_particles_decode(f.payload, f.payload_bytes, &s->last, msg, sizeof msg) || s->last.n != f.count_or_width)
         s->bad++;
     return 0;
 }

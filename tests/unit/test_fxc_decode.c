@@ -1,12 +1,14 @@
 /* test_fxc_decode.c — the payload decoders of libfxclient's public API (fxclient.h):
- * fxc_decode_particles, fxc_decode_rig and fxc_decode_lut write into the caller's arrays
- * exactly what the protocol/ codecs decode, answer 1 with the counts (and write nothing) when
- * an array is missing or too small, and refuse other kinds, header/payload disagreements and
- * cut payloads with -1 and a message. Frames are built with the daemon's encoders. */
+ * fxc_decode_particles (codecs 2, 3 and the engine encoding's 16), fxc_decode_texture (the
+ * engine encoding), fxc_decode_rig and fxc_decode_lut write into the caller's arrays exactly
+ * what the protocol/ codecs decode, answer 1 with the counts (and write nothing) when an array
+ * is missing or too small, and refuse other kinds, header/payload disagreements and cut
+ * payloads with -1 and a message. Frames are built with the daemon's encoders. */
 #include <string.h>
 
 #include "check.h"
 #include "fxclient.h"
+#include "fxs_engine.h"
 #include "fxs_lut.h"
 #include "fxs_rig.h"
 #include "particles_gen.h"
@@ -46,7 +48,8 @@ static void test_particles(void)
     if (!payload) return;
     CHECK(fxs_particles_decode(payload, len, &ref, err, sizeof err) == 0, "reference decode: %s", err);
     CHECK(fxc_decode_particles(&h, payload, &p, err, sizeof err) == 0, "decode: %s", err);
-    CHECK(p.count == 3000 && p.has_velocity, "count %u, velocities %d", p.count, p.has_velocity);
+    CHECK(p.count == 3000 && p.has_velocity && p.has_flags && p.has_fuel, "count %u, velocities %d, flags %d, fuel %d",
+          p.count, p.has_velocity, p.has_flags, p.has_fuel);
     CHECK(!memcmp(xyz, ref.xyz, sizeof xyz) && !memcmp(t, ref.temp, sizeof t) && !memcmp(fuel, ref.fuel, sizeof fuel) &&
               !memcmp(flags, ref.flags, sizeof flags) && !memcmp(vel, ref.vel, sizeof vel),
           "the same floats as fxs_particles_decode");
@@ -122,6 +125,123 @@ static void test_particle_blocks(void)
     CHECK(fxc_decode_particles(&h, payload, &none, err, sizeof err) == 0 && none.count == 0,
           "0 particles need no arrays: %s", err);
     fxs_particles_free(&src);
+    free(payload);
+}
+
+/* The engine encoding's particles: positions, temperatures and velocities as the protocol's
+ * decoder gives them; flags and fuel marked absent and left alone. */
+static void test_engine_particles(void)
+{
+    struct fxs_particles src = { 0 }, ref;
+    uint8_t *payload = NULL;
+    size_t len = 0;
+    char err[256];
+    pgen_random(&src, 2500, 0.3);
+    src.vel = calloc(3 * 2500, sizeof *src.vel);
+    for (uint32_t i = 0; i < 3 * 2500; i++) src.vel[i] = (float)(pgen_rand() - 0.5);
+    CHECK(fxs_engine_encode_particles(&src, FXS_ENGINE_ZSTD_LEVEL, &payload, &len, err, sizeof err) == 0, "encode: %s",
+          err);
+    CHECK(fxs_engine_decode_particles(payload, len, &ref, err, sizeof err) == 0, "reference decode: %s", err);
+    struct fxs_header h = header_for(FXS_KIND_PARTICLES, FXS_CODEC_ENGINE, len, 2500);
+    static float xyz[3 * 2500], t[2500], fuel[2500], vel[3 * 2500];
+    static uint8_t flags[2500];
+    memset(fuel, 0x55, sizeof fuel);
+    memset(flags, 0x55, sizeof flags);
+    struct fxc_particles p = { .capacity = 2500, .xyz = xyz, .temperature = t, .flags = flags, .fuel = fuel,
+                               .velocity = vel };
+    CHECK(fxc_decode_particles(&h, payload, &p, err, sizeof err) == 0, "decode: %s", err);
+    CHECK(p.count == 2500 && p.has_velocity && !p.has_flags && !p.has_fuel, "count %u, velocities %d, flags %d, fuel %d",
+          p.count, p.has_velocity, p.has_flags, p.has_fuel);
+    CHECK(!memcmp(xyz, ref.xyz, sizeof xyz) && !memcmp(t, ref.temp, sizeof t) && !memcmp(vel, ref.vel, sizeof vel),
+          "the same floats as fxs_engine_decode_particles");
+    CHECK(fuel[2499] == fuel[0] && flags[2499] == 0x55 && flags[0] == 0x55, "fuel and flags not written");
+
+    /* flags, fuel and velocities are not needed */
+    memset(xyz, 0, sizeof xyz);
+    struct fxc_particles q = { .capacity = 2500, .xyz = xyz, .temperature = t };
+    CHECK(fxc_decode_particles(&h, payload, &q, err, sizeof err) == 0 && !memcmp(xyz, ref.xyz, sizeof xyz) &&
+              q.has_velocity,
+          "positions and temperatures only: %s", err);
+    q.capacity = 2499;
+    xyz[0] = 0;
+    CHECK(fxc_decode_particles(&h, payload, &q, err, sizeof err) == 1 && q.count == 2500 && xyz[0] == 0,
+          "capacity 2499: 1 with the count, arrays untouched");
+    q.capacity = 2500;
+    q.temperature = NULL;
+    CHECK(fxc_decode_particles(&h, payload, &q, err, sizeof err) == 1, "no temperature array: 1");
+
+    /* refused */
+    struct fxs_header bad = h;
+    bad.count_or_width = 2501;
+    CHECK(fxc_decode_particles(&bad, payload, &p, err, sizeof err) == -1 && strstr(err, "header count 2501"),
+          "header count disagrees: %s", err);
+    bad = h;
+    bad.payload_bytes = (uint32_t)len - 1;
+    CHECK(fxc_decode_particles(&bad, payload, &p, err, sizeof err) == -1 && strstr(err, "zstd"), "a cut payload: %s",
+          err);
+    bad = h;
+    bad.codec = FXS_CODEC_PARTICLES;
+    CHECK(fxc_decode_particles(&bad, payload, &p, err, sizeof err) == -1, "read as codec 2: -1 (%s)", err);
+    fxs_particles_free(&ref);
+    fxs_particles_free(&src);
+    free(payload);
+}
+
+/* The engine encoding's textures, one and four channels, as the halves of the input. */
+static void test_engine_texture(void)
+{
+    static float src[4 * 33 * 17], out[4 * 33 * 17];
+    char err[256];
+    for (int channels = 1; channels <= 4; channels += 3) {
+        uint8_t *payload = NULL;
+        size_t len = 0, n = (size_t)channels * 33 * 17;
+        for (size_t i = 0; i < n; i++) src[i] = (float)(pgen_rand() * 100 - 20);
+        CHECK(fxs_engine_encode_texture(src, 33, 17, (uint32_t)channels, FXS_ENGINE_ZSTD_LEVEL, &payload, &len, err,
+                                        sizeof err) == 0,
+              "encode: %s", err);
+        struct fxs_header h = header_for(FXS_KIND_TEXTURE, FXS_CODEC_ENGINE, len, 33);
+        h.height = 17;
+        struct fxc_texture tex = { 0 };
+        CHECK(fxc_decode_texture(&h, payload, &tex, err, sizeof err) == 1 && tex.width == 33 && tex.height == 17 &&
+                  tex.channels == (uint32_t)channels,
+              "no array: 1 with the size, %u channels", tex.channels);
+        tex.texels = out;
+        tex.capacity = n - 1;
+        out[0] = -1;
+        CHECK(fxc_decode_texture(&h, payload, &tex, err, sizeof err) == 1 && out[0] == -1, "one float short: 1, untouched");
+        tex.capacity = n;
+        int same = fxc_decode_texture(&h, payload, &tex, err, sizeof err) == 0;
+        for (size_t i = 0; same && i < n; i++) same = out[i] == fxs_half_to_float(fxs_half_from_float(src[i]));
+        CHECK(same, "%d channels: the halves of the input, row 0 first (%s)", channels, err);
+        struct fxs_header bad = h;
+        bad.height = 16;
+        CHECK(fxc_decode_texture(&bad, payload, &tex, err, sizeof err) == -1 && strstr(err, "33x16"),
+              "header size disagrees: %s", err);
+        bad = h;
+        bad.payload_bytes = 63;
+        CHECK(fxc_decode_texture(&bad, payload, &tex, err, sizeof err) == -1, "a cut payload: %s", err);
+        bad = h;
+        bad.codec = FXS_CODEC_EXR;
+        CHECK(fxc_decode_texture(&bad, payload, &tex, err, sizeof err) == -1 && strstr(err, "OpenEXR"),
+              "an EXR texture: %s", err);
+        bad = h;
+        bad.kind = FXS_KIND_PARTICLES;
+        CHECK(fxc_decode_texture(&bad, payload, &tex, err, sizeof err) == -1 && strstr(err, "not a texture frame"),
+              "kind 1: %s", err);
+        free(payload);
+    }
+    /* a particle payload is not a texture */
+    struct fxs_particles p = { 0 };
+    uint8_t *payload = NULL;
+    size_t len = 0;
+    pgen_random(&p, 10, 0.3);
+    CHECK(fxs_engine_encode_particles(&p, 1, &payload, &len, err, sizeof err) == 0, "encode: %s", err);
+    struct fxs_header h = header_for(FXS_KIND_TEXTURE, FXS_CODEC_ENGINE, len, 1024);
+    h.height = 1;
+    struct fxc_texture tex = { .capacity = sizeof out / sizeof *out, .texels = out };
+    CHECK(fxc_decode_texture(&h, payload, &tex, err, sizeof err) == -1 && strstr(err, "count 0"),
+          "particles as a texture: %s", err);
+    fxs_particles_free(&p);
     free(payload);
 }
 
@@ -203,6 +323,8 @@ int main(void)
 {
     RUN(test_particles);
     RUN(test_particle_blocks);
+    RUN(test_engine_particles);
+    RUN(test_engine_texture);
     RUN(test_rig);
     RUN(test_lut);
     return CHECK_DONE();

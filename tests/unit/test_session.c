@@ -88,6 +88,8 @@ static void test_hello(void)
     CHECK(!strcmp(cJSON_GetObjectItem(h, "protocol")->valuestring, "fxstream.v1"), "protocol");
     CHECK(cJSON_GetArraySize(cJSON_GetObjectItem(h, "effects")) >= 1, "effects");
     CHECK(cJSON_GetObjectItem(cJSON_GetObjectItem(h, "limits"), "max_message_bytes")->valueint == 4096, "limits");
+    const cJSON *enc = cJSON_GetObjectItem(h, "encodings");
+    CHECK(cJSON_GetArraySize(enc) == 2 && !strcmp(cJSON_GetArrayItem(enc, 1)->valuestring, "engine"), "encodings");
     cJSON_Delete(h);
     t_server_free();
 }
@@ -232,6 +234,42 @@ static void test_broadcast(void)
         cJSON_Delete(ev);
     }
     CHECK(b->nsubs == 0, "subscription dropped");
+    t_server_free();
+}
+
+/* subscribe's `encoding`: the reply names it, the hub counts subscribers per encoding, a new
+ * one replaces the old; a bad one is bad_request (param encoding, with the nearest name),
+ * checked after max_fps and before the stream, and changes nothing. */
+static void test_subscribe_encoding(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    cJSON_Delete(t_req(s, "{\"op\":\"create\",\"effect\":\"flame\",\"stream\":\"f\"}"));
+    struct stream *st = t_srv.hub.streams[0];
+    cJSON *r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"engine\"}");
+    CHECK(!strcmp(t_op(r), "subscribed") && !strcmp(cJSON_GetObjectItem(r, "encoding")->valuestring, "engine"), "engine");
+    cJSON_Delete(r);
+    CHECK(st->subscribers == 1 && st->subscribers_by[FXS_ENCODING_ENGINE] == 1 && st->subscribers_by[FXS_ENCODING_DEFAULT] == 0,
+          "counted as engine");
+    r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\"}");
+    CHECK(!strcmp(cJSON_GetObjectItem(r, "encoding")->valuestring, "default"), "omitted: default");
+    cJSON_Delete(r);
+    CHECK(st->subscribers == 1 && st->subscribers_by[FXS_ENCODING_ENGINE] == 0 && st->subscribers_by[FXS_ENCODING_DEFAULT] == 1,
+          "re-subscribing moves the subscription to the default");
+    r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"engin\"}");
+    CHECK(!strcmp(t_code(r), "bad_request") && !strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "encoding") &&
+          strstr(cJSON_GetObjectItem(r, "message")->valuestring, "did you mean \"engine\""), "misspelt encoding");
+    cJSON_Delete(r);
+    t_expect_error(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":2}", "bad_request");
+    t_expect_error(s, "{\"op\":\"subscribe\",\"stream\":\"nope\",\"encoding\":\"x\"}", "bad_request");
+    t_expect_error(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"x\",\"max_fps\":0}", "bad_request");
+    r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"x\",\"max_fps\":0}");
+    CHECK(!strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "max_fps"), "max_fps is checked first");
+    cJSON_Delete(r);
+    CHECK(st->subscribers_by[FXS_ENCODING_DEFAULT] == 1 && st->subscribers_by[FXS_ENCODING_ENGINE] == 0, "errors changed nothing");
+    cJSON_Delete(t_req(s, "{\"op\":\"unsubscribe\",\"stream\":\"f\"}"));
+    CHECK(st->subscribers == 0 && st->subscribers_by[FXS_ENCODING_DEFAULT] == 0, "unsubscribed");
     t_server_free();
 }
 
@@ -432,6 +470,7 @@ int main(void)
     RUN(test_error_echoes_id_and_param);
     RUN(test_set_all_or_nothing);
     RUN(test_broadcast);
+    RUN(test_subscribe_encoding);
     RUN(test_stream_error_event);
     RUN(test_receive_limits);
     RUN(test_rate_limit);

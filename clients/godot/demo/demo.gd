@@ -1,0 +1,32 @@
+# demo.gd — the demo scene's script: points the client at FXSTREAM_URL when that is set (else
+# the Client node's url, fxstreamd's default), turns the camera slowly around the scene, and
+# with `--screenshot PATH` on the command line saves a picture once every stream has drawn and
+# quits (how README's screenshot is made). The demo's addons/fxstream is a link to
+# clients/godot/addons/fxstream: copy the folder instead where links are not followed (Windows).
+# Start fxstreamd first (make run).
+extends Spatial
+
+var _shot := ""
+var _t := 0.0
+
+
+func _ready() -> void:
+	var url := OS.get_environment("FXSTREAM_URL")
+	if url != "":
+		$Client.url = url
+		$Client.connect_to_server()
+	var args := Array(OS.get_cmdline_args())
+	var i := args.find("--screenshot")
+	if i >= 0 and i + 1 < args.size():
+		_shot = args[i + 1]
+
+
+func _process(delta: float) -> void:
+	_t += delta
+	$CameraPivot.rotation.y = 0.35 * sin(0.15 * _t)
+	if _shot != "" and _t > 4.0 and $Flame.particles > 0 and $Wave.width > 0 and $Rig.lights_shown > 0:
+		var img := get_viewport().get_texture().get_data()
+		img.flip_y()
+		img.save_png(_shot)
+		print("saved ", _shot)
+		get_tree().quit()

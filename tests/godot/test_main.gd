@@ -1,0 +1,422 @@
+# test_main.gd — the fxstream add-on in the real engine (godot3-server, dummy renderer), run by
+# tests/integration/test_godot.py against a real daemon (FXS_URL) and a fake server that sends
+# malformed input (FXS_FAKE_URL). Prints "ok   CHECK" / "FAIL CHECK" lines; the exit status is
+# the number of failed checks. Talks to the driver through files in FXS_OUT (the driver cannot
+# write to Godot's stdin without blocking it): it asks for fxctl to run (fxctl-go), for the
+# daemon to be killed and restarted (restart-go), and dumps decoded particles for the driver
+# to compare with libfxclient's decoding of the same frames (godot-flame-SEQ.bin).
+# Assertions are on what the add-on hands the engine (images, MultiMesh counts, lights): the
+# dummy renderer runs no shaders. Times: a game frame's wall time less what the kernel says
+# the main thread waited for a CPU (/proc/thread-self/schedstat), so other processes on a
+# loaded machine do not count as the add-on blocking the loop, and a call that sleeps does.
+extends SceneTree
+
+const Client = preload("res://addons/fxstream/fx_client.gd")
+const Flame = preload("res://addons/fxstream/fx_flame.gd")
+const Texture_ = preload("res://addons/fxstream/fx_texture.gd")
+const Rig = preload("res://addons/fxstream/fx_light_rig.gd")
+const Eye = preload("res://addons/fxstream/fx_eye.gd")
+
+const BLOCK_LIMIT_USEC = 50000
+
+var passed := 0
+var failed := 0
+var out_dir := ""
+var frames := {}        # "client/stream/kind" -> frames received
+var bad_frames := []    # what failed a per-frame check
+var events := []        # [client, signal, args]
+var max_gap_usec := 0     # longest wall time between two idle frames
+var max_loop_usec := 0    # ... less the time the thread waited for a CPU
+var last_wait_usec := 0   # that wait in the latest interval
+var skip_interval := false # the test itself worked in this interval (a dump): not the add-on's
+var _last_idle := 0
+var _last_wait := 0
+var clients := []
+var longest := {}       # client name -> its longest idle-frame work, microseconds
+var a; var b; var m; var fake
+var flame; var wave; var rig; var eye
+
+
+func _initialize() -> void:
+	out_dir = OS.get_environment("FXS_OUT")
+	_run()
+
+
+func _idle(_delta: float) -> bool:
+	var now := OS.get_ticks_usec()
+	var wait := _run_queue_usec()
+	if _last_idle > 0 and not skip_interval:
+		last_wait_usec = wait - _last_wait
+		max_gap_usec = max(max_gap_usec, now - _last_idle)
+		max_loop_usec = max(max_loop_usec, now - _last_idle - last_wait_usec)
+	skip_interval = false
+	_last_idle = now
+	_last_wait = wait
+	return false
+
+
+# Microseconds the main thread has waited on a run queue (schedstat's second field).
+static func _run_queue_usec() -> int:
+	var f := File.new()
+	if f.open("/proc/thread-self/schedstat", File.READ) != OK:
+		return 0
+	var fields := f.get_line().split(" ")
+	f.close()
+	return int(fields[1]) / 1000 if fields.size() > 1 else 0
+
+
+func check(cond: bool, what: String) -> bool:
+	if cond:
+		passed += 1
+		print("ok   " + what)
+	else:
+		failed += 1
+		print("FAIL " + what)
+	return cond
+
+
+func _client(name: String, url: String) -> Node:
+	var c = Client.new()
+	c.name = name
+	c.url = url
+	c.reconnect_max_s = 1.0
+	root.add_child(c)
+	clients.append(c)
+	for sig in ["connected", "params", "error", "described", "list_received", "subscribed", "created"]:
+		c.connect(sig, self, "_on_event", [c, sig])
+	c.connect("frame_received", self, "_on_frame", [c])
+	return c
+
+
+# Signal arguments vary: the last two binds are the client and the signal's name.
+func _on_event(a0 = null, a1 = null, a2 = null, a3 = null, a4 = null, a5 = null, a6 = null) -> void:
+	var args := [a0, a1, a2, a3, a4, a5, a6]
+	while args.back() == null:
+		args.pop_back()
+	var sig = args.pop_back()
+	var c = args.pop_back()
+	events.append([c, sig, args])
+
+
+func _find(c, sig: String, pred: FuncRef = null, arg = null):
+	for e in events:
+		if e[0] == c and e[1] == sig and (pred == null or pred.call_func(e[2], arg)):
+			return e[2]
+	return null
+
+
+func _on_frame(stream: String, f, c) -> void:
+	var key := "%s/%s/%d" % [c.name, stream, f.kind]
+	frames[key] = frames.get(key, 0) + 1
+	if f.kind == f.KIND_PARTICLES:
+		var rows := int(ceil(f.count / 1024.0)) if f.count > 0 else 1
+		if f.image.get_format() != Image.FORMAT_RGBAH or f.image.get_width() != 1024 or f.image.get_height() != rows * (2 if f.velocities else 1):
+			bad_frames.append("flame seq %d: image %dx%d format %d for %d particles" % [f.seq, f.image.get_width(), f.image.get_height(), f.image.get_format(), f.count])
+		if f.count != f.count_or_width:
+			bad_frames.append("flame seq %d: %d particles decoded, header %d" % [f.seq, f.count, f.count_or_width])
+	elif f.kind == f.KIND_TEXTURE:
+		var fmt := Image.FORMAT_RGBAH if f.channels == 4 else Image.FORMAT_RH
+		if f.image.get_width() != f.count_or_width or f.image.get_height() != f.height or f.image.get_format() != fmt:
+			bad_frames.append("%s seq %d: image %dx%d format %d, header %dx%d, %d channels" % [stream, f.seq, f.image.get_width(), f.image.get_height(), f.image.get_format(), f.count_or_width, f.height, f.channels])
+
+
+# Frees a client and the nodes drawing its streams, keeping its longest work for the report.
+func _retire(c) -> void:
+	longest[c.name] = c.max_process_usec
+	for n in root.get_children():
+		if n.get("client") == c:
+			n.queue_free()
+	c.queue_free()
+
+
+func _count(c, stream: String, kind: int) -> int:
+	return frames.get("%s/%s/%d" % [c.name, stream, kind], 0)
+
+
+func _seconds(s: float) -> int:
+	return OS.get_ticks_msec() + int(s * 1000)
+
+
+func _file(name: String) -> String:
+	return out_dir.plus_file(name)
+
+
+func _touch(name: String) -> void:
+	var f := File.new()
+	f.open(_file(name), File.WRITE)
+	f.close()
+
+
+static func _is_id(args: Array, id) -> bool:
+	return args.back() == id
+
+
+static func _first_is(args: Array, v) -> bool:
+	return args[0] == v
+
+
+static func _params_event(args: Array, stream) -> bool:
+	return args[0] == stream and args[3] == 0
+
+
+# ---- the run ----
+
+func _run() -> void:
+	yield(self, "idle_frame")
+	a = _client("a", OS.get_environment("FXS_URL"))
+	b = _client("b", OS.get_environment("FXS_URL"))
+	yield(_test_hello(), "completed")
+	yield(_measure_default(), "completed")
+	yield(_test_streams(), "completed")
+	yield(_test_eye(), "completed")
+	yield(_test_dump(), "completed")
+	yield(_test_set(), "completed")
+	yield(_test_unknown_stream(), "completed")
+	yield(_test_restart(), "completed")
+	for c in [a, b]:
+		_retire(c) # the daemon's streams pause: the fake server's frames are measured alone
+	yield(_test_bad_input(), "completed")
+	_retire(fake)
+	check(max_loop_usec < BLOCK_LIMIT_USEC, "no game frame took 50 ms or more, waits for a CPU aside (longest %.1f ms; wall %.1f ms)" % [
+			max_loop_usec / 1000.0, max_gap_usec / 1000.0])
+	for n in longest.keys():
+		print("game loop: client %s's longest idle-frame work %.1f ms (wall)" % [n, longest[n] / 1000.0])
+	print("test_godot_scene: %d passed, %d failed" % [passed, failed])
+	quit(failed)
+
+
+func _test_hello() -> void:
+	var end := _seconds(15)
+	while (not a.is_open() or not b.is_open()) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	check(a.is_open() and b.is_open(), "two clients connect and read hello")
+	check(a.hello.get("protocol") == "fxstream.v1" and "engine" in a.hello.get("encodings", []), "hello: fxstream.v1, offers the engine encoding")
+	var id_list = a.list()
+	var id_desc = a.describe("flame")
+	end = _seconds(10)
+	while (_find(a, "list_received", funcref(self, "_is_id"), id_list) == null or _find(a, "described", funcref(self, "_is_id"), id_desc) == null) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var l = _find(a, "list_received", funcref(self, "_is_id"), id_list)
+	var names := []
+	for s in (l[0] if l != null else []):
+		names.append(s["stream"])
+	check("flame" in names and "energy" in names and "eye" in names, "list: flame, energy and eye (%s)" % str(names))
+	var d = _find(a, "described", funcref(self, "_is_id"), id_desc)
+	check(d != null and d[0].get("effect") == "flame" and d[0].get("params", []).size() > 10, "describe flame: its parameter schema")
+
+
+func _test_streams() -> void:
+	flame = Flame.new()
+	flame.client_path = a.get_path()
+	root.add_child(flame)
+	wave = Texture_.new()
+	wave.client_path = a.get_path()
+	root.add_child(wave)
+	rig = Rig.new()
+	rig.client_path = a.get_path()
+	root.add_child(rig)
+	var end := _seconds(30)
+	while (_count(a, "flame", 1) < 10 or _count(a, "energy", 2) < 10 or _count(a, "energy", 3) < 10) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	check(_count(a, "flame", 1) >= 10, "flame: >= 10 particle frames in the engine encoding (%d)" % _count(a, "flame", 1))
+	check(_count(a, "energy", 2) >= 10 and _count(a, "energy", 3) >= 10, "energy: >= 10 texture and light-rig frames (%d, %d)" % [_count(a, "energy", 2), _count(a, "energy", 3)])
+	check(flame.last_frame != null and flame.particles == flame.last_frame.count_or_width and flame.particles > 0,
+			"flame: the particles drawn are the header's count (%d)" % flame.particles)
+	var mm: MultiMesh = flame._sprites.multimesh
+	check(mm.visible_instance_count == flame.particles and mm.instance_count >= flame.particles, "flame: the MultiMesh draws that many instances")
+	check(wave.width == 256 and wave.height == 256 and wave.channels == 1 and wave.texture.get_width() == 256,
+			"energy: a 256x256 one-channel texture on the material (%dx%d, %d channels)" % [wave.width, wave.height, wave.channels])
+	check(rig.lights_shown > 0 and rig.lights_shown <= rig.max_lights and rig.get_child_count() >= rig.lights_shown,
+			"energy: the light rig's strongest segments as lights (%d of %d lit)" % [rig.lights_shown, rig.lit_segments])
+	check(bad_frames.empty(), "every frame's image matches its header (%s)" % str(bad_frames.slice(0, 2)))
+
+
+# The compound eye sends a frame per change: a bake stream of its own, changed ten times.
+func _test_eye() -> void:
+	var id = a.send_request("create", {"effect": "compound_eye", "stream": "eyebake",
+			"params": {"mode": "bake", "bake_size": 128, "model": "hemisphere"}})
+	var end := _seconds(10)
+	while a._pending.has(id) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	check(_find(a, "created", funcref(self, "_first_is"), "eyebake") != null, "create a compound_eye stream in mode bake")
+	eye = Eye.new()
+	eye.stream = "eyebake"
+	eye.client_path = a.get_path()
+	root.add_child(eye)
+	for i in range(12):
+		var before := _count(a, "eyebake", 2)
+		a.set_params("eyebake", {"light": [0.2 + 0.1 * i, 0.6, 1.0]})
+		end = _seconds(20)
+		while _count(a, "eyebake", 2) <= before and OS.get_ticks_msec() < end:
+			yield(self, "idle_frame")
+	check(_count(a, "eyebake", 2) >= 10, "eye (bake): >= 10 texture frames in the engine encoding (%d)" % _count(a, "eyebake", 2))
+	check(eye.width == 128 and eye.height == 128 and eye.texture.get_width() == 128 and eye.last_frame.channels == 4,
+			"eye: a 128x128 RGBA bake on the model's mesh")
+	check(bad_frames.empty(), "every eye frame's image matches its header")
+
+
+# Decoded positions and temperatures of a few flame frames, for the driver to compare with
+# fxctl's decoding of the same seq (it subscribes with both encodings meanwhile).
+func _test_dump() -> void:
+	_touch("fxctl-go")
+	var end := _seconds(15)
+	while not File.new().file_exists(_file("fxctl-running")) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var dumped := 0
+	var last_seq := 0
+	end = _seconds(15)
+	while dumped < 6 and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+		var f = flame.last_frame
+		if f == null or f.seq <= last_seq + 3:
+			continue
+		last_seq = f.seq
+		_dump(f)
+		skip_interval = true
+		dumped += 1
+	_touch("godot-dumped")
+	check(dumped == 6, "dumped 6 decoded flame frames for the driver to compare")
+
+
+func _dump(f) -> void:
+	var out := File.new()
+	out.open(_file("godot-flame-%d.bin" % f.seq), File.WRITE)
+	out.store_32(f.count)
+	f.image.lock()
+	for i in range(f.count):
+		var c: Color = f.image.get_pixel(i % f.width, i / f.width)
+		out.store_float(f.origin.x + c.r)
+		out.store_float(f.origin.y + c.g)
+		out.store_float(f.origin.z + c.b)
+		out.store_float(c.a)
+	f.image.unlock()
+	out.close()
+
+
+func _test_set() -> void:
+	b.subscribe("energy")
+	var end := _seconds(10)
+	while _find(b, "subscribed", funcref(self, "_first_is"), "energy") == null and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var id_get = a.get_params("energy")
+	end = _seconds(10)
+	while _find(a, "params", funcref(self, "_is_id"), id_get) == null and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var got = _find(a, "params", funcref(self, "_is_id"), id_get)
+	var rev0: int = got[1] if got != null else -1
+	var id_set = a.set_params("energy", {"alpha": 2.5})
+	end = _seconds(10)
+	while (_find(a, "params", funcref(self, "_is_id"), id_set) == null or _find(b, "params", funcref(self, "_params_event"), "energy") == null) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var r = _find(a, "params", funcref(self, "_is_id"), id_set)
+	check(r != null and r[1] == rev0 + 1 and r[2].get("alpha") == 2.5, "set: the params reply with alpha 2.5 and the next rev (%s)" % str(r[1] if r else null))
+	var ev = _find(b, "params", funcref(self, "_params_event"), "energy")
+	check(ev != null and ev[1] == rev0 + 1, "another client's set arrives as a params event with that rev")
+	end = _seconds(10)
+	while wave.last_frame.param_rev < rev0 + 1 and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	check(wave.last_frame.param_rev == rev0 + 1, "energy frames then carry the new rev")
+	# Velocity lines: the stream's velocities on, a second layer in the texture, a line per particle.
+	flame.velocity_lines = true
+	a.set_params("flame", {"velocities": true})
+	end = _seconds(15)
+	while not (flame.last_frame != null and flame.last_frame.velocities) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var f = flame.last_frame
+	var lines: MultiMesh = flame._lines.multimesh
+	check(f.velocities and f.image.get_height() == 2 * f.rows and lines.visible_instance_count == f.count and f.count > 0,
+			"velocities: the frame's second layer and a velocity line per particle (%d)" % lines.visible_instance_count)
+
+
+static func _unknown(args: Array, _x) -> bool:
+	return args[0] == "unknown_stream"
+
+
+func _test_unknown_stream() -> void:
+	var id = a.subscribe("flam")
+	var end := _seconds(10)
+	while _find(a, "error", funcref(self, "_unknown"), null) == null and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var e = _find(a, "error", funcref(self, "_unknown"), null)
+	check(e != null and e[3] == id and "did you mean \"flame\"" in e[1], "unknown stream: the error signal with the server's did-you-mean (%s)" % str(e))
+	check(not a._subs.has("flam"), "a refused subscription is not made again")
+
+
+# FXS_FAKE_URL sends, after `subscribed`: a cut frame, a wrong payload size, a wrong raw size,
+# an unknown kind, an unknown codec, a corrupt zstd frame, invalid JSON, JSON that is no
+# object, an object without op; then a good frame; then 100 000-particle frames, measured.
+func _test_bad_input() -> void:
+	fake = _client("fake", OS.get_environment("FXS_FAKE_URL"))
+	var warnings := []
+	fake.connect("warning", self, "_collect", [warnings])
+	var big = Flame.new()
+	big.client_path = fake.get_path()
+	root.add_child(big)
+	var end := _seconds(15)
+	while _count(fake, "flame", 1) < 1 and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	check(fake.frames_dropped >= 6, "malformed frames dropped (%d)" % fake.frames_dropped)
+	check(fake.messages_dropped >= 3, "malformed messages dropped (%d)" % fake.messages_dropped)
+	check(warnings.size() >= 9, "each with a warning (%d): %s" % [warnings.size(), str(warnings.slice(0, 1))])
+	check(_count(fake, "flame", 1) == 1, "the good frame after them is decoded: the engine did not crash")
+	end = _seconds(10)
+	while big.particles < 100000 and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	yield(_measure("synthetic 100k flame", big, 5.0), "completed")
+
+
+func _collect(message: String, into: Array) -> void:
+	into.append(message)
+
+
+func _test_restart() -> void:
+	var conns: int = a.connections
+	var before := _count(a, "flame", 1)
+	_touch("restart-go")
+	var end := _seconds(20)
+	while not File.new().file_exists(_file("restarted")) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var t0 := OS.get_ticks_msec()
+	check(File.new().file_exists(_file("restarted")), "the driver restarted the daemon")
+	end = _seconds(10)
+	while (a.connections == conns or _count(a, "flame", 1) == before) and OS.get_ticks_msec() < end:
+		before = _count(a, "flame", 1) if a.connections == conns else before
+		yield(self, "idle_frame")
+	var took := (OS.get_ticks_msec() - t0) / 1000.0
+	check(a.connections > conns and _count(a, "flame", 1) > before and took <= 5.0,
+			"after the restart the client reconnects and flame frames resume within 5 s (%.2f s)" % took)
+
+
+# The default flame on a client of its own, so its frames are all it handles.
+func _measure_default() -> void:
+	m = _client("m", OS.get_environment("FXS_URL"))
+	var node = Flame.new()
+	node.client_path = m.get_path()
+	root.add_child(node)
+	var end := _seconds(15)
+	while node.particles == 0 and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	yield(_measure("default flame", node, 4.0), "completed")
+	_retire(m)
+
+
+# Per-frame client work (poll, decode, the flame node's update) for frames of one client.
+func _measure(label: String, node, seconds: float) -> void:
+	var c = node.client
+	var works := []
+	var seen: int = c.frames_decoded
+	var end := _seconds(seconds)
+	while OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+		if c.frames_decoded > seen and node.last_frame != null and last_wait_usec < 500:
+			works.append(c.last_process_usec) # only frames the OS did not hold up
+		seen = c.frames_decoded
+	works.sort()
+	if works.empty():
+		check(false, "%s: frames to measure" % label)
+		return
+	var total := 0
+	for w in works:
+		total += w
+	print("measure %s: %d particles, client work per frame %.2f ms mean, %.2f ms median, %.2f ms max over %d frames not held up by the OS" % [
+			label, node.particles, total / 1000.0 / works.size(), works[works.size() / 2] / 1000.0, works.back() / 1000.0, works.size()])
