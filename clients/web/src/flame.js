@@ -194,7 +194,7 @@ void main() {
 }`;
 
 // volume: one soft Gaussian kernel per particle, summed into a float target: (emission,
-// emission × heat, smoke density, 1). Below the clip plane (the plate under the sources)
+// emission × heat, smoke density, 1). Below the clip plane (the sources' plane)
 // the kernel is cut with a short fade, so no light is drawn under the base.
 const SPLAT_VERT = /* glsl */ `${COMMON_VERT}
 uniform float smokeT, smokeOn, kernel;
@@ -553,7 +553,7 @@ export class FlameView {
     const right = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 0);
     const camUp = new THREE.Vector3().setFromMatrixColumn(this.camera.matrixWorld, 1);
     su.upScreen.value.set(right.dot(up), camUp.dot(up));
-    su.clipFade.value = (s.baseFade ?? 1) * d;
+    su.clipFade.value = d;
     su.kernel.value = s.kernel;
     su.pointScale.value = sh / (2 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
     this.points.material = this.splat;
