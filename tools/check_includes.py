@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""check_includes.py — the #include graph of server/, protocol/, clients/c/ and the kernels'
+"""check_includes.py — the #include graph of server/, protocol/, common/, clients/c/ and the kernels'
 layout headers (kernels/*_layout.h) has no cycles, and protocol/ stands alone.
 
 A module is a source file's path without its extension (server/hub.c and server/hub.h are one
 module, server/hub). Module A depends on module B when A's .c or .h includes B's header, found
-as the compiler finds it: next to the including file, then in protocol/, server/, clients/c/,
-kernels/ (the Makefile's -I order). A cycle among modules means a newcomer must hold both files in mind
+as the compiler finds it: next to the including file, then in protocol/, common/, server/,
+clients/c/, kernels/ (the Makefile's -I order). A cycle among modules means a newcomer must hold both files in mind
 to change either; protocol/ is shared verbatim by the daemon and libfxclient, so it may include
 only itself and system headers. Prints each cycle or stray include, then
 "check_includes: N passed, M failed" (one check per rule); exits 1 on any failure.
@@ -15,8 +15,8 @@ import os
 import re
 import sys
 
-ROOTS = ("server", "protocol", "clients/c", "kernels")
-SEARCH = ("protocol", "server", "clients/c", "kernels")
+ROOTS = ("server", "protocol", "common", "clients/c", "kernels")
+SEARCH = ("protocol", "common", "server", "clients/c", "kernels")
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
 
