@@ -10,6 +10,7 @@
 // segments, stereographic uv); per vertex the tangent frame is the analytic ∂P/∂u, ∂P/∂v,
 // so density·uv is the lattice coordinate of eq. 5.1. An OBJ model (not sent to clients)
 // falls back to the hemisphere in mode lut and to the uv square in mode bake.
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { ViewOrbit } from './orbit.js';
 import { decompress } from 'fzstd';

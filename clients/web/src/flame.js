@@ -31,6 +31,7 @@
 // hdr: soft round additive sprites whose emission is the blackbody colour times a luminance
 //   that grows with heat, in linear HDR, tone-mapped with three's ACES filmic curve and an
 //   exposure control: a hot core is bright but rolls off instead of clipping.
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { decode, payloadOf } from '../fxs_particles.js';
 import { ACES_GLSL, SRGB_GLSL, fullscreenQuad } from './gl.js';

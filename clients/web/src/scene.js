@@ -6,6 +6,7 @@
 // back faces pushed out by d·|R_z| in view space; each model casts one clamped planar
 // shadow (direction from rig.js shadowDir, with the sign fix), t < 0 discarded, each pixel
 // darkened once (stencil). The wave itself is the stream's billboard, facing this camera.
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { ViewOrbit } from './orbit.js';
 import { SRGB_GLSL } from './gl.js';

@@ -7,6 +7,7 @@
 // and tone-maps with ACES filmic into its viewport; the toon scene's billboard uses the same
 // material with sRGB output and no bloom. The view's camera is the stream's: eye, center,
 // up, size (PROTOCOL.md §11.1).
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { EXRLoader } from 'three/examples/jsm/loaders/EXRLoader.js';
 import { UnrealBloomPass } from 'three/examples/jsm/postprocessing/UnrealBloomPass.js';
