@@ -17,6 +17,7 @@ clients/c/, kernels/ (the Makefile's -I order). Three rules, one check each:
      server/                       protocol/, common/, kernels/
      fxctl, fxload (clients/c)     libfxclient, protocol/, common/; never server/, nor each
                                    other
+     clients/c/examples/           libfxclient, protocol/ (the installed API)
      libfxclient (the rest of      protocol/ (common/ is not compiled into the library)
        clients/c)
    so the daemon and the clients meet only in protocol/ and common/.
@@ -46,6 +47,7 @@ LAYERS = (
     ("server", ("server/*",), ("protocol", "common", "kernels")),
     ("fxctl", ("clients/c/fxctl*", "clients/c/png"), ("libfxclient", "protocol", "common")),
     ("fxload", ("clients/c/fxload*",), ("libfxclient", "protocol", "common")),
+    ("examples", ("clients/c/examples/*",), ("libfxclient", "protocol")),
     ("libfxclient", ("clients/c/*",), ("protocol",)),
 )
 
