@@ -15,14 +15,19 @@ EXRLIB  := $(filter -lOpenEXRCore%,$(shell pkg-config --libs OpenEXR 2>/dev/null
 # build needs regardless lives in FX_CFLAGS/FX_LDLIBS so a command line cannot drop it.
 CFLAGS  ?= -O2 -g
 FX_CFLAGS := -std=c11 -D_GNU_SOURCE -Wall -Wextra -Werror -MMD -MP -pthread \
-             $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Iserver -Iclients/c -Ikernels
+             $(shell pkg-config --cflags $(PKGS) OpenEXR 2>/dev/null) -Iprotocol -Icommon -Iserver -Iclients/c -Ikernels
 FX_LDLIBS := $(shell pkg-config --libs $(PKGS) 2>/dev/null) $(EXRLIB) -lm -lpthread
 CC_ALL  = $(CC) $(FX_CFLAGS) $(CFLAGS)
 LINK    = $(CC) $(CFLAGS) $(LDFLAGS)
 
 # protocol/*.c (codecs shared by both sides) goes into the server and the client library.
 PROTO_SRC   := $(wildcard protocol/*.c)
-SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c server/codec/*.c)) $(PROTO_SRC)
+# common/*.c (helpers both sides own that are not the wire format: "did you mean") goes into
+# the server and into the programs that use it, not into libfxclient's API.
+COMMON_SRC  := $(wildcard common/*.c)
+COMMON_OBJ  := $(COMMON_SRC:%.c=$(BUILD)/obj/%.o)
+SERVER_SRC  := $(filter-out server/main.c,$(wildcard server/*.c server/effects/*.c)) $(PROTO_SRC) \
+               $(COMMON_SRC)
 SERVER_OBJ  := $(SERVER_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/gen/kernels.o
 FXCTL_SRC   := clients/c/fxctl.c clients/c/fxctl_print.c clients/c/fxctl_save.c clients/c/fxctl_sub.c clients/c/png.c
 FXLOAD_SRC  := $(wildcard clients/c/fxload*.c)
@@ -194,9 +199,9 @@ $(CLIENT_SO): $(CLIENT_OBJ)
 $(BUILD)/fxstreamd: $(BUILD)/obj/server/main.o $(BUILD)/libfxserver.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
-# fxctl's "did you mean" for commands is the daemon's (server/suggest.c); it writes engine-encoded
-# textures as EXR with the daemon's writer (server/codec/exr.c).
-$(BUILD)/fxctl: $(FXCTL_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/obj/server/suggest.o $(BUILD)/obj/server/codec/exr.o $(BUILD)/libfxclient.a
+# fxctl's "did you mean" for commands (common/suggest.c) and its EXR files of engine-encoded
+# textures (common/exr.c) are what the daemon uses too.
+$(BUILD)/fxctl: $(FXCTL_SRC:%.c=$(BUILD)/obj/%.o) $(COMMON_OBJ) $(BUILD)/libfxclient.a
 	$(LINK) $^ -o $@ $(FX_LDLIBS) $(LDLIBS)
 
 $(BUILD)/fxload: $(FXLOAD_SRC:%.c=$(BUILD)/obj/%.o) $(BUILD)/libfxclient.a

@@ -1,23 +1,68 @@
 #!/usr/bin/env python3
-"""check_includes.py — the #include graph of server/, protocol/, clients/c/ and the kernels'
-layout headers (kernels/*_layout.h) has no cycles, and protocol/ stands alone.
+"""check_includes.py — the layering of the C tree (server/, protocol/, common/, clients/c/ and
+the kernels' layout headers), checked from its #include lines.
 
 A module is a source file's path without its extension (server/hub.c and server/hub.h are one
 module, server/hub). Module A depends on module B when A's .c or .h includes B's header, found
-as the compiler finds it: next to the including file, then in protocol/, server/, clients/c/,
-kernels/ (the Makefile's -I order). A cycle among modules means a newcomer must hold both files in mind
-to change either; protocol/ is shared verbatim by the daemon and libfxclient, so it may include
-only itself and system headers. Prints each cycle or stray include, then
-"check_includes: N passed, M failed" (one check per rule); exits 1 on any failure.
-Run from the repository root; make test runs it (tests/integration/test_includes.sh)."""
+as the compiler finds it: next to the including file, then in protocol/, common/, server/,
+clients/c/, kernels/ (the Makefile's -I order). Three rules, one check each:
+
+1. No include cycles. A cycle among modules means a newcomer must hold both files in mind to
+   change either; within fxload, fxctl, libfxclient or the daemon alike.
+2. Layers. Each module belongs to the first layer of LAYERS whose pattern matches its path
+   and may include only its own layer's modules and those of the layers listed with it:
+     protocol/, common/, kernels/  nothing else (protocol/ is compiled into the daemon and
+                                   libfxclient, common/ into the daemon and fxctl, a layout
+                                   header is prepended to its kernel's OpenCL source)
+     server/                       protocol/, common/, kernels/
+     fxctl, fxload (clients/c)     libfxclient, protocol/, common/; never server/, nor each
+                                   other
+     clients/c/examples/           libfxclient, protocol/ (the installed API)
+     libfxclient (the rest of      protocol/ (common/ is not compiled into the library)
+       clients/c)
+   so the daemon and the clients meet only in protocol/ and common/.
+3. A header declares only functions its own module's .c defines (or, for the interfaces in
+   ELSEWHERE, the one file that implements them), so the include graph is the dependency
+   graph: a header that declared the functions of several files (as fxload.h once did for
+   seven) hides the cycles among them from rule 1.
+
+Prints each cycle, stray include and foreign declaration, then "check_includes: N passed, M
+failed"; exits 1 on any failure. Checks the repository it is in, or the tree given as its one
+argument (tests/integration/test_includes.sh plants faults in a scratch tree); make test runs it."""
+import fnmatch
 import glob
 import os
 import re
 import sys
 
-ROOTS = ("server", "protocol", "clients/c", "kernels")
-SEARCH = ("protocol", "server", "clients/c", "kernels")
+ROOTS = ("server", "protocol", "common", "clients/c", "kernels")
+SEARCH = ("protocol", "common", "server", "clients/c", "kernels")
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+
+# (layer, path patterns of its modules, the other layers it may include); first match wins.
+LAYERS = (
+    ("protocol", ("protocol/*",), ()),
+    ("common", ("common/*",), ()),
+    ("kernels", ("kernels/*",), ()),
+    ("server", ("server/*",), ("protocol", "common", "kernels")),
+    ("fxctl", ("clients/c/fxctl*", "clients/c/png"), ("libfxclient", "protocol", "common")),
+    ("fxload", ("clients/c/fxload*",), ("libfxclient", "protocol", "common")),
+    ("examples", ("clients/c/examples/*",), ("libfxclient", "protocol")),
+    ("libfxclient", ("clients/c/*",), ("protocol",)),
+)
+
+# Headers whose functions another file defines: an interface and its one implementation
+# (None: a generated file).
+ELSEWHERE = {
+    "server/effect.h": "server/effects/registry.c",
+    "server/kernels.h": None,  # build/gen/kernels.c, written by tools/embed_kernels.sh
+}
+
+# Comments, string and character literals: blanked before declarations are read.
+LEXEME = re.compile(r'/\*.*?\*/|//[^\n]*|"(?:\\.|[^"\\\n])*"|\'(?:\\.|[^\'\\\n])*\'', re.S)
+DIRECTIVE = re.compile(r'^\s*#(?:[^\n]*\\\n)*[^\n]*', re.M)
+CALLED = re.compile(r'([A-Za-z_]\w*)\s*\(')
+DEFINED = re.compile(r'([A-Za-z_]\w*)\s*\([^;{}]*\)\s*(?:__attribute__\s*\(\([^;{}]*\)\)\s*)?\{')
 
 
 def sources():
@@ -81,29 +126,87 @@ def cycles(edges):
     return out
 
 
-def main():
+def layer_of(mod):
+    for name, patterns, _ in LAYERS:
+        if any(fnmatch.fnmatch(mod, p) for p in patterns):
+            return name
+    return None
+
+
+def layer_faults(edges):
+    allowed = {name: (name,) + others for name, _, others in LAYERS}
+    faults = []
+    for m, targets in sorted(edges.items()):
+        lm = layer_of(m)
+        if lm is None:
+            faults.append(f"layers: {m} is in no layer of LAYERS")
+            continue
+        for t in sorted(targets):
+            lt = layer_of(t)
+            if lt is not None and lt not in allowed[lm]:
+                faults.append(f"layers: {m} ({lm}) includes {t} ({lt}); {lm} may include only "
+                              + ", ".join(allowed[lm]))
+    return faults
+
+
+def code(path):
+    """The text of a C file with comments, literals and preprocessor lines blanked."""
+    text = LEXEME.sub(lambda m: " " if m.group(0)[0] == "/" else "0", open(path, encoding="utf-8").read())
+    return DIRECTIVE.sub(" ", text)
+
+
+def declared_functions(header):
+    """Names of the functions a header declares (not static, not a typedef or a pointer)."""
+    text, depth, top = code(header), 0, []
+    for ch in text:  # top-level text; a braced body ends a declaration like a semicolon
+        if ch == "{":
+            depth += 1
+            top.append(";" if depth == 1 else "")
+        elif ch == "}":
+            depth -= 1
+            top.append(";" if depth == 0 else "")
+        elif depth == 0:
+            top.append(ch)
+    names = []
+    for decl in " ".join("".join(top).split()).split(";"):
+        m = CALLED.search(decl)
+        if not m or re.match(r"\s*(typedef|static)\b", decl) or decl[m.end():].lstrip().startswith("*"):
+            continue
+        if m.group(1) != "__attribute__" and not re.search(r"\(\s*\*\s*$", decl[:m.start()]):
+            names.append(m.group(1))
+    return names
+
+
+def declaration_faults(files):
+    faults = []
+    for h in (f for f in files if f.endswith(".h")):
+        names = declared_functions(h)
+        impl = ELSEWHERE.get(h, os.path.splitext(h)[0] + ".c")
+        if not names or (h in ELSEWHERE and impl is None):
+            continue
+        defined = set(DEFINED.findall(code(impl))) if os.path.isfile(impl) else set()
+        foreign = [n for n in names if n not in defined]
+        if foreign:
+            faults.append(f"declarations: {h} declares what {impl} does not define: " + ", ".join(foreign))
+    return faults
+
+
+def main(argv):
+    os.chdir(argv[1] if len(argv) > 1 else os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
     files = sources()
     edges = graph(files)
-    passed = failed = 0
-    found = cycles(edges)
-    for comp in found:
-        print("include cycle: " + " <-> ".join(comp))
-    if found:
-        failed += 1
-    else:
-        passed += 1
-    stray = [(m, t) for m, ts in sorted(edges.items()) if m.startswith("protocol/")
-             for t in sorted(ts) if not t.startswith("protocol/")]
-    for m, t in stray:
-        print(f"protocol/ must stand alone: {m} includes {t}")
-    if stray:
-        failed += 1
-    else:
-        passed += 1
+    faults = [
+        ["include cycle: " + " <-> ".join(c) for c in cycles(edges)],
+        layer_faults(edges),
+        declaration_faults(files),
+    ]
+    for f in (f for rule in faults for f in rule):
+        print(f)
+    failed = sum(1 for rule in faults if rule)
     print(f"  {len(files)} files, {len(edges)} modules, {sum(len(t) for t in edges.values())} dependencies")
-    print(f"check_includes: {passed} passed, {failed} failed")
+    print(f"check_includes: {len(faults) - failed} passed, {failed} failed")
     return 1 if failed else 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv))

@@ -10,7 +10,7 @@
 
 #include <cjson/cJSON.h>
 
-#include "codec/exr.h"
+#include "exr.h"
 #include "png.h"
 
 double fxctl_age_ms(const struct fxc_event *ev)

@@ -6,7 +6,7 @@
  * look-up-table product (fxc_decode_lut), .bin for anything else, and the line in
  * DIR/NAME-SEQ.json; a light-rig frame shares its texture's SEQ, so it goes to
  * DIR/NAME-SEQ-rig.bin and .json. Decodes with fxclient.h only, like a program outside the
- * tree; EXR files are written with the daemon's writer (server/codec/exr.h). */
+ * tree; EXR files are written with the daemon's writer (common/exr.h). */
 #ifndef FXCTL_SAVE_H
 #define FXCTL_SAVE_H
 

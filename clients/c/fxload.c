@@ -1,11 +1,24 @@
 /* fxload.c — the load generator of fxstreamd, built on libfxclient's pool (fxpool.h): its
  * help text and main, which runs the phases in order (options, plan, output files, the run,
- * the reports) and turns their outcome into the exit status. What each phase does lives in
- * its own file (fxload.h lists them).
+ * the reports) and turns their outcome into the exit status.
  *
  * The run ends by itself after --duration seconds (or earlier when every connection is
  * gone or on SIGINT/SIGTERM). It never targets anything but the default loopback URL or the
- * ones given with --url. */
+ * ones given with --url.
+ *
+ * fxload's files, one noun each with its header; a file includes only those listed above it:
+ *   fxload_opts       options, their checks and defaults, exit statuses
+ *   fxload_state.h    the record of one run (struct ld): streams, groups, counters, rows
+ *   fxload_errors     error messages kept for the end, fatal errors
+ *   fxload_plan       the run's streams (--streams groups, --set streams), each connection's group
+ *   fxload_conn       the connections: their table, control requests, servicing, closing
+ *   fxload_stats      measurements: frames, bytes, seq gaps, latency, delivered rate, rows
+ *   fxload_set        set mode: the set messages, the values before the run, restoring them
+ *   fxload_thresholds --max-p99, --min-delivered, --max-skipped: pass or fail
+ *   fxload_report     the per-second table, the summary, the JSON report
+ *   fxload_plot       the gnuplot plot
+ *   fxload_run        the run on libfxclient's pool: ramp, requests, callbacks, the end
+ * Not a library: the Makefile links these files into build/fxload only. */
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -13,7 +26,14 @@
 #include <unistd.h>
 
 #include "fxclient.h"
-#include "fxload.h"
+#include "fxload_conn.h"
+#include "fxload_opts.h"
+#include "fxload_plot.h"
+#include "fxload_plan.h"
+#include "fxload_report.h"
+#include "fxload_run.h"
+#include "fxload_state.h"
+#include "fxload_thresholds.h"
 #include "fxws.h"
 
 static const char ld_help[] =
@@ -150,10 +170,10 @@ static int ld_prepare(struct ld *ld, struct ld_opts *o, int argc, char **argv)
     char err[300];
     int r = ld_parse_args(o, argc, argv, ld_help);
     if (r) return r;
-    if ((r = ld_validate(ld, o))) return r;
+    if ((r = ld_opts_check(o)) || (r = ld_plan_streams(ld))) return r;
     for (int i = 0; i < (o->nurls ? o->nurls : 1); i++)
         if (fxws_url_parse(&u, ld_url_for(o, i), err, sizeof err)) return ld_usage(err, NULL);
-    if (ld_plan(ld)) {
+    if (ld_conns_create(ld)) {
         fprintf(stderr, "fxload: out of memory\n");
         return LD_FAIL;
     }
@@ -163,10 +183,11 @@ static int ld_prepare(struct ld *ld, struct ld_opts *o, int argc, char **argv)
 /* The reports of a finished run, then its exit status. */
 static int ld_finish(struct ld *ld)
 {
+    struct ld_thresholds th;
     int r = LD_OK;
-    ld_thresholds_judge(ld);
-    ld_summary(ld);
-    if (ld->json && ld_write_json(ld)) r = LD_FAIL;
+    ld_thresholds_judge(&th, ld);
+    ld_summary(ld, &th);
+    if (ld->json && ld_write_json(ld, &th)) r = LD_FAIL;
     if (ld->o->plot_path && ld_plot(ld)) r = LD_FAIL;
     if (r) return r;
     if (!ld->ever_open) {
@@ -176,7 +197,7 @@ static int ld_finish(struct ld *ld)
         return LD_FAIL;
     }
     if (ld->restore_failed) return LD_FAIL;
-    if (ld->checks_failed) return LD_THRESHOLD;
+    if (th.failed) return LD_THRESHOLD;
     if (ld->tot.failed || ld->tot.disconnects || ld->tot.errors) return LD_DEGRADED;
     return LD_OK;
 }

@@ -1,14 +1,14 @@
 /* fxload_opts.c — fxload's command line: one table of options (each with its own small
  * parser, fxctl's conventions: --opt VALUE or --opt=VALUE, one-line errors, exit 2), the
- * --streams groups and --set specs, the checks of combinations and defaults, and the plan
- * of a run (which group of streams each connection subscribes to). */
+ * --set specs, and the checks of combinations and defaults (fxload_opts.h). */
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "fxload.h"
+#include "fxload_opts.h"
+#include "fxs_frame.h"
 
 int ld_usage(const char *why, const char *arg)
 {
@@ -16,7 +16,7 @@ int ld_usage(const char *why, const char *arg)
     return LD_USAGE;
 }
 
-static int ld_parse_double(const char *s, double *out)
+int ld_parse_double(const char *s, double *out)
 {
     char *end;
     double v;
@@ -38,7 +38,7 @@ static int ld_parse_long(const char *s, long *out)
     return 0;
 }
 
-static int ld_valid_stream_name(const char *s, size_t n)
+int ld_valid_stream_name(const char *s, size_t n)
 {
     if (n < 1 || n > LD_NAME_MAX - 1) return 0;
     for (size_t i = 0; i < n; i++) {
@@ -284,135 +284,29 @@ int ld_parse_args(struct ld_opts *o, int argc, char **argv, const char *help_tex
     return 0;
 }
 
-/* ---- --streams and the plan ----------------------------------------------------------- */
+/* ---- combinations and defaults ---------------------------------------------------- */
 
-/* The index of the stream called name, added when new; -1 when LD_MAX_STREAMS are known. */
-static int ld_stream_add(struct ld *ld, const char *name, size_t n)
-{
-    for (int i = 0; i < ld->nstreams; i++)
-        if (strlen(ld->streams[i].name) == n && !strncmp(ld->streams[i].name, name, n)) return i;
-    if (ld->nstreams >= LD_MAX_STREAMS) return -1;
-    snprintf(ld->streams[ld->nstreams].name, sizeof ld->streams[0].name, "%.*s", (int)n, name);
-    return ld->nstreams++;
-}
-
-struct ld_stream *ld_stream_find(struct ld *ld, const char *name)
-{
-    for (int i = 0; i < ld->nstreams; i++)
-        if (!strcmp(ld->streams[i].name, name)) return &ld->streams[i];
-    return NULL;
-}
-
-/* Adds the streams of one group, STREAM[+STREAM...], to g. item is for messages. */
-static int ld_parse_group_streams(struct ld *ld, struct ld_group *g, char *s, const char *item)
-{
-    while (s && *s) {
-        char *plus = strchr(s, '+');
-        size_t n = plus ? (size_t)(plus - s) : strlen(s);
-        int idx;
-        if (!ld_valid_stream_name(s, n)) return ld_usage("--streams: invalid stream name (A-Z a-z 0-9 _ . -, 1-63)", item);
-        if (g->n >= LD_MAX_GROUP) return ld_usage("--streams: at most 16 streams in one group", item);
-        if ((idx = ld_stream_add(ld, s, n)) < 0) return ld_usage("--streams: at most 64 distinct streams", item);
-        for (int k = 0; k < g->n; k++)
-            if (g->stream[k] == idx) return ld_usage("--streams: a stream twice in one group", item);
-        g->stream[g->n++] = idx;
-        s = plus ? plus + 1 : NULL;
-        if (plus && !*s) return ld_usage("--streams: empty stream name after +", item);
-    }
-    return g->n ? 0 : ld_usage("--streams: empty group", item);
-}
-
-/* One item of --streams, GROUP[:WEIGHT], len bytes at p. */
-static int ld_parse_group(struct ld *ld, const char *p, size_t len, const char *spec)
-{
-    struct ld_group *g;
-    char item[1024], *colon;
-    if (!len || len >= sizeof item) return ld_usage("--streams: empty or too long item", spec);
-    if (ld->ngroups >= LD_MAX_GROUPS) return ld_usage("--streams: at most 64 groups", spec);
-    snprintf(item, sizeof item, "%.*s", (int)len, p);
-    g = &ld->groups[ld->ngroups++];
-    g->weight = 1;
-    if ((colon = strchr(item, ':'))) {
-        *colon = 0;
-        if (ld_parse_double(colon + 1, &g->weight) || !(g->weight > 0) || g->weight > 1e6)
-            return ld_usage("--streams: WEIGHT must be a positive number", item[0] ? colon + 1 : spec);
-    }
-    return ld_parse_group_streams(ld, g, item, p);
-}
-
-/* Parses --streams: GROUP[:WEIGHT],... with GROUP = STREAM[+STREAM...]. */
-static int ld_parse_streams(struct ld *ld, const char *spec)
-{
-    const char *p = spec;
-    if (!*spec) return ld_usage("--streams needs at least one stream", NULL);
-    while (*p) {
-        const char *end = strchr(p, ',');
-        size_t len = end ? (size_t)(end - p) : strlen(p);
-        int r = ld_parse_group(ld, p, len, spec);
-        if (r) return r;
-        p += len;
-        if (*p == ',' && !*++p) return ld_usage("--streams: empty item at the end", spec);
-    }
-    return 0;
-}
-
-static int ld_validate_subscribe(struct ld *ld, struct ld_opts *o)
+static int ld_check_subscribe(const struct ld_opts *o)
 {
     if (o->nsets) return ld_usage("--set goes with --mode set", NULL);
     if (o->rate >= 0) return ld_usage("--rate goes with --mode set", NULL);
     if (o->keep) return ld_usage("--keep goes with --mode set", NULL);
-    return ld_parse_streams(ld, o->streams_spec ? o->streams_spec : LD_DEFAULT_STREAMS);
+    return 0;
 }
 
-static int ld_validate_set(struct ld *ld, struct ld_opts *o)
+static int ld_check_set(struct ld_opts *o)
 {
-    int r;
     if (o->streams_spec) return ld_usage("--streams goes with --mode subscribe (set mode uses --set)", NULL);
     if (o->max_fps >= 0) return ld_usage("--max-fps goes with --mode subscribe", NULL);
     if (o->min_delivered >= 0) return ld_usage("--min-delivered goes with --mode subscribe", NULL);
     if (o->max_skipped >= 0) return ld_usage("--max-skipped goes with --mode subscribe", NULL);
     if (o->rate < 0) o->rate = LD_DEFAULT_RATE;
-    if (!o->nsets && (r = ld_parse_set(&o->sets[o->nsets++], LD_DEFAULT_SET))) return r;
-    for (int i = 0; i < o->nsets; i++)
-        if (ld_stream_add(ld, o->sets[i].stream, strlen(o->sets[i].stream)) < 0) return ld_usage("--set: at most 64 distinct streams", NULL);
-    return 0;
+    return o->nsets ? 0 : ld_parse_set(&o->sets[o->nsets++], LD_DEFAULT_SET);
 }
 
-int ld_validate(struct ld *ld, struct ld_opts *o)
+int ld_opts_check(struct ld_opts *o)
 {
     if (!o->ramp_given) o->ramp = o->duration > 2 ? 1 : o->duration / 2;
     if (o->ramp >= o->duration) return ld_usage("--ramp must be shorter than --duration", NULL);
-    return o->mode == LD_SUBSCRIBE ? ld_validate_subscribe(ld, o) : ld_validate_set(ld, o);
-}
-
-/* Smooth weighted round-robin: the group of the next connection. */
-static int ld_next_group(struct ld *ld)
-{
-    double total = 0;
-    int best = 0;
-    for (int g = 0; g < ld->ngroups; g++) {
-        ld->groups[g].current += ld->groups[g].weight;
-        total += ld->groups[g].weight;
-        if (ld->groups[g].current > ld->groups[best].current) best = g;
-    }
-    ld->groups[best].current -= total;
-    return best;
-}
-
-int ld_plan(struct ld *ld)
-{
-    long n = ld->o->connections;
-    int maxg = 1;
-    for (int g = 0; g < ld->ngroups; g++)
-        if (ld->groups[g].n > maxg) maxg = ld->groups[g].n;
-    ld->conns = calloc((size_t)n, sizeof *ld->conns);
-    ld->subs = calloc((size_t)n * (size_t)maxg, sizeof *ld->subs);
-    if (!ld->conns || !ld->subs) return -1;
-    for (long i = 0; i < n; i++) {
-        struct ld_conn *lc = &ld->conns[i];
-        lc->ld = ld;
-        lc->subs = ld->subs + i * maxg;
-        lc->group = ld->o->mode == LD_SUBSCRIBE ? ld_next_group(ld) : -1;
-    }
-    return 0;
+    return o->mode == LD_SUBSCRIBE ? ld_check_subscribe(o) : ld_check_set(o);
 }

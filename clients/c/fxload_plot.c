@@ -6,12 +6,15 @@
  * latency rise can be read against the load); then one line per stream: frames/s (with the
  * total MB/s on a second axis) and skipped/s on an axis of its own, where a few skipped
  * frames are not flattened by thousands of frames/s (subscribe mode), or sets/s (set mode). */
+#include "fxload_plot.h"
+
 #include <errno.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/wait.h>
 
-#include "fxload.h"
+#include "fxload_opts.h"
+#include "fxload_state.h"
 
 /* Columns of the data block: the row's totals, then LD_GP_PER_STREAM per stream. */
 enum {

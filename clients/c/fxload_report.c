@@ -1,14 +1,16 @@
-/* fxload_report.c — what fxload reports: the per-second table (one line per row as the
- * run goes), the summary at the end (per stream, totals, set results, the distinct error
- * messages on stderr) and the JSON document of --json (options, connections, totals,
- * streams with their kinds, sets, errors, seconds). Reads the run's state, never changes it. */
+/* fxload_report.c — see fxload_report.h. */
+#include "fxload_report.h"
+
 #include <errno.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "fxload.h"
+#include "fxload_opts.h"
+#include "fxload_state.h"
+#include "fxload_stats.h"
+#include "fxload_thresholds.h"
 
 /* ---- the per-second table -------------------------------------------------------------- */
 
@@ -128,7 +130,7 @@ static void ld_summary_set(const struct ld *ld, FILE *f)
     for (int i = 0; i < ld->nstreams; i++) ld_summary_set_stream(ld, f, &ld->streams[i]);
 }
 
-void ld_summary(const struct ld *ld)
+void ld_summary(const struct ld *ld, const struct ld_thresholds *t)
 {
     FILE *f = ld->tout;
     const struct ld_opts *o = ld->o;
@@ -140,7 +142,7 @@ void ld_summary(const struct ld *ld)
             ld->tot.disconnects, urls, ld->elapsed, ld->end_reason ? ld->end_reason : "");
     if (o->mode == LD_SUBSCRIBE) ld_summary_subscribe(ld, f);
     else ld_summary_set(ld, f);
-    ld_thresholds_summary(ld, f);
+    ld_thresholds_summary(t, f);
     fflush(f);
     for (int i = 0; i < ld->nerrs; i++) fprintf(stderr, "fxload: %" PRIu64 " x %s\n", ld->errs[i].count, ld->errs[i].msg);
     if (ld->other_errs) fprintf(stderr, "fxload: %" PRIu64 " x other errors\n", ld->other_errs);
@@ -362,7 +364,7 @@ static cJSON *ld_row_json(const struct ld *ld, int i)
     return s;
 }
 
-static cJSON *ld_report_json(const struct ld *ld)
+static cJSON *ld_report_json(const struct ld *ld, const struct ld_thresholds *t)
 {
     cJSON *j = cJSON_CreateObject(), *arr;
     cJSON_AddStringToObject(j, "tool", "fxload");
@@ -374,16 +376,16 @@ static cJSON *ld_report_json(const struct ld *ld)
     arr = cJSON_AddArrayToObject(j, "streams");
     for (int i = 0; i < ld->nstreams; i++) cJSON_AddItemToArray(arr, ld_stream_json(ld, &ld->streams[i]));
     if (ld->o->mode == LD_SET) cJSON_AddItemToObject(j, "sets", ld_sets_json(ld));
-    cJSON_AddItemToObject(j, "thresholds", ld_thresholds_json(ld));
+    cJSON_AddItemToObject(j, "thresholds", ld_thresholds_json(t));
     cJSON_AddItemToObject(j, "errors", ld_errors_json(ld));
     arr = cJSON_AddArrayToObject(j, "seconds");
     for (int i = 0; i < ld->nrows; i++) cJSON_AddItemToArray(arr, ld_row_json(ld, i));
     return j;
 }
 
-int ld_write_json(struct ld *ld)
+int ld_write_json(struct ld *ld, const struct ld_thresholds *t)
 {
-    cJSON *j = ld_report_json(ld);
+    cJSON *j = ld_report_json(ld, t);
     char *text = cJSON_Print(j);
     int ok = text && fprintf(ld->json, "%s\n", text) > 0;
     free(text);

@@ -8,18 +8,25 @@
  *
  * Request ids: subscribe requests carry 1 + the stream's place in the connection's group,
  * set messages a number per connection, fxload's own requests a string ("get:3"). */
+#include "fxload_run.h"
+
 #include <math.h>
 #include <signal.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
-#include "fxload.h"
+#include "fxload_conn.h"
+#include "fxload_errors.h"
+#include "fxload_opts.h"
+#include "fxload_plan.h"
+#include "fxload_report.h"
+#include "fxload_set.h"
+#include "fxload_state.h"
+#include "fxload_stats.h"
 #include "fxws.h"
 
-#define LD_CLOSE_WAIT_US 2000000
 #define LD_SERVICE_MAX_MS 10
 
 static volatile sig_atomic_t ld_signalled;
@@ -48,25 +55,6 @@ static void ld_on_open(struct fxp_conn *c, const cJSON *hello, void *user)
     ld->ever_open++;
     if (++ld->open > ld->peak) ld->peak = ld->open;
     if (ld->o->mode == LD_SUBSCRIBE) ld_send_subscribes(ld, c, &ld->groups[lc->group]);
-}
-
-void ld_fatal(struct ld *ld, int status, const char *fmt, ...)
-{
-    va_list ap;
-    fputs("fxload: ", stderr);
-    va_start(ap, fmt);
-    vfprintf(stderr, fmt, ap);
-    va_end(ap);
-    fputc('\n', stderr);
-    if (!ld->fatal) ld->fatal = status;
-}
-
-/* ld_fatal with "WHAT: code: message" of the server's error reply m. */
-static void ld_fatal_reply(struct ld *ld, int status, const char *what, const cJSON *m)
-{
-    char text[200];
-    ld_error_text(m, text, sizeof text);
-    ld_fatal(ld, status, "%s: %s", what, text);
 }
 
 /* The reply to subscribe request id (1 + the stream's place in the connection's group). */
@@ -137,30 +125,6 @@ static void ld_on_event(struct ld *ld, struct ld_conn *lc, const cJSON *m, const
 }
 
 /* ---- the `get` of each stream's parameters ------------------------------------------------ */
-
-/* An open connection, NULL when none is. */
-struct ld_conn *ld_open_conn(struct ld *ld)
-{
-    for (long i = 0; i < ld->o->connections; i++)
-        if (ld->conns[i].state == LDC_OPEN) return &ld->conns[i];
-    return NULL;
-}
-
-int ld_send_control(struct ld_conn *lc, const char *op, const char *prefix, int index, const cJSON *params)
-{
-    struct ld *ld = lc->ld;
-    char id[32];
-    cJSON *req = cJSON_CreateObject();
-    int r;
-    snprintf(id, sizeof id, "%s%d", prefix, index);
-    cJSON_AddStringToObject(req, "op", op);
-    cJSON_AddStringToObject(req, "id", id);
-    cJSON_AddStringToObject(req, "stream", ld->streams[index].name);
-    if (params) cJSON_AddItemToObject(req, "params", cJSON_Duplicate(params, 1));
-    r = fxp_send_json(lc->c, req);
-    cJSON_Delete(req);
-    return r;
-}
 
 /* Asks for the parameters of each stream that needs them and has not asked yet: in
  * subscribe mode once it has a subscriber (for its fps), in set mode at once (the values
@@ -306,6 +270,13 @@ static int ld_wait_ms(const struct ld *ld, double now, double next_row)
     return (int)ceil(wait * 1000);
 }
 
+/* Ends the per-second row at t (seconds since t0) and prints its line of the table. */
+static void ld_row_cut(struct ld *ld, double t)
+{
+    const struct ld_row *r = ld_row_end(ld, t);
+    if (r) ld_table_line(ld, r);
+}
+
 /* Ramp, measure, until the end. Returns 0, or an exit status on a fatal error. */
 static int ld_loop(struct ld *ld)
 {
@@ -318,7 +289,7 @@ static int ld_loop(struct ld *ld)
         ld_stats_advance(ld, now);
         ld_send_gets(ld);
         if (ld->o->mode == LD_SET) ld_send_due_sets(ld, now);
-        for (; now >= next_row && next_row <= ld->o->duration; next_row += 1) ld_row_end(ld, next_row);
+        for (; now >= next_row && next_row <= ld->o->duration; next_row += 1) ld_row_cut(ld, next_row);
         if ((ld->end_reason = ld_end_reason(ld, now))) break;
         if (fxp_service(ld->pool, ld_wait_ms(ld, now, next_row)) < 0) {
             fprintf(stderr, "fxload: libwebsockets service failed\n");
@@ -326,26 +297,9 @@ static int ld_loop(struct ld *ld)
         }
     }
     /* the last partial second */
-    if (now - ld->row_start > 0.05 || ld->nrows == 0) ld_row_end(ld, now);
+    if (now - ld->row_start > 0.05 || ld->nrows == 0) ld_row_cut(ld, now);
     ld->elapsed = now;
     return 0;
-}
-
-void ld_service_until(struct ld *ld, int (*done)(const struct ld *ld), int64_t wait_us)
-{
-    int64_t deadline = fxws_now_us(CLOCK_MONOTONIC) + wait_us;
-    while (!done(ld) && fxp_live(ld->pool) > 0 && fxws_now_us(CLOCK_MONOTONIC) < deadline)
-        if (fxp_service(ld->pool, 10) < 0) break;
-}
-
-static int ld_all_closed(const struct ld *ld) { return fxp_live(ld->pool) == 0; }
-
-/* Closes every connection politely (bounded wait). */
-static void ld_close_all(struct ld *ld)
-{
-    for (long i = 0; i < ld->o->connections; i++)
-        if (ld->conns[i].c) fxp_close(ld->conns[i].c);
-    ld_service_until(ld, ld_all_closed, LD_CLOSE_WAIT_US);
 }
 
 static void ld_catch_signals(void)

@@ -4,11 +4,17 @@
  * parameters the run changes; after the run, once the sets in flight are answered, one `set`
  * per stream puts them back (unless --keep) and waits for its answer. A parameter --set
  * names that the stream does not have ends the run at once (exit 2). */
+#include "fxload_set.h"
+
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 #include <time.h>
 
-#include "fxload.h"
+#include "fxload_conn.h"
+#include "fxload_errors.h"
+#include "fxload_plan.h"
+#include "fxload_state.h"
 #include "fxws.h"
 
 #define LD_SET_BURST_MAX 10000     /* set messages one loop turn may send to catch up */

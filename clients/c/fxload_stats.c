@@ -1,65 +1,23 @@
-/* fxload_stats.c — fxload's measurements: what each frame and set reply adds to the
- * counters (frames, bytes, seq gaps and latency per stream and kind, set round trips), the
- * delivered rate (subscriber-seconds and the frames the stream's fps promised over them),
- * the per-second rows cut from the running totals, and the distinct error messages shown at
- * the end. Nothing here sends or prints, except the table line of a finished row.
+/* fxload_stats.c — see fxload_stats.h.
  *
  * Delivered rate: every subscription open for t seconds of a stream at F fps (or --max-fps
  * when lower) should see F * t frames of each kind the stream sends every step; what it saw
  * over that is the delivered percentage. fps may change during the run (a `params`
  * broadcast): the promise follows it. The subscriber-time before the first `get` reply is
  * kept apart and promised at the first fps known. */
+#include "fxload_stats.h"
+
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
-#include "fxload.h"
+#include "fxload_conn.h"
+#include "fxload_errors.h"
+#include "fxload_plan.h"
+#include "fxload_state.h"
 #include "fxws.h"
 
 double ld_now(const struct ld *ld) { return (double)(fxws_now_us(CLOCK_MONOTONIC) - ld->t0) / 1e6; }
-
-void ld_note(struct ld *ld, const char *msg)
-{
-    for (int i = 0; i < ld->nerrs; i++)
-        if (!strcmp(ld->errs[i].msg, msg)) {
-            ld->errs[i].count++;
-            return;
-        }
-    if (ld->nerrs < LD_MAX_ERRS) {
-        snprintf(ld->errs[ld->nerrs].msg, sizeof ld->errs[0].msg, "%s", msg);
-        ld->errs[ld->nerrs++].count = 1;
-    } else {
-        ld->other_errs++;
-    }
-}
-
-void ld_error(struct ld *ld, const char *msg)
-{
-    ld->tot.errors++;
-    ld_note(ld, msg);
-}
-
-void ld_error_text(const cJSON *m, char *buf, size_t len)
-{
-    const cJSON *code = cJSON_GetObjectItemCaseSensitive(m, "code");
-    const cJSON *msg = cJSON_GetObjectItemCaseSensitive(m, "message");
-    snprintf(buf, len, "%s: %s", cJSON_IsString(code) ? code->valuestring : "error",
-             cJSON_IsString(msg) ? msg->valuestring : "(no message)");
-}
-
-int ld_is_error_code(const cJSON *m, const char *code)
-{
-    const cJSON *c = cJSON_GetObjectItemCaseSensitive(m, "code");
-    return cJSON_IsString(c) && !strcmp(c->valuestring, code);
-}
-
-void ld_server_error(struct ld *ld, const char *what, const cJSON *m)
-{
-    char text[LD_ERR_MSG_MAX], line[2 * LD_ERR_MSG_MAX]; /* ld_note cuts it */
-    ld_error_text(m, text, sizeof text);
-    snprintf(line, sizeof line, "%s%s%s", what, *what ? ": " : "", text);
-    ld_error(ld, line);
-}
 
 /* The subscription of lc that channel belongs to, and its stream; NULL when none. */
 static struct ld_sub *ld_find_sub(struct ld *ld, struct ld_conn *lc, uint32_t channel, struct ld_stream **st)
@@ -179,12 +137,12 @@ static void ld_counters_sub(struct ld_counters *d, const struct ld_counters *a, 
     d->sets_err = a->sets_err - b->sets_err;
 }
 
-void ld_row_end(struct ld *ld, double now)
+const struct ld_row *ld_row_end(struct ld *ld, double now)
 {
     struct ld_row *r;
     if (ld_rows_grow(ld)) {
         ld_error(ld, "out of memory: a second of the per-second table is missing");
-        return;
+        return NULL;
     }
     ld_row_streams_end(ld, ld->nrows);
     r = &ld->rows[ld->nrows++];
@@ -199,7 +157,7 @@ void ld_row_end(struct ld *ld, double now)
     ld->row_base = ld->tot;
     ld->row_start = now;
     fxp_hist_reset(&ld->row_lat);
-    ld_table_line(ld, r);
+    return r;
 }
 
 /* ---- delivered rate --------------------------------------------------------------------- */

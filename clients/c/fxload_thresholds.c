@@ -6,16 +6,18 @@
  * the summary (a failure also on stderr) and listed in the JSON report; any failure makes
  * the exit status 4. A threshold without data (nothing timed, a stream's fps unknown, no
  * frames) fails: a run that measured nothing does not pass. */
-#include <inttypes.h>
+#include "fxload_thresholds.h"
+
 #include <math.h>
 #include <string.h>
 
-#include "fxload.h"
+#include "fxload_state.h"
+#include "fxload_stats.h"
 
-static struct ld_check *ld_check_add(struct ld *ld, const char *option, const char *what, const char *stream,
+static struct ld_check *ld_check_add(struct ld_thresholds *t, const char *option, const char *what, const char *stream,
                                      double limit, const char *unit)
 {
-    struct ld_check *c = &ld->checks[ld->nchecks++];
+    struct ld_check *c = &t->checks[t->n++];
     c->at_most = !strncmp(option, "--max-", 6);
     c->option = option;
     c->what = what;
@@ -27,44 +29,44 @@ static struct ld_check *ld_check_add(struct ld *ld, const char *option, const ch
     return c;
 }
 
-static void ld_check_max_p99(struct ld *ld)
+static void ld_check_max_p99(struct ld_thresholds *t, const struct ld *ld)
 {
     const struct fxp_hist *h = ld->o->mode == LD_SET ? &ld->set_lat : &ld->lat;
-    struct ld_check *c = ld_check_add(ld, "--max-p99", ld->o->mode == LD_SET ? "set round trip p99" : "frame latency p99",
+    struct ld_check *c = ld_check_add(t, "--max-p99", ld->o->mode == LD_SET ? "set round trip p99" : "frame latency p99",
                                       NULL, ld->o->max_p99_ms, "ms");
     c->has_data = h->count > 0;
     c->measured = fxp_hist_quantile(h, 0.99) / 1000;
     c->passed = c->has_data && c->measured <= c->limit;
 }
 
-static void ld_check_min_delivered(struct ld *ld)
+static void ld_check_min_delivered(struct ld_thresholds *t, const struct ld *ld)
 {
     for (int i = 0; i < ld->nstreams; i++) {
         const struct ld_stream *st = &ld->streams[i];
         struct ld_delivery d = ld_delivered(st, ld_stream_steps(st));
-        struct ld_check *c = ld_check_add(ld, "--min-delivered", "delivered", st->name, ld->o->min_delivered, "%");
+        struct ld_check *c = ld_check_add(t, "--min-delivered", "delivered", st->name, ld->o->min_delivered, "%");
         c->has_data = d.known;
         c->measured = d.pct;
         c->passed = d.known && d.pct >= c->limit;
     }
 }
 
-static void ld_check_max_skipped(struct ld *ld)
+static void ld_check_max_skipped(struct ld_thresholds *t, const struct ld *ld)
 {
-    struct ld_check *c = ld_check_add(ld, "--max-skipped", "skipped frames", NULL, ld->o->max_skipped, "%");
+    struct ld_check *c = ld_check_add(t, "--max-skipped", "skipped frames", NULL, ld->o->max_skipped, "%");
     c->has_data = ld->tot.frames + ld->tot.skipped > 0;
     c->measured = ld_skipped_pct(ld);
     c->passed = c->has_data && c->measured <= c->limit;
 }
 
-void ld_thresholds_judge(struct ld *ld)
+void ld_thresholds_judge(struct ld_thresholds *t, const struct ld *ld)
 {
-    ld->nchecks = 0;
-    ld->checks_failed = 0;
-    if (ld->o->max_p99_ms >= 0) ld_check_max_p99(ld);
-    if (ld->o->min_delivered >= 0) ld_check_min_delivered(ld);
-    if (ld->o->max_skipped >= 0) ld_check_max_skipped(ld);
-    for (int i = 0; i < ld->nchecks; i++) ld->checks_failed += !ld->checks[i].passed;
+    t->n = 0;
+    t->failed = 0;
+    if (ld->o->max_p99_ms >= 0) ld_check_max_p99(t, ld);
+    if (ld->o->min_delivered >= 0) ld_check_min_delivered(t, ld);
+    if (ld->o->max_skipped >= 0) ld_check_max_skipped(t, ld);
+    for (int i = 0; i < t->n; i++) t->failed += !t->checks[i].passed;
 }
 
 /* A measured value ("14.367 ms", "37.3%") or a limit as given ("0.001 ms", "90%"). */
@@ -88,13 +90,13 @@ static void ld_check_text(const struct ld_check *c, char *buf, size_t len)
                   limit);
 }
 
-void ld_thresholds_summary(const struct ld *ld, FILE *f)
+void ld_thresholds_summary(const struct ld_thresholds *t, FILE *f)
 {
     char limit[48], text[160];
-    if (!ld->nchecks) return;
-    fprintf(f, "thresholds: %d of %d failed\n", ld->checks_failed, ld->nchecks);
-    for (int i = 0; i < ld->nchecks; i++) {
-        const struct ld_check *c = &ld->checks[i];
+    if (!t->n) return;
+    fprintf(f, "thresholds: %d of %d failed\n", t->failed, t->n);
+    for (int i = 0; i < t->n; i++) {
+        const struct ld_check *c = &t->checks[i];
         snprintf(limit, sizeof limit, "%s %g", c->option, c->limit);
 
         ld_check_text(c, text, sizeof text);
@@ -103,13 +105,13 @@ void ld_thresholds_summary(const struct ld *ld, FILE *f)
     }
 }
 
-cJSON *ld_thresholds_json(const struct ld *ld)
+cJSON *ld_thresholds_json(const struct ld_thresholds *t)
 {
     cJSON *j = cJSON_CreateObject(), *arr;
-    cJSON_AddBoolToObject(j, "passed", ld->checks_failed == 0);
+    cJSON_AddBoolToObject(j, "passed", t->failed == 0);
     arr = cJSON_AddArrayToObject(j, "checks");
-    for (int i = 0; i < ld->nchecks; i++) {
-        const struct ld_check *c = &ld->checks[i];
+    for (int i = 0; i < t->n; i++) {
+        const struct ld_check *c = &t->checks[i];
         cJSON *cj = cJSON_CreateObject();
         cJSON_AddStringToObject(cj, "option", c->option);
         if (c->stream) cJSON_AddStringToObject(cj, "stream", c->stream);

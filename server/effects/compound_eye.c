@@ -12,9 +12,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../buf.h"
+#include "buf.h"
 #include "../clock.h"
-#include "../codec/exr.h"
+#include "exr.h"
 #include "../effect.h"
 #include "../ocl.h"
 #include "eye_lut.h"

@@ -11,7 +11,7 @@
 
 #include <cjson/cJSON.h>
 
-#include "../err.h"
+#include "err.h"
 #include "../params.h"
 #include "compound_eye_layout.h" /* kernels/: struct eye_optics, EYE_* */
 

@@ -12,9 +12,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../buf.h"
+#include "buf.h"
 #include "../clock.h"
-#include "../codec/exr.h"
+#include "exr.h"
 #include "../ocl.h"
 #include "../vec3.h"
 #include "energy_wave_layout.h" /* kernels/: record strides, camera block */

@@ -10,8 +10,8 @@
 
 #include <stdint.h>
 
-#include "../buf.h"
-#include "../err.h"
+#include "buf.h"
+#include "err.h"
 
 #define EYE_LUT_GUTTER 1 /* texels around each LLUT tile */
 

@@ -14,7 +14,7 @@
 
 #include <stddef.h>
 
-#include "../err.h"
+#include "err.h"
 
 #define EYE_MODEL_MAX 64            /* built-ins + OBJ files offered */
 #define EYE_MODEL_NAME_MAX 64

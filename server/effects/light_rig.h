@@ -11,7 +11,7 @@
 
 #include <cjson/cJSON.h>
 
-#include "../err.h"
+#include "err.h"
 #include "fxs_rig.h"
 #include "wave_sources.h"
 

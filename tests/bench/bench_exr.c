@@ -12,7 +12,7 @@
 #include <stdlib.h>
 #include <time.h>
 
-#include "codec/exr.h"
+#include "exr.h"
 
 #define SIZE 512
 #define RUNS 25

@@ -13,7 +13,7 @@
 #include <time.h>
 
 #include "../ref/kernel_probe.h"
-#include "codec/exr.h"
+#include "exr.h"
 #include "effects/compound_eye.h"
 #include "ocl.h"
 #include "params.h"

@@ -19,7 +19,7 @@
 #include <openexr.h>
 
 #include "check.h"
-#include "codec/exr.h"
+#include "exr.h"
 
 #define TEST_NCODECS (EXR_CODEC_B44A + 1)
 

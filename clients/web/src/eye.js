@@ -12,6 +12,7 @@
 // eq. 5.1; the ellipsoids are closed behind by a head of dark chitin (their back half). An
 // OBJ model (not sent to clients) falls back to the hemisphere in mode lut and to the uv
 // square in mode bake.
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { ViewOrbit } from './orbit.js';
 import { decompress } from 'fzstd';

@@ -32,6 +32,7 @@
 //   that grows with heat, in linear HDR, tone-mapped with three's ACES filmic curve on the
 //   luminance (the hue kept) and an exposure control: a hot core is bright but rolls off
 //   instead of clipping.
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { decode, payloadOf } from '../fxs_particles.js';
 import { ACES_GLSL, SRGB_GLSL, fullscreenQuad } from './gl.js';

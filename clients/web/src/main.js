@@ -7,6 +7,7 @@
 // passes), grid=COLSxROWS, aa=0 (no multisampling), drawfps=N (draw at most N frames a
 // second, e.g. under software WebGL), streams=A,B (show only these streams), views=K,L (only
 // these kinds of view: flame, wave, scene, eye).
+// Every view keeps the View contract of view.js (what main.js may call, and when).
 import * as THREE from 'three';
 import GUI from 'lil-gui';
 import { parseHeader } from '../fxs_particles.js';

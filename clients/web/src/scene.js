@@ -8,6 +8,7 @@
 // darkened once (stencil). The wave itself is the stream's billboard, facing this camera.
 // The home view frames the whole ground disc, every model and the wave for the view's
 // aspect (fitHome).
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { ViewOrbit } from './orbit.js';
 import { SRGB_GLSL } from './gl.js';

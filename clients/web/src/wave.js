@@ -20,6 +20,7 @@
 // reaching 0 before its border, fades what is left, so the billboard's edge never shows.
 // This is done here rather than on the server, so the EXR stays the thesis's raw B for every
 // other client.
+// The page draws it through the View contract (view.js).
 import * as THREE from 'three';
 import { EXRLoader } from 'three/examples/jsm/loaders/EXRLoader.js';
 import { UnrealBloomPass } from 'three/examples/jsm/postprocessing/UnrealBloomPass.js';

@@ -2,7 +2,7 @@
  * of unknown parameters, ops, effects, streams and presets and for fxctl's commands, so a client
  * or a person at fxctl sees `alpa: unknown parameter (did you mean "alpha"?)`. The distance is
  * optimal string alignment: a dropped, added or changed letter and a swap of two adjacent ones
- * (`alhpa`) each count one edit. */
+ * (`alhpa`) each count one edit. In common/, as the daemon and fxctl both link it. */
 #ifndef FX_SUGGEST_H
 #define FX_SUGGEST_H
 

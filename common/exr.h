@@ -8,8 +8,8 @@
 
 #include <stddef.h>
 
-#include "../buf.h"
-#include "../err.h"
+#include "buf.h"
+#include "err.h"
 
 struct exr_image {
     int width, height;
