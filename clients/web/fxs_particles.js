@@ -4,7 +4,7 @@
 //
 // Plain ES module, no dependencies, no build step: the entropy stage is an adaptive
 // binary range coder (LZMA's) that takes a few lines here (Decoder.bit, the one place a
-// decision is decoded). Mirrors protocol/fxs_particles.c (the C decoder) value for value:
+// decision is decoded). Mirrors protocol/fxs_particles_dec.c (the C decoder) value for value:
 // positions, T, F and the optional velocities are float32(lo + q * step) or
 // float32(q * step) computed in double, so both decoders give identical floats (checked
 // against tests/data/particles/).

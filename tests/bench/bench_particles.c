@@ -2,7 +2,7 @@
  *
  * On the same frames, one line per figure: bytes per particle, encode and decode time
  * per million particles of
- *   (a) codec 2 (protocol/fxs_particles.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
+ *   (a) codec 2 (protocol/fxs_particles_enc.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
  *       12/16/20 bits with T and F at 8 bits: the quantisation given to Draco (equal
  *       quantisation: codec 2's position step is Draco's -qp step, largest extent /
  *       (2^B - 1) for all axes; T and F 8 bits over their range in both); then the wire
