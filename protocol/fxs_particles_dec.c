@@ -13,181 +13,208 @@
 
 #include "fxs_particles.h"
 #include "fxs_particles_format.h"
+#include "fxs_particles_near.h"
 #include "fxs_rangecoder.h"
 
-/* Keys (squared distance << 5 | k, exact integers: distances < 2^50) of particle j to
- * j - k for k = 1 ... kmax (those >= 0) into d[k - 1]; returns the index among
- * j - 1 ... j - FXS_PT_NEAR of the nearest (the latest on ties), or -1 for j = 0. */
-static inline int64_t fxs_pt_near(const uint32_t *q, uint32_t j, uint64_t *d, uint32_t kmax)
-{
-    uint64_t best = UINT64_MAX;
-    const uint32_t *c = q + 3 * (size_t)j;
-    if (j < kmax) kmax = j;
-    for (uint32_t k = 1; k <= kmax; k++) {
-        const uint32_t *o = c - 3 * (size_t)k;
-        int64_t dx = (int64_t)c[0] - o[0], dy = (int64_t)c[1] - o[1], dz = (int64_t)c[2] - o[2];
-        d[k - 1] = ((uint64_t)(dx * dx) + (uint64_t)(dy * dy) + (uint64_t)(dz * dz)) << 5 | k;
-    }
-    for (uint32_t k = 1; k <= FXS_PT_NEAR && k <= kmax; k++) best = d[k - 1] < best ? d[k - 1] : best;
-    return best == UINT64_MAX ? -1 : (int64_t)j - (int64_t)(best & 31u);
-}
-
-/* Mode 1: the nearest of j - 1 ... j - FXS_PT_SAME with flags v (the latest on ties),
- * else the latest particle before j with flags v (last[v]), else -1. */
-static inline int64_t fxs_pt_same(const uint8_t *fl, uint32_t j, const uint64_t *d, unsigned v, const int64_t *last)
-{
-    uint64_t best = UINT64_MAX;
-    uint32_t kmax = j < FXS_PT_SAME ? j : FXS_PT_SAME;
-    for (uint32_t k = 1; k <= kmax; k++) {
-        uint64_t key = fl[j - k] == v ? d[k - 1] : UINT64_MAX;
-        best = key < best ? key : best;
-    }
-    return best != UINT64_MAX ? (int64_t)j - (int64_t)(best & 31u) : last[v];
-}
-
+/* One block being decoded. */
 struct fxs_pt_dec {
     struct fxs_pt_frame f;
-    struct fxs_rc_io io;
+    struct fxs_rc_dec rc;
+    const uint8_t *rc_end, *bits_end; /* ends of the two sections in the padded copy */
     struct fxs_pt_models m;
-    uint32_t *q;      /* 3n coordinates in tree order */
-    int32_t *nbs;     /* n: each particle's nearest recent neighbour (-1: none), for the velocities */
-    uint32_t out;     /* particles placed so far */
+    /* scratch, one allocation: the sections' padded copy; x, y, z (quantised coordinates
+     * in tree order, as doubles for the neighbour search); quantised T and F; each
+     * particle's nearest recent neighbour (-1: none) and, in mode 1, the k of its 4 nearest
+     * of the 16 before (fxs_pt_near4); the quantised velocities */
+    void *scratch;
+    double *x, *y, *z;
+    uint32_t *qt, *qf, *near4;
+    int32_t *nbs, *qv;
 };
 
-/* Decodes the subtree of c points at depth d whose coordinates start with base. */
-static int fxs_pt_dec_node(struct fxs_pt_dec *d, uint32_t c, int depth, uint32_t bx, uint32_t by, uint32_t bz)
+/* The kd-tree (§7.5.3), depth first without recursion: the upper child of a split waits on
+ * a stack (at most one entry per depth) while the lower one is decoded; each point's
+ * coordinates go to x, y, z in tree order. 0, or -1 for a corrupt tree. */
+static int fxs_pt_dec_tree(struct fxs_pt_dec *d)
 {
     const struct fxs_pt_frame *f = &d->f;
-    uint32_t base[3] = { bx, by, bz };
-    while (c >= 2 && depth < f->depth) {
-        int a = f->axis[depth], sh = f->left[depth][a] - 1;
-        uint32_t z;
-        int64_t lo;
-        if (fxs_rc_get_int(&d->io, d->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U, &z)) return -1;
-        lo = (int64_t)(c >> 1) + fxs_pt_unzigzag(z);
-        if (lo < 0 || lo > (int64_t)c || d->io.rc.bad) return -1;
-        depth++;
-        if (lo && lo < (int64_t)c) {
-            if (fxs_pt_dec_node(d, (uint32_t)lo, depth, base[0], base[1], base[2])) return -1;
-            c -= (uint32_t)lo;
-            base[a] |= 1u << sh;
-        } else if (!lo) {
-            base[a] |= 1u << sh;
+    struct fxs_rc_dec rc = d->rc;
+    const uint8_t *rc_end = d->rc_end, *bits_end = d->bits_end;
+    double *x = d->x, *y = d->y, *z = d->z;
+    uint32_t st_c[FXS_PT_MAXD + 1], st_b[FXS_PT_MAXD + 1][3], c = f->n, out = 0, bx = 0, by = 0, bz = 0;
+    int st_d[FXS_PT_MAXD + 1], depth = 0, sp = 0, fdepth = f->depth;
+    for (;;) {
+        while (c >= 2 && depth < fdepth) {
+            int a = f->axis[depth];
+            uint32_t zz, bit = 1u << (f->left[depth][a] - 1);
+            if (fxs_rc_get_int(&rc, d->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U, &zz)) return -1;
+            int64_t lo = (int64_t)(c >> 1) + fxs_pt_unzigzag(zz);
+            if (lo < 0 || lo > (int64_t)c || fxs_rc_past(&rc, rc_end, bits_end)) return -1;
+            /* the upper half's base: this one's with the split bit set */
+            uint32_t ux = bx | (bit & (0u - (a == 0))), uy = by | (bit & (0u - (a == 1))), uz = bz | (bit & (0u - (a == 2)));
+            depth++;
+            if (lo && lo < (int64_t)c) {
+                st_c[sp] = c - (uint32_t)lo, st_d[sp] = depth;
+                st_b[sp][0] = ux, st_b[sp][1] = uy, st_b[sp][2] = uz;
+                sp++;
+                c = (uint32_t)lo;
+            } else if (!lo) {
+                bx = ux, by = uy, bz = uz;
+            }
         }
+        if (c == 1) { /* x, then y and z together (<= 48 bits) */
+            const uint8_t *l = f->left[depth];
+            bx |= (uint32_t)fxs_rc_raw(&rc, l[0]);
+            uint64_t yz = fxs_rc_raw(&rc, l[1] + l[2]);
+            by |= (uint32_t)yz & ((1u << l[1]) - 1u);
+            bz |= (uint32_t)(yz >> l[1]);
+            if (fxs_rc_past(&rc, rc_end, bits_end)) return -1;
+        }
+        x[out] = bx, y[out] = by, z[out] = bz; /* c >= 1 points here: c > 1 only at full depth */
+        for (uint32_t k = 1; k < c; k++) x[out + k] = bx, y[out + k] = by, z[out + k] = bz;
+        out += c;
+        if (!sp) break;
+        sp--;
+        c = st_c[sp], depth = st_d[sp], bx = st_b[sp][0], by = st_b[sp][1], bz = st_b[sp][2];
     }
-    if (c == 1)
-        for (int a = 0; a < 3; a++) {
-            uint32_t v;
-            if (fxs_rc_bits_get(&d->io.bits, f->left[depth][a], &v)) return -1;
-            base[a] |= v;
-        }
-    for (uint32_t k = 0; k < c; k++, d->out++) memcpy(d->q + 3 * (size_t)d->out, base, sizeof base);
+    d->rc = rc;
     return 0;
 }
 
-/* float32(lo + q * step) of every value of particle j. */
-static inline void fxs_pt_dec_out(const struct fxs_pt_frame *f, struct fxs_particles *p, const uint32_t *q, uint32_t j,
-                                  uint32_t t, uint32_t fu)
-{
-    for (int a = 0; a < 3; a++) p->xyz[3 * j + a] = (float)(f->lo[a] + q[3 * j + a] * f->step[a]);
-    p->temp[j] = (float)(f->lo[3] + t * f->step[3]);
-    if (p->fuel) p->fuel[j] = (float)(f->lo[4] + fu * f->step[4]);
-}
-
-static int fxs_pt_dec_attrs0(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
+/* Mode 0: flags, T and F predicted from the nearest recent neighbour nbs[j]. The loops
+ * keep every pointer in a local: a store through fl (bytes) could otherwise alias d's
+ * fields and make the compiler reload them per particle. */
+static int fxs_pt_dec_attrs0(struct fxs_pt_dec *d, uint8_t *fl)
 {
     const struct fxs_pt_frame *f = &d->f;
-    const uint32_t *q = d->q;
-    uint32_t zt = 0, zf = 0;
-    uint64_t dist[FXS_PT_SAME];
-    for (uint32_t j = 0; j < f->n; j++) {
-        int64_t nb = fxs_pt_near(q, j, dist, FXS_PT_NEAR);
+    struct fxs_pt_models *m = &d->m;
+    struct fxs_rc_dec rc = d->rc;
+    const uint8_t *rc_end = d->rc_end, *bits_end = d->bits_end;
+    const int32_t *nbs = d->nbs;
+    uint32_t *qt = d->qt, *qf = d->qf, zt = 0, zf = 0, n = f->n, tlim = 1u << f->temp_bits, flim = 1u << f->fuel_bits;
+    for (uint32_t j = 0; j < n; j++) {
+        int32_t nb = nbs[j];
         uint32_t nt = nb < 0 ? 0 : qt[nb], nf = nb < 0 ? 0 : qf[nb];
-        unsigned nfl = nb < 0 ? 0 : p->flags[nb], v = nfl;
-        int f0 = nf == 0;
-        int64_t t, fu;
-        d->nbs[j] = (int32_t)nb;
-        if (fxs_rc_get(&d->io.rc, &d->m.same[(nfl & 7u) * 2 + (unsigned)f0])) {
-            unsigned m = 1;
-            while (m < 256) m = 2 * m + (unsigned)fxs_rc_get(&d->io.rc, &d->m.tree[m]);
-            v = m - 256;
+        unsigned nfl = nb < 0 ? 0 : fl[nb], v = nfl, f0 = nf == 0;
+        if (fxs_rc_get(&rc, &m->same[(nfl & 7u) * 2 + f0])) {
+            v = fxs_rc_get_tree(&rc, m->tree, 8);
             if (v == nfl) return -1;
         }
-        fxs_rc_prob *pt = d->m.t[(fxs_pt_rclass(zt) * 8 + (int)(v & 7u)) * 2 + f0];
-        fxs_rc_prob *pf = d->m.f[(fxs_pt_rclass(zf) * 2 + f0) * 2 + (int)(v >> 2 & 1u)];
-        if (fxs_rc_get_int(&d->io, pt, FXS_PT_T_U, &zt) || fxs_rc_get_int(&d->io, pf, FXS_PT_F_U, &zf)) return -1;
-        t = (int64_t)nt + fxs_pt_unzigzag(zt);
-        fu = (int64_t)nf + fxs_pt_unzigzag(zf);
-        if (t < 0 || t >> f->temp_bits || fu < 0 || fu >> f->fuel_bits || d->io.rc.bad) return -1;
-        qt[j] = (uint32_t)t;
-        qf[j] = (uint32_t)fu;
-        p->flags[j] = (uint8_t)v;
-        fxs_pt_dec_out(f, p, q, j, qt[j], qf[j]);
+        fxs_rc_prob *pt = m->t[(fxs_pt_rclass(zt) * 8 + (int)(v & 7u)) * 2 + (int)f0];
+        fxs_rc_prob *pf = m->f[(fxs_pt_rclass(zf) * 2 + (int)f0) * 2 + (int)(v >> 2 & 1u)];
+        if (fxs_rc_get_int(&rc, pt, FXS_PT_T_U, &zt) || fxs_rc_get_int(&rc, pf, FXS_PT_F_U, &zf)) return -1;
+        uint32_t t = nt + (uint32_t)fxs_pt_unzigzag(zt), fu = nf + (uint32_t)fxs_pt_unzigzag(zf);
+        if (t >= tlim || fu >= flim || fxs_rc_past(&rc, rc_end, bits_end)) return -1;
+        qt[j] = t;
+        qf[j] = fu;
+        fl[j] = (uint8_t)v;
     }
+    d->rc = rc;
     return 0;
 }
 
-static int fxs_pt_dec_attrs1(struct fxs_pt_dec *d, struct fxs_particles *p, uint32_t *qt, uint32_t *qf)
+/* Mode 1: the nearest of j - 1 ... j - FXS_PT_SAME with flags v (the latest on ties), for
+ * when the nearest of them all (near4's first) has other flags: the next of the 4 nearest
+ * with v, else the whole search; -1 when none has v. */
+static int32_t fxs_pt_dec_same(const struct fxs_pt_dec *d, const uint8_t *fl, uint32_t j, unsigned v, uint32_t near4)
+{
+    const double *x = d->x, *y = d->y, *z = d->z;
+    uint32_t kmax = j < FXS_PT_SAME ? j : FXS_PT_SAME;
+    int32_t best = -1;
+    double bd = INFINITY;
+    for (uint32_t k = near4 >> 8; k & 0xFFu; k >>= 8)
+        if (fl[j - (k & 0xFFu)] == v) return (int32_t)(j - (k & 0xFFu));
+    for (uint32_t k = 1; k <= kmax; k++) {
+        double dx = x[j] - x[j - k], dy = y[j] - y[j - k], dz = z[j] - z[j - k], dd = dx * dx + dy * dy + dz * dz;
+        if (fl[j - k] == v && dd < bd) bd = dd, best = (int32_t)(j - k);
+    }
+    return best;
+}
+
+/* Mode 1: flags, T and F as values (bit trees) in contexts of the neighbours' values. */
+static int fxs_pt_dec_attrs1(struct fxs_pt_dec *d, uint8_t *fl)
 {
     const struct fxs_pt_frame *f = &d->f;
-    const uint32_t *q = d->q;
-    uint8_t *fl = p->flags;
-    int64_t last[256];
-    uint64_t dist[FXS_PT_SAME];
+    struct fxs_pt_models *m = &d->m;
+    struct fxs_rc_dec rc = d->rc;
+    const uint8_t *rc_end = d->rc_end, *bits_end = d->bits_end;
+    const int32_t *nbs = d->nbs;
+    const uint32_t *near4 = d->near4;
+    const int tbits = f->temp_bits, fbits = f->fuel_bits;
+    const int t3 = tbits > 3 ? tbits - 3 : 0, t4 = tbits > 4 ? tbits - 4 : 0;
+    uint32_t *qt = d->qt, *qf = d->qf, n = f->n, flim = 1u << fbits;
+    int32_t last[256];
     for (int i = 0; i < 256; i++) last[i] = -1;
-    for (uint32_t j = 0; j < f->n; j++) {
-        int64_t nb = fxs_pt_near(q, j, dist, FXS_PT_SAME), sb;
-        uint32_t v, t, fu = 0;
-        unsigned c;
-        int nf0 = nb < 0 || qf[nb] == 0, tb;
-        unsigned nfl = nb < 0 ? 0 : fl[nb], nc = nb < 0 ? 8 : nfl & 7u;
-        d->nbs[j] = (int32_t)nb;
-        v = nfl;
-        if (fxs_rc_get(&d->io.rc, &d->m.vsame[nc * 2 + (unsigned)nf0])) {
-            if (fxs_rc_get_tree(&d->io, d->m.vfl[nc], 8, &v)) return -1;
+    for (uint32_t j = 0; j < n; j++) {
+        int32_t nb = nbs[j], sb;
+        unsigned nf0 = nb < 0 || qf[nb] == 0, nfl = nb < 0 ? 0 : fl[nb], nc = nb < 0 ? 8 : nfl & 7u, v = nfl, c;
+        uint32_t t, fu = 0, k0 = near4[j] & 0xFFu;
+        if (fxs_rc_get(&rc, &m->vsame[nc * 2 + nf0])) {
+            v = fxs_rc_get_tree(&rc, m->vfl[nc], 8);
             if (v == nfl) return -1;
         }
         c = v & 7u;
         fl[j] = (uint8_t)v;
-        sb = fxs_pt_same(fl, j, dist, v, last);
-        tb = sb < 0 ? 8 : fxs_pt_top(qt[sb], f->temp_bits, 3);
-        if (fxs_rc_get_tree(&d->io, d->m.vt[c * 9 + (unsigned)tb], f->temp_bits, &t)) return -1;
-        if (fxs_rc_get(&d->io.rc, &d->m.vf0[(c * 16 + (unsigned)fxs_pt_top(t, f->temp_bits, 4)) * 2 + (unsigned)nf0])) {
-            if (fxs_rc_get_tree(&d->io, d->m.vf[c * 8 + (unsigned)fxs_pt_top(t, f->temp_bits, 3)], f->fuel_bits, &fu))
-                return -1;
-            if (++fu >> f->fuel_bits) return -1;
+        /* the same-flags neighbour: usually the nearest of all 16 */
+        sb = k0 && fl[j - k0] == v ? (int32_t)(j - k0) : fxs_pt_dec_same(d, fl, j, v, near4[j]);
+        if (sb < 0) sb = last[v];
+        t = fxs_rc_get_tree(&rc, m->vt[c * 9 + (sb < 0 ? 8u : qt[sb] >> t3)], tbits);
+        if (fxs_rc_get(&rc, &m->vf0[(c * 16 + (t >> t4)) * 2 + nf0])) {
+            fu = fxs_rc_get_tree(&rc, m->vf[c * 8 + (t >> t3)], fbits) + 1;
+            if (fu >= flim) return -1;
         }
-        if (d->io.rc.bad) return -1;
+        if (fxs_rc_past(&rc, rc_end, bits_end)) return -1;
         qt[j] = t;
         qf[j] = fu;
-        last[v] = j;
-        fxs_pt_dec_out(f, p, q, j, t, fu);
+        last[v] = (int32_t)j;
     }
+    d->rc = rc;
     return 0;
 }
 
-/* Velocities (§7.5.7) of every particle in tree order, after the attributes; qv: scratch
- * for 3n values. */
-static int fxs_pt_dec_vel(struct fxs_pt_dec *d, struct fxs_particles *p, int32_t *qv)
+/* Velocities (§7.5.7) of every particle in tree order, after the attributes: per axis the
+ * residual against the neighbour nbs[j]'s. */
+static int fxs_pt_dec_vel(struct fxs_pt_dec *d, const uint8_t *fl)
 {
     const struct fxs_pt_frame *f = &d->f;
-    int32_t qmax = fxs_pt_vqmax(f->vel_bits);
-    uint32_t zx = 0;
-    for (uint32_t j = 0; j < f->n; j++) {
-        int32_t *c = qv + 3 * (size_t)j, nb = d->nbs[j];
+    struct fxs_rc_dec rc = d->rc;
+    const uint8_t *rc_end = d->rc_end, *bits_end = d->bits_end;
+    const int32_t *nbs = d->nbs;
+    int32_t qmax = fxs_pt_vqmax(f->vel_bits), *qv = d->qv;
+    uint32_t zx = 0, n = f->n;
+    for (uint32_t j = 0; j < n; j++) {
+        int32_t nb = nbs[j];
         uint32_t zb = zx, z;
         for (int a = 0; a < 3; a++) {
-            int64_t v;
-            if (fxs_rc_get_int(&d->io, d->m.v[fxs_pt_vctx(a, zb, p->flags[j])], FXS_PT_V_U, &z)) return -1;
-            v = (int64_t)(nb < 0 ? 0 : qv[3 * (size_t)nb + a]) + fxs_pt_unzigzag(z);
-            if (v < -qmax || v > qmax || d->io.rc.bad) return -1;
-            c[a] = (int32_t)v;
+            if (fxs_rc_get_int(&rc, d->m.v[fxs_pt_vctx(a, zb, fl[j])], FXS_PT_V_U, &z)) return -1;
+            int64_t v = (int64_t)(nb < 0 ? 0 : qv[3 * (size_t)nb + a]) + fxs_pt_unzigzag(z);
+            if (v < -qmax || v > qmax) return -1;
+            qv[3 * (size_t)j + a] = (int32_t)v;
             zb = z;
             if (!a) zx = z;
-            if (p->vel) p->vel[3 * (size_t)j + a] = (float)(c[a] * f->vstep[a]);
         }
+        if (fxs_rc_past(&rc, rc_end, bits_end)) return -1;
     }
+    d->rc = rc;
     return 0;
+}
+
+/* The decoded block's values into p: float32(lo + q * step) computed in double (what the
+ * JavaScript decoder computes too), velocities float32(q * step). */
+static void fxs_pt_dec_out(const struct fxs_pt_dec *d, struct fxs_particles *p)
+{
+    const struct fxs_pt_frame *f = &d->f;
+    const double lx = f->lo[0], ly = f->lo[1], lz = f->lo[2], sx = f->step[0], sy = f->step[1], sz = f->step[2];
+    for (uint32_t j = 0; j < f->n; j++) {
+        p->xyz[3 * (size_t)j] = (float)(lx + d->x[j] * sx);
+        p->xyz[3 * (size_t)j + 1] = (float)(ly + d->y[j] * sy);
+        p->xyz[3 * (size_t)j + 2] = (float)(lz + d->z[j] * sz);
+    }
+    for (uint32_t j = 0; j < f->n; j++) p->temp[j] = (float)(f->lo[3] + d->qt[j] * f->step[3]);
+    if (p->fuel)
+        for (uint32_t j = 0; j < f->n; j++) p->fuel[j] = (float)(f->lo[4] + d->qf[j] * f->step[4]);
+    if (p->vel && f->vel)
+        for (size_t i = 0; i < 3 * (size_t)f->n; i++) p->vel[i] = (float)(d->qv[i] * f->vstep[i % 3]);
 }
 
 static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n, int vel)
@@ -204,35 +231,54 @@ static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n, int vel)
     return -1;
 }
 
-/* Decodes both sections after the header; NULL or the reason for rejecting. */
+/* Scratch of a block of nn particles (fxs_pt_dec's layout) and the sections' padded copy;
+ * -1 when out of memory. */
+static int fxs_pt_dec_scratch(struct fxs_pt_dec *d, const uint8_t *body, uint32_t rl, uint32_t bl)
+{
+    size_t nn = d->f.n, sections = (size_t)rl + bl + 2 * FXS_RC_PAD;
+    uint8_t *s = d->scratch = malloc(24 * nn + 16 * nn + (d->f.vel ? 12 * nn : 0) + sections);
+    if (!s) return -1;
+    d->x = (double *)s, d->y = d->x + nn, d->z = d->y + nn;
+    d->qt = (uint32_t *)(d->z + nn), d->qf = d->qt + nn, d->near4 = d->qf + nn;
+    d->nbs = (int32_t *)(d->near4 + nn);
+    d->qv = d->nbs + nn;
+    uint8_t *rc = (uint8_t *)(d->qv + (d->f.vel ? 3 * nn : 0)), *bits = rc + rl + FXS_RC_PAD;
+    memcpy(rc, body, rl);
+    memset(rc + rl, 0, FXS_RC_PAD);
+    memcpy(bits, body + rl, bl);
+    memset(bits + bl, 0, FXS_RC_PAD);
+    d->rc_end = rc + rl;
+    d->bits_end = bits + bl;
+    return fxs_rc_dec_init(&d->rc, rc, rl, bits) ? 1 : 0;
+}
+
+/* Decodes both sections after the header: the tree, the neighbours, the attributes, the
+ * velocities, then the values. NULL or the reason for rejecting. */
 static const char *fxs_pt_dec_body(struct fxs_pt_dec *d, const uint8_t *buf, size_t len, uint32_t rl, uint32_t bl,
                                    struct fxs_particles *p)
 {
-    size_t hb = fxs_pt_hdr_bytes(&d->f), nn = d->f.n;
-    const uint8_t *body = buf + hb;
-    uint32_t *qa;
+    const struct fxs_pt_frame *f = &d->f;
+    size_t hb = fxs_pt_hdr_bytes(f);
     const char *why = NULL;
+    int r;
     if ((uint64_t)hb + rl + bl != len) return "section sizes do not match the payload length";
-    if (!d->f.n) return rl || bl ? "bad sizes" : NULL;
-    if (fxs_rc_dec_init(&d->io.rc, body, rl)) return "corrupt particle data";
-    d->io.bits.p = body + rl;
-    d->io.bits.end = body + rl + bl;
+    if (!f->n) return rl || bl ? "bad sizes" : NULL;
+    if ((r = fxs_pt_dec_scratch(d, buf + hb, rl, bl))) return r < 0 ? "out of memory" : "corrupt particle data";
     fxs_pt_steps(&d->f);
     fxs_pt_schedule(&d->f);
     fxs_pt_models_init(&d->m);
-    /* 3n coordinates, n qT, n qF, n neighbours; 3n quantised velocities */
-    if (!(qa = malloc(nn * (d->f.vel ? 9 : 6) * sizeof *qa))) return "out of memory";
-    d->q = qa;
-    d->nbs = (int32_t *)(qa + 5 * nn);
-    if (fxs_pt_dec_node(d, d->f.n, 0, 0, 0, 0) || d->out != d->f.n ||
-        (d->f.mode ? fxs_pt_dec_attrs1 : fxs_pt_dec_attrs0)(d, p, qa + 3 * nn, qa + 4 * nn) ||
-        (d->f.vel && fxs_pt_dec_vel(d, p, (int32_t *)(qa + 6 * nn))))
+    if (fxs_pt_dec_tree(d)) return "corrupt particle data";
+    int exact = f->abits[0] <= 23 && f->abits[1] <= 23 && f->abits[2] <= 23;
+    if (f->mode) fxs_pt_near4(f->n, exact, d->x, d->y, d->z, d->nbs, d->near4);
+    else fxs_pt_near(f->n, exact, d->x, d->y, d->z, d->nbs);
+    if ((f->mode ? fxs_pt_dec_attrs1 : fxs_pt_dec_attrs0)(d, p->flags) || (f->vel && fxs_pt_dec_vel(d, p->flags)))
         why = "corrupt particle data";
-    else if (d->io.rc.bad || d->io.rc.p != d->io.rc.end)
+    else if (!fxs_rc_exact_rc(&d->rc, d->rc_end))
         why = "corrupt particle data (range coder section not consumed exactly)";
-    else if (d->io.bits.p != d->io.bits.end || d->io.bits.acc)
+    else if (!fxs_rc_exact_bits(&d->rc, d->bits_end))
         why = "corrupt particle data (raw bits not consumed exactly)";
-    free(qa);
+    else
+        fxs_pt_dec_out(d, p);
     return why;
 }
 
@@ -321,6 +367,7 @@ int fxs_particles_decode_into(const uint8_t *buf, size_t len, struct fxs_particl
                                      vel ? FXS_PT_AT(p->vel, 3 * out) : NULL};
         why = fxs_pt_dec_body(d, buf + at, blen, rl, bl, &view);
         out += d->f.n;
+        free(d->scratch);
         free(d);
     }
     return why ? fxs_pt_fail(err, errlen, why) : 0;

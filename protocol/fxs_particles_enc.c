@@ -357,13 +357,15 @@ static int fxs_pt_enc_attrs(struct fxs_pt_enc *e, const struct fxs_particles *p)
     uint8_t *fl = (uint8_t *)(qf + n);
     int32_t *nbs = e->nbs;
     uint8_t *sk = (uint8_t *)(nbs + n);
+    double *xd = e->pd, *yd = xd + n, *zd = yd + n, *fd = zd + n;
     for (uint32_t j = 0; j < n; j++) {
         uint32_t i = e->order[j];
         qt[j] = fxs_pt_quant(p->temp[i], f->lo[3], ts, tmax);
         qf[j] = fxs_pt_quant(p->fuel[i], f->lo[4], fs, fmax);
         fl[j] = p->flags[i];
+        xd[j] = q[3 * (size_t)j], yd[j] = q[3 * (size_t)j + 1], zd[j] = q[3 * (size_t)j + 2], fd[j] = fl[j];
     }
-    fxs_pt_neighbours(f, q, fl, nbs, sk, e->pd);
+    fxs_pt_near_same(n, f->abits[0] <= 23 && f->abits[1] <= 23 && f->abits[2] <= 23, xd, yd, zd, fd, nbs, sk);
     e->f.mode = fxs_pt_choose(f, qt, qf, fl, nbs);
     return e->f.mode ? fxs_pt_enc_attrs1(e, qt, qf, fl, nbs, sk) : fxs_pt_enc_attrs0(e, qt, qf, fl, nbs);
 }

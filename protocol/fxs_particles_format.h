@@ -98,9 +98,6 @@ static inline int fxs_pt_rclass(uint32_t z) { return z < 2 ? (int)z : z >= 32 ? 
 /* Class of a node's count c >= 2: 2..8 alone, then 9-12, 13-16, 17-32, ... 257+. */
 static inline int fxs_pt_cclass(uint32_t c) { return c <= 256 ? fxs_pt_cclass_tab[c] : 13; }
 
-/* Mode 1 context index: the top `keep` bits of a value of `bits` bits. */
-static inline int fxs_pt_top(uint32_t q, int bits, int keep) { return (int)(bits > keep ? q >> (bits - keep) : q); }
-
 /* Largest quantised velocity magnitude: 2^(bits - 1) - 1. */
 static inline int32_t fxs_pt_vqmax(int bits) { return (int32_t)(1u << (bits - 1)) - 1; }
 

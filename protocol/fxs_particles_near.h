@@ -1,21 +1,32 @@
 /* fxs_particles_near.h — the neighbour search of the particle codec's attribute coding
  * (PROTOCOL.md §7.5.4): for each particle in tree order, the nearest of the few particles
  * just before it, by exact squared distance of the quantised positions, the latest on ties.
- * Internal to protocol/; a search of its own so that its vector paths can be read (and
- * checked against the scalar one, FXS_PT_SCALAR) apart from the coding around them. */
+ * Internal to protocol/; shared by the encoder (both attribute modes in one pass) and the
+ * decoder (every neighbour found before the attributes are decoded), so the two cannot find
+ * different neighbours. A file of its own so that the vector paths can be read, and checked
+ * against the scalar one (FXS_PT_SCALAR), apart from the coding around them.
+ *
+ * Every search takes n particles with quantised coordinates x, y, z (tree order, as
+ * doubles: integers < 2^24, so squared distances are exact) and sets nbs[j], the nearest of
+ * j - 1 ... j - 8 (-1 for j = 0). keys_exact: every axis has at most 23 bits, so
+ * distance * 32 + k is exact in a double and the vector paths may compare such keys. */
 #ifndef FXS_PARTICLES_NEAR_H
 #define FXS_PARTICLES_NEAR_H
 
 #include <stdint.h>
 
-#include "fxs_particles_format.h"
+/* nbs only (attribute mode 0 and the velocities, decoding). */
+void fxs_pt_near(uint32_t n, int keys_exact, const double *x, const double *y, const double *z, int32_t *nbs);
 
-/* The neighbour search of both attribute modes, one pass over f->n particles with quantised
- * positions q (3n, tree order) and flags fl: nbs[j], the nearest of j - 1 ... j - 8 (-1 for
- * j = 0), and sk[j], the k (1 ... 16) of the nearest of j - 1 ... j - 16 with the flags of
- * j (0: none), from which mode 1 takes the same-flags neighbour (else the latest particle
- * with those flags). pd: scratch for 4n doubles. */
-void fxs_pt_neighbours(const struct fxs_pt_frame *f, const uint32_t *q, const uint8_t *fl, int32_t *nbs, uint8_t *sk,
-                       double *pd);
+/* nbs, and sk[j]: the k (1 ... 16) of the nearest of j - 1 ... j - 16 whose fl equals fl[j],
+ * 0 when none has (encoding: mode 1 takes that particle as the same-flags neighbour). */
+void fxs_pt_near_same(uint32_t n, int keys_exact, const double *x, const double *y, const double *z, const double *fl,
+                      int32_t *nbs, uint8_t *sk);
+
+/* nbs, and near4[j]: the k (1 ... 16) of the 4 nearest of j - 1 ... j - 16, nearest first,
+ * one a byte from the lowest (0 past the candidates j has) (decoding mode 1: the same-flags
+ * neighbour is usually the first of them with the flags just decoded). */
+void fxs_pt_near4(uint32_t n, int keys_exact, const double *x, const double *y, const double *z, int32_t *nbs,
+                  uint32_t *near4);
 
 #endif

@@ -28,110 +28,170 @@
 
 typedef uint16_t fxs_rc_prob;
 
-/* ---- decoder: range decoder and raw bits reader ------------------------------------------ */
+/* The decoder's functions are inlined whatever the compiler's estimate: called out of line
+ * they would keep the decoder's state in memory, on the decisions' dependency chain. */
+#if defined(__GNUC__)
+#define FXS_RC_INLINE static inline __attribute__((always_inline))
+#else
+#define FXS_RC_INLINE static inline
+#endif
 
-struct fxs_rc_bits {
-    const uint8_t *p, *end;
-    uint64_t acc;
+/* ---- decoder: range decoder and raw bits reader ----------------------------------------- */
+
+/* Zero bytes after each section in the decoder's copy of it: the hot loops read ahead
+ * without checking and test the positions (fxs_rc_past) once per particle or tree node,
+ * which takes at most 81 decisions (a byte each at most) and 72 raw bits, and the raw bits
+ * are loaded 8 bytes at a time. Past its end a section reads as zeros, as LZMA's decoder
+ * shifts in; a payload that gets there is rejected at the next test. */
+#define FXS_RC_PAD 256u
+
+/* The decoder of both sections. The hot loops copy it into a local (the compiler keeps the
+ * fields in registers) and write it back at the end. */
+struct fxs_rc_dec {
+    const uint8_t *p;        /* next byte of the range-coder section */
+    const uint8_t *bp;       /* next byte of the raw bits not yet loaded into acc */
+    uint64_t acc;            /* raw bits loaded, next first; the low cnt are valid */
+    uint32_t range, code;
     int cnt;
 };
 
-/* Reads nbits (<= 32), LSB first; returns -1 past the end. */
-static inline int fxs_rc_bits_get(struct fxs_rc_bits *r, int nbits, uint32_t *v)
+/* The sections rc (rl bytes: a zero byte, then the first four bytes of code) and bits, each
+ * followed by FXS_RC_PAD zero bytes. -1 when the range coder cannot start so. */
+static inline int fxs_rc_dec_init(struct fxs_rc_dec *d, const uint8_t *rc, size_t rl, const uint8_t *bits)
 {
-    while (r->cnt < nbits) {
-        if (r->p >= r->end) return -1;
-        r->acc |= (uint64_t)*r->p++ << r->cnt;
-        r->cnt += 8;
-    }
-    *v = (uint32_t)(r->acc & ((1ull << nbits) - 1u));
-    r->acc >>= nbits;
-    r->cnt -= nbits;
-    return 0;
-}
-
-struct fxs_rc_dec {
-    const uint8_t *p, *end;
-    uint32_t range, code;
-    int bad;
-};
-
-/* The range decoder over the section p (len bytes): a zero byte, then the first four bytes
- * of code. -1 when the section cannot start so. */
-static inline int fxs_rc_dec_init(struct fxs_rc_dec *d, const uint8_t *p, size_t len)
-{
-    if (len < 5 || p[0] != 0) return -1;
-    d->p = p + 5;
-    d->end = p + len;
+    if (rl < 5 || rc[0] != 0) return -1;
+    d->p = rc + 5;
     d->range = 0xFFFFFFFFu;
-    d->code = (uint32_t)p[1] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 8 | p[4]; /* big endian */
-    d->bad = d->code == 0xFFFFFFFFu;
-    return d->bad ? -1 : 0;
+    d->code = (uint32_t)rc[1] << 24 | (uint32_t)rc[2] << 16 | (uint32_t)rc[3] << 8 | rc[4]; /* big endian */
+    d->bp = bits;
+    d->acc = 0;
+    d->cnt = 0;
+    return d->code == 0xFFFFFFFFu ? -1 : 0;
 }
 
-/* One decision with probability *p (of a 0), which then adapts. Reading past the section
- * sets bad (the caller rejects the payload) and shifts in zeros. */
-static inline int fxs_rc_get(struct fxs_rc_dec *d, fxs_rc_prob *p)
+/* x = c ? a : x, without a branch. GCC turns the decoder's selects into branches on the
+ * decoded bit, which mispredict on every other decision of a value tree; an explicit cmov
+ * keeps the tree's decisions a chain of arithmetic (Clang and other targets: plain C). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define FXS_RC_SELECT(c, x, a) __asm__("testl %1, %1\n\tcmovnzl %2, %0" : "+r"(x) : "r"(c), "r"(a) : "cc")
+#else
+#define FXS_RC_SELECT(c, x, a) ((x) = (c) ? (a) : (x))
+#endif
+
+/* One decision with probability *p (of a 0), which then adapts as the encoder's
+ * fxs_rc_bit does. For decisions the caller branches on: the compiler may decode with a
+ * branch, which costs least when the bit is predictable. */
+FXS_RC_INLINE unsigned fxs_rc_get(struct fxs_rc_dec *d, fxs_rc_prob *p)
 {
-    uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * *p;
-    int bit;
-    if (d->code < bound) {
-        d->range = bound;
-        *p = (fxs_rc_prob)(*p + (((1u << FXS_RC_PROB_BITS) - *p) >> FXS_RC_ADAPT));
-        bit = 0;
-    } else {
-        d->code -= bound;
-        d->range -= bound;
-        *p = (fxs_rc_prob)(*p - (*p >> FXS_RC_ADAPT));
-        bit = 1;
-    }
+    uint32_t pv = *p, bound = (d->range >> FXS_RC_PROB_BITS) * pv;
+    unsigned bit = d->code >= bound;
+    uint32_t mask = 0u - bit;
+    d->code -= bound & mask;
+    d->range = bit ? d->range - bound : bound;
+    *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & ~mask)) >> FXS_RC_ADAPT));
     if (d->range < FXS_RC_TOP) {
         d->range <<= 8;
-        if (d->p < d->end) d->code = d->code << 8 | *d->p++;
-        else d->bad = 1, d->code <<= 8;
+        d->code = d->code << 8 | *d->p++;
     }
     return bit;
 }
 
-/* Both sections of a payload being decoded. */
-struct fxs_rc_io {
-    struct fxs_rc_dec rc;
-    struct fxs_rc_bits bits;
-};
+/* fxs_rc_get with the probability's value pv loaded by the caller, without a branch on the
+ * bit: for decisions whose bit only feeds arithmetic (a tree's next node). */
+FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv)
+{
+    uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * pv, range = bound;
+    unsigned bit = d->code >= bound;
+    uint32_t mask = 0u - bit;
+    FXS_RC_SELECT(bit, range, d->range - bound);
+    d->range = range;
+    d->code -= bound & mask;
+    *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & ~mask)) >> FXS_RC_ADAPT));
+    if (d->range < FXS_RC_TOP) {
+        d->range <<= 8;
+        d->code = d->code << 8 | *d->p++;
+    }
+    return bit;
+}
+
+/* n raw bits (n <= 56), LSB first. The buffer is refilled to at least 56 bits on every
+ * read, without a branch: the bytes at bp land at bit cnt (bits already there past cnt are
+ * the same stream bits, loaded before). */
+FXS_RC_INLINE uint64_t fxs_rc_raw(struct fxs_rc_dec *d, int n)
+{
+    uint64_t v, next;
+    memcpy(&next, d->bp, 8); /* one load; the bytes are little-endian */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+    next = __builtin_bswap64(next);
+#endif
+    d->acc |= next << d->cnt;
+    d->bp += (63 - d->cnt) >> 3;
+    d->cnt |= 56;
+    v = d->acc & ((1ull << n) - 1u);
+    d->acc >>= n;
+    d->cnt -= n;
+    return v;
+}
+
+/* Whether d has read past the range-coder section ending at rc_end or taken raw bits past
+ * bits_end. */
+FXS_RC_INLINE int fxs_rc_past(const struct fxs_rc_dec *d, const uint8_t *rc_end, const uint8_t *bits_end)
+{
+    return d->p > rc_end || (d->bp - bits_end) * 8 > (ptrdiff_t)d->cnt;
+}
+
+/* Whether d has consumed both sections exactly: every range-coder byte, and the raw bits
+ * up to the last byte's zero padding. */
+static inline int fxs_rc_exact_rc(const struct fxs_rc_dec *d, const uint8_t *rc_end) { return d->p == rc_end; }
+static inline int fxs_rc_exact_bits(const struct fxs_rc_dec *d, const uint8_t *bits_end)
+{
+    ptrdiff_t left = (ptrdiff_t)d->cnt - (d->bp - bits_end) * 8; /* bits of the section not taken */
+    return left >= 0 && left < 8 && !(d->acc & ((1ull << left) - 1u));
+}
 
 /* An integer z >= 0 with the model p (FXS_RC_IPROBS(u) probabilities). Returns 0, or -1 for
- * a class beyond the limit or raw bits past the end. */
-static inline int fxs_rc_get_int(struct fxs_rc_io *io, fxs_rc_prob *p, int u, uint32_t *z)
+ * a class beyond the limit. */
+FXS_RC_INLINE int fxs_rc_get_int(struct fxs_rc_dec *d, fxs_rc_prob *p, int u, uint32_t *z)
 {
-    uint32_t e, m;
+    uint32_t e;
     int k = 0;
     for (int i = 0; i < u; i++)
-        if (!fxs_rc_get(&io->rc, p + i)) {
+        if (!fxs_rc_get(d, p + i)) {
             *z = (uint32_t)i;
             return 0;
         }
-    while (fxs_rc_get(&io->rc, p + u + k))
+    while (fxs_rc_get(d, p + u + k))
         if (++k == FXS_RC_MAXK) return -1;
     e = 1;
     if (k) {
-        e = 2u | (uint32_t)fxs_rc_get(&io->rc, p + u + FXS_RC_MAXK + k);
-        if (fxs_rc_bits_get(&io->bits, k - 1, &m)) return -1;
-        e = e << (k - 1) | m;
+        e = 2u | fxs_rc_get(d, p + u + FXS_RC_MAXK + k);
+        e = e << (k - 1) | (uint32_t)fxs_rc_raw(d, k - 1);
     }
     *z = e + (uint32_t)u - 1u;
     return 0;
 }
 
 /* A value of `bits` bits as a bit tree: the top min(bits, 8) bits high first with p[m]
- * (m = 1, then 2m + bit), then the low bits - 8 bits raw. 0, or -1 past the raw bits. */
-static inline int fxs_rc_get_tree(struct fxs_rc_io *io, fxs_rc_prob *p, int bits, uint32_t *v)
+ * (m = 1, then 2m + bit), then the low bits - 8 bits raw. With 8 or more bits, the tree's
+ * 8 levels are unrolled and both children's probabilities loaded before the bit that picks
+ * one is known, so the load is off the decisions' dependency chain. */
+FXS_RC_INLINE uint32_t fxs_rc_get_tree(struct fxs_rc_dec *d, fxs_rc_prob *p, int bits)
 {
-    int low = bits > 8 ? bits - 8 : 0;
-    uint32_t m = 1, end = 1u << (bits - low), r = 0;
-    while (m < end) m = 2 * m + (uint32_t)fxs_rc_get(&io->rc, p + m);
-    if (low && fxs_rc_bits_get(&io->bits, low, &r)) return -1;
-    *v = (m - end) << low | r;
-    return 0;
+    uint32_t m = 1;
+    if (bits >= 8) {
+        uint32_t pv = p[1];
+        for (int i = 0; i < 7; i++) {
+            uint32_t p0 = p[2 * m], p1 = p[2 * m + 1];
+            unsigned bit = fxs_rc_get_pv(d, p + m, pv);
+            m = 2 * m + bit;
+            pv = p0;
+            FXS_RC_SELECT(bit, pv, p1);
+        }
+        m = 2 * m + fxs_rc_get_pv(d, p + m, pv);
+        return (m - 256u) << (bits - 8) | (uint32_t)fxs_rc_raw(d, bits - 8);
+    }
+    while (m < 1u << bits) m = 2 * m + fxs_rc_get(d, p + m);
+    return m - (1u << bits);
 }
 
 /* ---- encoder: range coder and raw bits writer --------------------------------------------- */
