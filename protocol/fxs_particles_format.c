@@ -5,7 +5,6 @@
 #include "fxs_particles_format.h"
 
 #include <math.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "fxs_bytes.h"
@@ -28,9 +27,16 @@ void fxs_pt_models_init(struct fxs_pt_models *m)
     for (size_t i = 0; i < sizeof *m / sizeof *p; i++) p[i] = FXS_RC_PROB_INIT;
 }
 
+/* Without stdio: the decoder also runs as WebAssembly, where printf's machinery would
+ * import file functions. */
 int fxs_pt_fail(char *err, size_t errlen, const char *msg)
 {
-    if (err && errlen) snprintf(err, errlen, "particles: %s", msg);
+    static const char prefix[] = "particles: ";
+    size_t at = 0;
+    if (!err || !errlen) return -1;
+    for (const char *s = prefix; *s && at + 1 < errlen; s++) err[at++] = *s;
+    for (const char *s = msg; *s && at + 1 < errlen; s++) err[at++] = *s;
+    err[at] = 0;
     return -1;
 }
 

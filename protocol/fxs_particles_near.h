@@ -9,11 +9,20 @@
  * Every search takes n particles with quantised coordinates x, y, z (tree order, as
  * doubles: integers < 2^24, so squared distances are exact) and sets nbs[j], the nearest of
  * j - 1 ... j - 8 (-1 for j = 0). keys_exact: every axis has at most 23 bits, so
- * distance * 32 + k is exact in a double and the vector paths may compare such keys. */
+ * distance * 32 + k is exact in a double (fxs_pt_near_key) and the fast paths may compare
+ * such keys. */
 #ifndef FXS_PARTICLES_NEAR_H
 #define FXS_PARTICLES_NEAR_H
 
 #include <stdint.h>
+
+/* The key of the candidate k particles before particle j: its squared distance * 32 + k.
+ * The smallest key is the nearest candidate, the latest on ties. */
+static inline double fxs_pt_near_key(const double *x, const double *y, const double *z, uint32_t j, uint32_t k)
+{
+    double dx = x[j] - x[j - k], dy = y[j] - y[j - k], dz = z[j] - z[j - k];
+    return (dx * dx + dy * dy + dz * dz) * 32.0 + (double)k;
+}
 
 /* nbs only (attribute mode 0 and the velocities, decoding). */
 void fxs_pt_near(uint32_t n, int keys_exact, const double *x, const double *y, const double *z, int32_t *nbs);
