@@ -14,6 +14,7 @@ import { Conn } from './conn.js';
 import { StreamPanel } from './panel.js';
 import { STATS_HELP, StreamStats } from './stats.js';
 import { FLAME_DEFAULTS, FLAME_MODES, FlameView } from './flame.js';
+import { particleDecoderStatus } from './particle_decoder.js';
 import { WAVE_DEFAULTS, WaveView } from './wave.js';
 import { SceneView } from './scene.js';
 import { EyeView } from './eye.js';
@@ -283,7 +284,10 @@ function deliver(st) {
     const { h, buf } = st.pending.get(kind);
     st.pending.delete(kind);
     for (const v of st.views) {
-      try { v.onFrame(h, buf); } catch (e) { st.error = `frame ${h.seq}: ${e.message}`; }
+      try {
+        const shown = v.onFrame(h, buf); // a promise where the view decodes off the main thread
+        if (shown instanceof Promise) shown.catch((e) => { st.error = `frame ${h.seq}: ${e.message}`; });
+      } catch (e) { st.error = `frame ${h.seq}: ${e.message}`; }
     }
   }
 }
@@ -476,6 +480,7 @@ window.fxs = {
   conn, streams, get views() { return views.map((v) => `${v.stream}:${v.kind}`); }, sample,
   stats: () => Object.fromEntries([...streams.values()].map((s) => [s.name, { rev: s.rev, channel: s.channel, maxFps: s.maxFps, latency: s.stats.rate.latency, frames: s.stats.totalFrames, drawn: s.stats.totalDrawn, kinds: [...s.stats.kindsSeen], skipped: s.stats.skipped, error: s.error }])),
   flame: () => views.find((x) => x.kind === 'flame')?.info() ?? null,
+  particleDecoder: particleDecoderStatus,
   flameLook,
   flameSettings,
   scene: () => { const v = views.find((x) => x.kind === 'scene'); return v ? { rig: !!v.rig?.constants, nSeg: v.rig?.nSeg ?? 0, shadows: v.shadowInfo ?? [] } : null; },
