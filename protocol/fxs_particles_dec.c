@@ -47,8 +47,14 @@ static int fxs_pt_dec_tree(struct fxs_pt_dec *d)
         while (c >= 2 && depth < fdepth) {
             int a = f->axis[depth];
             uint32_t zz, bit = 1u << (f->left[depth][a] - 1);
-            if (fxs_rc_get_int(&rc, d->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U, &zz)) return -1;
-            int64_t lo = (int64_t)(c >> 1) + fxs_pt_unzigzag(zz);
+            int64_t lo;
+            if (c == 2) { /* lo 1, 0 or 2: the unary decisions alone (a longer code is corrupt) */
+                fxs_rc_prob *p = d->m.cnt[a];
+                lo = !fxs_rc_get(&rc, p) ? 1 : !fxs_rc_get(&rc, p + 1) ? 0 : !fxs_rc_get(&rc, p + 2) ? 2 : -1;
+            } else {
+                if (fxs_rc_get_int(&rc, d->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U, &zz)) return -1;
+                lo = (int64_t)(c >> 1) + fxs_pt_unzigzag(zz);
+            }
             if (lo < 0 || lo > (int64_t)c || fxs_rc_past(&rc, rc_end, bits_end)) return -1;
             /* the upper half's base: this one's with the split bit set */
             uint32_t ux = bx | (bit & (0u - (a == 0))), uy = by | (bit & (0u - (a == 1))), uz = bz | (bit & (0u - (a == 2)));
