@@ -61,17 +61,25 @@ KERNEL_LAYOUTS := $(wildcard kernels/*_layout.h)
 # into clients/web/dist/ (git-ignored), which fxstreamd serves with the rest of clients/web.
 WEB_SRC     := $(wildcard clients/web/src/*.js clients/web/test/*.js) clients/web/fxs_particles.js clients/web/build.mjs
 WEB_OUT     := clients/web/dist/app.js
+# The page decodes particles with the C decoder compiled to WebAssembly (the module
+# imports nothing): clang for wasm32-wasi against Debian's wasi-libc, linked by lld's wasm-ld.
+WASM_CC     ?= clang
+WASM_SRC    := clients/web/wasm/fxs_particles_wasm.c protocol/fxs_particles_dec.c protocol/fxs_particles_format.c \
+               protocol/fxs_particles_near.c
+WASM_OUT    := clients/web/dist/fxs_particles.wasm
+WASM_FLAGS  := --target=wasm32-wasi --sysroot=/usr -std=c11 -O2 -msimd128 -ffp-contract=off -Wall -Wextra -Werror \
+               -Iprotocol -nostartfiles -Wl,--no-entry -Wl,--strip-all
 NPM_STAMP   := node_modules/.package-lock.json
 
 .PHONY: all deps run test bench screenshots clean unit web fuzz fuzz-libs install uninstall pkgs-present
 .SECONDARY: # keep object files of tests and benches between runs
-all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(CLIENT_SO) $(WEB_OUT)
+all: $(BUILD)/fxstreamd $(BUILD)/fxctl $(BUILD)/fxload $(CLIENT_SO) $(WEB_OUT) $(WASM_OUT)
 
 deps:
 	@deploy/install-deps.sh
 	@$(MAKE) --no-print-directory $(NPM_STAMP)
 
-web: $(WEB_OUT)
+web: $(WEB_OUT) $(WASM_OUT)
 
 # npm ci installs exactly the lock file (no network at run time: the bundle is static).
 $(NPM_STAMP): package.json package-lock.json
@@ -80,6 +88,11 @@ $(NPM_STAMP): package.json package-lock.json
 
 $(WEB_OUT): $(WEB_SRC) $(NPM_STAMP)
 	node clients/web/build.mjs
+
+$(WASM_OUT): $(WASM_SRC) $(wildcard protocol/*.h)
+	@test -e /usr/lib/wasm32-wasi/libc.a && command -v wasm-ld >/dev/null || { deploy/install-deps.sh --check; exit 1; }
+	@mkdir -p $(@D)
+	$(WASM_CC) $(WASM_FLAGS) $(WASM_SRC) -o $@
 
 # The second make builds on every core unless the command line chose -j.
 SUBMAKE = $(MAKE) --no-print-directory $(if $(findstring -j,$(MAKEFLAGS)),,-j$(shell nproc))

@@ -9,7 +9,7 @@ set -eu
 
 PKGS="build-essential pkg-config ocl-icd-opencl-dev opencl-headers pocl-opencl-icd clinfo gnuplot-nox
 libwebsockets-dev libopenexr-dev openexr libcjson-dev libzstd-dev zstd draco nodejs python3 python3-websockets python3-numpy python3-jsonschema python3-prometheus-client
-chromium clang valgrind openssl nginx systemd strace python3-kubernetes
+chromium clang lld wasi-libc libclang-rt-14-dev-wasm32 valgrind openssl nginx systemd strace python3-kubernetes
 libhiredis-dev redis-server godot3-server"
 
 missing=""

@@ -4,10 +4,13 @@
 //
 // Plain ES module, no dependencies, no build step: the entropy stage is an adaptive
 // binary range coder (LZMA's) that takes a few lines here (Decoder.bit, the one place a
-// decision is decoded). Mirrors protocol/fxs_particles.c (the C decoder) value for value:
+// decision is decoded). Mirrors protocol/fxs_particles_dec.c (the C decoder) value for value:
 // positions, T, F and the optional velocities are float32(lo + q * step) or
 // float32(q * step) computed in double, so both decoders give identical floats (checked
 // against tests/data/particles/).
+//
+// The same decoder in C runs here as WebAssembly where it can (loadWasmDecoder), about
+// twice as fast; this one is its fallback and the reference the tests hold both to.
 //
 //   import { parseHeader, decode } from './fxs_particles.js';
 //   const h = parseHeader(msg);                       // throws on a bad frame
@@ -410,6 +413,43 @@ export function decode(buf) {
     o += f.n;
   }
   return out;
+}
+
+/**
+ * The C decoder (protocol/fxs_particles_dec.c) compiled to WebAssembly (make builds
+ * clients/web/dist/fxs_particles.wasm): resolves to a function with decode()'s contract,
+ * the same particles and the same "particles: ..." errors, about twice as fast. source: the
+ * module's bytes (ArrayBuffer, typed array), a WebAssembly.Module, or a URL to fetch.
+ * Rejects when the module cannot be compiled here (e.g. a browser without WebAssembly SIMD):
+ * decode() is then the decoder to use.
+ */
+export async function loadWasmDecoder(source) {
+  let module = source;
+  if (typeof source === 'string' || source instanceof URL) {
+    const r = await fetch(source);
+    if (!r.ok) throw new Error(`particles: cannot load ${source}: HTTP ${r.status}`);
+    module = await r.arrayBuffer();
+  }
+  if (!(module instanceof WebAssembly.Module)) module = await WebAssembly.compile(bytesOf(module));
+  const w = (await WebAssembly.instantiate(module, {})).exports;
+  const view = (Type, at, count) => new Type(w.memory.buffer, at, count).slice(); // copies: memory can grow
+  return (buf) => {
+    const b = bytesOf(buf), at = w.fxs_wasm_alloc(b.length);
+    if (!at) throw new Error('particles: out of memory');
+    try {
+      new Uint8Array(w.memory.buffer, at, b.length).set(b);
+      if (w.fxs_wasm_decode(at, b.length)) {
+        const msg = new Uint8Array(w.memory.buffer, w.fxs_wasm_error());
+        throw new Error(new TextDecoder().decode(msg.subarray(0, msg.indexOf(0))));
+      }
+      const n = w.fxs_wasm_n(), vel = w.fxs_wasm_vel();
+      return { n, xyz: view(Float32Array, w.fxs_wasm_xyz(), 3 * n), temp: view(Float32Array, w.fxs_wasm_temp(), n),
+        fuel: view(Float32Array, w.fxs_wasm_fuel(), n), flags: view(Uint8Array, w.fxs_wasm_flags(), n),
+        vel: vel ? view(Float32Array, vel, 3 * n) : null };
+    } finally {
+      w.fxs_wasm_free(at);
+    }
+  };
 }
 
 /** Decodes a whole kind 1 frame (header + payload); returns {header, particles}. */

@@ -2,7 +2,7 @@
  *
  * On the same frames, one line per figure: bytes per particle, encode and decode time
  * per million particles of
- *   (a) codec 2 (protocol/fxs_particles.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
+ *   (a) codec 2 (protocol/fxs_particles_enc.c) at pos_bits 12/16/20 (T 10, F 8 bits), and at
  *       12/16/20 bits with T and F at 8 bits: the quantisation given to Draco (equal
  *       quantisation: codec 2's position step is Draco's -qp step, largest extent /
  *       (2^B - 1) for all axes; T and F 8 bits over their range in both); then the wire
@@ -21,10 +21,16 @@
  *       daemon and the wire.
  * Frames: synthetic SPH-like flames (tests/unit/particles_gen.h: 10k, 50k, 200k),
  * plus every DIR/<stream>-<seq>.ply that `fxctl subscribe flame --out DIR` wrote when
- * FXS_BENCH_PLY_DIR=DIR is set (real flame frames; with velocities when the stream sent
- * them). Each line says which. FXS_BENCH_VEL_ONLY=1 prints only the velocity lines. */
+ * FXS_BENCH_PLY_DIR=DIR is set (real flame frames, all of them, in name order; with
+ * velocities when the stream sent them). Each line says which. FXS_BENCH_VEL_ONLY=1 prints
+ * only the velocity lines.
+ * Last, the decode table: each frame's default payload (what the flame stream sends: 16-bit
+ * positions, T 10 and F 8 bits, no velocities) decoded by the C decoder here and, in node
+ * (V8, Chrome's engine), by the page's two decoders (tests/bench/particles_js_bench.mjs: the
+ * C decoder as WebAssembly, and fxs_particles.js's decode()), with the targets beside them. */
 #include <dirent.h>
 #include <stdio.h>
+#include <unistd.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -47,6 +53,99 @@ static void bp_line(const char *frame, uint32_t n, const char *what, double byte
 {
     printf("%-22s n=%-7u %-34s %6.3f B/particle  encode %8.1f ms/M  decode %8.1f ms/M  (%.3f ms / %.3f ms per 10k)\n",
            frame, n, what, bytes / n, enc_s * 1e9 / n, dec_s * 1e9 / n, enc_s * 1e7 / n, dec_s * 1e7 / n);
+}
+
+/* ---- the decode table --------------------------------------------------------------------- */
+
+#define BP_DECODE_C_TARGET 60.0   /* ms per million particles (issue 28) */
+#define BP_DECODE_WEB_TARGET 100.0
+#define BP_MAX_FRAMES 4096
+
+/* Each frame's default payload, written to bp_dir for the JavaScript figures. */
+static struct bp_dec {
+    char name[64], path[512];
+    uint32_t n;
+    double c_ms;
+} bp_decs[BP_MAX_FRAMES];
+static int bp_ndecs;
+static char bp_dir[] = "/tmp/bench_particles_dec_XXXXXX";
+
+/* Encodes p as the flame stream would by default, times the C decoder on it and keeps the
+ * payload for bp_decode_table. */
+static void bp_decode_record(const char *frame, const struct fxs_particles *pv)
+{
+    struct fxs_particles p = *pv, d;
+    struct fxs_particles_opts o = { .pos_bits = FXS_PARTICLES_DEFAULT_POS_BITS };
+    struct bp_dec *r = &bp_decs[bp_ndecs];
+    uint8_t *enc = NULL;
+    size_t len;
+    char err[200];
+    double td = 1e9;
+    p.vel = NULL;
+    if (bp_ndecs == BP_MAX_FRAMES || (!bp_ndecs && !mkdtemp(bp_dir))) return;
+    if (fxs_particles_encode(&p, &o, &enc, &len, err, sizeof err)) {
+        printf("%s: encode failed: %s\n", frame, err);
+        return;
+    }
+    for (int k = 0; k < 3 * bp_reps(p.n); k++) {
+        double t0 = bp_now();
+        int bad = fxs_particles_decode(enc, len, &d, err, sizeof err);
+        td = fmin(td, bp_now() - t0);
+        if (bad) {
+            printf("%s: decode failed: %s\n", frame, err);
+            free(enc);
+            return;
+        }
+        fxs_particles_free(&d);
+    }
+    snprintf(r->name, sizeof r->name, "%s", frame);
+    snprintf(r->path, sizeof r->path, "%s/%d.bin", bp_dir, bp_ndecs);
+    r->n = p.n;
+    r->c_ms = td * 1e9 / p.n;
+    FILE *f = fopen(r->path, "wb");
+    if (f && fwrite(enc, 1, len, f) == len && !fclose(f)) bp_ndecs++;
+    else if (f) fclose(f);
+    free(enc);
+}
+
+/* The decode table: the C figures, and the JavaScript ones from node. */
+static void bp_decode_table(void)
+{
+    static const char *script = "tests/bench/particles_js_bench.mjs", *wasm = "clients/web/dist/fxs_particles.wasm";
+    double js[BP_MAX_FRAMES], web[BP_MAX_FRAMES];
+    char cmd[1024], line[1024];
+    for (int i = 0; i < bp_ndecs; i++) js[i] = web[i] = -1;
+    if (access(script, R_OK) || access(wasm, R_OK)) {
+        printf("decode in node: not measured (%s or %s missing: run from the repository root after make)\n", script, wasm);
+    } else {
+        snprintf(cmd, sizeof cmd, "node %s %s %s", script, wasm, bp_dir);
+        FILE *f = popen(cmd, "r");
+        while (f && fgets(line, sizeof line, f)) {
+            char path[512];
+            unsigned n;
+            double a, b;
+            if (sscanf(line, "%511s %u %lf %lf", path, &n, &a, &b) != 4) {
+                printf("decode in node: %s", line);
+                continue;
+            }
+            for (int i = 0; i < bp_ndecs; i++)
+                if (!strcmp(path, bp_decs[i].path)) js[i] = a, web[i] = b;
+        }
+        if (!f || pclose(f)) printf("decode in node: node failed (%s)\n", cmd);
+    }
+    printf("decode, ms per million particles, of each frame's default payload (16-bit positions, T 10, F 8 bits);\n"
+           "C: this decoder; WebAssembly (the C decoder, the page's) and JavaScript (fxs_particles.js): in node\n");
+    printf("%-24s %8s %22s %28s %12s\n", "frame", "n", "C (target <= 60)", "WebAssembly (target <= 100)", "JavaScript");
+    for (int i = 0; i < bp_ndecs; i++) {
+        const struct bp_dec *r = &bp_decs[i];
+        char w[32] = "-", j[32] = "-";
+        if (web[i] >= 0) snprintf(w, sizeof w, "%.1f %s", web[i], web[i] <= BP_DECODE_WEB_TARGET ? "met" : "missed");
+        if (js[i] >= 0) snprintf(j, sizeof j, "%.1f", js[i]);
+        printf("%-24s %8u %15.1f %6s %28s %12s\n", r->name, r->n, r->c_ms, r->c_ms <= BP_DECODE_C_TARGET ? "met" : "missed",
+               w, j);
+        remove(r->path);
+    }
+    if (bp_ndecs) rmdir(bp_dir);
 }
 
 /* ---- (a) codec 2 ------------------------------------------------------------------------ */
@@ -316,6 +415,7 @@ static void bp_frame(const char *name, const struct fxs_particles *p)
 {
     static const int bits[] = { 12, 16, 20 };
     const char *vel_only = getenv("FXS_BENCH_VEL_ONLY");
+    bp_decode_record(name, p);
     if (p->vel) bp_vel(name, p);
     if (vel_only && *vel_only == '1') {
         printf("\n");
@@ -336,32 +436,37 @@ static void bp_frame(const char *name, const struct fxs_particles *p)
     printf("\n");
 }
 
+static int bp_ply_name(const struct dirent *e)
+{
+    size_t l = strlen(e->d_name);
+    return l >= 5 && !strcmp(e->d_name + l - 4, ".ply");
+}
+
+/* Every .ply in dir, in name order. */
 static void bp_real_frames(const char *dir)
 {
-    DIR *d = opendir(dir);
-    struct dirent *e;
-    int count = 0;
-    if (!d) {
+    struct dirent **names;
+    int count = 0, total = scandir(dir, &names, bp_ply_name, alphasort);
+    if (total < 0) {
         printf("real frames: cannot open %s\n", dir);
         return;
     }
-    while ((e = readdir(d)) && count < 4) {
+    for (int i = 0; i < total; i++) {
         char path[4096], name[64];
         struct fxs_particles p = { 0 };
-        size_t l = strlen(e->d_name);
-        if (l < 5 || strcmp(e->d_name + l - 4, ".ply")) continue;
-        snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+        snprintf(path, sizeof path, "%s/%s", dir, names[i]->d_name);
         if (pgen_read_ply(path, &p) || !p.n) {
-            fxs_particles_free(&p);
-            continue;
+            printf("real frames: %s: not a readable particle PLY, skipped\n", path);
+        } else {
+            snprintf(name, sizeof name, "real:%.17s", names[i]->d_name);
+            bp_frame(name, &p);
+            count++;
         }
-        snprintf(name, sizeof name, "real:%.17s", e->d_name);
-        bp_frame(name, &p);
         fxs_particles_free(&p);
-        count++;
+        free(names[i]);
     }
-    closedir(d);
-    if (!count) printf("real frames: no readable .ply in %s\n", dir);
+    free(names);
+    printf("real frames: %d of %d .ply files in %s\n\n", count, total, dir);
 }
 
 int main(void)
@@ -379,5 +484,6 @@ int main(void)
         fxs_particles_free(&p);
     }
     if (dir) bp_real_frames(dir);
+    bp_decode_table();
     return 0;
 }

@@ -1,4 +1,4 @@
-/* fuzz_particles.c — libFuzzer target: the particle decoder (protocol/fxs_particles.c) on
+/* fuzz_particles.c — libFuzzer target: the particle decoder (protocol/fxs_particles_dec.c) on
  * raw payloads. Whatever decodes must re-encode and decode to the same count, with every
  * position and velocity finite (the decoder reconstructs from finite bounds) and velocities
  * after the round trip exactly when the input had them. */

@@ -1,19 +1,23 @@
 // particles_js_check.mjs — decodes the C encoder's codec 2 test vectors (tests/data/particles/*.bin), alone and back to back as codec 3 payloads,
-// with clients/web/fxs_particles.js and compares with what the C decoder gave (*.json):
+// with both browser decoders of clients/web/fxs_particles.js, decode() (JavaScript) and
+// loadWasmDecoder() (the C decoder as WebAssembly: clients/web/dist/fxs_particles.wasm, which
+// make builds; missing, it fails), and compares with what the C decoder gave (*.json):
 // every float bit for bit (both decoders compute float32(lo + q * step) in double), flags
 // exactly, velocities (§7.5.7) exactly where the C decoder gave them and none elsewhere. Also: a frame header round trip, and truncated/corrupt payloads must throw a
-// "particles:" error, never return garbage silently or crash. Prints
+// "particles:" error, never return garbage silently or crash; on every corrupted vector the
+// two decoders give the same particles or the same error. Prints
 // "test_particles_js: N passed, M failed" last; exit status 1 on any failure.
 import { readFileSync, readdirSync } from 'node:fs';
 import { join, dirname } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { decode, decodeFrame, parseHeader } from '../../clients/web/fxs_particles.js';
+import { decode as decodeJs, decodeFrame, loadWasmDecoder, parseHeader } from '../../clients/web/fxs_particles.js';
 
 const root = join(dirname(fileURLToPath(import.meta.url)), '..', '..');
 const dir = join(root, 'tests', 'data', 'particles');
+const wasmPath = join(root, 'clients', 'web', 'dist', 'fxs_particles.wasm');
 let passed = 0, failed = 0;
 
-function check(name, fn) {
+function checkNamed(name, fn) {
   try {
     const why = fn();
     if (why) throw new Error(why);
@@ -22,6 +26,17 @@ function check(name, fn) {
   } catch (e) {
     failed++;
     console.log(`FAIL ${name}: ${e.message}`);
+  }
+}
+
+const check = checkNamed;
+
+// The result of decoding bin: {p} or {error}.
+function outcome(decode, bin) {
+  try {
+    return { p: decode(bin) };
+  } catch (e) {
+    return { error: e.message };
   }
 }
 
@@ -39,7 +54,7 @@ function compare(got, want) {
 }
 
 // null when decode() of bin cut to each of lengths throws a "particles:" error.
-function cutsRejected(bin, lengths) {
+function cutsRejected(decode, bin, lengths) {
   for (const l of lengths) {
     try {
       decode(bin.subarray(0, l));
@@ -69,121 +84,141 @@ function frameOf(payload, n) {
 
 const names = readdirSync(dir).filter((f) => f.endsWith('.bin')).map((f) => f.slice(0, -4)).sort();
 check('test vectors present', () => (names.length >= 4 ? null : `only ${names.length} in ${dir}`));
-for (const name of names) {
-  const bin = new Uint8Array(readFileSync(join(dir, `${name}.bin`)));
-  const want = JSON.parse(readFileSync(join(dir, `${name}.json`), 'utf8'));
-  check(`vector ${name} (n=${want.n})`, () => compare(decode(bin), want));
-  check(`vector ${name} as a frame`, () => {
-    const { header, particles } = decodeFrame(frameOf(bin, want.n).buffer);
-    if (header.seq !== 42n || header.channel !== 7 || header.simTime !== 1.5) return 'header fields';
-    return compare(particles, want);
+
+// Every check below, once per decoder: `decode` is the decoder under test, `tag` names it
+// (and prefixes its checks).
+function decoderChecks(tag, decode) {
+  const check = (what, fn) => checkNamed(`${tag}: ${what}`, fn);
+  for (const name of names) {
+    const bin = new Uint8Array(readFileSync(join(dir, `${name}.bin`)));
+    const want = JSON.parse(readFileSync(join(dir, `${name}.json`), 'utf8'));
+    check(`vector ${name} (n=${want.n})`, () => compare(decode(bin), want));
+    if (tag === 'js') check(`vector ${name} as a frame`, () => {
+      const { header, particles } = decodeFrame(frameOf(bin, want.n).buffer);
+      if (header.seq !== 42n || header.channel !== 7 || header.simTime !== 1.5) return 'header fields';
+      return compare(particles, want);
+    });
+    check(`vector ${name} truncated`, () => cutsRejected(decode, bin, bin.keys()));
+    check(`vector ${name} corrupt bytes`, () => {
+      let seed = 1;
+      for (let t = 0; t < 500; t++) {
+        const bad = bin.slice();
+        seed = (seed * 1103515245 + 12345) >>> 0;
+        bad[seed % bad.length] ^= 1 + (seed >>> 24) % 255;
+        const got = outcome(decode, bad);
+        if (got.error && !got.error.startsWith('particles: ')) return `unexpected error ${got.error}`;
+        if (got.p && got.p.xyz.length !== 3 * got.p.n) return 'inconsistent output';
+        if (tag !== 'js') { // the same result as the JavaScript decoder's, error or particles
+          const js = outcome(decodeJs, bad);
+          if (js.error !== got.error) return `byte ${seed % bad.length}: ${got.error ?? 'decoded'}, JavaScript: ${js.error ?? 'decoded'}`;
+          const why = js.p && compare(got.p, js.p);
+          if (why) return `byte ${seed % bad.length}: ${why}`;
+        }
+      }
+      return null;
+    });
+  }
+  // Codec 3 (§7.5.8): blocks back to back decode as the blocks' particles in order.
+  const vec = (name) => ({ bin: new Uint8Array(readFileSync(join(dir, `${name}.bin`))),
+    want: JSON.parse(readFileSync(join(dir, `${name}.json`), 'utf8')) });
+  function concat(parts) {
+    const out = new Uint8Array(parts.reduce((s, p) => s + p.length, 0));
+    let at = 0;
+    for (const p of parts) { out.set(p, at); at += p.length; }
+    return out;
+  }
+  function merged(wants) {
+    const m = { n: 0, xyz: [], temp: [], fuel: [], flags: [], vel: wants[0].vel ? [] : undefined };
+    for (const w of wants) {
+      m.n += w.n;
+      for (const key of ['xyz', 'temp', 'fuel', 'flags', ...(m.vel ? ['vel'] : [])]) m[key].push(...w[key]);
+    }
+    return m;
+  }
+  for (const set of [['flame64', 'seven_8bit', 'real_flame600', 'empty'], ['flame64_vel', 'empty_vel', 'seven_vel_4bit', 'real_vel600_12bit']]) {
+    const vs = set.map(vec), bin = concat(vs.map((v) => v.bin)), want = merged(vs.map((v) => v.want));
+    check(`codec 3: ${set.join(' + ')} back to back`, () => compare(decode(bin), want));
+    if (tag === 'js') check(`codec 3: ${set.join(' + ')} as a frame`, () => {
+      const f = frameOf(bin, want.n);
+      new DataView(f.buffer).setUint32(40, 3, true);
+      return compare(decodeFrame(f.buffer).particles, want);
+    });
+    check(`codec 3: ${set.join(' + ')} cut anywhere is rejected`, () => {
+      const ends = vs.map((_, k) => vs.slice(0, k + 1).reduce((s, v) => s + v.bin.length, 0)); // block boundaries
+      return cutsRejected(decode, bin, Array.from({ length: bin.length }, (_, l) => l).filter((l) => l % 7 === 1 && !ends.includes(l)));
+    });
+  }
+  const rejects = (bin, want) => {
+    try {
+      decode(bin);
+      return 'accepted';
+    } catch (e) {
+      return e.message.includes(want) ? null : e.message;
+    }
+  };
+  check('codec 3: blocks with and without velocities rejected', () =>
+    rejects(concat([vec('flame64').bin, vec('flame64_vel').bin]), 'blocks disagree on velocities'));
+  check('codec 3: 64 empty blocks decode, 65 are rejected', () => {
+    const e = vec('empty').bin;
+    if (decode(concat(Array(64).fill(e))).n !== 0) return '64 empty blocks';
+    return rejects(concat(Array(65).fill(e)), 'more blocks than allowed');
   });
-  check(`vector ${name} truncated`, () => cutsRejected(bin, bin.keys()));
-  check(`vector ${name} corrupt bytes`, () => {
-    let seed = 1;
-    for (let t = 0; t < 500; t++) {
+  check('codec 3: trailing garbage after a block rejected', () =>
+    rejects(concat([vec('flame64').bin, new TextEncoder().encode('garbage!')]), 'not a codec 2 payload'));
+  check('unknown attribute mode rejected', () => {
+    const bin = new Uint8Array(readFileSync(join(dir, 'real_flame600.bin')));
+    if (bin[11] !== 1) return `real_flame600 uses attribute mode ${bin[11]}, expected 1`;
+    const bad = bin.slice();
+    bad[11] = 2;
+    try {
+      decode(bad);
+      return 'accepted';
+    } catch (e) {
+      return e.message.startsWith('particles: ') ? null : e.message;
+    }
+  });
+  check('velocity vectors present', () => (names.filter((n) => n.includes('vel')).length >= 3 ? null : 'fewer than 3'));
+  check('velocity block: bad flags, bits, reserved bytes and bounds rejected', () => {
+    const bin = new Uint8Array(readFileSync(join(dir, 'flame64_vel.bin')));
+    if (!(bin[11] & 0x10)) return `flame64_vel has attr_mode ${bin[11]}`;
+    const cases = [[11, 0x30], [11, bin[11] & 15], [64, 1], [64, 17], [65, 1], [67, 128], [71, 0xff], [79, 0x7f]];
+    for (const [at, val] of cases) {
       const bad = bin.slice();
-      seed = (seed * 1103515245 + 12345) >>> 0;
-      bad[seed % bad.length] ^= 1 + (seed >>> 24) % 255;
+      bad[at] = val;
+      if (at === 79) bad[78] = 0x80; // vmax z = +inf (0x7f800000)
       try {
-        const p = decode(bad);
-        if (p.xyz.length !== 3 * p.n) return 'inconsistent output';
+        decode(bad);
+        return `byte ${at} = ${val} accepted`;
       } catch (e) {
-        if (!e.message.startsWith('particles: ')) return `unexpected error ${e.message}`;
+        if (!e.message.startsWith('particles: ')) return e.message;
       }
     }
     return null;
   });
-}
-// Codec 3 (§7.5.8): blocks back to back decode as the blocks' particles in order.
-const vec = (name) => ({ bin: new Uint8Array(readFileSync(join(dir, `${name}.bin`))),
-  want: JSON.parse(readFileSync(join(dir, `${name}.json`), 'utf8')) });
-function concat(parts) {
-  const out = new Uint8Array(parts.reduce((s, p) => s + p.length, 0));
-  let at = 0;
-  for (const p of parts) { out.set(p, at); at += p.length; }
-  return out;
-}
-function merged(wants) {
-  const m = { n: 0, xyz: [], temp: [], fuel: [], flags: [], vel: wants[0].vel ? [] : undefined };
-  for (const w of wants) {
-    m.n += w.n;
-    for (const key of ['xyz', 'temp', 'fuel', 'flags', ...(m.vel ? ['vel'] : [])]) m[key].push(...w[key]);
-  }
-  return m;
-}
-for (const set of [['flame64', 'seven_8bit', 'real_flame600', 'empty'], ['flame64_vel', 'empty_vel', 'seven_vel_4bit', 'real_vel600_12bit']]) {
-  const vs = set.map(vec), bin = concat(vs.map((v) => v.bin)), want = merged(vs.map((v) => v.want));
-  check(`codec 3: ${set.join(' + ')} back to back`, () => compare(decode(bin), want));
-  check(`codec 3: ${set.join(' + ')} as a frame`, () => {
-    const f = frameOf(bin, want.n);
-    new DataView(f.buffer).setUint32(40, 3, true);
-    return compare(decodeFrame(f.buffer).particles, want);
-  });
-  check(`codec 3: ${set.join(' + ')} cut anywhere is rejected`, () => {
-    const ends = vs.map((_, k) => vs.slice(0, k + 1).reduce((s, v) => s + v.bin.length, 0)); // block boundaries
-    return cutsRejected(bin, Array.from({ length: bin.length }, (_, l) => l).filter((l) => l % 7 === 1 && !ends.includes(l)));
-  });
-}
-const rejects = (bin, want) => {
-  try {
-    decode(bin);
-    return 'accepted';
-  } catch (e) {
-    return e.message.includes(want) ? null : e.message;
-  }
-};
-check('codec 3: blocks with and without velocities rejected', () =>
-  rejects(concat([vec('flame64').bin, vec('flame64_vel').bin]), 'blocks disagree on velocities'));
-check('codec 3: 64 empty blocks decode, 65 are rejected', () => {
-  const e = vec('empty').bin;
-  if (decode(concat(Array(64).fill(e))).n !== 0) return '64 empty blocks';
-  return rejects(concat(Array(65).fill(e)), 'more blocks than allowed');
-});
-check('codec 3: trailing garbage after a block rejected', () =>
-  rejects(concat([vec('flame64').bin, new TextEncoder().encode('garbage!')]), 'not a codec 2 payload'));
-check('unknown attribute mode rejected', () => {
-  const bin = new Uint8Array(readFileSync(join(dir, 'real_flame600.bin')));
-  if (bin[11] !== 1) return `real_flame600 uses attribute mode ${bin[11]}, expected 1`;
-  const bad = bin.slice();
-  bad[11] = 2;
-  try {
-    decode(bad);
-    return 'accepted';
-  } catch (e) {
-    return e.message.startsWith('particles: ') ? null : e.message;
-  }
-});
-check('velocity vectors present', () => (names.filter((n) => n.includes('vel')).length >= 3 ? null : 'fewer than 3'));
-check('velocity block: bad flags, bits, reserved bytes and bounds rejected', () => {
-  const bin = new Uint8Array(readFileSync(join(dir, 'flame64_vel.bin')));
-  if (!(bin[11] & 0x10)) return `flame64_vel has attr_mode ${bin[11]}`;
-  const cases = [[11, 0x30], [11, bin[11] & 15], [64, 1], [64, 17], [65, 1], [67, 128], [71, 0xff], [79, 0x7f]];
-  for (const [at, val] of cases) {
-    const bad = bin.slice();
-    bad[at] = val;
-    if (at === 79) bad[78] = 0x80; // vmax z = +inf (0x7f800000)
+  check('codec 1 payload rejected', () => {
+    const bin = new Uint8Array(readFileSync(join(dir, 'flame64.bin')));
+    const old = bin.slice();
+    old[3] = 0x31; // 'FXP1'
+    old[4] = 1;
     try {
-      decode(bad);
-      return `byte ${at} = ${val} accepted`;
+      decode(old);
+      return 'accepted';
     } catch (e) {
-      if (!e.message.startsWith('particles: ')) return e.message;
+      return e.message.startsWith('particles: ') ? null : e.message;
     }
-  }
-  return null;
-});
-check('codec 1 payload rejected', () => {
-  const bin = new Uint8Array(readFileSync(join(dir, 'flame64.bin')));
-  const old = bin.slice();
-  old[3] = 0x31; // 'FXP1'
-  old[4] = 1;
-  try {
-    decode(old);
-    return 'accepted';
-  } catch (e) {
-    return e.message.startsWith('particles: ') ? null : e.message;
-  }
-});
+  });
+}
+
+decoderChecks('js', decodeJs);
+let wasm = null, wasmError = null;
+try {
+  wasm = await loadWasmDecoder(readFileSync(wasmPath));
+} catch (e) {
+  wasmError = e.message;
+}
+check('the WebAssembly decoder loads (make builds clients/web/dist/fxs_particles.wasm)', () => wasmError);
+if (wasm) decoderChecks('wasm', wasm);
+
 check('header: bad magic rejected', () => {
   try {
     parseHeader(new Uint8Array(64));

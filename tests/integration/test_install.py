@@ -58,8 +58,10 @@ def test_destdir(t):
                 "libfxclient in PREFIX/lib, its headers in PREFIX/include/fxclient, fxclient.pc "
                 "(test_libfxclient.py builds against them)")
         web = p + "/share/fxstream/web"
-        t.check(os.path.isfile(web + "/index.html") and os.path.isfile(web + "/dist/app.js"),
-                "web client (index.html, dist/app.js) in PREFIX/share/fxstream/web")
+        t.check(os.path.isfile(web + "/index.html") and
+                all(os.path.isfile(web + "/dist/" + f) for f in ("app.js", "decode_worker.js", "fxs_particles.wasm")),
+                "web client (index.html; dist/app.js, the particle decoder's worker and WebAssembly module) "
+                "in PREFIX/share/fxstream/web")
         t.check(not os.path.exists(web + "/src") and not os.path.exists(web + "/build.mjs"),
                 "the web client's sources are not installed")
         missing = []
@@ -129,6 +131,8 @@ def test_prefix_runs(t):
                 "installed daemon serves the installed web page at /")
         status, body = get(port, "/dist/app.js")
         t.check(status == 200 and len(body) > 1000, "installed daemon serves the web client's bundle")
+        status, body = get(port, "/dist/fxs_particles.wasm")
+        t.check(status == 200 and body[:4] == b"\0asm", "installed daemon serves the particle decoder's WebAssembly module")
         web = p + "/share/fxstream/web"
         refs = sorted({r for f in os.listdir(web) if f.endswith(".html") for r in referenced(open(os.path.join(web, f)).read())})
         bad = []

@@ -7,7 +7,8 @@
 // picture; a change made in a second page appears in the first; a server error shows next
 // to its field; compound eyes (created here, mode lut and bake) show a lattice of facets
 // with pigment, the look-up-table view agrees with the server's bake from the same eye, and
-// the lattice follows the client-side density; the flame view alone (volume by default; PBVR not
+// the lattice follows the client-side density; the flame view alone (decoded in a worker by
+// the WebAssembly decoder; volume by default; PBVR not
 // blown out, hotter at the base, moving; orbit drag and double-click home; the hdr mode;
 // velocity lines: the view toggle turns the stream's velocities on, lines are drawn and
 // change the picture, and a view-only page is told instead); the page reconnects after a
@@ -404,6 +405,8 @@ async function flameChecks(ctx, port, fxctl) {
     return w.length === 5 ? { mean: w.reduce((s, x) => s + x, 0) / 5, looks: w } : null;
   };
   check(await until(async () => (await drawn()) > 2, 30000, 500), 'flame view: frames drawn');
+  const decoder = await page.evaluate(() => window.fxs.particleDecoder());
+  check(decoder.engine === 'wasm' && !decoder.error, 'flame frames decoded in a worker by the C decoder as WebAssembly', JSON.stringify(decoder));
   const info = await page.evaluate(() => window.fxs.flame());
   check(info?.mode === 'volume', 'the flame view defaults to the volume mode', JSON.stringify(info));
   await page.evaluate(() => { window.fxs.flameSettings.mode = 'pbvr'; });

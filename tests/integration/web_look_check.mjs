@@ -203,7 +203,7 @@ async function flameLook(page, fxctl) {
   await nextDraw(); await nextDraw();
   const smokeOff = await figures();
   await page.evaluate(() => { window.fxs.flameSettings.smoke = true; });
-  check(smokeOn.grey > 0.1 * smokeOn.area && smokeOff.grey < 0.3 * smokeOn.grey, 'grey smoke above the flame (>= 10% of the flame\'s area), on by default, gone when turned off',
+  check(smokeOn.grey > 0.05 * smokeOn.area && smokeOff.grey < 0.3 * smokeOn.grey, 'grey smoke above the flame (>= 5% of the flame\'s area), on by default, gone when turned off',
     `on ${smokeOn.grey.toFixed(4)}, off ${smokeOff.grey.toFixed(4)} of the view; the flame ${smokeOn.area.toFixed(4)}`);
   fxctl('set', 'flame', 'time_scale=1');
 }

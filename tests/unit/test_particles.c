@@ -1,4 +1,4 @@
-/* test_particles.c — the kind 1 particle codec 2 (protocol/fxs_particles.c, PROTOCOL.md §7.5).
+/* test_particles.c — the kind 1 particle codec 2 (protocol/fxs_particles_*.c, PROTOCOL.md §7.5).
  *
  * Round trips of random, SPH-like and real flame sets (n = 0, 1, 2, 1e6, all particles
  * identical, degenerate and extreme bounds, every pos_bits 8..24, every T/F width) checked

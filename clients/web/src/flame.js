@@ -1,4 +1,4 @@
-// flame.js — the `flame` stream (kind 1 particles, codec 2, decoded by fxs_particles.js) in
+// flame.js — the `flame` stream (kind 1 particles, codec 2, decoded in a worker: particle_decoder.js) in
 // one of three modes, on a fixed stage (a ground grid in centimetres and each source's outline,
 // in world units) with an orbit camera that never re-frames on the particles:
 //
@@ -34,7 +34,7 @@
 //   instead of clipping.
 // The page draws it through the View contract (view.js).
 import * as THREE from 'three';
-import { decode, payloadOf } from '../fxs_particles.js';
+import { ParticleDecoder } from './particle_decoder.js';
 import { ACES_GLSL, SRGB_GLSL, fullscreenQuad } from './gl.js';
 import { ViewOrbit } from './orbit.js';
 
@@ -460,9 +460,15 @@ export class FlameView {
     return g;
   }
 
+  // Decoded off the main thread (particle_decoder.js); the promise settles when the frame is
+  // shown, or skipped for a newer one, and rejects with the decoder's error.
   onFrame(h, buf) {
     if (h.kind !== 1 || (h.codec !== 2 && h.codec !== 3)) return false;
-    const p = decode(payloadOf(buf, h));
+    this.decoder ??= new ParticleDecoder();
+    return this.decoder.decode(h, buf).then((p) => p && this.showParticles(p));
+  }
+
+  showParticles(p) {
     if (p.n > this.capacity) {
       // New geometries: three fixes an instanced geometry's largest instance count when it
       // first draws it, so growing the attributes in place would draw only the old count.

@@ -285,7 +285,10 @@ function deliver(st) {
     const { h, buf } = st.pending.get(kind);
     st.pending.delete(kind);
     for (const v of st.views) {
-      try { v.onFrame(h, buf); } catch (e) { st.error = `frame ${h.seq}: ${e.message}`; }
+      try {
+        const shown = v.onFrame(h, buf); // a promise where the view decodes off the main thread
+        if (shown instanceof Promise) shown.catch((e) => { st.error = `frame ${h.seq}: ${e.message}`; });
+      } catch (e) { st.error = `frame ${h.seq}: ${e.message}`; }
     }
   }
 }

@@ -5,6 +5,7 @@
 // dist/app.js (web_lib.mjs openPage); the product bundle has none of this.
 import './test_mode.js';
 import { app } from '../src/main.js';
+import { particleDecoderStatus } from '../src/particle_decoder.js';
 
 // The drawn pixels of the first view of `kind` (and `stream`, if given): {entry, w, h, px},
 // RGBA rows from the bottom (readPixels), or null when there is no such view.
@@ -80,6 +81,7 @@ window.fxs = {
   conn, streams, get views() { return app.views.map((v) => `${v.stream}:${v.kind}`); }, sample,
   stats: () => Object.fromEntries([...streams.values()].map((s) => [s.name, { rev: s.rev, channel: s.channel, maxFps: s.maxFps, latency: s.stats.rate.latency, frames: s.stats.totalFrames, drawn: s.stats.totalDrawn, kinds: [...s.stats.kindsSeen], skipped: s.stats.skipped, error: s.error }])),
   flame: () => app.views.find((x) => x.kind === 'flame')?.info() ?? null,
+  particleDecoder: particleDecoderStatus,
   flameLook,
   flameSettings,
   waveSettings: app.waveSettings,
