@@ -387,7 +387,8 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
     if (ce->busy == EYE_TRACING) {
         int cells, dirs, ss;
         eye_table_dims(ce, &cells, &dirs, &ss);
-        rc = eye_run(ce, ce->k_lut, "eye_lut", (size_t)cells * cells * dirs * dirs, ce->d_lut, ce->samples, slice_end, err);
+        size_t n = (size_t)cells * cells * dirs * dirs;
+        rc = eye_run(ce, ce->k_lut, "eye_lut", n, ce->d_lut, ce->samples, slice_end, err);
         if (!rc && !(rc = eye_lut_pack_start(ce, err))) ce->busy = EYE_PACKING;
         if (!rc && clock_now() >= slice_end) rc = EFFECT_MORE;
     }

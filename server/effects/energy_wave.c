@@ -5,10 +5,10 @@
  * energy_wave_layout.h; the camera), the colour map, the EXR frame, and handing the same
  * sources and weights to the light rig (light_rig.c). Everything per frame is small uploads
  * plus one kernel and one read-back; big buffers (device output, host image, RGBA, EXR
- * bytes) are allocated once per texture size and reused. A stream's frame that would hold the
- * engine past its slice (effect.h) runs the kernel over the texture in pieces, a rectangle of
- * work-items at a time, each read back, checked and colour-mapped at once: the same work-items
- * compute the same texels, so the picture does not depend on the slicing. */
+ * bytes) are allocated once per texture size and reused. A frame that would hold the engine
+ * past its slice (effect.h) runs the kernel in pieces, a rectangle of work-groups at a time,
+ * each read back, checked and colour-mapped at once: the same work-items compute the same
+ * texels, so the picture does not depend on the slicing. */
 #include "energy_wave.h"
 
 #include <math.h>
@@ -512,10 +512,9 @@ static int ew_frame_begin(struct energy_wave *ew, double sim_time, struct fx_err
 }
 
 /* Runs the frame's next n work-groups (at most) as one rectangle of the grid, the rest of a row
- * or whole rows, and reads their texels back into out, texels [*from, *to). Returns the groups
- * run, or 0 with err. */
-static size_t ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *from, size_t *to,
-                             struct fx_err *err)
+ * or whole rows, and reads their texels back into out, texels [*from, *to); ew->done moves on.
+ * 0, or -1 with err. */
+static int ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *from, size_t *to, struct fx_err *err)
 {
     const size_t gx = ew_groups_x(ew), w = (size_t)ew->width, j = ew->done / gx, x = ew->done % gx;
     size_t groups[2] = {gx, n / gx};
@@ -532,21 +531,21 @@ static size_t ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);
     cl_int rc = clEnqueueNDRangeKernel(q, k, 2, offset, global, local, 0, NULL, &ev);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc)), 0;
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
     rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, *from * sizeof(float), (*to - *from) * sizeof(float), out + *from,
                              0, NULL, NULL);
     if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);
     clReleaseEvent(ev);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc)), 0;
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
     ew->done += groups[0] * groups[1];
-    return groups[0] * groups[1];
+    return 0;
 }
 
 int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err)
 {
     size_t from, to;
     ew->busy = 0;
-    return ew_frame_begin(ew, sim_time, err) || !ew_frame_piece(ew, ew_groups(ew), out, &from, &to, err) ? -1 : 0;
+    return ew_frame_begin(ew, sim_time, err) || ew_frame_piece(ew, ew_groups(ew), out, &from, &to, err) ? -1 : 0;
 }
 
 /* ---- effect_ops ---------------------------------------------------------------------- */
@@ -581,12 +580,15 @@ static int ew_render_slice(struct energy_wave *ew, double sim_time, double slice
     const size_t total = ew_groups(ew);
     double t0 = clock_now();
     do {
-        size_t from, to, n = ew_frame_piece(ew, slice_units(&ew->meter, total - ew->done, t0, slice_end), ew->img,
-                                            &from, &to, err);
-        if (!n || ew_check_finite(ew->img, from, to, err)) return ew->busy = 0, -1;
+        size_t from, to, before = ew->done;
+        if (ew_frame_piece(ew, slice_units(&ew->meter, total - before, t0, slice_end), ew->img, &from, &to, err) ||
+            ew_check_finite(ew->img, from, to, err)) {
+            ew->busy = 0;
+            return -1;
+        }
         if (ew->output == 1) ew_colour_map(ew, from, to);
         double t1 = clock_now();
-        slice_record(&ew->meter, n, t1 - t0);
+        slice_record(&ew->meter, ew->done - before, t1 - t0);
         t0 = t1;
     } while (ew->done < total && t0 < slice_end);
     if (ew->done < total) return EFFECT_MORE;

@@ -115,7 +115,10 @@ static void eye_lut_macro_tiles(const struct eye_lut_table *t, uint8_t *macro, i
     }
 }
 
-void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro) { eye_lut_macro_tiles(t, macro, 0, t->dirs * t->dirs); }
+void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
+{
+    eye_lut_macro_tiles(t, macro, 0, t->dirs * t->dirs);
+}
 
 /* ---- the container (protocol/fxs_lut.h, PROTOCOL.md §7.6) ------------------------ */
 

@@ -263,7 +263,7 @@ struct flame {
     double h, d, dt, time_scale, space_scale, t_amb, period_ms;
     double emit_ms; /* wall time of the last frame's read-back, encoding and the substep run beside it */
     int enc_threads; /* threads a frame's encoding may use: 1 on a CPU device, else the cores up to FL_ENC_THREADS_MAX */
-    double step_ms; /* recent wall time per substep (moving average; 0 = not measured yet) */
+    double step_ms; /* recent time per substep, the wall time of its slices (moving average; 0 = none yet) */
     double fit_frac; /* the fraction of a substep that the budgets of frames cut short left over */
     int ahead;       /* substeps of the coming frame already run beside the last encoding (0 or 1) */
     struct fl_frame_plan frame; /* the frame in progress (fl_step) */
