@@ -168,7 +168,7 @@ struct compound_eye {
 };
 
 enum { EYE_IDLE, EYE_TRACING, EYE_PACKING };
-#define EYE_GROUP 64 /* work-items of a work-group */
+#define EYE_GROUP 64 /* work-items of a group (eye_items) */
 
 /* Drops the table or view in progress. */
 static void eye_abandon(struct compound_eye *ce)
@@ -285,8 +285,9 @@ static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
 }
 
 /* Work-items for n rays, each tracing EYE_LANES of them (kernels/compound_eye.cl), in whole
- * work-groups of EYE_GROUP: every launch has that size, since PoCL compiles a kernel once per
- * work-group size (the kernels store nothing past n). */
+ * groups of EYE_GROUP (the kernels store nothing past n). On a CPU device each group is a
+ * work-group, every launch alike, since PoCL compiles a kernel once per work-group size; a GPU's
+ * driver chooses its own. */
 static size_t eye_items(size_t n)
 {
     size_t items = (n + EYE_LANES - 1) / EYE_LANES;
@@ -300,6 +301,7 @@ static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_
                    double slice_end, struct fx_err *err)
 {
     const size_t groups = eye_items(n) / EYE_GROUP, f4 = 4 * sizeof(float), local = EYE_GROUP;
+    const size_t *wg = ocl_is_cpu(ce->ocl) ? &local : NULL;
     cl_command_queue q = ocl_queue(ce->ocl);
     double t0 = clock_now();
     do {
@@ -307,7 +309,7 @@ static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_
         size_t offset = ce->done * EYE_GROUP, global = m * EYE_GROUP;
         size_t from = offset * EYE_LANES, to = (offset + global) * EYE_LANES < n ? (offset + global) * EYE_LANES : n;
         cl_event ev;
-        cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, &local, 0, NULL, &ev);
+        cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
         rc = clEnqueueReadBuffer(q, out, CL_TRUE, from * f4, (to - from) * f4, host + 4 * from, 0, NULL, NULL);
         if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);

@@ -240,10 +240,11 @@ struct energy_wave {
     struct slice_meter meter;
 };
 
-/* Work-groups are EW_GROUP work-items of one row, every launch alike: PoCL compiles a kernel
- * once per work-group size, so sizes left to it (one per piece size) cost a compilation each.
- * Rows are padded to whole groups (the kernel skips the work-items past the texture's edge). A
- * frame's pieces are counted in groups; the first is EW_PROBE_GROUPS before their cost is known. */
+/* A frame's pieces are counted in groups of EW_GROUP work-items of one row, rows padded to whole
+ * groups (the kernel skips the work-items past the texture's edge); the first piece is
+ * EW_PROBE_GROUPS before their cost is known. On a CPU device each group is a work-group, every
+ * launch alike: PoCL compiles a kernel once per work-group size, so sizes left to it (one per
+ * piece size) cost a compilation each; a GPU's driver chooses its own. */
 #define EW_GROUP 16
 #define EW_PROBE_GROUPS 2
 
@@ -524,13 +525,14 @@ static int ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *
     }
     const size_t span = EW_GROUP * EW_LANES; /* texels of a group */
     size_t offset[2] = {x * EW_GROUP, j}, global[2] = {groups[0] * EW_GROUP, groups[1]}, local[2] = {EW_GROUP, 1};
+    const size_t *wg = ocl_is_cpu(ew->ocl) ? local : NULL;
     *from = j * w + x * span;
     *to = groups[1] > 1 || (x + groups[0]) * span >= w ? (j + groups[1]) * w : j * w + (x + groups[0]) * span;
     const char *name;
     cl_kernel k = ew_kernel(ew, &name);
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);
-    cl_int rc = clEnqueueNDRangeKernel(q, k, 2, offset, global, local, 0, NULL, &ev);
+    cl_int rc = clEnqueueNDRangeKernel(q, k, 2, offset, global, wg, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
     rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, *from * sizeof(float), (*to - *from) * sizeof(float), out + *from,
                              0, NULL, NULL);
