@@ -429,7 +429,7 @@ static double engine_slice_end(const struct engine *eng, const struct engine_slo
     for (int i = 0; i < eng->nslots; i++) {
         const struct engine_slot *o = &eng->slots[i];
         if (o == b || !o->running) continue;
-        if (cb == ENGINE_INTERACTIVE) /* b turns background */
+        if (cb == ENGINE_INTERACTIVE) /* b turns background, and o may come first */
             end = fmin(end, now + b->long_s - engine_attained(b));
         int co = engine_class(o, floor);
         double t = INFINITY; /* when o comes before b */
