@@ -16,6 +16,8 @@
 #include "../ref/kernel_probe.h"
 #include "check.h"
 #include "effects/energy_wave.h"
+#include "fxs_frame.h"
+#include "slices.h"
 #include "effects/wave_sources.h"
 #include "ocl.h"
 #include "params.h"
@@ -858,6 +860,45 @@ static void test_animation_render(void)
     cJSON_Delete(doc);
 }
 
+/* A frame stepped by a new energy_wave effect with the given budget per call (slices.h). */
+static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame *out)
+{
+    struct fx_err err = {0};
+    void *ew = energy_wave_effect.create(tek_ocl, doc, &err);
+    int rc = ew ? slices_step(&energy_wave_effect, ew, 0.7, budget, out, &err) : -1;
+    CHECK(rc == 0, "step with %g s per call: %s", budget, err.message);
+    if (ew) energy_wave_effect.destroy(ew);
+    return rc;
+}
+
+/* Slices do not change the picture: a frame stepped a work-group per call, and a few
+ * milliseconds per call, is the frame stepped whole, byte for byte (its EXR payload), raw Y and
+ * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups. */
+static void test_sliced_frames(void)
+{
+    static const char *const outputs[] = {"Y", "RGBA"};
+    for (int o = 0; o < 2; o++) {
+        char partial[128];
+        snprintf(partial, sizeof partial, "{\"width\":200,\"height\":40,\"output\":\"%s\"}", outputs[o]);
+        cJSON *doc = tek_doc(cJSON_Parse(partial));
+        struct slices_frame whole = {.kind = FXS_KIND_TEXTURE}, piece = {.kind = FXS_KIND_TEXTURE},
+                            ms = {.kind = FXS_KIND_TEXTURE};
+        if (doc && !tek_sliced_frame(doc, INFINITY, &whole) && !tek_sliced_frame(doc, 0, &piece) &&
+            !tek_sliced_frame(doc, 0.003, &ms)) {
+            CHECK(whole.calls == 1 && piece.calls >= 40, "%s: %d calls whole, %d a group at a time", outputs[o],
+                  whole.calls, piece.calls);
+            CHECK(whole.payload && piece.len == whole.len && !memcmp(piece.payload, whole.payload, whole.len),
+                  "%s: the frame in pieces of a group is the whole frame", outputs[o]);
+            CHECK(ms.len == whole.len && !memcmp(ms.payload, whole.payload, whole.len),
+                  "%s: the frame in 3 ms slices (%d) is the whole frame", outputs[o], ms.calls);
+        }
+        slices_free(&whole);
+        slices_free(&piece);
+        slices_free(&ms);
+        cJSON_Delete(doc);
+    }
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -884,6 +925,7 @@ int main(void)
     RUN(test_epsilon_no_nan);
     RUN(test_sources_near_eye);
     RUN(test_animation_render);
+    RUN(test_sliced_frames);
     cJSON_Delete(tek_defaults);
     ocl_close(tek_ocl);
     return CHECK_DONE();
