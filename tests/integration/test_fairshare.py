@@ -3,17 +3,28 @@ stream keeps at least 80% of its rate beside a stream whose every frame takes se
 2048^2 texture), both rates measured the same way in alternating phases of one run; the heavy
 stream still gets some of the engine, and /metrics shows each stream's configured and achieved
 fps and engine time. A `set` reaches a stream in the middle of a long step (a 64x64x8 lens
-table) within a second, and after a `destroy` the daemon stops computing within a second."""
+table) within a second, and after a `destroy` the daemon stops computing within a second. A
+subscriber of an encoding nobody took gets the latest frame at once while the next one is being
+computed in slices, and that frame is the one the other encoding carried, texel for texel."""
 import asyncio
+import ctypes
+import json
+import os
 import re
+import struct
 import time
 import urllib.request
 
-from fxtest import Client, Daemon, Suite, config_file, cpu_seconds
+import numpy as np
+
+from fxtest import ROOT, Client, Daemon, Suite, config_file, cpu_seconds
 
 HEAVY_WAVE = {"width": 2048, "height": 2048}  # ~64 x the default's work per frame
 HEAVY_TABLE = {"lut_cells": 64, "lut_dirs": 64, "lut_supersample": 8}  # ~1e9 rays: tens of seconds
 SMALL_TABLE = {"lut_cells": 8, "lut_dirs": 8, "lut_supersample": 1}
+# A pulse running along a curve: every frame a different picture; EXR uncompressed (exr_halves).
+HEAVY_PULSE = dict(HEAVY_WAVE, tori=[], size=20.4, compression="none", curves=[
+    {"p0": [-13.2, -4.2, 1.8], "p1": [-6.6, 9.0, -1.8], "p2": [0, 0, 0], "coef": 8.0}])
 # Alternating phases of a second, so that the machine's other load, which changes over seconds,
 # hits both alike; at least MIN_ROUNDS, more (up to MAX_ROUNDS) until each has MIN_FRAMES.
 PHASE_S, MIN_ROUNDS, MAX_ROUNDS, MIN_FRAMES = 1.0, 20, 40, 250
@@ -146,6 +157,75 @@ async def test_change_and_destroy_reach_a_long_step(t):
         await c.close()
 
 
+def exr_halves(payload):
+    """The one half-float channel of an uncompressed scanline OpenEXR file (common/exr.c's, for
+    compression none) as a float32 array, rows top first."""
+    pos, attrs = 8, {}
+    while payload[pos]:
+        name_end = payload.index(b"\0", pos)
+        type_end = payload.index(b"\0", name_end + 1)
+        size = struct.unpack_from("<i", payload, type_end + 1)[0]
+        attrs[payload[pos:name_end].decode()] = payload[type_end + 5:type_end + 5 + size]
+        pos = type_end + 5 + size
+    x0, y0, x1, y1 = struct.unpack("<4i", attrs["dataWindow"])
+    w, h = x1 - x0 + 1, y1 - y0 + 1
+    offsets = struct.unpack_from("<%dQ" % h, payload, pos + 1)
+    rows = [np.frombuffer(payload, np.float16, w, o + 8) for o in offsets]  # y and size, then the halves
+    return np.concatenate(rows).astype(np.float32)
+
+
+class FxsHeader(ctypes.Structure):  # protocol/fxs_frame.h struct fxs_header
+    _fields_ = [("header_bytes", ctypes.c_uint16), ("kind", ctypes.c_uint16), ("channel", ctypes.c_uint32),
+                ("param_rev", ctypes.c_uint32), ("seq", ctypes.c_uint64), ("sim_time", ctypes.c_double),
+                ("server_time_us", ctypes.c_uint64), ("codec", ctypes.c_uint32),
+                ("payload_bytes", ctypes.c_uint32), ("count_or_width", ctypes.c_uint32),
+                ("height", ctypes.c_uint32), ("flags", ctypes.c_uint32)]
+
+
+class FxcTexture(ctypes.Structure):  # clients/c/fxclient.h struct fxc_texture
+    _fields_ = [("capacity", ctypes.c_size_t), ("texels", ctypes.POINTER(ctypes.c_float)),
+                ("width", ctypes.c_uint32), ("height", ctypes.c_uint32), ("channels", ctypes.c_uint32)]
+
+
+def engine_texels(f):
+    """The texels of an engine-encoded texture frame, decoded by libfxclient, or None."""
+    lib = ctypes.CDLL(os.path.join(ROOT, "build", "libfxclient.so.0.1.0"))
+    h = FxsHeader(64, f["kind"], f["channel"], f["param_rev"], f["seq"], f["sim_time"], f["server_time_us"],
+                  f["codec"], f["payload_bytes"], f["width"], f["height"], f["flags"])
+    out = np.zeros(f["width"] * f["height"] * 4, np.float32)
+    tex = FxcTexture(out.size, out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)))
+    err = ctypes.create_string_buffer(256)
+    if lib.fxc_decode_texture(ctypes.byref(h), f["payload"], ctypes.byref(tex), err, len(err)):
+        print("fxc_decode_texture: %s" % err.value.decode())
+        return None
+    return out[:tex.width * tex.height * tex.channels]
+
+
+async def test_new_encoding_during_a_long_step(t):
+    with Daemon("--config", config_file({"streams": []})) as d:
+        c, e = await Client.connect(d), await Client.connect(d)
+        r = await c.request("create", effect="energy_wave", stream="pulse", params=HEAVY_PULSE)
+        t.check(r["op"] == "created", "create a 2048^2 energy_wave stream with a running pulse")
+        await c.request("subscribe", stream="pulse")
+        await c.frame(60, kind=2)  # the kernel is built, the frames' pace settled
+        first = await c.frame(60, kind=2)
+        t0 = time.monotonic()
+        await e.ws.send(json.dumps({"op": "subscribe", "id": 1, "stream": "pulse", "encoding": "engine"}))
+        f = await e.frame(10, kind=2)
+        took = time.monotonic() - t0
+        nxt = await c.frame(60, kind=2)
+        t.check(f["codec"] == 16 and f["seq"] == first["seq"] and nxt["seq"] > first["seq"],
+                "a subscriber of the engine encoding gets the latest frame (%d, codec %d) %.2f s after asking, "
+                "before the next one (%d) is complete" % (f["seq"], f["codec"], took, nxt["seq"]))
+        a, b = exr_halves(first["payload"]), engine_texels(f)
+        same = b is not None and a.size == b.size and np.max(np.abs(a - b)) <= 1e-3 * np.max(np.abs(a))
+        t.check(same, "it is the frame the EXR carried, texel for texel (max difference %s of %s)"
+                % (None if b is None or a.size != b.size else np.max(np.abs(a - b)), np.max(np.abs(a))))
+        await c.close()
+        await e.close()
+
+
 if __name__ == "__main__":
     s = Suite("test_fairshare")
-    s.run([test_heavy_beside_default, test_change_and_destroy_reach_a_long_step], timeout=240)
+    s.run([test_heavy_beside_default, test_change_and_destroy_reach_a_long_step, test_new_encoding_during_a_long_step],
+          timeout=240)

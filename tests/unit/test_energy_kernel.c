@@ -899,6 +899,55 @@ static void test_sliced_frames(void)
     }
 }
 
+static int tek_keep_texture(void *ctx, const struct effect_frame *f)
+{
+    if (f->kind == FXS_KIND_TEXTURE) *(struct effect_frame *)ctx = *f;
+    return 0;
+}
+
+/* The frame a step emitted stays as it was while the next one is computed in slices (effect.h),
+ * so the engine can still encode it for a subscriber of another encoding: its texels and its
+ * EXR, after part of the next frame of a pulse running along the curves (a different picture). */
+static void test_emitted_frame_kept(void)
+{
+    cJSON *doc = tek_doc(cJSON_Parse("{\"tori\":[],\"size\":20.4,\"curves\":[{\"p0\":[-13.2,-4.2,1.8],"
+                                     "\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":8.0}],\"animate\":true,"
+                                     "\"width\":200,\"height\":40,\"output\":\"RGBA\"}"));
+    struct fx_err err = {0};
+    void *ew = doc ? energy_wave_effect.create(tek_ocl, doc, &err) : NULL;
+    struct effect_frame first = {0}, next = {0};
+    const size_t bytes = (size_t)200 * 40 * 4 * sizeof(float);
+    float *texels = malloc(bytes);
+    int rc = ew ? energy_wave_effect.step(ew, 0.3, 1.0 / 30, INFINITY, tek_keep_texture, &first, &err) : -1;
+    CHECK(rc == 0 && first.texels && first.channels == 4 && texels, "frame 1: %s", err.message);
+    struct effect_frame exr = first;
+    if (rc || !first.texels || !texels || effect_frame_encode(&exr, &err)) {
+        CHECK(0, "frame 1's EXR: %s", err.message);
+        goto out;
+    }
+    memcpy(texels, first.texels, bytes);
+    uint8_t *payload = malloc(exr.payload_bytes);
+    size_t len = exr.payload_bytes;
+    if (payload) memcpy(payload, exr.payload, len);
+    int calls = 0;
+    while ((rc = energy_wave_effect.step(ew, 0.9, calls ? 0 : 0.6, 0, tek_keep_texture, &next, &err)) == EFFECT_MORE &&
+           ++calls < 4) {}
+    CHECK(rc == EFFECT_MORE && !next.texels, "frame 2 in progress after %d calls (rc %d)", calls, rc);
+    CHECK(!memcmp(first.texels, texels, bytes), "frame 1's texels are as emitted while frame 2 runs");
+    exr = first;
+    exr.payload = NULL;
+    CHECK(payload && !effect_frame_encode(&exr, &err) && exr.payload_bytes == len && !memcmp(exr.payload, payload, len),
+          "frame 1's EXR made again while frame 2 runs is the same: %s", err.message);
+    while (rc == EFFECT_MORE) rc = energy_wave_effect.step(ew, 0.9, 0, INFINITY, tek_keep_texture, &next, &err);
+    CHECK(rc == 0 && next.texels && memcmp(next.texels, texels, bytes), "frame 2 completes, another picture: %s",
+          err.message);
+    free(payload);
+out:
+    free(texels);
+    if (ew) energy_wave_effect.destroy(ew);
+    cJSON_Delete(doc);
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -926,6 +975,7 @@ int main(void)
     RUN(test_sources_near_eye);
     RUN(test_animation_render);
     RUN(test_sliced_frames);
+    RUN(test_emitted_frame_kept);
     cJSON_Delete(tek_defaults);
     ocl_close(tek_ocl);
     return CHECK_DONE();
