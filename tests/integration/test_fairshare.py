@@ -103,7 +103,10 @@ async def test_heavy_beside_default(t):
         t.check(0 < achieved.get("light", 0) <= 31 and achieved.get("heavy", 99) < 30,
                 "/metrics: achieved fps, the heavy stream below its fps (light %s, heavy %s)"
                 % (achieved.get("light"), achieved.get("heavy")))
-        t.check(engine.get("light", 0) > 0 and 0 < share.get("heavy", 0) < share.get("light", 0) <= 1.05,
+        # Shares of one engine thread: how they split depends on the light stream's cost (the
+        # heavy one takes what that leaves), each published at its own time.
+        t.check(engine.get("light", 0) > 0 and share.get("light", 0) > 0 and share.get("heavy", 0) > 0
+                and share["light"] + share["heavy"] <= 1.1,
                 "/metrics: engine seconds and share per stream (shares light %s, heavy %s)"
                 % (share.get("light"), share.get("heavy")))
         busy = re.search(r"^fxs_engine_busy_seconds_total (\S+)$", m, re.M)
