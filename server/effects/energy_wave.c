@@ -136,8 +136,8 @@ const struct param_def energy_wave_params[] = {
      .doc = "multiply each curve's W by a travelling pulse (Watanabe 2016 eq. 5.1)"},
     {.name = "anim_rate", .group = "animation", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
      .doc = "animation frames per second of stream time (Watanabe 2016 eq. 5.1; a pulse enters every 7n + 10 frames)"},
-    /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7): on by default, since the
-     * issue asks every energy_wave stream to light its surroundings; ~1 kB a frame. */
+    /* The light rig (Nito 2011; kind 3 frames, PROTOCOL.md §7.7): on by default, so every
+     * energy_wave stream can light its surroundings; ~1 kB a frame. */
     {.name = "light_rig", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "also send a light-rig frame (kind 3: centre-line segments, toon ramp, outline, shadow) with "
             "every texture, for clients that light their own scene with the wave"},
