@@ -114,12 +114,15 @@ bench: deps
 	@$(SUBMAKE) all $(BENCH_BIN)
 	@tests/bench/run.sh
 
-# README's pictures (docs/images/), taken in headless chromium from the default streams by the
-# first-look browser test (tests/integration/web_look_check.mjs), which also checks them.
+# README's pictures (docs/images/), all from the default streams: the page's views taken in
+# headless chromium by the first-look browser test (tests/integration/web_look_check.mjs), which
+# also checks them, and the Godot demo under Xvfb (tools/screenshot_godot.sh).
 screenshots: deps
+	@deploy/install-deps.sh --screenshots
 	@$(SUBMAKE) all
 	@mkdir -p docs/images
 	@tests/integration/test_web_look.sh --shots $(CURDIR)/docs/images
+	@tools/screenshot_godot.sh docs/images/godot-demo.png
 
 unit: $(UNIT_BIN)
 

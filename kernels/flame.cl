@@ -1,7 +1,8 @@
 /* flame.cl — the SPH flame (seed 002, Mabuchi 2012; spec: digest 002) on the device.
  *
  * One substep (digest §2.10, §5.3):
- *   fl_hash           cell key per particle (cells of h/2, linear hash, power-of-two table)
+ *   fl_hash           cell key per particle (cells 2h in y and z, h/2 along x by default; linear
+ *                     hash, power-of-two table)
  *   fl_radix_hist/scan/scatter   stable LSD radix sort of (key, index), 8 bits a pass
  *   fl_reorder        gathers the state into sorted order (double buffer)
  *   fl_cell_start     cs[k] = number of particles with key < k (so a run of keys is one range)
@@ -194,7 +195,7 @@ __constant uint fl_pack8[256] = {FL_P64(0), FL_P64(64), FL_P64(128), FL_P64(192)
  * positions packed to the front, one vstore8 writes all 8 slots from slot nb and nb advances
  * by the popcount (the slots past it are overwritten by the next store or ignored). Appending
  * one set bit at a time instead (a loop with an unpredictable trip count per 8 candidates)
- * made the density pass 1.5x slower (bench_flame 50k: 12.9 -> 7.2 ms, 10k: 2.7 -> 1.8 ms). */
+ * makes the density pass about 1.5x slower (docs/performance-log.md). */
 __kernel void fl_density(__global const float4 *pos, __global const float4 *vel, __global const uint *cs, uint mask,
                          int n, prm_t P, __global float2 *rho_p, __global uint *counts, __global uint *nl,
                          __global const float *sxyz, int stride)

@@ -36,7 +36,7 @@
 #define FP_LITERAL 31   /* 1: diffusion as printed (§9 #4 literal mode) */
 #define FP_NBR_INS 32   /* insertion neighbour threshold (§9 #8) */
 #define FP_SEED 33
-#define FP_INV_CELLX 34 /* cells are h/K wide along x (K = FL_XCELLS), h along y and z */
+#define FP_INV_CELLX 34 /* cells are c/K wide along x (K = FL_XCELLS), c = h / FL_CELLS_PER_H along y and z */
 #define FP_WINDV 35     /* 35..37: wind_velocity */
 #define FP_DRAG 38      /* 1 - exp(-wind_drag dt) */
 #define FP_COUNT 39

@@ -24,8 +24,8 @@
 #define STREAM_NAME_MAX 64
 
 /* Revisions stay below 10^15: every integer there is exact in a double and prints exactly with
- * cJSON's 15 significant digits (2^32 and up used to wrap to 0). A stream that reaches it takes
- * no more changes (at a change a millisecond, 31 700 years). */
+ * cJSON's 15 significant digits (a 32-bit revision would wrap to 0 at 2^32). A stream that
+ * reaches it takes no more changes (at a change a millisecond, 31 700 years). */
 #define HUB_REV_MAX 1e15
 
 /* Who computes a stream. On a single node: this daemon, always. In cluster mode (lease.h) the

@@ -5,9 +5,9 @@
  * at U+0000 (`"list\u0000x"` read as "list"), and reads what RFC 8259 does not allow (`0200`
  * as 200, `1.`, form feed as whitespace, raw control characters and invalid UTF-8 in
  * strings). This reader follows RFC 8259's grammar exactly, requires UTF-8 (§8.1) and
- * rejects the rest, so what is acted on is exactly what was sent (issue 15 items 9-11, issue
- * 27 item 9). Numbers beyond double range (1e400) are grammatical and read as infinity:
- * the callers' range checks refuse them. */
+ * rejects the rest, so what is acted on is exactly what was sent. Numbers beyond double
+ * range (1e400) are grammatical and read as infinity: the callers' range checks refuse
+ * them. */
 #ifndef FX_JSON_STRICT_H
 #define FX_JSON_STRICT_H
 

@@ -4,7 +4,7 @@
  * name it does not know runs on, line ends included, until its first ':', "%0a" in the path
  * ends the request line. A guard that looked for "\r\n\r\n" read frames sent after a
  * handshake with bare \n line endings as more of the request and let an unmasked one
- * through (issue 27 item 7).
+ * through.
  *
  * This follows lws_parse's states as far as the end depends on them: the header names lws
  * knows (its own table, lws_token_to_string), line ends in values, and its one quirk (an

@@ -83,7 +83,7 @@ struct net {
  * NET_PENDING_MAX at once, the oldest dropped to make room, each for at most
  * NET_PENDING_TIMEOUT_S. A real client's request arrives within milliseconds, so a flood of
  * half-open handshakes (sockets that send a partial GET and wait) can no longer hold every
- * file descriptor and lock sessions and /healthz out (issue 15 item 3). */
+ * file descriptor and lock sessions and /healthz out. */
 static void net_pending_drop(struct net *net, struct lws *wsi)
 {
     for (int i = 0; i < net->npending; i++)

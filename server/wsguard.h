@@ -6,9 +6,9 @@
  * connection's handshake to the byte where lws ends it (lwsreq.h) and then its frame headers,
  * and withholds a frame whose mask bit is clear. The connection is then closed with 1002
  * (protocol error) and nothing of that frame reaches lws. Everything else passes through
- * untouched, including every read made on another thread or of a socket lws does not own
- * (issue 15 item 13, issue 27 item 7). And a client's close frame is checked (RFC 6455
- * 5.5.1, 7.4), which lws echoes whatever it holds (issue 27 item 10). */
+ * untouched, including every read made on another thread or of a socket lws does not own.
+ * And a client's close frame is checked (RFC 6455 5.5.1, 7.4), since lws echoes whatever it
+ * holds. */
 #ifndef FX_WSGUARD_H
 #define FX_WSGUARD_H
 

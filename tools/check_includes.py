@@ -21,8 +21,9 @@ clients/c/, kernels/ (the Makefile's -I order). Three rules, one check each:
      libfxclient (the rest of      protocol/ (common/ is not compiled into the library)
        clients/c)
    so the daemon and the clients meet only in protocol/ and common/.
-3. A header declares only functions its own module's .c defines (or, for the interfaces in
-   ELSEWHERE, the one file that implements them), so the include graph is the dependency
+3. A header declares only functions its own module defines: its .c (where there is no STEM.c,
+   the STEM_*.c files it is split into), inline in the header itself, or, for the interfaces
+   in ELSEWHERE, the one file that implements them. So the include graph is the dependency
    graph: a header that declared the functions of several files (as fxload.h once did for
    seven) hides the cycles among them from rule 1.
 
@@ -181,10 +182,18 @@ def declaration_faults(files):
     faults = []
     for h in (f for f in files if f.endswith(".h")):
         names = declared_functions(h)
-        impl = ELSEWHERE.get(h, os.path.splitext(h)[0] + ".c")
+        stem = os.path.splitext(h)[0]
+        impl = ELSEWHERE.get(h, stem + ".c")
         if not names or (h in ELSEWHERE and impl is None):
             continue
-        defined = set(DEFINED.findall(code(impl))) if os.path.isfile(impl) else set()
+        # the module: its .c (or, where there is none, the STEM_*.c files it is split into) and
+        # the header's own inline definitions
+        split = h not in ELSEWHERE and not os.path.isfile(impl)
+        parts = sorted(glob.glob(stem + "_*.c")) if split else [impl]
+        defined = set(DEFINED.findall(code(h)))
+        for f in parts:
+            if os.path.isfile(f):
+                defined |= set(DEFINED.findall(code(f)))
         foreign = [n for n in names if n not in defined]
         if foreign:
             faults.append(f"declarations: {h} declares what {impl} does not define: " + ", ".join(foreign))

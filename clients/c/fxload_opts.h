@@ -19,7 +19,7 @@
 #define LD_DEFAULT_SET "energy.alpha=0.5..2"
 #define LD_DEFAULT_RATE 10
 
-/* Exit statuses (README "Load testing with fxload"). */
+/* Exit statuses (docs/fxload.md). */
 enum { LD_OK = 0, LD_FAIL = 1, LD_USAGE = 2, LD_DEGRADED = 3, LD_THRESHOLD = 4 };
 enum ld_mode { LD_SUBSCRIBE = 0, LD_SET = 1 };
 

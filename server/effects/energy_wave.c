@@ -42,16 +42,16 @@ static const char *const ew_output_names[] = {"Y", "RGBA", NULL};
      .doc = what ", normalised by the server", .flags = PARAM_NONZERO, __VA_ARGS__}
 #define EW_COEF(dflt)                                                                                       \
     {.name = "coef", .type = PARAM_FLOAT, .def = dflt, .min = -20, .max = 20, .unit = "",                  \
-     .doc = "energy coefficient (sign unrestricted, eq. 3.28)"}
+     .doc = "energy coefficient (sign unrestricted, Watanabe 2016 eq. 3.28)"}
 
 static const struct param_def ew_point_fields[] = {
-    EW_POS("pos", "[0,0,0]", "point source M (eq. 3.2)"),
+    EW_POS("pos", "[0,0,0]", "point source M (Watanabe 2016 eq. 3.2)"),
     EW_COEF("4.0"),
     {0},
 };
 
 static const struct param_def ew_line_fields[] = {
-    EW_POS("pos", "[0,0,0]", "any point M on the infinite line (eq. 3.3)"),
+    EW_POS("pos", "[0,0,0]", "any point M on the infinite line (Watanabe 2016 eq. 3.3)"),
     EW_DIR("dir", "[0,0,1]", "line direction D"),
     EW_COEF("4.0"),
     {0},
@@ -61,7 +61,7 @@ static const struct param_def ew_torus_fields[] = {
     EW_POS("center", "[0,0,0]", "centre of the torus"),
     EW_DIR("axis", "[0,0,1]", "torus axis (local z)"),
     {.name = "R", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "world units",
-     .doc = "radius of the centre circle (eq. 3.7)"},
+     .doc = "radius of the centre circle (Watanabe 2016 eq. 3.7)"},
     EW_COEF("5.1"),
     {0},
 };
@@ -72,16 +72,16 @@ static const struct param_def ew_curve_fields[] = {
     EW_POS("p2", "[1,0,0]", "Bezier control point B2 (curve end)"),
     EW_COEF("8.0"),
     {.name = "W", .type = PARAM_FLOAT_LIST, .def = "[1,1,1,1,1,1,1]", .min = 0, .max = 1, .min_len = 3,
-     .max_len = WAVE_MAX_W, .unit = "", .doc = "strength sequence along the curve (quadratic B-spline, eq. 3.25)"},
+     .max_len = WAVE_MAX_W, .unit = "", .doc = "strength sequence along the curve (quadratic B-spline, Watanabe 2016 eq. 3.25)"},
     {0},
 };
 
 /* Light rig (digest 003): the toon ramp's bands, eq. 2.5 by default. */
 static const struct param_def ew_band_fields[] = {
     {.name = "m_min", .type = PARAM_FLOAT, .def = "-1", .min = -1, .max = 1, .unit = "",
-     .doc = "lower end of the band in m = N.L (eq. 2.4); bands ascend, m below the first band takes its colour"},
+     .doc = "lower end of the band in m = N.L (Nito 2011 eq. 2.4); bands ascend, m below the first band takes its colour"},
     {.name = "color", .type = PARAM_COLOR, .def = "[1,1,1]", .min = 0, .max = 1, .unit = "linear RGB",
-     .doc = "toon colour of the band (eq. 2.5)"},
+     .doc = "toon colour of the band (Nito 2011 eq. 2.5)"},
     {0},
 };
 
@@ -103,13 +103,13 @@ const struct param_def energy_wave_params[] = {
     {.name = "epsilon", .group = "sources", .type = PARAM_FLOAT, .def = "0.05", .min = 1e-5, .max = 0.5, .unit = "world units",
      .doc = "distance floor of every kernel 1/max(eps, d)"},
     {.name = "alpha", .group = "integration", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 100, .unit = "",
-     .doc = "attenuation gain: zeta(s) = alpha/(s+beta)^2 (eq. 3.31)"},
+     .doc = "attenuation gain: zeta(s) = alpha/(s+beta)^2 (Watanabe 2016 eq. 3.31): higher, a brighter wave"},
     {.name = "beta", .group = "integration", .type = PARAM_FLOAT, .def = "1.0", .min = 0.01, .max = 10, .unit = "",
      .doc = "attenuation offset in ray parameter s (must stay > 0)"},
     {.name = "divisions", .group = "integration", .type = PARAM_INT, .def = "200", .min = 2, .max = 1024, .unit = "",
      .doc = "Simpson divisions n (n+1 samples per ray), used by mode simpson", .flags = PARAM_EVEN},
     {.name = "mode", .group = "integration", .type = PARAM_ENUM, .def = "\"adaptive\"", .choices = ew_mode_names, .unit = "",
-     .doc = "simpson: the thesis's composite Simpson with `divisions` (n+1 samples per ray); adaptive: "
+     .doc = "simpson: Watanabe 2016's composite Simpson rule with `divisions` (n+1 samples per ray); adaptive: "
             "closed forms for points/lines, and per torus/curve a 12-point Gauss-Legendre rule in u where "
             "s = s* + w sinh(u) around the ray's closest approach (about 9x faster than simpson n=200 and "
             "more accurate, no banding; ignores `divisions`)"},
@@ -123,7 +123,7 @@ const struct param_def energy_wave_params[] = {
     {.name = "height", .group = "camera", .type = PARAM_INT, .def = "256", .min = 16, .max = 2048, .unit = "texels",
      .doc = "texture height"},
     {.name = "nu", .group = "integration", .type = PARAM_FLOAT, .def = "2.0", .min = 1.05, .max = 16, .unit = "",
-     .doc = "ray end E = V + nu(S - V) (eq. 4.3, translation-invariant form)"},
+     .doc = "ray end E = V + nu(S - V) (Watanabe 2016 eq. 4.3, in a translation-invariant form)"},
     {.name = "fps", .group = "output", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 240, .unit = "1/s",
      .doc = "frames per second of the stream"},
     /* Default rle: lossless and 2.3 ms at 512^2 half Y (bench_exr); zip is 1.8x smaller but 16 ms,
@@ -133,15 +133,15 @@ const struct param_def energy_wave_params[] = {
     {.name = "output", .group = "output", .type = PARAM_ENUM, .def = "\"Y\"", .choices = ew_output_names, .unit = "",
      .doc = "Y: raw luminance B (HDR, half float); RGBA: colour map clamp((1-B)Cb + B Ce), A = clamp(B)"},
     {.name = "color_energy", .group = "output", .type = PARAM_COLOR, .def = "[0.05,0.35,1.0]", .min = 0, .max = 1, .unit = "linear RGB",
-     .doc = "energy colour C_e of the RGBA colour map (eq. 4.8)"},
+     .doc = "energy colour C_e of the RGBA colour map (Watanabe 2016 eq. 4.8)"},
     {.name = "color_background", .group = "output", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
-     .doc = "background colour C_b of the RGBA colour map (eq. 4.8)"},
+     .doc = "background colour C_b of the RGBA colour map (Watanabe 2016 eq. 4.8)"},
     {.name = "animate", .group = "animation", .type = PARAM_BOOL, .def = "true", .unit = "",
-     .doc = "multiply each curve's W by the eq. (5.1) travelling pulse"},
+     .doc = "multiply each curve's W by a travelling pulse (Watanabe 2016 eq. 5.1)"},
     {.name = "anim_rate", .group = "animation", .type = PARAM_FLOAT, .def = "30", .min = 0.1, .max = 240, .unit = "frames/s",
-     .doc = "eq. (5.1) animation frames per second of stream time (a pulse enters every 7n + 10 frames)"},
-    /* The light rig (digest 003 §7; kind 3 frames, PROTOCOL.md §7.7): on by default, since the
-     * issue asks every energy_wave stream to light its surroundings; ~1 kB a frame. */
+     .doc = "animation frames per second of stream time (Watanabe 2016 eq. 5.1; a pulse enters every 7n + 10 frames)"},
+    /* The light rig (Nito 2011; kind 3 frames, PROTOCOL.md §7.7): on by default, so every
+     * energy_wave stream can light its surroundings; ~1 kB a frame. */
     {.name = "light_rig", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
      .doc = "also send a light-rig frame (kind 3: centre-line segments, toon ramp, outline, shadow) with "
             "every texture, for clients that light their own scene with the wave"},
@@ -150,28 +150,28 @@ const struct param_def energy_wave_params[] = {
     {.name = "torus_segments", .group = "light rig", .type = PARAM_INT, .def = "12", .min = 3, .max = 32, .unit = "",
      .doc = "light rig: chords per torus centre circle"},
     {.name = "light_strength", .group = "light rig", .type = PARAM_FLOAT, .def = "1", .min = 0, .max = 1, .unit = "",
-     .doc = "light rig: mix of the toon colour over the client's own shading (1: full replacement, the thesis)"},
+     .doc = "light rig: mix of the toon colour over the client's own shading (1: full replacement, as in Nito 2011)"},
     {.name = "ramp", .group = "light rig", .type = PARAM_OBJECT_LIST, .def = "[]", .min_len = 0, .max_len = FXS_RIG_MAX_BANDS,
      .fields = ew_band_fields, .unit = "",
-     .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (eq. 2.5); empty: three bands "
+     .doc = "light rig: toon colour bands over m = N.L in [-1, 1], m_min ascending (Nito 2011 eq. 2.5); empty: three bands "
             "that follow color_energy C_e (0.3 C_e from -1, 0.05 + 0.6 C_e from -0.3, 0.2 + 0.8 C_e from 0)"},
     {.name = "features", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
-     .doc = "light rig: multiply the feature texture onto the toon colour (eq. 2.6)"},
+     .doc = "light rig: multiply the feature texture onto the toon colour (Nito 2011 eq. 2.6)"},
     {.name = "outline", .group = "light rig", .type = PARAM_BOOL, .def = "true", .unit = "",
-     .doc = "light rig: draw back-face outlines (eq. 2.7)"},
+     .doc = "light rig: draw back-face outlines (Nito 2011 eq. 2.7)"},
     {.name = "outline_width", .group = "light rig", .type = PARAM_FLOAT, .def = "0.005", .min = 0, .max = 0.05, .unit = "x depth",
-     .doc = "light rig: outline thickness d, R' = R + d|R_z|U in view space (eq. 2.7)"},
+     .doc = "light rig: outline thickness d, R' = R + d|R_z|U in view space (Nito 2011 eq. 2.7)"},
     {.name = "outline_color", .group = "light rig", .type = PARAM_COLOR, .def = "[0,0,0]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "light rig: outline colour"},
     {.name = "shadow", .group = "shadow", .type = PARAM_BOOL, .def = "true", .unit = "",
-     .doc = "light rig: draw the clamped planar shadows (eqs. 2.8-2.32)"},
+     .doc = "light rig: draw the clamped planar shadows (Nito 2011 eqs. 2.8-2.32)"},
     {.name = "shadow_theta", .group = "shadow", .type = PARAM_FLOAT, .def = "60", .min = 0, .max = 89, .unit = "degrees",
      .doc = "light rig: largest angle theta of the shadow direction from the plane's downward normal; "
-            "a shadow is at most height x tan(theta) long (eq. 2.14)"},
+            "a shadow is at most height x tan(theta) long (Nito 2011 eq. 2.14)"},
     {.name = "shadow_color", .group = "shadow", .type = PARAM_COLOR, .def = "[0.02,0.03,0.06]", .min = 0, .max = 1, .unit = "linear RGB",
      .doc = "light rig: shadow colour"},
     {.name = "shadow_opacity", .group = "shadow", .type = PARAM_FLOAT, .def = "0.65", .min = 0, .max = 1, .unit = "",
-     .doc = "light rig: shadow opacity where t >= 0 (eq. 2.32; 0 elsewhere)"},
+     .doc = "light rig: shadow opacity where t >= 0 (Nito 2011 eq. 2.32; 0 elsewhere)"},
     EW_POS("shadow_plane_point", "[0,-9,0]", "light rig: a point I of the shadow-receiving plane", .group = "shadow"),
     EW_DIR("shadow_plane_normal", "[0,1,0]", "light rig: up normal Y of the shadow-receiving plane", .group = "shadow"),
     {0},

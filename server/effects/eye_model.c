@@ -290,7 +290,7 @@ static int eye_obj_path(const char *name, char *path, size_t cap, struct stat *s
     if (!eye_assets_dir[0]) return fx_fail(err, "bad_param", "model", "model \"%s\": no assets_dir configured", name);
     snprintf(path, cap, "%s/%s.obj", eye_assets_dir, name);
     /* lstat: a symlink is refused, not followed, so a link to /etc/passwd cannot have its lines
-     * quoted in a parse error (issue 15 item 4) */
+     * quoted in a parse error */
     if (lstat(path, st) || !S_ISREG(st->st_mode))
         return fx_fail(err, "bad_param", "model", "model \"%s\": no regular file %s.obj in the assets directory "
                                                   "(symbolic links are not followed)", name, name);

@@ -40,10 +40,9 @@
 #endif
 #ifndef FL_CELLS_PER_H
 /* Cells of edge 2h: a particle sets up 4 rows, not 9 (cells of h) or 25 (h/2). The row set-up,
- * not the candidates, is most of fl_density's time on the sparse default flame (~8 neighbours):
- * bench_flame on an AVX2 host (2026-11-26, A/B runs alternating), density pass 2.2-2.6 -> 1.4-1.7
- * ms per step, real-time factor 0.51-0.67 -> 0.71-0.91; the dense lattice blocks gain too
- * (2.5-2.9 -> 2.9-3.4 M particle-steps/s at 22k particles). Cells of 3h or 2.5h: the same. */
+ * not the candidates, is most of fl_density's time on the sparse default flame (~8 neighbours),
+ * so cells of 2h make the density pass about 1.5x faster there, and the dense lattice blocks
+ * of bench_flame faster too; cells of 2.5h or 3h gain nothing more (docs/performance-log.md). */
 #define FL_CELLS_PER_H 0.5
 #endif
 #ifndef FL_XCELLS
@@ -51,10 +50,9 @@
 #endif
 /* On a GPU device a frame of 2 x 4096 particles or more is encoded as up to this many blocks
  * on as many of the host's cores (PROTOCOL.md §7.5.8), which are free during the device's
- * work: on the H200's 16-core host (2026-11-26) the default flame's 10k particles encode in
- * 1.6 ms instead of 2.5 (2 blocks), 50k in 3.6 ms instead of 13.2 (8 blocks), for 1-2% more
- * bytes. On a CPU device (PoCL) one thread: on the 2-vCPU VM two threads gained nothing and
- * took the cores PoCL's workers step on (real-time factor 0.51-0.78 against 0.66-0.99). */
+ * work: a 50k-particle frame encodes nearly 4x faster as 8 blocks, for 1-2% more bytes. On
+ * a CPU device (PoCL) one thread: the other cores are the ones PoCL's workers step on, so a
+ * second encoding thread slows the simulation more than it speeds the encoding. */
 #define FL_ENC_THREADS_MAX 8
 #define FL_FRAME_MARGIN_MS 1.0 /* frame period kept free beyond the substeps and the frame's encoding */
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
@@ -95,17 +93,15 @@ static const struct param_def fl_obstacle_fields[] = {
     {0},
 };
 
-/* Default scene (issue 13): the thesis's 3 cm disc (digest §2.13, ch.7's real flame) on a 3.6 cm
+/* Default scene: the thesis's 3 cm disc (digest §2.13, ch.7's real flame) on a 3.6 cm
  * non-burning base plate 4 mm under it, with h = 3.5 mm (a third of Table 3.1's, so ~10k particles
- * resolve the thesis-size flame) at dt 3 ms. Measured (tests/bench/bench_flame_shape.c): a flame
- * 4.4 times as tall as wide (H90 11.4 cm, W90 2.6 cm), 1.3% of the burning gas below the source
- * plane, flicker 11.8%, 10.0k particles (without the wind drag: 3.6 times, 12.7 and 3.5 cm, 1.1%,
- * 10.7%, 10.3k). Without the plate, gas heated by the disc's lower layer
- * stays under it (12% of the burning gas below the source plane, as the thesis's free-floating
- * source has no ground); the plate is an obstacle (digest §2.13), so no new physics. The earlier
- * default (an 11.4 cm disc at h = 11.25 mm) held as many particles but burned as a wide dome
- * (H90/W90 1.3, 20% below the source). The thesis's dt of 1 ms would need 10 M particle-steps/s
- * for 10k particles in real time. */
+ * resolve the thesis-size flame) at dt 3 ms (the thesis's 1 ms would need 10 M particle-steps/s
+ * for 10k particles in real time). Finer particles on a thesis-size source, not a bigger source,
+ * give a flame several times as tall as wide (tests/bench/bench_flame_shape.c measures it,
+ * tests/unit/test_flame_shape.c holds it). Without the plate, gas heated by the disc's lower
+ * layer stays under it (about a tenth of the burning gas below the source plane, as the
+ * thesis's free-floating source has no ground); the plate is an obstacle (digest §2.13), so no
+ * new physics. */
 const struct param_def flame_params[] = {
     {.name = "sources", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.015}]", .max_len = 16,
      .fields = fl_source_fields, .unit = "", .doc = "burning solids: discs that hold fuel and heat and feed the flame"},
@@ -118,16 +114,14 @@ const struct param_def flame_params[] = {
     /* The wind as the digest's optional drag model (§2.14 [P], f = rho k_drag (v_wind - v)): gas
      * takes up the velocity of the ambient air the thesis does not simulate, at rate wind_drag,
      * across `up` only, since buoyancy already is the net vertical force (§2.6 [P]: the air's
-     * resistance to the rise is in k_buo, and §8 B4's exact buoyancy step stays exact). A
-     * uniform wind_accel cannot lean a flame whose burning gas lives ~40 ms and rises at ~2.5
-     * m/s: without drag 10 m/s^2 moved the burning centroid 1.3 cm (0.10 H90), and as a force
-     * density like buoyancy (rho_rest a / rho) 2.9 cm (0.23 H90). A wind *velocity* leans it like a
-     * real flame, by about the ratio of wind to rise speed: 2 m/s moves it 4.3 cm = 0.37 H90
-     * (tests/unit/test_flame_shape.c). The drag also resists the gas's sideways spreading in
-     * still air: at 25/s the calm flame is 11.4 cm tall and 2.6 cm wide (H90/W90 4.4; without
-     * drag 12.7 and 3.5 cm, 3.6) with 10.0k particles (10.3k). 20/s: 11.6 cm, a lean of 0.31 H90
-     * at 2 m/s; 30/s: 11.1 cm, 0.43 H90, but 9.97k particles; 50/s: 10.6 cm. Drag on the vertical
-     * too cut H90 to 9.3 cm at 10/s and to 3.1 cm at 30/s. */
+     * resistance to the rise is in k_buo, and §8 B4's exact buoyancy step stays exact; drag on
+     * the vertical too made the flame far shorter). A uniform wind_accel leans a flame whose
+     * burning gas lives ~40 ms and rises at ~2.5 m/s little (10 m/s^2: a tenth of its height,
+     * a quarter as a force density like buoyancy, rho_rest a / rho); a wind *velocity* leans it
+     * like a real flame, by about the ratio of wind to rise speed (2 m/s: about a third of its
+     * height; test_flame_shape.c). The drag also resists the gas's sideways spreading in still
+     * air, so the calm flame is narrower; 25/s leans it well and keeps the default scene at ~10k
+     * particles (other rates: docs/performance-log.md). */
     {.name = "wind_velocity", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -20, .max = 20, .unit = "m/s",
      .doc = "velocity of the surrounding air: the flame leans downwind (the gas takes it up at wind_drag); its "
             "part along `up` is ignored"},
@@ -1107,16 +1101,16 @@ static void fl_plan(struct flame *fl, double dt)
      * encoding (with the substep that ran beside it) and a margin; as many run as fit at the
      * recent time per substep. The plan comes from the average of earlier frames, since the
      * clock can only be read where the host waits for the device (resampling steps): deciding
-     * there, all or nothing per 5-step interval, left a quarter of each frame's period idle.
+     * there, all or nothing per 5-step interval, would leave a quarter of each frame's period idle.
      * The fraction of a substep a cut frame could not use goes to the next frame's budget
-     * (rounding down every frame wasted half a substep a frame), and the simulated time a cut
+     * (rounding down every frame would waste half a substep a frame), and the simulated time a cut
      * frame leaves undone is carried up to one frame's worth, so a frame slowed by the host
      * catches up in the next ones; beyond that it is dropped, and a scene too slow for the
      * machine streams at a steady frame rate while /metrics reports its real-time factor. A
-     * frame still stops once it is over budget. Default scene, 2-vCPU AVX2 VM, variants
-     * interleaved in one process (README): real-time factor 0.83-0.85 -> 0.88-0.89 with this
-     * plan, 0.90-0.94 with the substep beside the encoding too. Times are the frame's own: the
-     * engine may run other streams between its slices. */
+     * frame still stops once it is over budget. Together with the substep run beside the
+     * encoding this raised the default scene's real-time factor on a 2-core host by about a
+     * tenth (docs/performance-log.md). Times are the frame's own: the engine may run other
+     * streams between its slices. */
     double budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
     double fitf = fl->step_ms > 0 ? budget / fl->step_ms + fl->fit_frac : n;
     int fit = (int)fitf;

@@ -142,8 +142,8 @@ void light_rig_build(const struct light_rig *lr, const struct wave_sources *src,
 /* ---- settings ------------------------------------------------------------------------ */
 
 /* The default ramp (an empty `ramp`): three bands of eq. 2.5's shape in the wave's own colour
- * C_e, so changing color_energy changes the light the wave casts (issue 14) and the lit side
- * shows the wave's hue, not a near-white (issue 25): 0.3 C_e, 0.05 + 0.6 C_e, 0.2 + 0.8 C_e. */
+ * C_e, so changing color_energy changes the light the wave casts and the lit side shows the
+ * wave's hue, not a near-white: 0.3 C_e, 0.05 + 0.6 C_e, 0.2 + 0.8 C_e. */
 static void lr_ramp_from_energy(const cJSON *p, struct fxs_rig_consts *k)
 {
     static const double m_min[3] = {-1, -0.3, 0}, base[3] = {0, 0.05, 0.2}, gain[3] = {0.3, 0.6, 0.8};

@@ -52,8 +52,8 @@ void wave_sources_weights(const struct wave_sources *s, double sim_time, double 
 void wave_anim_weights(double frame, int n, double *w);
 /* The stream's animation: eq. (5.1)'s pulse started again every wave_anim_period(n) = 7n + 10
  * frames, overlapping pulses summed and clamped at 1, so the curve is never dark between two
- * sweeps (a single looped sweep of 7(n-1) + 50 frames left every weight 0 for ~10 frames: the
- * blank textures of issue 14). */
+ * sweeps (a single looped sweep of 7(n-1) + 50 frames would leave every weight 0, a blank
+ * texture, for ~10 frames). */
 double wave_anim_period(int n);
 void wave_loop_weights(double frame, int n, double *w);
 

@@ -212,7 +212,7 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     printf("flame default N %.0f dt %.4f s: %.2f ms of work per frame of 1/30 s, real-time factor %.2f, %.2f M "
            "particle-steps/s, %.0f kB/frame\n",
            nsum / frames, dt, busy * 1e3 / frames, sim / wall, ps * 1e-6, out.bytes / 1024.0 / frames);
-    printf("flame default encoding %.3f ms per frame (%.1f ns per particle): %.2f%% of the %.2f ms step (issue 13: "
+    printf("flame default encoding %.3f ms per frame (%.1f ns per particle): %.2f%% of the %.2f ms step (target "
            "<= 5%%)\n", out.encode_ms / frames, out.encode_ms * 1e6 / nsum, 100 * out.encode_ms / (busy * 1e3),
            busy * 1e3 / frames);
     printf("flame default CPU %.2f s for %.3f s simulated: real-time factor %.2f with %.0f cores to itself\n", cpu, sim,
@@ -229,8 +229,8 @@ int main(int argc, char **argv)
     struct ocl *ocl;
     if (ocl_open(&ocl, argc > 1 ? argv[1] : NULL, &err)) bench_die("ocl_open", &err);
     printf("flame device: %s\n", ocl_device_name(ocl));
-    const char *only = getenv("BENCH_FLAME_ONLY"); /* "sizes" or "default": one half of the bench */
-    if (only && strcmp(only, "50k") == 0) bench_size(ocl, "50k", 37, 20); /* quick A/B runs */
+    const char *only = getenv("BENCH_FLAME_ONLY"); /* "sizes" or "default": one half; "50k": one size */
+    if (only && strcmp(only, "50k") == 0) bench_size(ocl, "50k", 37, 20); /* quick comparisons of two builds */
     else if (!only || strcmp(only, "default") != 0) {
         bench_size(ocl, "10k", 22, 60);
         bench_size(ocl, "50k", 37, 20);

@@ -1,4 +1,4 @@
-/* bench_flame_shape.c — the flame's shape figures (issue 13) on the default scene, its
+/* bench_flame_shape.c — the flame's shape figures on the default scene, its
  * difference-form variant and a sideways wind (a 2 m/s wind_velocity, digest §2.14's drag
  * model, and for comparison a uniform wind_accel of 10 m/s^2), as a client measures them on the stream:
  * 5 s of warm-up, then one state every 1/30 s of simulated time for 10 s (tests/ref/

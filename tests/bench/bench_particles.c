@@ -57,7 +57,7 @@ static void bp_line(const char *frame, uint32_t n, const char *what, double byte
 
 /* ---- the decode table --------------------------------------------------------------------- */
 
-#define BP_DECODE_C_TARGET 60.0   /* ms per million particles (issue 28) */
+#define BP_DECODE_C_TARGET 60.0   /* ms per million particles: the decode targets */
 #define BP_DECODE_WEB_TARGET 100.0
 #define BP_MAX_FRAMES 4096
 

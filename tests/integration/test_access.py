@@ -156,8 +156,8 @@ def handshake(port, host, origin=None):
 
 
 async def test_dns_rebinding(t):
-    """Without tokens only this machine's names are accepted as Host (issue 15 item 1): a page on
-    a rebinding domain sends its own name as Host and Origin and used to get admin."""
+    """Without tokens only this machine's names are accepted as Host: a page on a DNS-rebinding
+    domain sends its own name as Host and Origin, and must not get admin."""
     d = token_daemon({"allowed_hosts": ["studio.local"]}, tokens=False)
     try:
         p = d.port

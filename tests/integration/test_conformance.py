@@ -1,5 +1,5 @@
 """test_conformance.py — RFC 6455 framing cases in the manner of the Autobahn suite, sent by a
-client built from the RFC's rules (rawws.py) to a real daemon (issue 15 items 8 and 13):
+client built from the RFC's rules (rawws.py) to a real daemon:
 - a client frame must be masked (5.1): an unmasked text, binary, ping or continuation frame,
   one split across writes, one after long masked frames (16- and 64-bit lengths) and one sent
   together with the handshake each close the connection with 1002, and nothing of that frame
@@ -155,9 +155,9 @@ def close_answer(payload, after=b""):
 
 
 async def test_close_frames(t):
-    """Close frames as RFC 6455 5.5.1 and 7.4 have them (issue 27 item 10): lws 4.1 echoed a
-    one-byte payload, codes 5000 and 65535 and a reason cut inside a character, and a request
-    sent after the client's close was acted on."""
+    """Close frames as RFC 6455 5.5.1 and 7.4 have them: left to itself lws 4.1 echoes a
+    one-byte payload, codes 5000 and 65535 and a reason cut inside a character, and acts on a
+    request sent after the client's close."""
     code = lambda n: struct.pack(">H", n)
     for payload, want, what in ((b"", (None, b""), "an empty close is echoed empty"),
                                 (code(1000) + b"bye", (1000, b"bye"), "1000 with a reason is echoed"),
@@ -216,8 +216,9 @@ def boundary_cases(port):
 
 
 async def test_handshake_boundaries(t, port=None, wrap=None, label=""):
-    """The guard sees each handshake end where lws sees it (issue 27 item 7): a handshake with
-    bare \\n line endings then an unmasked destroy got `destroyed`, over plain and TLS."""
+    """The guard sees each handshake end where lws sees it: a handshake with bare \\n line
+    endings then an unmasked destroy must be refused, not answered `destroyed`, over plain and
+    TLS."""
     port = port or D.port
     victim_there(port, wrap)
     for what, request in boundary_cases(port):

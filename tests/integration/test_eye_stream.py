@@ -101,7 +101,7 @@ async def test_bake_and_obj(t):
     t.check(bad["op"] == "error" and bad["param"] == "model" and "line" in bad["message"],
             "malformed OBJ refused with its line: %s" % bad.get("message"))
     # A model that is a symlink (here to a secret outside the assets) is not offered and never
-    # read, so no line of the target can be quoted in an error (issue 15 item 4).
+    # read, so no line of the target can be quoted in an error.
     bad = await c.request("create", effect="compound_eye", stream="b3", params={"model": "leak"})
     t.check(bad["op"] == "error" and bad["param"] == "model" and "SECRET" not in bad["message"] and
             '"leak"' not in bad["message"].split("expected one of")[-1],

@@ -1,5 +1,5 @@
-"""test_libfxclient.py — libfxclient taken as a program outside the tree takes it (issue 26
-item 5). `make install DESTDIR=D` puts the shared library (soname, version, symlinks), the
+"""test_libfxclient.py — libfxclient taken as a program outside the tree takes it.
+`make install DESTDIR=D` puts the shared library (soname, version, symlinks), the
 static one, the headers and fxclient.pc in place; pkg-config pointed at D (PKG_CONFIG_LIBDIR,
 PKG_CONFIG_SYSROOT_DIR) gives flags into D only; the shared library exports fxclient.h's
 FXC_API functions and nothing else; the header compiles as C99 and as C++. Built from those

@@ -120,9 +120,9 @@ def drain_close(c, timeout=20):
 
 
 async def test_queued_bytes(t):
-    """Replies a client does not read are bounded in bytes (issue 15 item 2): describe replies
-    (~11 kB) asked for at the allowed rate by readers that never read. Its requests are no longer
-    read while its replies wait, and each one is answered once it reads (issue 27 item 6)."""
+    """Replies a client does not read are bounded in bytes: describe replies (~11 kB) asked for
+    at the allowed rate by readers that never read. Its requests are not read while its replies
+    wait, and each one is answered once it reads."""
     # stall_timeout_s 60: sending 12,000 requests can take longer than the default 10 s on a
     # loaded host, and a reader whose socket is full that long is closed for not reading (no
     # close frame fits), which is another limit than the one checked here.
@@ -171,9 +171,9 @@ async def test_events_not_read(t):
 
 
 async def test_large_reply(t):
-    """A reply larger than max_queued_bytes is delivered to a client that reads it (issue 27 item
-    6): 64 presets of a rich energy document (presets.json ~600 kB) used to close the page's
-    connection with 1008 within ms. Two such replies asked for at once both come."""
+    """A reply larger than max_queued_bytes is delivered to a client that reads it: 64 presets of
+    a rich energy document (presets.json ~600 kB) must not close the page's connection with
+    1008. Two such replies asked for at once both come."""
     state = tempfile.mkdtemp(prefix="fxs-state-")
     with Daemon(state_dir=state) as d:
         c = await Client.connect(d)
@@ -198,8 +198,8 @@ async def test_large_reply(t):
 
 async def test_half_open_flood(t):
     """A bounded flood of half-open handshakes (1150 sockets that send a partial GET and are
-    reopened when dropped, for 12 s) does not lock out new sessions or /healthz (issue 15 item
-    3): pending connections are capped at 128, the oldest dropped, each given 3 s at most."""
+    reopened when dropped, for 12 s) does not lock out new sessions or /healthz: pending
+    connections are capped at 128, the oldest dropped, each given 3 s at most."""
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, 4096), hard))
     with Daemon() as d:

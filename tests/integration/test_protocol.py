@@ -64,7 +64,7 @@ async def test_http(t):
 
 
 async def test_metrics_parse(t):
-    """/metrics by Prometheus's own text parser (issue 16): every family parses, counters end in
+    """/metrics by Prometheus's own text parser: every family parses, counters end in
     _total, histograms have cumulative buckets ending at +Inf with _count = the +Inf bucket, and
     the per-stream figures are there for a flame that is being watched."""
     from prometheus_client.parser import text_string_to_metric_families
@@ -79,8 +79,8 @@ async def test_metrics_parse(t):
     _, _, body = http_get("/metrics")
     fams = {f.name: f for f in text_string_to_metric_families(body)}
     t.check(len(fams) >= 25, "the text parser reads %d metric families" % len(fams))
-    # Each # TYPE line is a family of its own (issue 27 item 13): the counter
-    # fxs_connections_total was read into the gauge fxs_connections's family.
+    # Each # TYPE line is a family of its own: a counter fxs_connections_total beside a gauge
+    # fxs_connections would be read into the gauge's family.
     types = re.findall(r"^# TYPE (\S+) (\S+)$", body, re.M)
     own = [(n, ty) for n, ty in types if fams.get(n[:-6] if ty == "counter" and n.endswith("_total") else n) is not None
            and fams[n[:-6] if ty == "counter" and n.endswith("_total") else n].type == ty]
@@ -107,9 +107,8 @@ async def test_metrics_parse(t):
 
 
 async def test_static_root(t):
-    """Only regular files that resolve inside the web root are served (issue 15 item 4): a
-    symlink to a file or a directory outside it is 404; other methods than GET get 405 with
-    Allow: GET (issue 15 item 13)."""
+    """Only regular files that resolve inside the web root are served: a symlink to a file or a
+    directory outside it is 404; other methods than GET get 405 with Allow: GET."""
     root, outside = tempfile.mkdtemp(prefix="fxs-web-"), tempfile.mkdtemp(prefix="fxs-out-")
     with open(os.path.join(root, "index.html"), "w") as f:
         f.write("<p>root</p>")
@@ -135,9 +134,9 @@ async def test_static_root(t):
         for method in ("OPTIONS", "POST", "PUT", "DELETE"):
             st, _, hd = get("/healthz", method)
             t.check(st == 405 and hd.get("Allow") == "GET", "%s: 405 with Allow: GET (%s, %s)" % (method, st, hd.get("Allow")))
-        # lws answers these itself, before any callback (issue 27 item 13: they got 403)
+        # lws would answer these itself, before any callback, with 403: they get 405 too
         for line in (b"OPTIONS * HTTP/1.1", b"TRACE / HTTP/1.1", b"TRACE * HTTP/1.1", b"BREW /pot HTTP/1.1",
-                     b"CONNECT 127.0.0.1:1 HTTP/1.1"):  # CONNECT: lws made it a raw socket held open
+                     b"CONNECT 127.0.0.1:1 HTTP/1.1"):  # CONNECT: lws makes it a raw socket held open
             head = http_raw(d.port, line + b"\r\nHost: 127.0.0.1\r\n\r\n")
             t.check(head[:1] and b" 405 " in head[0] and b"allow: get" in head[1:],
                     "%s: 405 with Allow: GET (%s)" % (line.decode(), head[:1]))
@@ -258,7 +257,7 @@ async def test_error_codes(t):
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"fps":1000}}', "bad_param", "out of range")
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"eye":[1,2]}}', "bad_param", "wrong length")
     await expect_error(t, c, '{"op":"set","stream":"energy","params":{"colour":1}}', "bad_param", "unknown name")
-    # A misspelt name gets the nearest known one (issue 16: "did you mean"), a far-off one none.
+    # A misspelt name gets the nearest known one ("did you mean"), a far-off one none.
     for text, code, hint in (('{"op":"set","stream":"energy","params":{"alpa":2}}', "bad_param", '"alpha"'),
                              ('{"op":"lst"}', "unknown_op", '"list"'),
                              ('{"op":"describe","effect":"flam"}', "unknown_effect", '"flame"'),
@@ -268,14 +267,14 @@ async def test_error_codes(t):
         got = m["message"]
         t.check(('did you mean %s?' % hint in got) if hint else ("did you mean" not in got),
                 "%s: %s" % ("suggests " + hint if hint else "no suggestion for a far-off name", got))
-    # Only exactly one JSON value is acted on (issue 15 items 9-11): the first of two objects,
-    # the first of duplicate members and a string cut at U+0000 used to be run.
+    # Only exactly one JSON value is acted on: cJSON alone would run the first of two objects,
+    # the first of duplicate members and a string cut at U+0000.
     await expect_error(t, c, '{"op":"list"}{"op":"destroy","stream":"energy"}', "bad_json", "trailing data")
     await expect_error(t, c, '{"op":"get","op":"destroy","stream":"energy"}', "bad_json", "duplicate member")
     await expect_error(t, c, '{"op":"list\\u0000x"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"create","effect":"energy_wave","stream":"ab\\u0000cd"}', "bad_json", "U+0000")
     await expect_error(t, c, '{"op":"auth","token":"t\\u0000junk"}', "bad_json", "U+0000")
-    # preset ops check their fields in the order of §3 before any state (issue 27 item 13)
+    # preset ops check their fields in the order of §3 before any state
     for text, code, param in (('{"op":"preset_save","stream":"nope","name":"bad name"}', "bad_request", "name"),
                               ('{"op":"preset_save","stream":"nope","name":"ok","doc":"%s"}' % ("x" * 201), "bad_request", "doc"),
                               ('{"op":"preset_save","stream":"energy","name":"ember-arc","doc":"%s"}' % ("x" * 201),
@@ -285,7 +284,7 @@ async def test_error_codes(t):
                               ('{"op":"preset_load","name":7}', "bad_request", "stream")):
         m = await expect_error(t, c, text, code, text[:60])
         t.check(m.get("param") == param, "%s: param %s (%s)" % (text[:60], param, m.get("param")))
-    # RFC 8259 exactly (issue 27 item 9): 0200 was read as 200, \f as whitespace, raw controls kept.
+    # RFC 8259 exactly: not 0200 as 200, nor \f as whitespace, nor raw control characters.
     rev = (await c.request("get", stream="energy"))["rev"]
     for text, why in (('{"op":"set","stream":"energy","params":{"divisions":0200}}', "leading zero"),
                       ('{"op":"set","stream":"energy","params":{"alpha":1.}}', "digit must follow '.'"),
@@ -295,7 +294,7 @@ async def test_error_codes(t):
         m = await expect_error(t, c, text, "bad_json", "%r" % text)
         t.check(why in m["message"], "%r: the message says %r (%s)" % (text, why, m["message"]))
     t.check((await c.request("get", stream="energy"))["rev"] == rev, "none of those sets changed the stream")
-    # ids come back exactly (issue 15 item 12), or are refused when a double cannot hold them
+    # ids come back exactly, or are refused when a double cannot hold them
     for text in ("9007199254740991", "-9007199254740991", "0.1", "123456.789", "1e-300", '"x\\u00e9"'):
         await c.ws.send('{"op":"list","id":%s}' % text)
         got, want = json.loads(await c.ws.recv()).get("id"), json.loads(text)
@@ -303,7 +302,7 @@ async def test_error_codes(t):
     for text in ("9007199254740992", "1e400", "-1e400"):
         m = await expect_error(t, c, '{"op":"list","id":%s}' % text, "bad_request", "id %s refused" % text)
         t.check(m.get("param") == "id" and "id" not in m, "id %s: refused naming id, no id echoed" % text)
-    # Replies are valid UTF-8 even where a quoted client string is cut (issue 15 item 8): the
+    # Replies are valid UTF-8 even where a quoted client string is cut: the
     # client would otherwise drop the connection (websockets raises on invalid UTF-8).
     m = await expect_error(t, c, json.dumps({"op": "a" * 63 + "\u00e9"}, ensure_ascii=False), "unknown_op",
                            "an op cut inside a character")
@@ -333,8 +332,8 @@ async def test_invalid_utf8_closes_1007(t):
 
 
 async def test_noop_set(t):
-    """A set that changes nothing keeps the revision and broadcasts nothing (issue 27 item 13:
-    it bumped rev and sent params to every subscriber)."""
+    """A set that changes nothing keeps the revision and broadcasts nothing (no new rev, no
+    params to every subscriber)."""
     a, b = await Client.connect(D), await Client.connect(D)
     await a.request("create", effect="energy_wave", stream="still", params=SMALL)
     await b.request("subscribe", stream="still")
@@ -364,8 +363,8 @@ async def test_noop_set(t):
 
 async def test_paused_first_frame(t):
     """The first frame after subscribing to a paused stream was computed before the pause: it is
-    sent at once marked FXS_FLAG_BEFORE_PAUSE (flags bit 31), fresh frames unmarked after it
-    (issue 27 item 13: it came unmarked, with its old sim_time)."""
+    sent at once marked FXS_FLAG_BEFORE_PAUSE (flags bit 31), fresh frames unmarked after it,
+    so a client can tell an old frame with its old sim_time from a fresh one."""
     c = await Client.connect(D)
     await c.request("create", effect="energy_wave", stream="napping", params=SMALL)
     await c.request("subscribe", stream="napping")
@@ -467,7 +466,7 @@ async def test_persistence(t):
 
 
 async def test_rev_64bit(t):
-    """rev is 64-bit end to end (issue 15 item 7): a stored 4294967295 goes on to 4294967296, not 0."""
+    """rev is 64-bit end to end: a stored 4294967295 goes on to 4294967296, not 0."""
     state = tempfile.mkdtemp(prefix="fxs-state-")
     with open(os.path.join(state, "streams.json"), "w") as f:
         json.dump([{"stream": "big", "effect": "energy_wave", "rev": 4294967295, "params": {"width": 32, "height": 32}}], f)
@@ -485,7 +484,7 @@ async def test_rev_64bit(t):
 
 
 async def test_state_write_failure(t):
-    """A change the state directory refuses is not applied (issue 15 item 5): set, create and
+    """A change the state directory refuses is not applied: set, create and
     destroy get `unavailable`, nothing changes, /healthz and /metrics show the condition until a
     write succeeds, and a restart finds exactly the acknowledged state."""
     state = tempfile.mkdtemp(prefix="fxs-state-")
@@ -533,7 +532,7 @@ async def test_state_write_failure(t):
 
 async def test_presets_persist(t):
     """User presets survive a restart; a save whose file write fails is `unavailable` and changes
-    nothing; a stored preset that no longer validates loads as bad_param (issue 14 item 5)."""
+    nothing; a stored preset that no longer validates loads as bad_param."""
     state = tempfile.mkdtemp(prefix="fxs-state-")
     with Daemon(state_dir=state) as d:
         c = await Client.connect(d)
@@ -567,8 +566,8 @@ async def test_presets_persist(t):
                 "bad_param k_buo (%s)" % r)
         t.check((await c.request("get", stream="flame"))["params"]["k_buo"] == 0.02, "and changes nothing")
         await c.close()
-    # Each entry is checked as preset_save checks one (issue 27 item 8): each of these loaded,
-    # then was listed (1e999 as null), sent raw (\xff) or could not be deleted (../../x).
+    # Each entry is checked as preset_save checks one: unchecked, each of these would load and
+    # then be listed (1e999 as null), sent raw (\xff) or be impossible to delete (../../x).
     good = json.load(open(os.path.join(state, "presets.json")))
     entry = lambda name, **kw: dict(dict(effect="flame", name=name, doc="", params={"fps": 20}), **kw)
     for extra, why in (([entry("candle")], 'entry 3 (flame/candle): "candle" is a built-in flame preset'),
@@ -590,7 +589,7 @@ async def test_presets_persist(t):
 
 
 async def test_quarantine(t):
-    """Stored streams that no longer validate are kept aside, not erased (issue 15 item 6)."""
+    """Stored streams that no longer validate are kept aside, not erased."""
     state = tempfile.mkdtemp(prefix="fxs-state-")
     stored = [{"stream": "ok", "effect": "energy_wave", "rev": 3, "params": {"width": 32, "height": 32}},
               {"stream": "old", "effect": "smoke", "rev": 7, "params": {}},

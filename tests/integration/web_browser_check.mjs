@@ -175,7 +175,7 @@ function pupils(img) {
   return { r: Math.round(r), B, med, all: comps.length, pupils: big };
 }
 
-// The default compound eye from the default camera shows the phenomenon (issue 14): one
+// The default compound eye from the default camera shows the phenomenon: one
 // central pseudopupil and the six side pupils of the hexagonal lattice.
 async function defaultEyeCheck(ctx, port) {
   const page = await ctx.newPage();
@@ -248,7 +248,7 @@ async function eyeChecks(ctx, port, fxctl, url) {
   const hex = await eyeImages(page);
   await page.screenshot({ path: join(ART, 'web-eye-hex.png') });
   console.log('eye hex', JSON.stringify(hex));
-  // (the look-up is a one-texel tent since issue 25, against speckles: pupils a little softer)
+  // (the look-up is a one-texel tent, against speckles, so the pupils are a little soft)
   check(hex.lut.std > 15 && hex.lut.dark > 0.015 && hex.period.c > 0.1, 'hex lut view: facets with pigment', JSON.stringify({ lut: hex.lut, period: hex.period }));
   check(hex.corr > 0.75, 'hex: lut and bake views agree', `correlation ${hex.corr}`);
 
@@ -279,9 +279,9 @@ async function eyeChecks(ctx, port, fxctl, url) {
   fxctl('destroy', 'eyebake');
 }
 
-// The energy wave's glow is a bloom (issue 14): an isolated torus seen face-on, its radial
-// brightness profile outside the ring falls monotonically (no ghost rings: the old 24-tap glow
-// drew copies of the ring around it). Also the screenshot of the wave view.
+// The energy wave's glow is a bloom: an isolated torus seen face-on, its radial brightness
+// profile outside the ring falls monotonically (no ghost rings, which a glow of a few fixed taps
+// draws as copies of the ring around it). Also the screenshot of the wave view.
 async function waveChecks(ctx, port, fxctl, main) {
   fxctl('create', 'energy_wave', 'ring', 'tori=[{"center":[0,0,0],"axis":[0,0,1],"R":3,"coef":5.1}]', 'curves=[]',
     'animate=false', 'light_rig=false', 'fps=3');
@@ -318,7 +318,7 @@ async function waveChecks(ctx, port, fxctl, main) {
   check(gone, 'and disappears when it is destroyed', String(await main.evaluate(() => window.fxs.views)));
 }
 
-// ---- the tuning panel (issue 14 item 5) -------------------------------------------------
+// ---- the tuning panel ---------------------------------------------------------------------
 
 const serverParams = async (port, stream) => {
   const d = await (await fetch(`http://127.0.0.1:${port}/healthz`)).json(); // (rev only there)
@@ -393,8 +393,8 @@ async function flameChecks(ctx, port, fxctl) {
   const drawn = () => page.evaluate(() => window.fxs.stats().flame?.drawn ?? 0);
   const nextDraw = async () => { const d = await drawn(); return until(async () => (await drawn()) > d, 8000, 100); };
   // The white share of a flickering flame: the mean of five looks 0.5 s apart. One look ranges
-  // 2-17% on the same stream (2026-11-26, 40 looks of each of two builds: medians 6-7%), so a
-  // single look near the 15% bound passed or failed by chance.
+  // 2-17% on the same stream (medians 6-7% over 40 looks), so a single look near the 15% bound
+  // would pass or fail by chance.
   const whiteMean = async () => {
     const w = [];
     for (let i = 0; i < 5; i++) {
@@ -504,8 +504,8 @@ try {
   check(rig && rig.shadows.length === 4 && rig.shadows.every((s) => s.k[1] < 0), 'every model casts a shadow downwards', JSON.stringify(rig?.shadows));
   check(scene && scene.lit > 0.3, 'toon scene is lit', JSON.stringify(scene));
   const sceneLum = scene ? 0.2126 * scene.mean[0] + 0.7152 * scene.mean[1] + 0.0722 * scene.mean[2] : 0;
-  // (the home view frames the whole floor disc since issue 25, with the dark background around it)
-  check(sceneLum > 30 && sceneLum < 145, 'toon scene exposure: a mid-grey ground, not a white sheet (mean luminance 30-145; was 158)',
+  // (the home view frames the whole floor disc, with the dark background around it)
+  check(sceneLum > 30 && sceneLum < 145, 'toon scene exposure: a mid-grey ground, not a white sheet (mean luminance 30-145)',
     sceneLum.toFixed(1));
   check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
   // The overlay: skipped frames by who skipped them and per kind, every figure defined in a tooltip.

@@ -1,5 +1,5 @@
-// web_look_metrics.mjs — the look metrics of issue 25 (energy wave, toon scene, compound
-// eye) computed from a view's pixels: img = {w, h, px} with px RGBA bytes, rows from the top.
+// web_look_metrics.mjs — the look metrics of the energy wave, the toon scene and the compound
+// eye, computed from a view's pixels: img = {w, h, px} with px RGBA bytes, rows from the top.
 // Pure functions, used by web_look_wave_check.mjs; every figure is in display values
 // (sRGB bytes) and luminance is Rec. 709's weighting of them.
 

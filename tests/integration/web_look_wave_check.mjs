@@ -1,4 +1,4 @@
-// web_look_wave_check.mjs — issue 25's look of the energy wave, its toon scene and the compound
+// web_look_wave_check.mjs — the look of the energy wave, its toon scene and the compound
 // eye, measured on the default streams of a real fxstreamd (random loopback port) in Debian's
 // chromium (headless, SwiftShader WebGL) at 1600 × 1000, the page's default 2 × 2 layout (the
 // flame stream left out: its look is another suite's). Every figure comes from the views'

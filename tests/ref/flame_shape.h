@@ -1,5 +1,6 @@
-/* flame_shape.h — the default flame's shape figures of issue 13, measured on particle states
- * the way a client measures them on the stream's frames (tests and benches only).
+/* flame_shape.h — the flame's shape figures (H90, W90, share below the source, flicker,
+ * centroid), measured on particle states the way a client measures them on the stream's
+ * frames (tests and benches only).
  *
  * "Burning" = a gas particle with T >= T_ign. Heights run along `up` from the sources' plane
  * (through the mean of the enabled sources' centres: the source's centre when there is one),

@@ -478,7 +478,7 @@ static int tek_cmp(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* Issue 14: with the joined curves and their pulse (wave_scenes.h) no frame of two loops of the
+/* With the joined curves and their pulse (wave_scenes.h) no frame of two loops of the
  * longest curve carries less than half the median total energy (sum of B over a 64 x 32
  * texture): the pulse must not leave every weight near zero at once. Each frame is also lit
  * somewhere. */

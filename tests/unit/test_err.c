@@ -1,5 +1,5 @@
 /* test_err.c — server/err.h: fx_fail's messages and parameter paths are valid UTF-8 however
- * they were cut or whatever client bytes they quote (issue 15 item 8): fx_utf8_sanitize keeps
+ * they were cut or whatever client bytes they quote: fx_utf8_sanitize keeps
  * well-formed sequences and turns every other byte into '?'. */
 #include <string.h>
 

@@ -1,4 +1,4 @@
-/* test_flame_shape.c — issue 13's shape figures of the default flame scene, measured as a
+/* test_flame_shape.c — the shape of the default flame scene, measured as a
  * client measures them on the stream (tests/ref/flame_shape.c: 5 s of warm-up, then 10 s of
  * states at 30 per simulated second; "burning" = gas with T >= T_ign; heights along `up` from
  * the source's top plane). Targets: H90 >= 2 W90, <= 5% of the burning gas below the source
@@ -64,7 +64,7 @@ static void test_difference_form_rises(void)
     CHECK(s.below <= 0.10, "%.1f%% of the burning gas below the source plane", 100 * s.below);
 }
 
-/* Issue 13: a sideways wind moves the burning centroid downwind by >= 30% of the calm H90.
+/* A sideways wind moves the burning centroid downwind by >= 30% of the calm H90.
  * The wind is a 2 m/s wind_velocity (a light breeze, below the flame's ~2.5 m/s rise) with
  * the default drag (digest §2.14's model; measured 4.3 cm = 0.37 H90; a uniform wind_accel of
  * 10 m/s^2 moves it only 0.07 H90, bench_flame_shape); the flame stays above the source plane. */

@@ -1,7 +1,7 @@
 /* test_json_strict.c — the strict JSON reader (server/json_strict.c): exactly one value with
  * optional whitespace, no duplicate members at any depth, no U+0000 in keys or values (escaped
- * or raw), and a reason for every refusal (issue 15 items 9-11); RFC 8259's grammar exactly:
- * numbers, whitespace, string characters and escapes, UTF-8 (issue 27 item 9). */
+ * or raw), and a reason for every refusal; RFC 8259's grammar exactly: numbers, whitespace,
+ * string characters and escapes, UTF-8. */
 #include <string.h>
 
 #include "check.h"
@@ -111,8 +111,8 @@ static void test_strings(void)
     JS_BAD("[\"\\uD800\\u0041\"]", "unpaired");
 }
 
-/* RFC 8259 §8.1: JSON text is UTF-8. A name with the byte 0xff was read from presets.json and
- * sent raw in a text frame (issue 27 item 8). */
+/* RFC 8259 §8.1: JSON text is UTF-8. A name with the byte 0xff read from presets.json would
+ * otherwise be sent raw in a text frame. */
 static void test_utf8(void)
 {
     JS_BAD("[\"a\xff" "b\"]", "invalid UTF-8 in a string at byte 3");

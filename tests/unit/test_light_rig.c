@@ -279,9 +279,9 @@ static void test_segments_curves(void)
     cJSON_Delete(p);
 }
 
-/* Issue 14: with the joined curves and their pulse the rig never switches off: at every frame
- * of several loops the total segment strength is at least 30% of its median (measured: 48%;
- * the texture's total energy, test_energy_kernel, keeps 63%). It used to reach 0. */
+/* With the joined curves and their pulse the rig never switches off: at every frame of several
+ * loops the total segment strength is at least 30% of its median (measured: 48%; the texture's
+ * total energy, test_energy_kernel, keeps 63%), where a single looped sweep would reach 0. */
 static int rig_cmp(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
@@ -309,7 +309,7 @@ static void test_loop_never_dark(void)
     cJSON_Delete(p);
 }
 
-/* Issue 14: the default ramp follows color_energy (the light the wave casts takes its colour);
+/* The default ramp follows color_energy (the light the wave casts takes its colour);
  * an explicit ramp is used as given. */
 static void test_ramp_follows_energy_colour(void)
 {

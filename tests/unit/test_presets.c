@@ -198,8 +198,8 @@ static void tp_load_case(const char *entries, const char *why)
 #define TP_E(effect, name, rest) "{\"effect\":\"" effect "\",\"name\":\"" name "\",\"doc\":\"\"," rest "}"
 #define TP_P "\"params\":{\"fps\":20}"
 
-/* Every entry of presets.json is checked as preset_save checks a new one (issue 27 item 8):
- * each of these loaded before and was then listed, sent or impossible to delete. */
+/* Every entry of presets.json is checked as preset_save checks a new one: unchecked, each of
+ * these would load and then be listed, sent or impossible to delete. */
 static void test_bad_entries(void)
 {
     tp_load_case(TP_E("flame", "ok", TP_P) "," TP_E("energy_wave", "ok", TP_P), NULL);
@@ -254,7 +254,7 @@ static cJSON *tp_longest(const struct param_def *defs)
     return o;
 }
 
-/* A preset's parameters are bounded in size, so a presets reply is too (issue 27 item 6). */
+/* A preset's parameters are bounded in size, so a presets reply is too. */
 static void test_params_size(void)
 {
     struct presets ps;

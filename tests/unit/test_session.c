@@ -424,7 +424,7 @@ static void test_rate_limit(void)
     t_server_free();
 }
 
-/* The send queue (issue 27 item 6): a reply is queued whatever its size and then holds the
+/* The send queue: a reply is queued whatever its size and then holds the
  * connection's requests back (session_backlogged) until it has gone; events a connection does
  * not read close it past max_queued_bytes. */
 static void test_send_queue(void)

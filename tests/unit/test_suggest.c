@@ -1,7 +1,7 @@
 /* test_suggest.c — common/suggest.c, the "did you mean" of the daemon's errors and of fxctl's
  * commands: the distance counts an adjacent transposition as one edit (optimal string
- * alignment), so swapped letters are suggested like a dropped or changed one (issue 27 item 12),
- * within a third of the word's length. */
+ * alignment), so swapped letters are suggested like a dropped or changed one, within a third
+ * of the word's length. */
 #include <string.h>
 
 #include "check.h"

@@ -1,5 +1,5 @@
-/* test_wsguard.c — the masking guard's parts that need no libwebsockets connection (issue 27
- * item 7): lwsreq ends a request's headers at the byte where libwebsockets 4.1's parser ends
+/* test_wsguard.c — the masking guard's parts that need no libwebsockets connection:
+ * lwsreq ends a request's headers at the byte where libwebsockets 4.1's parser ends
  * them (bare \n line ends, names that run on to their colon, escapes in the path, the first
  * Upgrade's value, a body after which it cannot follow the next request), and the guard follows only the sockets it was given, each until it is
  * told the connection is gone, so any other socket read with recv() on its thread (a Redis

@@ -1,8 +1,9 @@
 # demo.gd — the demo scene's script: points the client at FXSTREAM_URL when that is set (else
 # the Client node's url, fxstreamd's default), turns the camera slowly around the scene, and
 # with `--screenshot PATH` on the command line saves a picture once every stream has drawn and
-# quits (how README's screenshot is made). The demo's addons/fxstream is a link to
-# clients/godot/addons/fxstream: copy the folder instead where links are not followed (Windows).
+# quits (tools/screenshot_godot.sh takes README's picture so). The demo's addons/fxstream is a
+# link to clients/godot/addons/fxstream: copy the folder instead where links are not followed
+# (Windows).
 # Start fxstreamd first (make run).
 extends Spatial
 

@@ -3,7 +3,7 @@
 // canvas split into views: flame particles, the energy-wave billboard, a toon scene lit by
 // the wave's light rig, and the compound eye. A lil-gui panel per stream is generated from
 // `describe`; a stats overlay per view; operator status (health, streams) in the side bar.
-// Query options: url=, flame=hdr (the flame's mode; pbvr by default), rl=N (flame repeat
+// Query options: url=, flame=pbvr|hdr (the flame's mode; volume by default), rl=N (PBVR's repeat
 // passes), grid=COLSxROWS, aa=0 (no multisampling), drawfps=N (draw at most N frames a
 // second, e.g. under software WebGL), streams=A,B (show only these streams), views=K,L (only
 // these kinds of view: flame, wave, scene, eye).

@@ -40,7 +40,7 @@ function sample(kind, stream) {
   return { w, h, mean: [sr / n, sg / n, sb / n], lit: lit / n, bright: bright / n, warm: warm / n, max, hash, css: entry.css };
 }
 
-// The flame view's look, for issue 13's checks: of the flame's pixels brighter than 10%, the
+// The flame view's look, for the browser test's flame checks: of the flame's pixels brighter than 10%, the
 // share with every channel >= 0.98 (blown out), and the mean colour of the lower and upper
 // thirds of their rows (hotter = a larger G/R, towards yellow and white), and a hash. Flame
 // pixels are warm (R > B) or near white; the stage's bluish grid and grey smoke are not.
