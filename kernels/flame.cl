@@ -41,6 +41,14 @@ inline int3 fl_cell(float4 p, prm_t P)
     return convert_int3_rtn(p.xyz * (float3)(P[FP_INV_CELLX], P[FP_INV_CELL], P[FP_INV_CELL]));
 }
 
+/* floor(x) as an int: truncation, one less below a negative non-integer (floor() and
+ * convert_int_rtn cost several times more on PoCL) */
+inline int fl_floor(float x)
+{
+    int t = convert_int(x);
+    return t - ((float)t > x ? 1 : 0);
+}
+
 inline uint fl_row_base(int cy, int cz) { return (uint)cy * FL_HP1 + (uint)cz * FL_HP2; }
 
 inline uint fl_key(int3 c, uint mask) { return ((uint)c.x + fl_row_base(c.y, c.z)) & mask; }
@@ -179,6 +187,7 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
 #define FL_P64(m) FL_P16(m), FL_P16(m + 16), FL_P16(m + 32), FL_P16(m + 48)
 __constant uint fl_pack8[256] = {FL_P64(0), FL_P64(64), FL_P64(128), FL_P64(192)};
 
+#define FL_ROWS 9 /* rows a sphere reaches with cells of 2h or more: 3 x 3 at most (2 x 2 but for rounding) */
 #define FL_LIST (FL_NL - 8) /* longest list: fl_density stores 8 slots from slot nb <= FL_LIST */
 
 /* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11 clamped at 0 in both forms: in the
@@ -210,8 +219,13 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_, icx_ = P[FP_INV_CELLX];
     const uint m_ = mask + 1u;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    const int ylo_ = (int)floor((pi.y - h_) * ic_), yhi_ = (int)floor((pi.y + h_) * ic_);
-    const int zlo_ = (int)floor((pi.z - h_) * ic_), zhi_ = (int)floor((pi.z + h_) * ic_);
+    /* the rows the sphere reaches (at most 2 x 2: cells of 2h or more, flame.c), each one range
+     * of sorted particles, or two where its keys wrap past the end of the table */
+    uint ra[2 * FL_ROWS], rb[2 * FL_ROWS];
+    float rcy[2 * FL_ROWS], rcz[2 * FL_ROWS];
+    int nr = 0;
+    const int ylo_ = fl_floor((pi.y - h_) * ic_), yhi_ = fl_floor((pi.y + h_) * ic_);
+    const int zlo_ = fl_floor((pi.z - h_) * ic_), zhi_ = fl_floor((pi.z + h_) * ic_);
     for (int cz_ = zlo_; cz_ <= zhi_; cz_++) {
         float ez_ = fmax(0.0f, fmax(cz_ * c_ - pi.z, pi.z - (cz_ + 1) * c_));
         for (int cy_ = ylo_; cy_ <= yhi_; cy_++) {
@@ -219,36 +233,52 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
             float rr_ = h_ * h_ - ey_ * ey_ - ez_ * ez_;
             if (rr_ < 0.0f) continue;
             float rx_ = sqrt(rr_) * 1.0001f;
-            int xlo_ = (int)floor((pi.x - rx_) * icx_), xhi_ = (int)floor((pi.x + rx_) * icx_);
+            int xlo_ = fl_floor((pi.x - rx_) * icx_), xhi_ = fl_floor((pi.x + rx_) * icx_);
             uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_)) & mask;
             uint k1_ = k0_ + (uint)(xhi_ - xlo_ + 1);
-            const float fcy_ = (float)cy_, fcz_ = (float)cz_;
-            for (int part_ = 0; part_ < 2; part_++) {
-                uint a_, b_;
-                if (part_ == 0) { a_ = cs[k0_]; b_ = cs[min(k1_, m_)]; }
-                else if (k1_ > m_) { a_ = cs[0]; b_ = cs[k1_ - m_]; }
-                else break;
-                /* 8 candidates a step as float8 lanes (sxyz arrays padded by FL_PAD) */
-                for (uint j0 = a_; j0 < b_; j0 += 8u) {
-                    float8 dX = pi.x - vload8(0, sxyz + j0);
-                    float8 Y = vload8(0, sxyz + stride + j0), Z = vload8(0, sxyz + 2 * stride + j0);
-                    float8 dY = pi.y - Y, dZ = pi.z - Z;
-                    float8 r2 = dX * dX + dY * dY + dZ * dZ;
-                    float8 yc = Y * ic_, zc = Z * ic_; /* floor(yc) == cy  <=>  cy <= yc < cy + 1 */
-                    int8 ok = (r2 <= h2_) & (lane < (int)(b_ - j0)) & (yc >= fcy_) & (yc < fcy_ + 1.0f) &
-                              (zc >= fcz_) & (zc < fcz_ + 1.0f);
-                    float8 q = h2_ - r2;
-                    w8 += select((float8)(0.0f), q * q * q, ok);
-                    /* accepted lanes as bits (self excluded), stored packed to the front */
-                    int8 bv = select((int8)(0), (int8)(1, 2, 4, 8, 16, 32, 64, 128), ok);
-                    int4 b4 = bv.lo | bv.hi;
-                    uint bits = (uint)(b4.x | b4.y | b4.z | b4.w);
-                    if ((uint)i - j0 < 8u) bits &= ~(1u << ((uint)i - j0));
-                    uint8 at = ((uint8)(fl_pack8[bits]) >> (uint8)(0, 4, 8, 12, 16, 20, 24, 28)) & 15u;
-                    vstore8(j0 + at, 0, L + min(nb, (uint)FL_LIST));
-                    nb += popcount(bits);
-                }
+            ra[nr] = cs[k0_];
+            rb[nr] = cs[min(k1_, m_)];
+            rcy[nr] = (float)cy_;
+            rcz[nr++] = (float)cz_;
+            if (k1_ > m_) {
+                ra[nr] = cs[0];
+                rb[nr] = cs[k1_ - m_];
+                rcy[nr] = (float)cy_;
+                rcz[nr++] = (float)cz_;
             }
+        }
+    }
+    /* A candidate within h lies in its own row's range, so with ranges that share no particle
+     * the distance test alone accepts each neighbour once; ranges overlap only when the keys
+     * of two rows collide (a small table), and then a candidate must be in the row scanned. */
+    int overlap = 0;
+    for (int u = 0; u < nr; u++)
+        for (int v = u + 1; v < nr; v++)
+            overlap |= ra[u] < rb[u] && ra[v] < rb[v] && ra[u] < rb[v] && ra[v] < rb[u];
+    for (int r_ = 0; r_ < nr; r_++) {
+        const uint a_ = ra[r_], b_ = rb[r_];
+        const float fcy_ = rcy[r_], fcz_ = rcz[r_];
+        /* 8 candidates a step as float8 lanes (sxyz arrays padded by FL_PAD) */
+        for (uint j0 = a_; j0 < b_; j0 += 8u) {
+            float8 dX = pi.x - vload8(0, sxyz + j0);
+            float8 Y = vload8(0, sxyz + stride + j0), Z = vload8(0, sxyz + 2 * stride + j0);
+            float8 dY = pi.y - Y, dZ = pi.z - Z;
+            float8 r2 = dX * dX + dY * dY + dZ * dZ;
+            int8 ok = (r2 <= h2_) & (lane < (int)(b_ - j0));
+            if (overlap) {
+                float8 yc = Y * ic_, zc = Z * ic_; /* floor(yc) == cy  <=>  cy <= yc < cy + 1 */
+                ok &= (yc >= fcy_) & (yc < fcy_ + 1.0f) & (zc >= fcz_) & (zc < fcz_ + 1.0f);
+            }
+            float8 q = h2_ - r2;
+            w8 += select((float8)(0.0f), q * q * q, ok);
+            /* accepted lanes as bits (self excluded), stored packed to the front */
+            int8 bv = select((int8)(0), (int8)(1, 2, 4, 8, 16, 32, 64, 128), ok);
+            int4 b4 = bv.lo | bv.hi;
+            uint bits = (uint)(b4.x | b4.y | b4.z | b4.w);
+            if ((uint)i - j0 < 8u) bits &= ~(1u << ((uint)i - j0));
+            uint8 at = ((uint8)(fl_pack8[bits]) >> (uint8)(0, 4, 8, 12, 16, 20, 24, 28)) & 15u;
+            vstore8(j0 + at, 0, L + min(nb, (uint)FL_LIST));
+            nb += popcount(bits);
         }
     }
     if (nb > FL_LIST) { /* no list: the flame neighbours from the grid (fl_forces counts them otherwise) */
@@ -354,74 +384,68 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
     if (nbl <= FL_LIST) { /* the list of fl_density: the same neighbours in the same order */
         __global const uint *L = nl + (size_t)i * FL_NL;
         const float tign = P[FP_TIGN], feps = P[FP_FEPS];
-        uint k = 0, fnb = 0;
-        if (nbl >= 8u) {
-            /* 8 neighbours a step as float8 lanes: fl_pair's sums, gathered then transposed */
-            const float h = P[FP_H], h2 = P[FP_H2], spiky = P[FP_SPIKY], mass = P[FP_MASS];
-            const float sym = P[FP_SYMMETRIC] != 0.0f ? 1.0f : 0.0f;
-            float8 fx = 0.0f, fy = 0.0f, fz = 0.0f, ux = 0.0f, uy = 0.0f, uz = 0.0f, nx = 0.0f, ny = 0.0f,
-                   nz = 0.0f, sT = 0.0f, sV = 0.0f, sF = 0.0f, sWF = 0.0f;
-            int8 nfl = 0;
-            for (; k + 8u <= nbl; k += 8u) {
-                uint8 J = vload8(0, L + k);
-                float4 p0 = pos[J.s0], p1 = pos[J.s1], p2 = pos[J.s2], p3 = pos[J.s3], p4 = pos[J.s4],
-                       p5 = pos[J.s5], p6 = pos[J.s6], p7 = pos[J.s7];
-                float4 v0 = vel[J.s0], v1 = vel[J.s1], v2 = vel[J.s2], v3 = vel[J.s3], v4 = vel[J.s4],
-                       v5 = vel[J.s5], v6 = vel[J.s6], v7 = vel[J.s7];
-                float2 q0 = rho_p[J.s0], q1 = rho_p[J.s1], q2 = rho_p[J.s2], q3 = rho_p[J.s3], q4 = rho_p[J.s4],
-                       q5 = rho_p[J.s5], q6 = rho_p[J.s6], q7 = rho_p[J.s7];
-                float8 dX = pi.x - (float8)(p0.x, p1.x, p2.x, p3.x, p4.x, p5.x, p6.x, p7.x);
-                float8 dY = pi.y - (float8)(p0.y, p1.y, p2.y, p3.y, p4.y, p5.y, p6.y, p7.y);
-                float8 dZ = pi.z - (float8)(p0.z, p1.z, p2.z, p3.z, p4.z, p5.z, p6.z, p7.z);
-                float8 TJ = (float8)(p0.w, p1.w, p2.w, p3.w, p4.w, p5.w, p6.w, p7.w);
-                float8 VX = (float8)(v0.x, v1.x, v2.x, v3.x, v4.x, v5.x, v6.x, v7.x);
-                float8 VY = (float8)(v0.y, v1.y, v2.y, v3.y, v4.y, v5.y, v6.y, v7.y);
-                float8 VZ = (float8)(v0.z, v1.z, v2.z, v3.z, v4.z, v5.z, v6.z, v7.z);
-                float8 FJ = (float8)(v0.w, v1.w, v2.w, v3.w, v4.w, v5.w, v6.w, v7.w);
-                nfl -= (TJ > tign) & (FJ > feps); /* flame neighbours (true lanes are -1) */
-                float8 RJ = (float8)(q0.x, q1.x, q2.x, q3.x, q4.x, q5.x, q6.x, q7.x);
-                float8 PJ = (float8)(q0.y, q1.y, q2.y, q3.y, q4.y, q5.y, q6.y, q7.y);
-                float8 r2 = dX * dX + dY * dY + dZ * dZ, r = sqrt(r2), vol = mass / RJ;
-                float8 hr = h - r, lap = spiky * hr;                                 /* eq 3.9 */
-                float8 grad = select((float8)(0.0f), spiky * hr * hr / r, r > 0.0f);
-                float8 pp = sym * (0.5f * (rpi.y + PJ)) + (1.0f - sym) * (PJ - rpi.y);
-                float8 g = vol * pp * grad;                                          /* eq 3.12 */
-                fx += g * dX;
-                fy += g * dY;
-                fz += g * dZ;
-                float8 wv = vol * lap;                                               /* eq 3.13 */
-                ux += wv * (VX - vi.x);
-                uy += wv * (VY - vi.y);
-                uz += wv * (VZ - vi.z);
-                sV += wv;
-                sT += wv * (TJ - pi.w);                                              /* eq 3.20 */
-                float8 wf = wv * 0.5f * (pi.w + TJ);                                 /* eq 3.21 */
-                sF += wf * (FJ - vi.w);
-                sWF += wf;
-                float8 q = h2 - r2, c = q * q / RJ;                                   /* colour normal / mass */
-                nx -= c * dX;
-                ny -= c * dY;
-                nz -= c * dZ;
-            }
+        /* 8 neighbours a step as float8 lanes: fl_pair's sums, gathered then transposed; the
+         * last group's lanes past the list read particle i itself and weigh nothing */
+        const float h = P[FP_H], h2 = P[FP_H2], spiky = P[FP_SPIKY], mass = P[FP_MASS];
+        const float sym = P[FP_SYMMETRIC] != 0.0f ? 1.0f : 0.0f;
+        const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+        float8 fx = 0.0f, fy = 0.0f, fz = 0.0f, ux = 0.0f, uy = 0.0f, uz = 0.0f, nx = 0.0f, ny = 0.0f, nz = 0.0f,
+               sT = 0.0f, sV = 0.0f, sF = 0.0f, sWF = 0.0f;
+        int8 nfl = 0;
+        for (uint k = 0; k < nbl; k += 8u) {
+            int8 in = lane < (int)(nbl - k);
+            uint8 J = select((uint8)((uint)i), vload8(0, L + k), as_uint8(in));
+            float4 p0 = pos[J.s0], p1 = pos[J.s1], p2 = pos[J.s2], p3 = pos[J.s3], p4 = pos[J.s4], p5 = pos[J.s5],
+                   p6 = pos[J.s6], p7 = pos[J.s7];
+            float4 v0 = vel[J.s0], v1 = vel[J.s1], v2 = vel[J.s2], v3 = vel[J.s3], v4 = vel[J.s4], v5 = vel[J.s5],
+                   v6 = vel[J.s6], v7 = vel[J.s7];
+            float2 q0 = rho_p[J.s0], q1 = rho_p[J.s1], q2 = rho_p[J.s2], q3 = rho_p[J.s3], q4 = rho_p[J.s4],
+                   q5 = rho_p[J.s5], q6 = rho_p[J.s6], q7 = rho_p[J.s7];
+            float8 dX = pi.x - (float8)(p0.x, p1.x, p2.x, p3.x, p4.x, p5.x, p6.x, p7.x);
+            float8 dY = pi.y - (float8)(p0.y, p1.y, p2.y, p3.y, p4.y, p5.y, p6.y, p7.y);
+            float8 dZ = pi.z - (float8)(p0.z, p1.z, p2.z, p3.z, p4.z, p5.z, p6.z, p7.z);
+            float8 TJ = (float8)(p0.w, p1.w, p2.w, p3.w, p4.w, p5.w, p6.w, p7.w);
+            float8 VX = (float8)(v0.x, v1.x, v2.x, v3.x, v4.x, v5.x, v6.x, v7.x);
+            float8 VY = (float8)(v0.y, v1.y, v2.y, v3.y, v4.y, v5.y, v6.y, v7.y);
+            float8 VZ = (float8)(v0.z, v1.z, v2.z, v3.z, v4.z, v5.z, v6.z, v7.z);
+            float8 FJ = (float8)(v0.w, v1.w, v2.w, v3.w, v4.w, v5.w, v6.w, v7.w);
+            nfl -= in & (TJ > tign) & (FJ > feps); /* flame neighbours (true lanes are -1) */
+            float8 RJ = (float8)(q0.x, q1.x, q2.x, q3.x, q4.x, q5.x, q6.x, q7.x);
+            float8 PJ = (float8)(q0.y, q1.y, q2.y, q3.y, q4.y, q5.y, q6.y, q7.y);
+            float8 r2 = dX * dX + dY * dY + dZ * dZ, r = sqrt(r2);
+            float8 vol = select((float8)(0.0f), mass / RJ, in);
+            float8 hr = h - r, lap = spiky * hr;                                 /* eq 3.9 */
+            float8 grad = select((float8)(0.0f), spiky * hr * hr / r, r > 0.0f);
+            float8 pp = sym * (0.5f * (rpi.y + PJ)) + (1.0f - sym) * (PJ - rpi.y);
+            float8 g = vol * pp * grad;                                          /* eq 3.12 */
+            fx += g * dX;
+            fy += g * dY;
+            fz += g * dZ;
+            float8 wv = select((float8)(0.0f), vol * lap, in);                   /* eq 3.13 */
+            ux += wv * (VX - vi.x);
+            uy += wv * (VY - vi.y);
+            uz += wv * (VZ - vi.z);
+            sV += wv;
+            sT += wv * (TJ - pi.w);                                              /* eq 3.20 */
+            float8 wf = wv * 0.5f * (pi.w + TJ);                                 /* eq 3.21 */
+            sF += wf * (FJ - vi.w);
+            sWF += wf;
+            float8 q = h2 - r2, c = q * q / RJ;                                   /* colour normal / mass */
+            nx -= c * dX;                                                       /* dX = 0 on the lanes of i */
+            ny -= c * dY;
+            nz -= c * dZ;
+        }
 #define FL_HSUM8(v) ({ float4 t_ = (v).lo + (v).hi; (t_.x + t_.y) + (t_.z + t_.w); })
-            a.f = (float3)(FL_HSUM8(fx), FL_HSUM8(fy), FL_HSUM8(fz));
-            a.visc = (float3)(FL_HSUM8(ux), FL_HSUM8(uy), FL_HSUM8(uz));
-            a.nrm = (float3)(FL_HSUM8(nx), FL_HSUM8(ny), FL_HSUM8(nz));
-            a.wV = a.wT = FL_HSUM8(sV);
-            a.dT = FL_HSUM8(sT);
-            a.dF = FL_HSUM8(sF);
-            a.wF = FL_HSUM8(sWF);
+        a.f = (float3)(FL_HSUM8(fx), FL_HSUM8(fy), FL_HSUM8(fz));
+        a.visc = (float3)(FL_HSUM8(ux), FL_HSUM8(uy), FL_HSUM8(uz));
+        a.nrm = (float3)(FL_HSUM8(nx), FL_HSUM8(ny), FL_HSUM8(nz));
+        a.wV = a.wT = FL_HSUM8(sV);
+        a.dT = FL_HSUM8(sT);
+        a.dF = FL_HSUM8(sF);
+        a.wF = FL_HSUM8(sWF);
 #undef FL_HSUM8
-            int4 n4 = nfl.lo + nfl.hi;
-            fnb = (uint)((n4.x + n4.y) + (n4.z + n4.w));
-        }
-        for (; k < nbl; k++) {
-            uint j = L[k];
-            float4 pj = pos[j], vj = vel[j];
-            float3 dx = pi.xyz - pj.xyz;
-            fl_pair(&a, pi, vi, rpi, pj, vj, rho_p[j], dx, dot(dx, dx), P);
-            fnb += (pj.w > tign && vj.w > feps) ? 1u : 0u;
-        }
+        int4 n4 = nfl.lo + nfl.hi;
+        uint fnb = (uint)((n4.x + n4.y) + (n4.z + n4.w));
         counts[i] = nbl | (min(fnb, 65535u) << 16); /* the flame-neighbour count of fl_density's list */
     } else {
         FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {

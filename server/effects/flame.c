@@ -45,6 +45,7 @@
  * of bench_flame faster too; cells of 2.5h or 3h gain nothing more (docs/performance-log.md). */
 #define FL_CELLS_PER_H 0.5
 #endif
+_Static_assert(FL_CELLS_PER_H <= 0.5, "fl_density (flame.cl) keeps the ranges of at most 3 x 3 rows: cells of 2h or more");
 #ifndef FL_XCELLS
 #define FL_XCELLS 4
 #endif
