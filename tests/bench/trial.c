@@ -87,12 +87,16 @@ void trial_stop(pid_t pid)
     waitpid(pid, &status, 0);
 }
 
-static double trial_proc_cpu(pid_t pid)
+/* CPU seconds of process pid, or with thread set of its main thread alone (fxstreamd's network
+ * thread: libwebsockets' service loop, which sends the frames; the engine and PoCL's workers
+ * run in other threads). */
+static double trial_proc_cpu(pid_t pid, int thread)
 {
     char path[64], buf[1024], *p;
     unsigned long ut = 0, st = 0;
     FILE *f;
-    snprintf(path, sizeof path, "/proc/%d/stat", (int)pid);
+    if (thread) snprintf(path, sizeof path, "/proc/%d/task/%d/stat", (int)pid, (int)pid);
+    else snprintf(path, sizeof path, "/proc/%d/stat", (int)pid);
     if (!(f = fopen(path, "r"))) return 0;
     if (!fgets(buf, sizeof buf, f)) buf[0] = 0;
     fclose(f);
@@ -102,10 +106,10 @@ static double trial_proc_cpu(pid_t pid)
     return (double)(ut + st) / (double)sysconf(_SC_CLK_TCK);
 }
 
-static double trial_cpu(const struct trial_target *tg)
+static double trial_cpu(const struct trial_target *tg, int thread)
 {
     double s = 0;
-    for (int i = 0; i < tg->npids; i++) s += trial_proc_cpu(tg->pids[i]);
+    for (int i = 0; i < tg->npids; i++) s += trial_proc_cpu(tg->pids[i], thread);
     return s;
 }
 
@@ -229,16 +233,18 @@ int trial_await_frames(const struct trial_target *tg, int n, double timeout_s)
 static void trial_measure(const struct trial_target *tg, struct fxp_pool *pool, struct trial_state *t,
                           struct trial_result *res)
 {
-    double w0, w1, cpu0, cpu1;
+    double w0, w1, cpu0, cpu1, net0, net1;
     trial_service_until(pool, trial_now() + TRIAL_WARMUP_S);
     t->max_seq_start = t->max_seq;
     fxp_hist_reset(&t->lat);
-    cpu0 = trial_cpu(tg);
+    cpu0 = trial_cpu(tg, 0);
+    net0 = trial_cpu(tg, 1);
     w0 = trial_now();
     t->measuring = 1;
     trial_service_until(pool, w0 + TRIAL_WINDOW_S);
     w1 = trial_now();
-    cpu1 = trial_cpu(tg);
+    cpu1 = trial_cpu(tg, 0);
+    net1 = trial_cpu(tg, 1);
     t->max_seq_end = t->max_seq;
     t->measuring = 2;
     trial_service_until(pool, w1 + TRIAL_GRACE_S);
@@ -250,6 +256,7 @@ static void trial_measure(const struct trial_target *tg, struct fxp_pool *pool, 
     res->p99 = fxp_hist_quantile(&t->lat, 0.99) / 1000;
     res->mbps = (double)t->bytes / (w1 - w0) / 1e6;
     res->cpu_s = cpu1 - cpu0;
+    res->net_cpu_s = net1 - net0;
     res->frames = t->frames;
     res->fps_produced = (double)produced / (w1 - w0);
     res->frame_bytes = t->payload_bytes_last;

@@ -8,8 +8,9 @@
  * subscribed, none closed early, >= 95% of the frames the stream produced inside the window
  * delivered, p99 latency <= 100 ms. Latency is the client's receive time minus the frame
  * header's server_time_us (the computing daemon's frame time; one machine, one clock). The
- * daemons' CPU time comes from /proc/PID/stat. One trial at a time (the pool's callbacks reach
- * it through a file-scope pointer); each prints one progress line on stderr. */
+ * daemons' CPU time comes from /proc/PID/stat, their network threads' from
+ * /proc/PID/task/PID/stat. One trial at a time (the pool's callbacks reach it through a
+ * file-scope pointer); each prints one progress line on stderr. */
 #ifndef BENCH_TRIAL_H
 #define BENCH_TRIAL_H
 
@@ -34,7 +35,8 @@ struct trial_target {
 struct trial_result {
     const char *stream;
     int n, ok, all_subscribed;
-    double ratio, p50, p99, mbps, cpu_s, fps_produced; /* latencies in ms */
+    double ratio, p50, p99, mbps, fps_produced; /* latencies in ms */
+    double cpu_s, net_cpu_s; /* the daemons' CPU seconds in the window: all, and their network (main) threads' */
     uint64_t frames;
     uint64_t frame_bytes, count;
 };
