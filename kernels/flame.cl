@@ -363,6 +363,81 @@ inline float2 fl_burn(float T, float F, float dTdiff, float dFdiff, int flame, p
     return (float2)(Tn, burn > Fd ? 0.0f : fmax(0.0f, F + dt * *dF));
 }
 
+/* fl_forces' sums over the list of fl_density (the same neighbours in the same order), 8
+ * neighbours a step as float8 lanes, gathered then transposed; the last group's lanes past the
+ * list read particle i itself and weigh nothing. The colour normal only where `normal` (the
+ * resampling steps, which alone use it); the callers pass a constant, so each gets its own
+ * loop. Returns the flame-neighbour count. */
+__attribute__((always_inline)) inline uint fl_list_sums(struct fl_acc *a, __global const uint *L, uint nbl, int i,
+                                                        float4 pi, float4 vi, float2 rpi, __global const float4 *pos,
+                                                        __global const float4 *vel, __global const float2 *rho_p,
+                                                        prm_t P, const int normal)
+{
+    const float tign = P[FP_TIGN], feps = P[FP_FEPS];
+    const float h = P[FP_H], h2 = P[FP_H2], spiky = P[FP_SPIKY], mass = P[FP_MASS];
+    const float sym = P[FP_SYMMETRIC] != 0.0f ? 1.0f : 0.0f;
+    const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    float8 fx = 0.0f, fy = 0.0f, fz = 0.0f, ux = 0.0f, uy = 0.0f, uz = 0.0f, nx = 0.0f, ny = 0.0f, nz = 0.0f,
+           sT = 0.0f, sV = 0.0f, sF = 0.0f, sWF = 0.0f;
+    int8 nfl = 0;
+    for (uint k = 0; k < nbl; k += 8u) {
+        int8 in = lane < (int)(nbl - k);
+        uint8 J = select((uint8)((uint)i), vload8(0, L + k), as_uint8(in));
+        float4 p0 = pos[J.s0], p1 = pos[J.s1], p2 = pos[J.s2], p3 = pos[J.s3], p4 = pos[J.s4], p5 = pos[J.s5],
+               p6 = pos[J.s6], p7 = pos[J.s7];
+        float4 v0 = vel[J.s0], v1 = vel[J.s1], v2 = vel[J.s2], v3 = vel[J.s3], v4 = vel[J.s4], v5 = vel[J.s5],
+               v6 = vel[J.s6], v7 = vel[J.s7];
+        float2 q0 = rho_p[J.s0], q1 = rho_p[J.s1], q2 = rho_p[J.s2], q3 = rho_p[J.s3], q4 = rho_p[J.s4],
+               q5 = rho_p[J.s5], q6 = rho_p[J.s6], q7 = rho_p[J.s7];
+        float8 dX = pi.x - (float8)(p0.x, p1.x, p2.x, p3.x, p4.x, p5.x, p6.x, p7.x);
+        float8 dY = pi.y - (float8)(p0.y, p1.y, p2.y, p3.y, p4.y, p5.y, p6.y, p7.y);
+        float8 dZ = pi.z - (float8)(p0.z, p1.z, p2.z, p3.z, p4.z, p5.z, p6.z, p7.z);
+        float8 TJ = (float8)(p0.w, p1.w, p2.w, p3.w, p4.w, p5.w, p6.w, p7.w);
+        float8 VX = (float8)(v0.x, v1.x, v2.x, v3.x, v4.x, v5.x, v6.x, v7.x);
+        float8 VY = (float8)(v0.y, v1.y, v2.y, v3.y, v4.y, v5.y, v6.y, v7.y);
+        float8 VZ = (float8)(v0.z, v1.z, v2.z, v3.z, v4.z, v5.z, v6.z, v7.z);
+        float8 FJ = (float8)(v0.w, v1.w, v2.w, v3.w, v4.w, v5.w, v6.w, v7.w);
+        nfl -= in & (TJ > tign) & (FJ > feps); /* flame neighbours (true lanes are -1) */
+        float8 RJ = (float8)(q0.x, q1.x, q2.x, q3.x, q4.x, q5.x, q6.x, q7.x);
+        float8 PJ = (float8)(q0.y, q1.y, q2.y, q3.y, q4.y, q5.y, q6.y, q7.y);
+        float8 r2 = dX * dX + dY * dY + dZ * dZ, r = sqrt(r2);
+        float8 vol = select((float8)(0.0f), mass / RJ, in);
+        float8 hr = h - r, lap = spiky * hr;                                 /* eq 3.9 */
+        float8 grad = select((float8)(0.0f), spiky * hr * hr / r, r > 0.0f);
+        float8 pp = sym * (0.5f * (rpi.y + PJ)) + (1.0f - sym) * (PJ - rpi.y);
+        float8 g = vol * pp * grad;                                          /* eq 3.12 */
+        fx += g * dX;
+        fy += g * dY;
+        fz += g * dZ;
+        float8 wv = select((float8)(0.0f), vol * lap, in);                   /* eq 3.13 */
+        ux += wv * (VX - vi.x);
+        uy += wv * (VY - vi.y);
+        uz += wv * (VZ - vi.z);
+        sV += wv;
+        sT += wv * (TJ - pi.w);                                              /* eq 3.20 */
+        float8 wf = wv * 0.5f * (pi.w + TJ);                                 /* eq 3.21 */
+        sF += wf * (FJ - vi.w);
+        sWF += wf;
+        if (normal) {
+            float8 q = h2 - r2, c = q * q / RJ;                               /* colour normal / mass */
+            nx -= c * dX;                                                   /* dX = 0 on the lanes of i */
+            ny -= c * dY;
+            nz -= c * dZ;
+        }
+    }
+#define FL_HSUM8(v) ({ float4 t_ = (v).lo + (v).hi; (t_.x + t_.y) + (t_.z + t_.w); })
+    a->f = (float3)(FL_HSUM8(fx), FL_HSUM8(fy), FL_HSUM8(fz));
+    a->visc = (float3)(FL_HSUM8(ux), FL_HSUM8(uy), FL_HSUM8(uz));
+    a->nrm = (float3)(FL_HSUM8(nx), FL_HSUM8(ny), FL_HSUM8(nz));
+    a->wV = a->wT = FL_HSUM8(sV);
+    a->dT = FL_HSUM8(sT);
+    a->dF = FL_HSUM8(sF);
+    a->wF = FL_HSUM8(sWF);
+#undef FL_HSUM8
+    int4 n4 = nfl.lo + nfl.hi;
+    return (uint)((n4.x + n4.y) + (n4.z + n4.w));
+}
+
 /* Pass 2 + integration: reads the sorted state (pos, vel, flags, id), writes the next state
  * in the same order (pos2..), the derivatives, and when `resample` is set the keep/insert
  * decisions and the outward normal for fl_compact. */
@@ -383,69 +458,8 @@ __kernel void fl_forces(__global const float4 *pos, __global const float4 *vel, 
     uint nbl = counts[i] & 0xffffu;
     if (nbl <= FL_LIST) { /* the list of fl_density: the same neighbours in the same order */
         __global const uint *L = nl + (size_t)i * FL_NL;
-        const float tign = P[FP_TIGN], feps = P[FP_FEPS];
-        /* 8 neighbours a step as float8 lanes: fl_pair's sums, gathered then transposed; the
-         * last group's lanes past the list read particle i itself and weigh nothing */
-        const float h = P[FP_H], h2 = P[FP_H2], spiky = P[FP_SPIKY], mass = P[FP_MASS];
-        const float sym = P[FP_SYMMETRIC] != 0.0f ? 1.0f : 0.0f;
-        const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-        float8 fx = 0.0f, fy = 0.0f, fz = 0.0f, ux = 0.0f, uy = 0.0f, uz = 0.0f, nx = 0.0f, ny = 0.0f, nz = 0.0f,
-               sT = 0.0f, sV = 0.0f, sF = 0.0f, sWF = 0.0f;
-        int8 nfl = 0;
-        for (uint k = 0; k < nbl; k += 8u) {
-            int8 in = lane < (int)(nbl - k);
-            uint8 J = select((uint8)((uint)i), vload8(0, L + k), as_uint8(in));
-            float4 p0 = pos[J.s0], p1 = pos[J.s1], p2 = pos[J.s2], p3 = pos[J.s3], p4 = pos[J.s4], p5 = pos[J.s5],
-                   p6 = pos[J.s6], p7 = pos[J.s7];
-            float4 v0 = vel[J.s0], v1 = vel[J.s1], v2 = vel[J.s2], v3 = vel[J.s3], v4 = vel[J.s4], v5 = vel[J.s5],
-                   v6 = vel[J.s6], v7 = vel[J.s7];
-            float2 q0 = rho_p[J.s0], q1 = rho_p[J.s1], q2 = rho_p[J.s2], q3 = rho_p[J.s3], q4 = rho_p[J.s4],
-                   q5 = rho_p[J.s5], q6 = rho_p[J.s6], q7 = rho_p[J.s7];
-            float8 dX = pi.x - (float8)(p0.x, p1.x, p2.x, p3.x, p4.x, p5.x, p6.x, p7.x);
-            float8 dY = pi.y - (float8)(p0.y, p1.y, p2.y, p3.y, p4.y, p5.y, p6.y, p7.y);
-            float8 dZ = pi.z - (float8)(p0.z, p1.z, p2.z, p3.z, p4.z, p5.z, p6.z, p7.z);
-            float8 TJ = (float8)(p0.w, p1.w, p2.w, p3.w, p4.w, p5.w, p6.w, p7.w);
-            float8 VX = (float8)(v0.x, v1.x, v2.x, v3.x, v4.x, v5.x, v6.x, v7.x);
-            float8 VY = (float8)(v0.y, v1.y, v2.y, v3.y, v4.y, v5.y, v6.y, v7.y);
-            float8 VZ = (float8)(v0.z, v1.z, v2.z, v3.z, v4.z, v5.z, v6.z, v7.z);
-            float8 FJ = (float8)(v0.w, v1.w, v2.w, v3.w, v4.w, v5.w, v6.w, v7.w);
-            nfl -= in & (TJ > tign) & (FJ > feps); /* flame neighbours (true lanes are -1) */
-            float8 RJ = (float8)(q0.x, q1.x, q2.x, q3.x, q4.x, q5.x, q6.x, q7.x);
-            float8 PJ = (float8)(q0.y, q1.y, q2.y, q3.y, q4.y, q5.y, q6.y, q7.y);
-            float8 r2 = dX * dX + dY * dY + dZ * dZ, r = sqrt(r2);
-            float8 vol = select((float8)(0.0f), mass / RJ, in);
-            float8 hr = h - r, lap = spiky * hr;                                 /* eq 3.9 */
-            float8 grad = select((float8)(0.0f), spiky * hr * hr / r, r > 0.0f);
-            float8 pp = sym * (0.5f * (rpi.y + PJ)) + (1.0f - sym) * (PJ - rpi.y);
-            float8 g = vol * pp * grad;                                          /* eq 3.12 */
-            fx += g * dX;
-            fy += g * dY;
-            fz += g * dZ;
-            float8 wv = select((float8)(0.0f), vol * lap, in);                   /* eq 3.13 */
-            ux += wv * (VX - vi.x);
-            uy += wv * (VY - vi.y);
-            uz += wv * (VZ - vi.z);
-            sV += wv;
-            sT += wv * (TJ - pi.w);                                              /* eq 3.20 */
-            float8 wf = wv * 0.5f * (pi.w + TJ);                                 /* eq 3.21 */
-            sF += wf * (FJ - vi.w);
-            sWF += wf;
-            float8 q = h2 - r2, c = q * q / RJ;                                   /* colour normal / mass */
-            nx -= c * dX;                                                       /* dX = 0 on the lanes of i */
-            ny -= c * dY;
-            nz -= c * dZ;
-        }
-#define FL_HSUM8(v) ({ float4 t_ = (v).lo + (v).hi; (t_.x + t_.y) + (t_.z + t_.w); })
-        a.f = (float3)(FL_HSUM8(fx), FL_HSUM8(fy), FL_HSUM8(fz));
-        a.visc = (float3)(FL_HSUM8(ux), FL_HSUM8(uy), FL_HSUM8(uz));
-        a.nrm = (float3)(FL_HSUM8(nx), FL_HSUM8(ny), FL_HSUM8(nz));
-        a.wV = a.wT = FL_HSUM8(sV);
-        a.dT = FL_HSUM8(sT);
-        a.dF = FL_HSUM8(sF);
-        a.wF = FL_HSUM8(sWF);
-#undef FL_HSUM8
-        int4 n4 = nfl.lo + nfl.hi;
-        uint fnb = (uint)((n4.x + n4.y) + (n4.z + n4.w));
+        uint fnb = resample ? fl_list_sums(&a, L, nbl, i, pi, vi, rpi, pos, vel, rho_p, P, 1)
+                            : fl_list_sums(&a, L, nbl, i, pi, vi, rpi, pos, vel, rho_p, P, 0);
         counts[i] = nbl | (min(fnb, 65535u) << 16); /* the flame-neighbour count of fl_density's list */
     } else {
         FL_FOR_NEIGHBOURS(pos, cs, mask, P, pi, {
