@@ -22,12 +22,13 @@
  * have consecutive keys and, after the sort, consecutive particles: a particle visits at most 4
  * rows (9 with cells of h, 25 with h/2), each one contiguous
  * range [cs[k0], cs[k0+len]), trimmed to the part of the row the sphere of radius h reaches.
- * A candidate is accepted when r <= h and its own (cy,cz) is the row's, which filters hash
- * collisions and makes overlapping rows (tiny tables) count each neighbour once. The candidate
- * loop (about 6 candidates per neighbour, an unpredictable accept branch) costs far more than the
- * pair arithmetic, so it runs once a step: fl_density records the accepted j != i in gather
- * order and fl_forces reads them back (bench_flame: the forces pass 3.5x faster), 8 neighbours
- * at a time as float8 lanes (another 1.6x), the rest one by one through fl_pair.
+ * A candidate is accepted when r <= h and (the FL_FOR_NEIGHBOURS walk, and fl_density when two
+ * of its rows' ranges overlap) its own (cy,cz) is the row's, which filters hash collisions and
+ * makes overlapping rows (tiny tables) count each neighbour once. The candidate loop (about 6
+ * candidates per neighbour) costs far more than the pair arithmetic, so it runs once a step:
+ * fl_density records the accepted j != i in gather order and fl_forces reads them back
+ * (bench_flame: the forces pass 3.5x faster), 8 neighbours at a time as float8 lanes (another
+ * 1.6x), the last group masked.
  * Parameters live in one __constant float array; its indices FP_*, the particle flags FL_* and
  * the error bits come from flame_layout.h, which the build prepends and flame.c includes. */
 
@@ -197,8 +198,9 @@ __constant uint fl_pack8[256] = {FL_P64(0), FL_P64(64), FL_P64(128), FL_P64(192)
  * (slots FL_LIST.. take the overflow writes). fl_forces walks the list instead of the grid; a
  * particle with more neighbours keeps no valid list and both passes gather it from the grid
  * again, so no neighbour is ever dropped. The candidate scan runs 8 candidates at a time as
- * float8 lanes (PoCL emits AVX for it), the row test as float compares (floor(y/c) == cy  <=>
- * cy <= y/c < cy + 1; convert_int8_rtn is slow on PoCL); x, y, z come from the sorted arrays
+ * float8 lanes (PoCL emits AVX for it); the row test, needed only when two rows' ranges
+ * overlap (below), as float compares (floor(y/c) == cy  <=>  cy <= y/c < cy + 1;
+ * convert_int8_rtn is slow on PoCL); x, y, z come from the sorted arrays
  * of fl_reorder (sxyz: three plain vload8 instead of two vload16 and shuffles, 10%). The
  * accepted lanes are appended without a branch: fl_pack8 of their bit mask gives their
  * positions packed to the front, one vstore8 writes all 8 slots from slot nb and nb advances
