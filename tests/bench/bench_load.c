@@ -8,8 +8,8 @@
  * and the daemon's send capacity (3072 subscribers of the texture that only drain their
  * sockets) against raw loopback TCP measured the same way in the same run: as many
  * connections, messages of the texture frame's size, one writer and one reader thread,
- * the two measurements interleaved, so that the daemon (which adds framing and a
- * simulation to the same work) has no way to exceed its yardstick but noise.
+ * three rounds of the two interleaved and the best raw round as the yardstick, so that the
+ * daemon (which adds framing and a simulation to the same work) exceeds it only by noise.
  * One line per figure on stdout. Total time bounded (~4 min).
  *
  * The client shares the machine with the daemon, so every figure is a property of
@@ -38,7 +38,7 @@
 #define BL_BUDGET_S 150.0      /* whole benchmark */
 #define BL_STREAM_BUDGET_S 70.0
 #define BL_DRAIN_N 3072 /* send capacity: 3072 x 30 fps x ~82 kB offers ~7.6 GB/s, above raw loopback (4-6 GB/s) */
-#define BL_ROUNDS 2     /* raw loopback and send capacity, interleaved */
+#define BL_ROUNDS 3     /* raw loopback and send capacity, interleaved */
 
 static double bl_t0;
 
@@ -234,7 +234,9 @@ static void bl_report_searches(const struct trial_search *fl, const struct trial
 
 /* Send capacity against its yardstick, BL_ROUNDS rounds, each raw loopback then the daemon,
  * with the same connections, reader and message size (bench_tex's frame: its payload, the
- * 64-byte frame header and the WebSocket header). */
+ * 64-byte frame header and the WebSocket header). The shared machine's speed moves by 2-3x
+ * between rounds, so the yardstick is the best raw round: the mean capacity exceeds it only
+ * where the daemon outsent every raw round at least once. */
 struct bl_capacity {
     double raw[BL_ROUNDS], cap[BL_ROUNDS], raw_best;
     int drained[BL_ROUNDS];
@@ -255,6 +257,7 @@ static void bl_capacity(struct trial_target *tg, int port, const struct trial_se
         c->raw[r] = bl_raw_loopback(BL_DRAIN_N, c->msg, TRIAL_WINDOW_S);
         c->cap[r] = bl_drain(port, "bench_tex", BL_DRAIN_N, TRIAL_WINDOW_S, &c->drained[r]);
         c->raw_best = fmax(c->raw_best, c->raw[r]);
+        sleep(1); /* the daemon closes the drained connections before the next raw round */
     }
 }
 
@@ -269,10 +272,12 @@ static void bl_report_capacity(const struct bl_capacity *c)
                "%.0f MB/s; server send capacity, %d subscribers of bench_tex that only drain their sockets: %.0f MB/s = "
                "%.1f%% of it\n", r + 1, BL_DRAIN_N, c->msg, c->raw[r], c->drained[r], c->cap[r],
                c->raw[r] > 0 ? 100 * c->cap[r] / c->raw[r] : 0);
-    double cap = 0, raw = 0;
-    for (int r = 0; r < BL_ROUNDS; r++) cap += c->cap[r], raw += c->raw[r];
-    printf("bench_load: server send capacity %.0f MB/s = %.1f%% of raw loopback measured the same way (means of %d "
-           "interleaved rounds; target >= 50%%)\n", cap / BL_ROUNDS, raw > 0 ? 100 * cap / raw : 0, BL_ROUNDS);
+    double cap = 0;
+    for (int r = 0; r < BL_ROUNDS; r++) cap += c->cap[r];
+    cap /= BL_ROUNDS;
+    printf("bench_load: server send capacity %.0f MB/s (mean of %d rounds) = %.1f%% of raw loopback measured the same "
+           "way (the best of the %d interleaved rounds, %.0f MB/s; target >= 50%%)\n", cap, BL_ROUNDS,
+           c->raw_best > 0 ? 100 * cap / c->raw_best : 0, BL_ROUNDS, c->raw_best);
 }
 
 /* Both searches, after a 1-subscriber trial that lets the flame develop to its ~20k particles. */
