@@ -221,8 +221,8 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_, icx_ = P[FP_INV_CELLX];
     const uint m_ = mask + 1u;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    /* the rows the sphere reaches (at most 2 x 2: cells of 2h or more, flame.c), each one range
-     * of sorted particles, or two where its keys wrap past the end of the table */
+    /* the rows the sphere reaches (2 x 2 with cells of 2h or more, FL_ROWS at most), each one
+     * range of sorted particles, or two where its keys wrap past the end of the table */
     uint ra[2 * FL_ROWS], rb[2 * FL_ROWS];
     float rcy[2 * FL_ROWS], rcz[2 * FL_ROWS];
     int nr = 0;
