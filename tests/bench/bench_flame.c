@@ -1,7 +1,7 @@
 /* bench_flame.c — throughput of effect flame through PoCL (or any OpenCL device).
  *
  * 1. Particle-steps per second on three lattice blocks, named by their particle count once
- *    warmed up (about 23k, 59k and 195k; issue 28's target: >= 10 M at ~50k). Scene: a cubic
+ *    warmed up (about 23k, 59k and 195k; the target: >= 10 M at ~50k). Scene: a cubic
  *    lattice block of gas at spacing d = h/2 (the §8 A3 lattice, 32 neighbours inside) loaded
  *    with flame_load (22^3, 37^3, 58^3), every particle a flame particle (T 1500 K, F 1) with
  *    k_rs = 0 and k_buo = 0, so resampling keeps them and the block stays put; the full step
@@ -28,7 +28,7 @@
 #include "params.h"
 
 #define BENCH_MAX_STATS 32
-#define BENCH_TARGET_K 37 /* the block of ~59k particles: issue 28's ">= 10 M particle-steps/s at ~50k" */
+#define BENCH_TARGET_K 37 /* the block of ~59k particles, which carries the target ">= 10 M particle-steps/s at ~50k" */
 
 /* CPU seconds of this process (all its threads): on a shared machine, process CPU time
  * divided by the cores gives the wall time the work would take with the machine to itself

@@ -1,6 +1,6 @@
 #!/bin/sh
 # run.sh — runs every benchmark in build/bench/, each printing one line per figure, then
-# repeats the lines that name a target (issue 28's table among them) as one summary.
+# repeats the lines that name a target as one summary (the performance targets' table).
 set -u
 cd "$(dirname "$0")/../.."
 status=0
