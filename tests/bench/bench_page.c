@@ -6,9 +6,10 @@
  * frames arrive within 50 ms of the stream's best latency, raised by 30% within 100 ms, halved
  * beyond 250 ms, up to the stream's fps. After a 12 s ramp, a window of SECONDS (the argument;
  * 20 by default, 300 for the target's five minutes) in which /metrics is read every second:
- * per stream the frames delivered per second (fxs_stream_delivered_fps of its most frequent kind:
- * energy's light rig is sent only when it changes) and the flame's real-time factor (fxs_stream_realtime_factor,
- * simulated seconds per wall second over the last second), printed as min / median / mean of
+ * per stream the frames delivered per second (fxs_stream_delivered_fps of its most frequent
+ * kind: energy's texture, the flame's particles) and the flame's real-time factor
+ * (fxs_stream_realtime_factor, simulated seconds per wall second over the last second),
+ * printed as min / median / mean of
  * the samples with the targets beside them: energy and flame each >= 29 fps delivered and the
  * flame's real-time factor >= 0.98. The eye at its defaults is static: it sends its look-up
  * table once and again only when its parameters change, so it has a frame count, no rate
