@@ -188,7 +188,6 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
 #define FL_P64(m) FL_P16(m), FL_P16(m + 16), FL_P16(m + 32), FL_P16(m + 48)
 __constant uint fl_pack8[256] = {FL_P64(0), FL_P64(64), FL_P64(128), FL_P64(192)};
 
-#define FL_ROWS 9 /* rows a sphere reaches with cells of 2h or more: 3 x 3 at most (2 x 2 but for rounding) */
 #define FL_LIST (FL_NL - 8) /* longest list: fl_density stores 8 slots from slot nb <= FL_LIST */
 
 /* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11 clamped at 0 in both forms: in the
@@ -221,8 +220,8 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_, icx_ = P[FP_INV_CELLX];
     const uint m_ = mask + 1u;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    /* the rows the sphere reaches (2 x 2 with cells of 2h or more, FL_ROWS at most), each one
-     * range of sorted particles, or two where its keys wrap past the end of the table */
+    /* the rows the sphere reaches (2 x 2 with cells of 2h; FL_ROWS at most, from flame.c), each
+     * one range of sorted particles, or two where its keys wrap past the end of the table */
     uint ra[2 * FL_ROWS], rb[2 * FL_ROWS];
     float rcy[2 * FL_ROWS], rcz[2 * FL_ROWS];
     int nr = 0;

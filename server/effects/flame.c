@@ -17,6 +17,7 @@
 #include "flame.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -45,7 +46,6 @@
  * of bench_flame faster too; cells of 2.5h or 3h gain nothing more (docs/performance-log.md). */
 #define FL_CELLS_PER_H 0.5
 #endif
-_Static_assert(FL_CELLS_PER_H <= 0.5, "fl_density (flame.cl) keeps the ranges of at most 3 x 3 rows: cells of 2h or more");
 #ifndef FL_XCELLS
 #define FL_XCELLS 4
 #endif
@@ -853,7 +853,12 @@ static int fl_restart(struct flame *fl, struct fx_err *err)
 static int fl_create_objects(struct flame *fl, struct fx_err *err)
 {
     cl_int rc = CL_SUCCESS;
-    cl_program prog = ocl_program(fl->ocl, FL_KERNEL_FILE, FL_BUILD_OPTS, err);
+    /* FL_ROWS: the rows of cells a sphere of radius h reaches at most (fl_density keeps their
+     * ranges): per axis, the cells its extent 2h (widened by the kernel's 1.0001) can touch */
+    int axis = (int)floor(2.0002 * FL_CELLS_PER_H) + 2;
+    char opts[sizeof FL_BUILD_OPTS + 32];
+    snprintf(opts, sizeof opts, "%s -DFL_ROWS=%d", FL_BUILD_OPTS, axis * axis);
+    cl_program prog = ocl_program(fl->ocl, FL_KERNEL_FILE, opts, err);
     if (!prog) return -1;
     for (int k = 0; k < K_N && rc == CL_SUCCESS; k++) fl->k[k] = clCreateKernel(prog, fl_kernel_names[k], &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "clCreateKernel", rc);
