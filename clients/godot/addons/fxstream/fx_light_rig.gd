@@ -63,9 +63,10 @@ func _on_stream_frame(f) -> bool:
 	return true
 
 
-# The lit segments as at most max_lights groups, strongest first: runs of consecutive segments
-# of one source, cut into pieces of g segments, g the smallest that gives max_lights or fewer
-# (or, with more sources than lights, one piece a source). {at: Vector3, strength: float}.
+# The lit segments in groups, strongest first: runs of consecutive segments of one source, cut
+# into pieces of g segments, g the smallest that gives max_lights pieces or fewer; with more
+# sources than lights, one piece a source, and the weakest pieces get no light.
+# {at: Vector3, strength: float}.
 func _groups(segments: Array) -> Array:
 	var runs := []
 	var key := []

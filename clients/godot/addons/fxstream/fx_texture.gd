@@ -56,8 +56,7 @@ func _init() -> void:
 	stream = "energy"
 	_mat.shader = WAVE_SHADER
 	_uniform("wave", texture)
-	for p in ["billboard", "floor_level", "gain", "contrast", "exposure", "tone_map"]:
-		set(p, get(p)) # the defaults into the material
+	_apply_look()
 
 
 func _ready() -> void:
@@ -79,32 +78,41 @@ func set_size(v: Vector2) -> void:
 
 func set_billboard(v: bool) -> void:
 	billboard = v
-	_uniform("billboard", v)
+	_apply_look()
 
 
 func set_floor_level(v: float) -> void:
 	floor_level = v
-	_uniform("floor_k", v)
+	_apply_look()
 
 
 func set_gain(v: float) -> void:
 	gain = v
-	_uniform("gain", v)
+	_apply_look()
 
 
 func set_contrast(v: float) -> void:
 	contrast = max(v, 0.01)
-	_uniform("contrast", contrast)
+	_apply_look()
 
 
 func set_exposure(v: float) -> void:
 	exposure = v
-	_uniform("exposure", v)
+	_apply_look()
 
 
 func set_tone_map(v: bool) -> void:
 	tone_map = v
-	_uniform("tone_map", v)
+	_apply_look()
+
+
+func _apply_look() -> void:
+	_uniform("billboard", billboard)
+	_uniform("floor_k", floor_level)
+	_uniform("gain", gain)
+	_uniform("contrast", contrast)
+	_uniform("exposure", exposure)
+	_uniform("tone_map", tone_map)
 
 
 func _on_stream_params(doc: Dictionary) -> void:
