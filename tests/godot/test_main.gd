@@ -5,8 +5,9 @@
 # write to Godot's stdin without blocking it): it asks for fxctl to run (fxctl-go), for the
 # daemon to be killed and restarted (restart-go), and dumps decoded particles for the driver
 # to compare with libfxclient's decoding of the same frames (godot-flame-SEQ.bin).
-# Assertions are on what the add-on hands the engine (images, MultiMesh counts, lights): the
-# dummy renderer runs no shaders. Times: a game frame's wall time less what the kernel says
+# Assertions are on what the add-on hands the engine (images, MultiMesh counts, lights, the
+# wave material's uniforms as FxTexture.uniforms records them): the dummy renderer runs no
+# shaders and keeps no uniforms. Times: a game frame's wall time less what the kernel says
 # the main thread waited for a CPU (/proc/thread-self/schedstat), so other processes on a
 # loaded machine do not count as the add-on blocking the loop, and a call that sleeps does.
 extends SceneTree
