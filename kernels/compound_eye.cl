@@ -420,14 +420,14 @@ struct eye_shading {
     int pad0, pad1;
 };
 
-/* The baked view texture (digest §8.2), 8 atlas texels per work-item (global size
- * n8 / 8). geo holds 16 planes of n8 floats (plane i, texel k at geo[i * n8 + k]):
+/* The baked view texture (digest §8.2), 8 atlas texels per work-item (n8 / 8 of them, which
+ * may run a range at a time). geo holds 16 planes of n8 floats (plane i, texel k at geo[i * n8 + k]):
  * P, u, N_face, v, dP/du, mask, dP/dv, 0, with u, v the raw OBJ texture coordinates;
  * eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
 __kernel void eye_bake(__global float4 *out, __global const float *geo, __global const float4 *pig, int pw, int ph,
-                       struct eye_optics o, struct eye_shading s, float4 dot_col, float4 base_col)
+                       struct eye_optics o, struct eye_shading s, float4 dot_col, float4 base_col, int n8)
 {
-    const int n8 = (int)get_global_size(0) * EYE_LANES, k0 = (int)get_global_id(0) * EYE_LANES;
+    const int k0 = (int)get_global_id(0) * EYE_LANES;
 #define EYE_GEO(i) vload8(0, geo + (i) * n8 + k0)
     iv covered = EYE_GEO(11) != 0.0f;
     if (!any(covered)) {

@@ -54,28 +54,64 @@ static void lut_entry(const struct fxs_lut_product *p, uint8_t *e)
     fxs_put_u32(e + 44, p->inner);
 }
 
-size_t fxs_lut_encode(const struct fxs_lut_info *info, struct fxs_lut_product *products, int count, int zstd_level,
-                      uint8_t *out, size_t cap, char *msg, size_t msgcap)
+int fxs_lut_encode_begin(struct fxs_lut_encoder *e, const struct fxs_lut_info *info, struct fxs_lut_product *products,
+                         int count, int zstd_level, uint8_t *out, size_t cap, char *msg, size_t msgcap)
 {
-    size_t n = FXS_LUT_HEADER_BYTES + (size_t)count * FXS_LUT_ENTRY_BYTES;
+    *e = (struct fxs_lut_encoder){.products = products, .count = count, .level = zstd_level, .out = out, .cap = cap};
+    e->zstd = ZSTD_createCCtx();
+    if (!e->zstd) return snprintf(msg, msgcap, "zstd: out of memory"), -1;
     lut_header(info, count, out);
-    for (int i = 0; i < count; i++) {
-        struct fxs_lut_product *p = &products[i];
-        while (n % 8) out[n++] = 0; /* products start 8-aligned */
-        size_t z = ZSTD_compress(out + n, cap - n, p->rgba, lut_raw(p), zstd_level);
-        if (ZSTD_isError(z)) {
-            snprintf(msg, msgcap, "zstd (%s): %s", p->name, ZSTD_getErrorName(z));
-            return 0;
-        }
+    e->len = FXS_LUT_HEADER_BYTES + (size_t)count * FXS_LUT_ENTRY_BYTES;
+    return 0;
+}
+
+/* Starts product cur's zstd frame, 8-aligned, with its size pledged (it goes into the frame header). */
+static int lut_product_begin(struct fxs_lut_encoder *e, struct fxs_lut_product *p, char *msg, size_t msgcap)
+{
+    while (e->len % 8) e->out[e->len++] = 0;
+    p->offset = (uint32_t)e->len;
+    size_t z = ZSTD_CCtx_reset(e->zstd, ZSTD_reset_session_and_parameters);
+    if (!ZSTD_isError(z)) z = ZSTD_CCtx_setParameter(e->zstd, ZSTD_c_compressionLevel, e->level);
+    if (!ZSTD_isError(z)) z = ZSTD_CCtx_setPledgedSrcSize(e->zstd, lut_raw(p));
+    return ZSTD_isError(z) ? snprintf(msg, msgcap, "zstd (%s): %s", p->name, ZSTD_getErrorName(z)), -1 : 0;
+}
+
+int fxs_lut_encode_some(struct fxs_lut_encoder *e, size_t bytes, char *msg, size_t msgcap)
+{
+    while (e->cur < e->count) {
+        struct fxs_lut_product *p = &e->products[e->cur];
+        size_t raw = lut_raw(p), take = raw - e->done < bytes ? raw - e->done : bytes;
+        if (e->done == 0 && lut_product_begin(e, p, msg, msgcap)) return -1;
+        ZSTD_EndDirective mode = e->done + take == raw ? ZSTD_e_end : ZSTD_e_continue;
+        ZSTD_inBuffer in = {p->rgba + e->done, take, 0};
+        ZSTD_outBuffer zout = {e->out + e->len, e->cap - e->len, 0};
+        size_t left;
+        do { /* until the input is taken, and with e_end the frame is flushed */
+            left = ZSTD_compressStream2(e->zstd, &zout, &in, mode);
+            if (ZSTD_isError(left)) return snprintf(msg, msgcap, "zstd (%s): %s", p->name, ZSTD_getErrorName(left)), -1;
+            if (zout.pos == zout.size && (in.pos < in.size || (mode == ZSTD_e_end && left)))
+                return snprintf(msg, msgcap, "zstd (%s): the output is full", p->name), -1;
+        } while (in.pos < in.size || (mode == ZSTD_e_end && left));
+        e->len += zout.pos;
+        e->done += take;
+        bytes -= take;
+        if (e->done < raw) return 1;
         p->format = FXS_LUT_FORMAT_RGBA8;
         p->codec = FXS_LUT_CODEC_ZSTD;
-        p->offset = (uint32_t)n;
-        p->stored = (uint32_t)z;
-        p->raw = (uint32_t)lut_raw(p);
-        lut_entry(p, out + FXS_LUT_HEADER_BYTES + (size_t)i * FXS_LUT_ENTRY_BYTES);
-        n += z;
+        p->stored = (uint32_t)(e->len - p->offset);
+        p->raw = (uint32_t)raw;
+        lut_entry(p, e->out + FXS_LUT_HEADER_BYTES + (size_t)e->cur * FXS_LUT_ENTRY_BYTES);
+        e->cur++;
+        e->done = 0;
+        if (!bytes && e->cur < e->count) return 1;
     }
-    return n;
+    return 0;
+}
+
+void fxs_lut_encode_free(struct fxs_lut_encoder *e)
+{
+    ZSTD_freeCCtx(e->zstd);
+    e->zstd = NULL;
 }
 
 /* Checks the container's magic and that its directory lies inside the payload: the directory's

@@ -37,12 +37,29 @@ struct fxs_lut_product {
     const uint8_t *rgba;
 };
 
-/* Bytes fxs_lut_encode may need for these products (directory, alignment, zstd bounds). */
+/* Bytes the encoder may need for these products (directory, alignment, zstd bounds). */
 size_t fxs_lut_bound(const struct fxs_lut_product *products, int count);
-/* Writes the container into out (cap bytes, at least fxs_lut_bound); fills each product's
- * offset, stored and raw. Returns the size, or 0 with msg when zstd fails. */
-size_t fxs_lut_encode(const struct fxs_lut_info *info, struct fxs_lut_product *products, int count, int zstd_level,
-                      uint8_t *out, size_t cap, char *msg, size_t msgcap);
+
+/* The encoder writes the container into out (cap bytes, at least fxs_lut_bound) a piece at a
+ * time, so that a big table can be encoded between other work: begin writes the header, each
+ * fxs_lut_encode_some compresses up to `bytes` more of the products' texels, in order (one zstd
+ * frame per product, its size in the frame header), filling each product's offset, stored and
+ * raw as it completes. */
+struct fxs_lut_encoder {
+    struct fxs_lut_product *products;
+    int count, level;
+    int cur;         /* the product being compressed */
+    size_t done;     /* its texel bytes compressed so far */
+    uint8_t *out;
+    size_t cap, len; /* len: the container's bytes so far */
+    void *zstd;      /* ZSTD_CCtx */
+};
+/* 0, or -1 with msg (out of memory). */
+int fxs_lut_encode_begin(struct fxs_lut_encoder *e, const struct fxs_lut_info *info, struct fxs_lut_product *products,
+                         int count, int zstd_level, uint8_t *out, size_t cap, char *msg, size_t msgcap);
+/* 1 while texels are left, 0 once the container is complete (e->len bytes), -1 with msg. */
+int fxs_lut_encode_some(struct fxs_lut_encoder *e, size_t bytes, char *msg, size_t msgcap);
+void fxs_lut_encode_free(struct fxs_lut_encoder *e);
 
 /* Reads entry i of a container (0..count-1). Returns the entry count (>= 0), or -1 with msg
  * when the container is malformed or i is out of range. */

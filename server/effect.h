@@ -22,7 +22,8 @@ struct ocl;
 /* One output of a step. The engine copies what it sends before emit returns; payload,
  * particles and texels stay valid until the effect emits another frame of the kind (or is
  * applied, reset or destroyed), so the engine may encode the output again for a subscriber
- * that asks for another encoding later. */
+ * that asks for another encoding later, also between the slices of a step in progress (so a
+ * step computed in slices does not write into the content it emitted last). */
 struct effect_frame {
     uint16_t kind;           /* enum fxs_kind */
     uint32_t codec;          /* kind-specific codec id of payload (protocol/PROTOCOL.md) */
@@ -64,6 +65,9 @@ struct effect_env {
 
 typedef int (*effect_emit_fn)(void *ctx, const struct effect_frame *frame);
 
+/* What step returns when it stopped at its slice's end with work left (see step). */
+#define EFFECT_MORE 1
+
 struct effect_ops {
     const char *name;             /* protocol name, e.g. "energy_wave" */
     const char *doc;              /* one paragraph for describe */
@@ -87,8 +91,16 @@ struct effect_ops {
      * flagged PARAM_RESTART never reaches apply: the engine re-creates instead. */
     int (*apply)(void *self, const cJSON *params, struct fx_err *err);
 
-    /* Advances to sim_time (dt seconds after the previous step) and emits frames. */
-    int (*step)(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err);
+    /* Advances to sim_time (dt seconds after the previous step) and emits frames; 0 once the
+     * step is complete. A step that can take long is done in slices: the effect stops between
+     * two launches when the next would end after slice_end (clock.h seconds; INFINITY: no
+     * limit), with no device work left in flight, keeps its place and returns EFFECT_MORE; the
+     * engine calls it again later, after other streams' slices, with the same sim_time and
+     * dt 0, and it goes on. Each call makes progress; a step emits its frames in the call that
+     * completes it, and what it emitted before stays as struct effect_frame says meanwhile.
+     * apply, reset and destroy abandon a step in progress: the next call starts afresh. */
+    int (*step)(void *self, double sim_time, double dt, double slice_end, effect_emit_fn emit, void *ctx,
+                struct fx_err *err);
 
     /* Restarts the state as if just created (the protocol's `reset`). */
     int (*reset)(void *self, struct fx_err *err);

@@ -1,5 +1,28 @@
 /* engine.c — see engine.h.
  *
+ * Scheduling. A stream is ready when its next frame is due (every 1/fps s) or a step of it is in
+ * progress. The engine runs one ready stream at a time, for one slice: an effect stops a long
+ * step at the slice's end and goes on at its next turn (effect.h: EFFECT_MORE), so no step holds
+ * the engine for long. Which ready stream goes next:
+ *  1. one that has had less than its floor of the engine lately (ENGINE_FLOOR_SHARE split among
+ *     the ready streams), the least served first: no stream starves;
+ *  2. then the interactive streams, and among them the one that has had the least engine time
+ *     lately (usage, decaying with ENGINE_SHARE_TAU_S): streams that need less than an equal
+ *     share get what they need, the others split the rest equally;
+ *  3. then the background streams, the least used first: those whose frames (the last one, or
+ *     the one in progress so far) take more than ENGINE_LONG_S of engine time and more than
+ *     ENGINE_HEAVY_RATIO times those of the cheapest other stream with work (a texture or table
+ *     far beyond real time). They run in the time the interactive ones leave, below their fps
+ *     (/metrics: fxs_stream_achieved_fps), instead of slowing those down. The ratio keeps the
+ *     classes as they are when the machine's load slows every stream alike.
+ * The stream that ran last keeps its turn until another in its class has used ENGINE_QUANTUM_S
+ * less, so equal streams do not alternate at every slice. A slice ends when another stream
+ * would come first (it becomes due, falls below its floor, or the running stream turns
+ * background), after ENGINE_SLICE_MAX_S at most, so a destroy or a change reaches a long
+ * step within that, and not before ENGINE_SLICE_MIN_S, so slicing costs little. Alone, a
+ * stream runs its steps whole but for that bound. The engine time of every slice is counted
+ * per stream (/metrics).
+ *
  * Failures stay inside their stream: a failed creation waits for the next parameter
  * change; a failed step resets the effect (re-creating it when the reset fails too) and
  * the stream pauses ENGINE_BACKOFF_MIN_S before its next step, doubling up to
@@ -12,7 +35,9 @@
  * older frames leave the hub (a subscriber never gets a frame older than the newest of the
  * kind). The slot keeps each kind's latest output (struct engine_kept), so a subscriber asking
  * for an encoding not made yet gets that frame at once, not at the next change of a stream
- * that emits only on change (the compound eye). */
+ * that emits only on change (the compound eye), nor at the end of a step in progress: a step
+ * emits in its last slice, and what it emitted before stays valid meanwhile (effect.h). The
+ * time such a catch-up spends encoding counts as the stream's engine time. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -26,6 +51,14 @@
 
 #define ENGINE_BACKOFF_MIN_S 0.5
 #define ENGINE_BACKOFF_MAX_S 30.0
+#define ENGINE_SLICE_MIN_S 0.005
+#define ENGINE_SLICE_MAX_S 0.25
+#define ENGINE_QUANTUM_S 0.02
+#define ENGINE_LONG_S 1.0
+#define ENGINE_HEAVY_RATIO 8.0
+#define ENGINE_FLOOR_SHARE 0.04
+#define ENGINE_SHARE_TAU_S 1.0
+#define ENGINE_PACE_MAX_S 10.0 /* longest window of the achieved fps: a stream stuck reads 0 after it */
 
 /* The latest output of a kind as the effect emitted it (its pointers valid as effect.h says),
  * the header its frames carry, and the encodings published of it (bits 1 << enum fxs_encoding). */
@@ -53,6 +86,20 @@ struct engine_slot {
     uint64_t fail_reset; /* a change of either ends the pause */
     double next_due, last_wall, sim_time;
     double rt_wall, rt_sim; /* start of the current real-time factor window */
+    /* scheduling (the header comment) */
+    double period;       /* 1/fps */
+    bool ready;          /* due, or a step in progress */
+    bool working;        /* a step in progress: the effect returned EFFECT_MORE */
+    double frame_due;    /* when the frame being computed was due */
+    double attained;     /* engine seconds of the frame being computed */
+    double cost;         /* engine seconds of the last frame completed */
+    double long_s;       /* frames that take longer make it a background stream */
+    double usage;        /* engine seconds, decayed with ENGINE_SHARE_TAU_S */
+    uint64_t hub_gen, hub_reset; /* the hub's params_gen and reset_gen at the last scan */
+    double pace_t;       /* start of the achieved fps window, */
+    uint64_t pace_n;     /* the steps completed since, */
+    double achieved;     /* the last window's steps per second, */
+    double pace_shown;   /* and when it and the share were last published */
 };
 
 /* The effect's outputs are about to change (apply, reset, re-creation): nothing kept is valid. */
@@ -66,6 +113,7 @@ static void engine_drop_fx(struct engine_slot *sl)
     engine_forget(sl);
     if (sl->state) sl->s->effect->destroy(sl->state);
     sl->state = NULL;
+    sl->working = false;
     cJSON_Delete(sl->params);
     sl->params = NULL;
 }
@@ -280,14 +328,18 @@ static void engine_step_failed(struct engine *eng, struct engine_slot *sl, const
     sl->sim_time = 0;
 }
 
-/* Steps the stream once; -1 when it failed just now (reported; the stream is to pause). */
-static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
+/* Runs one slice of the stream's step: the step in progress, unless a change or reset started
+ * it over, or a new one. 0 when the step completed, EFFECT_MORE when it stopped at slice_end, -1
+ * when it failed just now (reported; the stream is to pause). */
+static int engine_step(struct engine *eng, struct engine_slot *sl, double now, double slice_end)
 {
     struct stream *s = sl->s;
     struct fx_err err = {0};
+    uint64_t gen = sl->gen;
     int sync = engine_sync_params(eng, sl);
     if (sync < 0) sl->fails++;
     if (sync) return sync < 0 ? -1 : 0;
+    if (sl->gen != gen) sl->working = false; /* apply or create dropped the step in progress */
 
     struct stream_status st;
     hub_status(eng->hub, s, &st);
@@ -296,16 +348,20 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
         engine_forget(sl);
         sl->reset_gen = reset_gen;
         sl->sim_time = 0;
+        sl->working = false;
         if (s->effect->reset(sl->state, &err)) engine_fail(eng, sl, &err, NULL);
     }
 
-    double dt = fmin(fmax(now - sl->last_wall, 0.0), 0.25); /* a long stall does not jump time */
-    sl->last_wall = now;
-    sl->sim_time += dt;
+    double dt = 0;
+    if (!sl->working) {
+        dt = fmin(fmax(now - sl->last_wall, 0.0), 0.25); /* a long stall does not jump time */
+        sl->last_wall = now;
+        sl->sim_time += dt;
+    }
     struct engine_emit_ctx ctx = {.eng = eng, .sl = sl};
-    double t0 = clock_now();
-    int rc = s->effect->step(sl->state, sl->sim_time, dt, engine_emit, &ctx, &err);
-    double ms = (clock_now() - t0) * 1e3;
+    int rc = s->effect->step(sl->state, sl->sim_time, dt, slice_end, engine_emit, &ctx, &err);
+    sl->working = rc == EFFECT_MORE;
+    if (sl->working) return rc;
     if (rc && ctx.err.code[0]) err = ctx.err;
     if (rc) {
         engine_step_failed(eng, sl, &err);
@@ -315,9 +371,6 @@ static int engine_step(struct engine *eng, struct engine_slot *sl, double now)
         hub_stream_recovered(eng->hub, s);
     }
     engine_realtime(eng, sl, now);
-    atomic_fetch_add(&eng->busy_ns, (uint_fast64_t)(ms * 1e6));
-    atomic_fetch_add(&s->steps, 1);
-    hist_observe(&s->step_time, ms * 1e-3);
     hist_observe(&s->encode_time, ctx.encode_ms * 1e-3);
     return rc ? -1 : 0;
 }
@@ -382,41 +435,196 @@ static bool engine_holds(struct engine *eng, struct engine_slot *sl, const struc
     return mine;
 }
 
-/* Steps what is due; returns the time of the next deadline. */
+/* Reads the stream's state from the hub and whether it is ready (the header comment); false
+ * when this daemon does not compute it or it pauses for want of subscribers. */
+static bool engine_scan(struct engine *eng, struct engine_slot *sl, double now)
+{
+    struct stream_status st;
+    hub_status(eng->hub, sl->s, &st);
+    sl->ready = false;
+    if (!engine_holds(eng, sl, &st.lease, now)) return false;
+    if (eng->pause_idle && st.subscribers == 0 && !st.lease.remote_demand) {
+        if (sl->running) hub_set_pace(eng->hub, sl->s, 0, 0);
+        sl->running = false;
+        sl->rt_wall = 0; /* a pause is not slowness */
+        return false;
+    }
+    if (!sl->running) {
+        sl->running = true;
+        sl->next_due = sl->last_wall = sl->pace_t = now;
+        sl->pace_n = 0;
+        sl->achieved = 0;
+        sl->usage = fmax(sl->usage, 0.5 * ENGINE_FLOOR_SHARE * ENGINE_SHARE_TAU_S); /* not starved at once */
+    }
+    sl->period = 1.0 / (st.fps > 0 ? st.fps : 1.0);
+    sl->hub_gen = st.params_gen;
+    sl->hub_reset = st.reset_gen;
+    if (sl->fails && (st.params_gen != sl->fail_gen || st.reset_gen != sl->fail_reset))
+        sl->next_due = now; /* a set or reset retries at once */
+    if (sl->working && (st.params_gen != sl->gen || st.reset_gen != sl->reset_gen))
+        sl->attained = 0; /* the change starts the step over: a new frame */
+    sl->ready = sl->working || now >= sl->next_due;
+    return true;
+}
+
+/* Publishes the stream's share of the engine and, over a window that ends at a completed step
+ * a second or more after it began (or after ENGINE_PACE_MAX_S without one), its steps per
+ * second; at most once a second. */
+static void engine_pace(struct engine *eng, struct engine_slot *sl, double now)
+{
+    if (now - sl->pace_shown < 1.0) return;
+    double span = now - sl->pace_t;
+    if (span >= 1.0 && (sl->pace_n > 0 || span >= ENGINE_PACE_MAX_S)) {
+        sl->achieved = (double)sl->pace_n / span;
+        sl->pace_t = now;
+        sl->pace_n = 0;
+    }
+    hub_set_pace(eng->hub, sl->s, sl->achieved, sl->usage / ENGINE_SHARE_TAU_S);
+    sl->pace_shown = now;
+}
+
+/* Ages every stream's engine usage to now. */
+static void engine_decay(struct engine *eng, double now)
+{
+    double k = exp(-fmax(now - eng->decay_t, 0.0) / ENGINE_SHARE_TAU_S);
+    for (int i = 0; i < eng->nslots; i++) eng->slots[i].usage *= k;
+    eng->decay_t = now;
+}
+
+/* Engine seconds of the stream's current frame (0 for one not started). */
+static double engine_attained(const struct engine_slot *sl) { return sl->working ? sl->attained : 0; }
+
+/* Engine seconds of the stream's frames: the last one's, or the current one's so far if more. */
+static double engine_cost(const struct engine_slot *sl) { return fmax(sl->cost, engine_attained(sl)); }
+
+/* Sets each running stream's long_s (the header comment): ENGINE_LONG_S, or ENGINE_HEAVY_RATIO
+ * times the cost of the cheapest other stream whose frames take ENGINE_SLICE_MIN_S or more. */
+static void engine_long(struct engine *eng)
+{
+    for (int i = 0; i < eng->nslots; i++) {
+        double cheapest = INFINITY;
+        for (int j = 0; j < eng->nslots; j++) {
+            double c = engine_cost(&eng->slots[j]);
+            if (j != i && eng->slots[j].running && c >= ENGINE_SLICE_MIN_S) cheapest = fmin(cheapest, c);
+        }
+        eng->slots[i].long_s = fmax(ENGINE_LONG_S, isinf(cheapest) ? 0 : ENGINE_HEAVY_RATIO * cheapest);
+    }
+}
+
+enum { ENGINE_STARVED, ENGINE_INTERACTIVE, ENGINE_BACKGROUND };
+
+/* The stream's class (the header comment); floor: the usage below which it is starved. */
+static int engine_class(const struct engine_slot *sl, double floor)
+{
+    if (sl->usage < floor) return ENGINE_STARVED;
+    return engine_cost(sl) > sl->long_s ? ENGINE_BACKGROUND : ENGINE_INTERACTIVE;
+}
+
+/* The usage a stream is ranked by in its class: the one that ran last gets ENGINE_QUANTUM_S off. */
+static double engine_rank(const struct engine *eng, const struct engine_slot *sl)
+{
+    return sl->usage - (sl->s == eng->last ? ENGINE_QUANTUM_S : 0);
+}
+
+/* Whether ready stream a comes before ready stream b (the header comment). */
+static bool engine_before(const struct engine *eng, const struct engine_slot *a, const struct engine_slot *b,
+                          double floor)
+{
+    int ca = engine_class(a, floor), cb = engine_class(b, floor);
+    if (ca != cb) return ca < cb;
+    double ra = ca == ENGINE_STARVED ? a->usage : engine_rank(eng, a);
+    double rb = cb == ENGINE_STARVED ? b->usage : engine_rank(eng, b);
+    if (ra != rb) return ra < rb;
+    return a->next_due < b->next_due;
+}
+
+/* When b's slice ends: when another stream would come before it (the header comment), within
+ * [ENGINE_SLICE_MIN_S, ENGINE_SLICE_MAX_S] from now; usage's decay over a slice is neglected.
+ * A starved stream catches up ENGINE_QUANTUM_S at a time: seldom enough that the others'
+ * frames are cut into few pieces. */
+static double engine_slice_end(const struct engine *eng, const struct engine_slot *b, double floor, double now)
+{
+    int cb = engine_class(b, floor);
+    if (cb == ENGINE_STARVED) return now + ENGINE_QUANTUM_S;
+    double end = now + ENGINE_SLICE_MAX_S;
+    for (int i = 0; i < eng->nslots; i++) {
+        const struct engine_slot *o = &eng->slots[i];
+        if (o == b || !o->running) continue;
+        if (cb == ENGINE_INTERACTIVE) /* b turns background, and o may come first */
+            end = fmin(end, now + b->long_s - engine_attained(b));
+        int co = engine_class(o, floor);
+        double t = INFINITY; /* when o comes before b */
+        if (co < cb)
+            t = now;
+        else if (co == cb) /* b grows from its usage, with the last runner's quantum off */
+            t = now + engine_rank(eng, o) - (b->usage - ENGINE_QUANTUM_S);
+        if (!o->ready)
+            t = fmax(t, o->next_due);
+        else if (floor > 0)
+            t = fmin(t, now + ENGINE_SHARE_TAU_S * log(fmax(o->usage / floor, 1.0)));
+        end = fmin(end, t);
+    }
+    return fmax(end, now + ENGINE_SLICE_MIN_S);
+}
+
+/* Counts engine seconds spent on the stream: in its usage, /metrics and the cluster's load. */
+static void engine_account(struct engine *eng, struct engine_slot *sl, double spent)
+{
+    sl->usage += spent;
+    atomic_fetch_add(&eng->busy_ns, (uint_fast64_t)(spent * 1e9));
+    atomic_fetch_add(&sl->s->engine_ns, (uint_fast64_t)(spent * 1e9));
+}
+
+/* Runs one slice of sl and accounts for its engine time; a completed step schedules the next. */
+static void engine_run(struct engine *eng, struct engine_slot *sl, double now, double slice_end)
+{
+    if (!sl->working) {
+        sl->frame_due = sl->next_due;
+        sl->attained = 0;
+    }
+    int rc = engine_step(eng, sl, now, slice_end);
+    double end = clock_now(), spent = end - now;
+    sl->attained += spent;
+    engine_account(eng, sl, spent);
+    if (rc == EFFECT_MORE) return;
+    atomic_fetch_add(&sl->s->steps, 1);
+    hist_observe(&sl->s->step_time, sl->attained);
+    sl->cost = sl->attained;
+    sl->pace_n++;
+    sl->next_due = fmax(sl->frame_due + sl->period, end); /* overrun: no catch-up burst */
+    if (rc) engine_pause(sl, sl->hub_gen, sl->hub_reset, end);
+}
+
+/* Runs one slice of the ready stream that comes first; returns when to look again: at once
+ * while a stream is ready, else at the next due time. */
 static double engine_run_due(struct engine *eng)
 {
     double now = clock_now(), next = now + 1.0;
+    engine_decay(eng, now);
+    int nready = 0;
     for (int i = 0; i < eng->nslots; i++) {
         struct engine_slot *sl = &eng->slots[i];
-        struct stream_status st;
-        hub_status(eng->hub, sl->s, &st);
-        int subs = st.subscribers;
-        double fps = st.fps;
-        uint64_t gen = st.params_gen, reset_gen = st.reset_gen;
-        if (!engine_holds(eng, sl, &st.lease, now)) continue;
-        if (eng->pause_idle && subs == 0 && !st.lease.remote_demand) {
-            sl->running = false;
-            sl->rt_wall = 0; /* a pause is not slowness */
-            continue;
-        }
-        if (!sl->running) {
-            sl->running = true;
-            sl->next_due = sl->last_wall = now;
-        }
-        if (sl->fails && (gen != sl->fail_gen || reset_gen != sl->fail_reset))
-            sl->next_due = now; /* a set or reset retries at once */
+        if (!engine_scan(eng, sl, now)) continue;
+        engine_pace(eng, sl, now);
+        double t0 = clock_now();
         engine_catch_up(eng, sl);
-        if (now >= sl->next_due) {
-            bool failed = engine_step(eng, sl, now) != 0;
-            double period = 1.0 / (fps > 0 ? fps : 1.0);
-            sl->next_due += period;
-            now = clock_now();
-            if (sl->next_due < now) sl->next_due = now; /* overrun: no catch-up burst */
-            if (failed) engine_pause(sl, gen, reset_gen, now);
-        }
-        if (sl->next_due < next) next = sl->next_due;
+        engine_account(eng, sl, clock_now() - t0);
+        if (sl->ready)
+            nready++;
+        else
+            next = fmin(next, sl->next_due);
     }
-    return next;
+    if (!nready) return next;
+    now = clock_now(); /* the slice starts after any catch-up's encoding */
+    engine_long(eng);
+    double floor = nready > 1 ? ENGINE_FLOOR_SHARE * ENGINE_SHARE_TAU_S / nready : 0;
+    struct engine_slot *first = NULL;
+    for (int i = 0; i < eng->nslots; i++)
+        if (eng->slots[i].ready && (!first || engine_before(eng, &eng->slots[i], first, floor)))
+            first = &eng->slots[i];
+    engine_run(eng, first, now, engine_slice_end(eng, first, floor, now));
+    eng->last = first->s;
+    return clock_now();
 }
 
 static void *engine_main(void *arg)
@@ -441,6 +649,8 @@ int engine_start(struct engine *eng, struct hub *hub, struct ocl *ocl, bool paus
     eng->hub = hub;
     eng->ocl = ocl;
     eng->pause_idle = pause_idle;
+    eng->decay_t = clock_now();
+    eng->last = NULL;
     if (pthread_create(&eng->thread, NULL, engine_main, eng))
         return fx_fail(err, "internal", NULL, "cannot start the engine thread");
     eng->started = true;

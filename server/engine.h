@@ -6,8 +6,10 @@
  * restart-only parameter changed, and honours `reset`. Each step's outputs are encoded
  * once into frames and published to the hub. One thread is enough on purpose: PoCL
  * already spreads every kernel over all cores, and a second stepping thread would only
- * contend for them; streams are scheduled earliest-deadline-first. A stream with no
- * subscribers pauses (its simulated time stops) unless pause_idle is off.
+ * contend for them. Long steps run in slices, and the streams share the thread by the rules
+ * in engine.c's header: cheap frames first, a floor for every stream, a destroy or change
+ * reaching a long step within a slice. A stream with no subscribers pauses (its simulated
+ * time stops) unless pause_idle is off.
  *
  * In cluster mode the engine computes only the streams whose lease this daemon holds (hub.h
  * struct stream_lease): a stream taken over starts its effect afresh and continues the previous
@@ -31,8 +33,10 @@ struct engine {
     bool pause_idle;
     pthread_t thread;
     bool started;
-    struct engine_slot *slots; /* engine thread only */
+    struct engine_slot *slots; /* engine thread only: */
     int nslots;
+    double decay_t;            /* when the slots' usage was last aged */
+    const struct stream *last; /* the stream that ran the last slice */
     atomic_uint_fast64_t busy_ns; /* time spent stepping, for the cluster's load measure (lease.c) */
     /* Cluster mode: called from the engine thread with each new frame (a reference the callee
      * owns) and the lease generation it was computed under; NULL on a single node. */

@@ -197,6 +197,7 @@ void hub_status(struct hub *hub, struct stream *s, struct stream_status *out)
     *out = (struct stream_status){.rev = s->rev, .params_gen = s->params_gen, .reset_gen = s->reset_gen,
                                   .error_gen = s->error_gen, .lease = s->lease,
                                   .subscribers = s->subscribers, .fps = s->fps, .realtime = s->realtime,
+                                  .achieved_fps = s->achieved_fps, .engine_share = s->engine_share,
                                   .failing = s->failing};
     memcpy(out->subscribers_by, s->subscribers_by, sizeof out->subscribers_by);
     memcpy(out->error, s->error, sizeof out->error);
@@ -207,6 +208,14 @@ void hub_set_realtime(struct hub *hub, struct stream *s, double factor)
 {
     pthread_mutex_lock(&hub->mu);
     s->realtime = factor;
+    pthread_mutex_unlock(&hub->mu);
+}
+
+void hub_set_pace(struct hub *hub, struct stream *s, double achieved_fps, double engine_share)
+{
+    pthread_mutex_lock(&hub->mu);
+    s->achieved_fps = achieved_fps;
+    s->engine_share = engine_share;
     pthread_mutex_unlock(&hub->mu);
 }
 

@@ -67,9 +67,11 @@ struct stream {
     uint64_t error_gen;
     bool failing;     /* since that error the stream has not stepped successfully */
     double realtime;  /* effect-simulated seconds per wall second, recent steps */
+    double achieved_fps, engine_share; /* the engine's pace of the stream (hub_set_pace) */
 
     /* For /metrics. */
     atomic_uint_fast64_t steps, frames_produced, frames_sent, frames_skipped, bytes_sent;
+    atomic_uint_fast64_t engine_ns;  /* engine time spent stepping the stream, every slice */
     atomic_uint_fast64_t sent_by_kind[FXS_KIND_MAX + 1]; /* frames sent, per kind */
     atomic_uint particles;           /* of the latest particle frame (kind 1) */
     struct histogram step_time, encode_time, frame_age; /* engine, engine, network thread */
@@ -125,13 +127,16 @@ struct stream_status {
     uint64_t rev, params_gen, reset_gen, error_gen;
     struct stream_lease lease;
     int subscribers, subscribers_by[FXS_ENCODING_COUNT];
-    double fps, realtime;
+    double fps, realtime, achieved_fps, engine_share;
     bool failing;
     char error[320]; /* the latest stream error ("" if none) */
 };
 void hub_status(struct hub *hub, struct stream *s, struct stream_status *out);
 /* Engine side: the real-time factor of the stream's recent steps. */
 void hub_set_realtime(struct hub *hub, struct stream *s, double factor);
+/* Engine side: the steps per second the stream completed and its share of the engine thread,
+ * both over the last second or more. */
+void hub_set_pace(struct hub *hub, struct stream *s, double achieved_fps, double engine_share);
 /* The hub's change generation, and whether it is stopping. */
 uint64_t hub_generation(struct hub *hub, bool *stopping);
 

@@ -64,6 +64,10 @@ static double m_skipped(const struct m_row *r) { return (double)atomic_load(&r->
 static double m_bytes(const struct m_row *r) { return (double)atomic_load(&r->s->bytes_sent); }
 static double m_steps(const struct m_row *r) { return (double)atomic_load(&r->s->steps); }
 static double m_particles(const struct m_row *r) { return atomic_load(&r->s->particles); }
+static double m_fps(const struct m_row *r) { return r->st.fps; }
+static double m_achieved(const struct m_row *r) { return r->st.achieved_fps; }
+static double m_engine_s(const struct m_row *r) { return (double)atomic_load(&r->s->engine_ns) * 1e-9; }
+static double m_share(const struct m_row *r) { return r->st.engine_share; }
 
 /* Every live stream with its status; free() the result (references released by the caller
  * through hub_release_all on *all). */
@@ -118,6 +122,8 @@ static void metrics_global(struct server *srv, struct fx_buf *out, int nstreams)
     metrics_printf(out, "fxs_bytes_sent_total %llu\n", (unsigned long long)atomic_load(&c->bytes_sent));
     metrics_head(out, "fxs_streams", "gauge", "Streams defined.");
     metrics_printf(out, "fxs_streams %d\n", nstreams);
+    metrics_head(out, "fxs_engine_busy_seconds_total", "counter", "Engine thread time spent on streams (their steps, and their outputs encoded for new subscriptions), all streams.");
+    metrics_printf(out, "fxs_engine_busy_seconds_total %.6f\n", (double)atomic_load(&srv->engine.busy_ns) * 1e-9);
 }
 
 /* Cluster mode: the number of streams this daemon holds the lease of; with names set, their
@@ -250,7 +256,8 @@ static void metrics_histograms(struct fx_buf *out, struct stream **all, int n)
         const char *name, *help;
         size_t off;
     } h[] = {
-        {"fxs_stream_step_seconds", "Wall time per step of the effect, encoding included.", offsetof(struct stream, step_time)},
+        {"fxs_stream_step_seconds", "Engine time per completed step of the effect, all its slices, encoding included.",
+         offsetof(struct stream, step_time)},
         {"fxs_stream_encode_seconds", "Wall time encoding the frames of one step.", offsetof(struct stream, encode_time)},
         {"fxs_stream_frame_age_seconds", "Age of a frame (since its server_time) when its sending starts.",
          offsetof(struct stream, frame_age)},
@@ -302,9 +309,21 @@ int metrics_render(struct server *srv, struct fx_buf *out)
     metrics_per_stream(out, rows, n, "fxs_stream_frames_skipped_total", "counter",
                        "Frames a subscriber skipped (latest frame wins).", m_skipped);
     metrics_per_stream(out, rows, n, "fxs_stream_bytes_sent_total", "counter", "Frame bytes sent.", m_bytes);
-    metrics_per_stream(out, rows, n, "fxs_stream_steps_total", "counter", "Steps run.", m_steps);
+    metrics_per_stream(out, rows, n, "fxs_stream_steps_total", "counter", "Steps completed.", m_steps);
     metrics_per_stream(out, rows, n, "fxs_stream_particles", "gauge",
                        "Particles in the latest particle frame (kind 1); 0 for effects without particles.", m_particles);
+    metrics_per_stream(out, rows, n, "fxs_stream_fps", "gauge", "The stream's fps parameter: steps due per second.", m_fps);
+    metrics_per_stream(out, rows, n, "fxs_stream_achieved_fps", "gauge",
+                       "Steps completed per second over the last second or more (0 while paused); below fxs_stream_fps "
+                       "when the stream's steps need more of the engine than it gets.",
+                       m_achieved);
+    metrics_per_stream(out, rows, n, "fxs_stream_engine_seconds_total", "counter",
+                       "Engine thread time spent on the stream: every slice of its steps (kernels, read-backs, encoding), and its "
+                       "latest outputs encoded for a subscription to an encoding not made before.",
+                       m_engine_s);
+    metrics_per_stream(out, rows, n, "fxs_stream_engine_share", "gauge",
+                       "The stream's share of the engine thread over about the last second (exponential decay, 1 s).",
+                       m_share);
     metrics_delivered(out, all, n);
     metrics_histograms(out, all, n);
     free(rows);

@@ -5,7 +5,12 @@
  * changes and then emits it once, as one kind 4 frame (the hub keeps the latest frame
  * per kind for late subscribers, so all products travel together); "bake" renders the
  * model's view texture (eye_model.h) and emits a kind 2 EXR whenever anything changed.
- * A step with nothing new emits nothing. */
+ * A step with nothing new emits nothing. A table or view that would hold the engine past its
+ * slice (effect.h) is traced a range of work-items at a time, each read back at once, and a
+ * table is then packed in pieces too (eye_lut.h): the same work-items compute the same
+ * samples, so the products do not depend on the slicing. Both are computed only after a change
+ * or a reset, which end the life of the frame emitted before (effect.h), so they are computed in
+ * place of its table or texels. */
 #include "compound_eye.h"
 
 #include <math.h>
@@ -17,6 +22,7 @@
 #include "exr.h"
 #include "../effect.h"
 #include "../ocl.h"
+#include "../slice.h"
 #include "eye_lut.h"
 #include "eye_model.h"
 #include "fxs_frame.h"
@@ -158,7 +164,24 @@ struct compound_eye {
     int size, compression;
     float *rgba;
     struct fx_buf exr;
+    /* the table or view in progress (eye_step): its stage, the kernel's work-items done and
+     * what one costs, the packer of a table, and its time */
+    int busy;
+    size_t done;
+    struct slice_meter meter;
+    struct eye_lut_packer packer;
+    double pack_ms;
 };
+
+enum { EYE_IDLE, EYE_TRACING, EYE_PACKING };
+#define EYE_GROUP 64 /* work-items of a group (eye_items) */
+
+/* Drops the table or view in progress. */
+static void eye_abandon(struct compound_eye *ce)
+{
+    if (ce->busy == EYE_PACKING) eye_lut_pack_free(&ce->packer);
+    ce->busy = EYE_IDLE;
+}
 
 static void eye_rgb(const cJSON *p, const char *name, double out[3]) { params_vec3(p, name, out); }
 
@@ -229,6 +252,8 @@ static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *e
 
 int compound_eye_set(struct compound_eye *ce, const cJSON *params, struct fx_err *err)
 {
+    eye_abandon(ce);
+    ce->meter = (struct slice_meter){.probe = 1}; /* counted in work-groups */
     if (!ce->params || ce->mode == EYE_MODE_BAKE || eye_table_changed(ce->params, params)) ce->dirty = 1;
     cJSON *copy = cJSON_Duplicate(params, 1);
     if (!copy) return fx_fail(err, "internal", "", "out of memory");
@@ -265,27 +290,60 @@ static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
-/* Work-items for n rays: each traces EYE_LANES of them (kernels/compound_eye.cl). */
-static size_t eye_groups(size_t n) { return (n + EYE_LANES - 1) / EYE_LANES; }
-
-/* Runs kernel k over a 1-D range and reads `bytes` of out back into host. */
-static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, const size_t *global, cl_mem out,
-                   size_t bytes, void *host, struct fx_err *err)
+/* Work-items for n rays, each tracing EYE_LANES of them (kernels/compound_eye.cl), in whole
+ * groups of EYE_GROUP (the kernels store nothing past n). On a CPU device each group is a
+ * work-group, every launch alike, since PoCL compiles a kernel once per work-group size; a GPU's
+ * driver chooses its own. */
+static size_t eye_items(size_t n)
 {
-    cl_event ev;
+    size_t items = (n + EYE_LANES - 1) / EYE_LANES;
+    return (items + EYE_GROUP - 1) / EYE_GROUP * EYE_GROUP;
+}
+
+/* Runs kernel k (its arguments set) over its 1-D range from work-group ce->done on, a piece at a
+ * time until slice_end, reading each piece's results back into host (float4 each, EYE_LANES per
+ * work-item, n in all). 0 when every work-item ran, EFFECT_MORE, or -1 with err. */
+static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_t n, cl_mem out, float *host,
+                   double slice_end, struct fx_err *err)
+{
+    const size_t groups = eye_items(n) / EYE_GROUP, f4 = 4 * sizeof(float), local = EYE_GROUP;
+    const size_t *wg = ocl_is_cpu(ce->ocl) ? &local : NULL;
     cl_command_queue q = ocl_queue(ce->ocl);
-    cl_int rc = clEnqueueNDRangeKernel(q, k, 1, NULL, global, NULL, 0, NULL, &ev);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
-    rc = clEnqueueReadBuffer(q, out, CL_TRUE, 0, bytes, host, 0, NULL, NULL);
-    if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
-    clReleaseEvent(ev);
-    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
+    double t0 = clock_now();
+    do {
+        size_t m = slice_units(&ce->meter, groups - ce->done, t0, slice_end);
+        size_t offset = ce->done * EYE_GROUP, global = m * EYE_GROUP;
+        size_t from = offset * EYE_LANES, to = (offset + global) * EYE_LANES < n ? (offset + global) * EYE_LANES : n;
+        cl_event ev;
+        cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
+        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
+        rc = clEnqueueReadBuffer(q, out, CL_TRUE, from * f4, (to - from) * f4, host + 4 * from, 0, NULL, NULL);
+        if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
+        clReleaseEvent(ev);
+        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
+        ce->done += m;
+        double t1 = clock_now();
+        slice_record(&ce->meter, m, t1 - t0);
+        t0 = t1;
+    } while (ce->done < groups && t0 < slice_end);
+    return ce->done < groups ? EFFECT_MORE : 0;
 }
 
 /* ---- mode lut ---------------------------------------------------------------------- */
 
-static int eye_lut_samples(struct compound_eye *ce, int cells, int dirs, int ss, struct fx_err *err)
+/* The table's dimensions from the parameters. */
+static void eye_table_dims(const struct compound_eye *ce, int *cells, int *dirs, int *ss)
 {
+    *cells = (int)params_num(ce->params, "lut_cells");
+    *dirs = (int)params_num(ce->params, "lut_dirs");
+    *ss = (int)params_num(ce->params, "lut_supersample");
+}
+
+/* Starts a table: the sample buffers (regrown when needed) and the LUT kernel's arguments. */
+static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
+{
+    int cells, dirs, ss;
+    eye_table_dims(ce, &cells, &dirs, &ss);
     size_t n = (size_t)cells * cells * dirs * dirs, bytes = n * 4 * sizeof(float);
     if (bytes > ce->d_lut_bytes) {
         float *s = realloc(ce->samples, bytes);
@@ -301,31 +359,62 @@ static int eye_lut_samples(struct compound_eye *ce, int cells, int dirs, int ss,
         {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
         {sizeof ce->optics, &ce->optics}, {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss},
         {sizeof dot, &dot}, {sizeof base, &base}};
-    if (ocl_set_args(ce->k_lut, "eye_lut", a, 10, err)) return -1;
-    size_t global = eye_groups(n);
-    return eye_run(ce, ce->k_lut, "eye_lut", &global, ce->d_lut, bytes, ce->samples, err);
+    ce->done = 0;
+    ce->pack_ms = 0;
+    return ocl_set_args(ce->k_lut, "eye_lut", a, 10, err);
+}
+
+/* Starts packing the traced samples. */
+static int eye_lut_pack_start(struct compound_eye *ce, struct fx_err *err)
+{
+    struct eye_lut_table t = {
+        .lattice = ce->optics.lattice,
+        .max_passes = ce->optics.max_passes,
+        .tile_h = ce->optics.tile_h,
+        .lens_radius = ce->optics.r,
+        .refractive_index = ce->optics.n,
+        .pigment_depth = (float)params_num(ce->params, "pigment_depth"),
+        .pigment = ce->pig,
+        .pw = ce->pw,
+        .ph = ce->ph,
+        .samples = ce->samples,
+    };
+    eye_table_dims(ce, &t.cells, &t.dirs, &t.supersample);
+    return eye_lut_pack_begin(&ce->packer, &t, &ce->table, err);
+}
+
+/* Works on the table until slice_end: traces its samples, then packs them. 0 when ce->table
+ * holds the container, EFFECT_MORE, or -1 with err. */
+static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_err *err)
+{
+    int rc = 0;
+    if (ce->busy == EYE_IDLE) {
+        if (eye_lut_start(ce, err)) return -1;
+        ce->busy = EYE_TRACING;
+    }
+    if (ce->busy == EYE_TRACING) {
+        int cells, dirs, ss;
+        eye_table_dims(ce, &cells, &dirs, &ss);
+        size_t n = (size_t)cells * cells * dirs * dirs;
+        rc = eye_run(ce, ce->k_lut, "eye_lut", n, ce->d_lut, ce->samples, slice_end, err);
+        if (!rc && !(rc = eye_lut_pack_start(ce, err))) ce->busy = EYE_PACKING;
+        if (!rc && clock_now() >= slice_end) rc = EFFECT_MORE;
+    }
+    if (ce->busy == EYE_PACKING && !rc) {
+        double t0 = clock_now();
+        rc = eye_lut_pack_run(&ce->packer, slice_end, err);
+        ce->pack_ms += (clock_now() - t0) * 1e3;
+        rc = rc > 0 ? EFFECT_MORE : rc;
+        if (!rc) eye_abandon(ce); /* done: frees the packer */
+    }
+    if (rc < 0) eye_abandon(ce);
+    return rc;
 }
 
 int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, struct fx_err *err)
 {
-    const cJSON *p = ce->params;
-    struct eye_lut_table t = {
-        .lattice = ce->optics.lattice,
-        .max_passes = ce->optics.max_passes,
-        .cells = (int)params_num(p, "lut_cells"),
-        .dirs = (int)params_num(p, "lut_dirs"),
-        .supersample = (int)params_num(p, "lut_supersample"),
-        .tile_h = ce->optics.tile_h,
-        .lens_radius = ce->optics.r,
-        .refractive_index = ce->optics.n,
-        .pigment_depth = (float)params_num(p, "pigment_depth"),
-        .pigment = ce->pig,
-        .pw = ce->pw,
-        .ph = ce->ph,
-    };
-    if (eye_lut_samples(ce, t.cells, t.dirs, t.supersample, err)) return -1;
-    t.samples = ce->samples;
-    if (eye_lut_pack(&t, &ce->table, err)) return -1;
+    eye_abandon(ce);
+    if (eye_table_slice(ce, INFINITY, err)) return -1;
     *data = ce->table.data;
     *len = ce->table.len;
     return 0;
@@ -334,7 +423,7 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 /* ---- mode bake --------------------------------------------------------------------- */
 
 /* The bake kernel reads the atlas as 16 planes of n8 floats (texels rounded up to whole
- * work-items, the padding uncovered), so 8 texels' field is one vector load. */
+ * work-groups, the padding uncovered), so 8 texels' field is one vector load. */
 static void eye_geo_planes(const float *geo, size_t texels, size_t n8, float *planes)
 {
     memset(planes, 0, n8 * 16 * sizeof(float));
@@ -346,7 +435,7 @@ static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err
 {
     struct eye_mesh mesh;
     ce->size = (int)params_num(p, "bake_size");
-    size_t texels = (size_t)ce->size * ce->size, n8 = eye_groups(texels) * EYE_LANES;
+    size_t texels = (size_t)ce->size * ce->size, n8 = eye_items(texels) * EYE_LANES;
     if (eye_model_load(params_str(p, "model"), &mesh, err)) return -1;
     float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(n8 * 16 * sizeof(float));
     ce->rgba = malloc(texels * 4 * sizeof(float));
@@ -369,7 +458,8 @@ static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err
 
 int compound_eye_bake_size(const struct compound_eye *ce) { return ce->size; }
 
-int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
+/* Starts a view: the bake kernel's arguments. */
+static int eye_bake_start(struct compound_eye *ce, struct fx_err *err)
 {
     const cJSON *p = ce->params;
     double eye[3], light[3];
@@ -388,13 +478,31 @@ int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
         .lens_normal = params_enum(p, "shading_normal", eye_normal_names),
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
+    int n8 = (int)(eye_items((size_t)ce->size * ce->size) * EYE_LANES);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_pig},
         {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
-        {sizeof dot, &dot}, {sizeof base, &base}};
-    if (ocl_set_args(ce->k_bake, "eye_bake", a, 9, err)) return -1;
-    size_t texels = (size_t)ce->size * ce->size, global = eye_groups(texels);
-    return eye_run(ce, ce->k_bake, "eye_bake", &global, ce->d_out, texels * 4 * sizeof(float), rgba, err);
+        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &n8}};
+    ce->done = 0;
+    return ocl_set_args(ce->k_bake, "eye_bake", a, 10, err);
+}
+
+/* Renders the view into rgba until slice_end: 0 when it is complete, EFFECT_MORE, or -1 with err. */
+static int eye_bake_slice(struct compound_eye *ce, float *rgba, double slice_end, struct fx_err *err)
+{
+    if (ce->busy == EYE_IDLE) {
+        if (eye_bake_start(ce, err)) return -1;
+        ce->busy = EYE_TRACING;
+    }
+    int rc = eye_run(ce, ce->k_bake, "eye_bake", (size_t)ce->size * ce->size, ce->d_out, rgba, slice_end, err);
+    if (rc <= 0) eye_abandon(ce);
+    return rc;
+}
+
+int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
+{
+    eye_abandon(ce);
+    return eye_bake_slice(ce, rgba, INFINITY, err);
 }
 
 /* ---- life cycle -------------------------------------------------------------------- */
@@ -419,6 +527,7 @@ struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, stru
 void compound_eye_free(struct compound_eye *ce)
 {
     if (!ce) return;
+    eye_abandon(ce);
     cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
@@ -435,21 +544,19 @@ void compound_eye_free(struct compound_eye *ce)
 
 /* ---- effect_ops -------------------------------------------------------------------- */
 
-static int eye_emit_table(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
+static int eye_emit_table(struct compound_eye *ce, double slice_end, effect_emit_fn emit, void *ctx, struct fx_err *err)
 {
-    const void *data;
-    size_t len;
-    double t0 = clock_now() * 1e3;
-    if (compound_eye_table(ce, &data, &len, err)) return -1;
+    int rc = eye_table_slice(ce, slice_end, err);
+    if (rc) return rc;
     int W = eye_lut_atlas_width((int)params_num(ce->params, "lut_cells"), (int)params_num(ce->params, "lut_dirs"));
     struct effect_frame fr = {
         .kind = FXS_KIND_LUT,
         .codec = FXS_CODEC_LUT_PACK,
         .count_or_width = (uint32_t)W,
         .height = (uint32_t)W,
-        .payload = data,
-        .payload_bytes = len,
-        .encode_ms = clock_now() * 1e3 - t0,
+        .payload = ce->table.data,
+        .payload_bytes = ce->table.len,
+        .encode_ms = ce->pack_ms,
     };
     return emit(ctx, &fr);
 }
@@ -469,9 +576,10 @@ static int eye_encode_bake(void *self, struct effect_frame *fr, struct fx_err *e
     return 0;
 }
 
-static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx, struct fx_err *err)
+static int eye_emit_bake(struct compound_eye *ce, double slice_end, effect_emit_fn emit, void *ctx, struct fx_err *err)
 {
-    if (compound_eye_bake(ce, ce->rgba, err)) return -1;
+    int rc = eye_bake_slice(ce, ce->rgba, slice_end, err);
+    if (rc) return rc;
     struct effect_frame fr = {
         .kind = FXS_KIND_TEXTURE,
         .count_or_width = (uint32_t)ce->size,
@@ -484,13 +592,15 @@ static int eye_emit_bake(struct compound_eye *ce, effect_emit_fn emit, void *ctx
     return emit(ctx, &fr);
 }
 
-static int eye_step(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err)
+static int eye_step(void *self, double sim_time, double dt, double slice_end, effect_emit_fn emit, void *ctx,
+                    struct fx_err *err)
 {
     struct compound_eye *ce = self;
     (void)sim_time;
     (void)dt;
     if (!ce->dirty) return 0; /* nothing new: the hub still holds the last frame */
-    int rc = ce->mode == EYE_MODE_LUT ? eye_emit_table(ce, emit, ctx, err) : eye_emit_bake(ce, emit, ctx, err);
+    int rc = ce->mode == EYE_MODE_LUT ? eye_emit_table(ce, slice_end, emit, ctx, err)
+                                      : eye_emit_bake(ce, slice_end, emit, ctx, err);
     if (!rc) ce->dirty = 0;
     return rc;
 }
@@ -521,10 +631,11 @@ static void *eye_create(struct ocl *ocl, const cJSON *params, struct fx_err *err
 
 static int eye_apply(void *self, const cJSON *params, struct fx_err *err) { return compound_eye_set(self, params, err); }
 
-/* A reset sends the current table (or view) again. */
+/* A reset sends the current table (or view) again, computed afresh. */
 static int eye_reset(void *self, struct fx_err *err)
 {
     (void)err;
+    eye_abandon(self);
     ((struct compound_eye *)self)->dirty = 1;
     return 0;
 }

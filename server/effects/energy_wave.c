@@ -5,7 +5,10 @@
  * energy_wave_layout.h; the camera), the colour map, the EXR frame, and handing the same
  * sources and weights to the light rig (light_rig.c). Everything per frame is small uploads
  * plus one kernel and one read-back; big buffers (device output, host image, RGBA, EXR
- * bytes) are allocated once per texture size and reused. */
+ * bytes) are allocated once per texture size and reused. A frame that would hold the engine
+ * past its slice (effect.h) runs the kernel in pieces, a rectangle of work-groups at a time,
+ * each read back, checked and colour-mapped at once: the same work-items compute the same
+ * texels, so the picture does not depend on the slicing. */
 #include "energy_wave.h"
 
 #include <math.h>
@@ -16,6 +19,7 @@
 #include "../clock.h"
 #include "exr.h"
 #include "../ocl.h"
+#include "../slice.h"
 #include "../vec3.h"
 #include "energy_wave_layout.h" /* kernels/: record strides, camera block */
 #include "fxs_frame.h"
@@ -222,8 +226,10 @@ struct energy_wave {
     float cam[EW_CAM_FLOATS];
     float pts[WAVE_MAX_SRC * EW_PT_STRIDE], lns[WAVE_MAX_SRC * EW_LN_STRIDE], tor[WAVE_MAX_SRC * EW_TO_STRIDE];
     float cur[WAVE_MAX_SRC * EW_CV_STRIDE], wts[WAVE_MAX_SRC * EW_MAX_W];
-    /* reused frame buffers */
-    float *img, *rgba;
+    /* reused frame buffers: the frame in progress (luminance B, its colour map) and the last one
+     * completed, its texels emitted; swapped when a frame completes, so what was emitted stays as
+     * it is while the next frame is computed over several slices (effect.h) */
+    float *img, *rgba, *done_img, *done_rgba;
     struct fx_buf exr;
     /* this frame's curve weights (W times the pulses), shared by the kernel and the rig */
     double w[WAVE_MAX_SRC][WAVE_MAX_W];
@@ -232,7 +238,19 @@ struct energy_wave {
     struct light_rig lr;
     struct fxs_rig rig;
     uint8_t rig_payload[FXS_RIG_MAX_PAYLOAD];
+    /* the frame in progress: work-items of the kernel's grid done (row-major), and what one costs */
+    int busy;
+    size_t done;
+    struct slice_meter meter;
 };
+
+/* A frame's pieces are counted in groups of EW_GROUP work-items of one row, rows padded to whole
+ * groups (the kernel skips the work-items past the texture's edge); the first piece is
+ * EW_PROBE_GROUPS before their cost is known. On a CPU device each group is a work-group, every
+ * launch alike: PoCL compiles a kernel once per work-group size, so sizes left to it (one per
+ * piece size) cost a compilation each; a GPU's driver chooses its own. */
+#define EW_GROUP 16
+#define EW_PROBE_GROUPS 2
 
 static void ew_put3(float *dst, const double v[3])
 {
@@ -378,12 +396,14 @@ static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
     if (texels <= ew->out_texels) return 0;
     if (ew->d_out) clReleaseMemObject(ew->d_out);
     ew->d_out = NULL;
-    free(ew->img);
-    free(ew->rgba);
+    float **bufs[] = {&ew->img, &ew->rgba, &ew->done_img, &ew->done_rgba};
     ew->out_texels = 0;
-    ew->img = malloc(texels * sizeof(float));
-    ew->rgba = malloc(texels * 4 * sizeof(float));
-    if (!ew->img || !ew->rgba) return fx_fail(err, "internal", "", "out of memory for %zu texels", texels);
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++) {
+        free(*bufs[i]);
+        *bufs[i] = malloc(texels * (i % 2 ? 4 : 1) * sizeof(float));
+    }
+    if (!ew->img || !ew->rgba || !ew->done_img || !ew->done_rgba)
+        return fx_fail(err, "internal", "", "out of memory for %zu texels", texels);
     if (!(ew->d_out = ew_buffer(ew, CL_MEM_WRITE_ONLY, texels * sizeof(float), err))) return -1;
     ew->out_texels = texels;
     return 0;
@@ -393,6 +413,8 @@ static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
 
 int energy_wave_set(struct energy_wave *ew, const cJSON *params, struct fx_err *err)
 {
+    ew->busy = 0; /* a frame in progress is dropped */
+    ew->meter = (struct slice_meter){.probe = EW_PROBE_GROUPS};
     ew->mode = (enum ew_mode)params_enum(params, "mode", ew_mode_names);
     ew->width = (int)params_num(params, "width");
     ew->height = (int)params_num(params, "height");
@@ -435,6 +457,8 @@ void energy_wave_free(struct energy_wave *ew)
     if (ew->k_adaptive) clReleaseKernel(ew->k_adaptive);
     free(ew->img);
     free(ew->rgba);
+    free(ew->done_img);
+    free(ew->done_rgba);
     fx_buf_free(&ew->exr);
     free(ew);
 }
@@ -471,34 +495,77 @@ static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, in
     return ocl_set_args(k, name, a, k == ew->k_simpson ? 14 : 13, err);
 }
 
-int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err)
+static cl_kernel ew_kernel(const struct energy_wave *ew, const char **name)
+{
+    *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
+    return ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
+}
+
+/* Work-groups per row of the kernel's grid (EW_GROUP work-items of EW_LANES texels each), and in all. */
+static size_t ew_groups_x(const struct energy_wave *ew)
+{
+    return ((size_t)ew->width + EW_GROUP * EW_LANES - 1) / (EW_GROUP * EW_LANES);
+}
+static size_t ew_groups(const struct energy_wave *ew) { return ew_groups_x(ew) * (size_t)ew->height; }
+
+/* Starts a frame at sim_time: the curve weights, the uploads and the kernel's arguments. */
+static int ew_frame_begin(struct energy_wave *ew, double sim_time, struct fx_err *err)
 {
     wave_sources_weights(&ew->src, sim_time, ew->w);
     int nc = ew_pack_curves(ew);
-    if (ew_upload(ew, nc, err)) return -1;
-    cl_kernel k = ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
-    const char *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
-    if (ew_set_args(ew, k, name, nc, err)) return -1;
-    size_t global[2] = {(size_t)(ew->width + EW_LANES - 1) / EW_LANES, (size_t)ew->height};
+    const char *name;
+    cl_kernel k = ew_kernel(ew, &name);
+    if (ew_upload(ew, nc, err) || ew_set_args(ew, k, name, nc, err)) return -1;
+    ew->done = 0;
+    return 0;
+}
+
+/* Runs the frame's next n work-groups (at most) as one rectangle of the grid, the rest of a row
+ * or whole rows, and reads their texels back into out, texels [*from, *to); ew->done moves on.
+ * 0, or -1 with err. */
+static int ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *from, size_t *to, struct fx_err *err)
+{
+    const size_t gx = ew_groups_x(ew), w = (size_t)ew->width, j = ew->done / gx, x = ew->done % gx;
+    size_t groups[2] = {gx, n / gx};
+    if (x > 0 || n < gx) { /* within a row */
+        groups[0] = n < gx - x ? n : gx - x;
+        groups[1] = 1;
+    }
+    const size_t span = EW_GROUP * EW_LANES; /* texels of a group */
+    size_t offset[2] = {x * EW_GROUP, j}, global[2] = {groups[0] * EW_GROUP, groups[1]}, local[2] = {EW_GROUP, 1};
+    const size_t *wg = ocl_is_cpu(ew->ocl) ? local : NULL;
+    *from = j * w + x * span;
+    *to = groups[1] > 1 || (x + groups[0]) * span >= w ? (j + groups[1]) * w : j * w + (x + groups[0]) * span;
+    const char *name;
+    cl_kernel k = ew_kernel(ew, &name);
     cl_event ev;
     cl_command_queue q = ocl_queue(ew->ocl);
-    cl_int rc = clEnqueueNDRangeKernel(q, k, 2, NULL, global, NULL, 0, NULL, &ev);
+    cl_int rc = clEnqueueNDRangeKernel(q, k, 2, offset, global, wg, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
-    rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, 0, (size_t)ew->width * ew->height * sizeof(float), out, 0, NULL, NULL);
+    rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, *from * sizeof(float), (*to - *from) * sizeof(float), out + *from,
+                             0, NULL, NULL);
     if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);
     clReleaseEvent(ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
+    ew->done += groups[0] * groups[1];
     return 0;
+}
+
+int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err)
+{
+    size_t from, to;
+    ew->busy = 0;
+    return ew_frame_begin(ew, sim_time, err) || ew_frame_piece(ew, ew_groups(ew), out, &from, &to, err) ? -1 : 0;
 }
 
 /* ---- effect_ops ---------------------------------------------------------------------- */
 
 static float ew_clamp01(double v) { return (float)(v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v)); }
 
-/* digest §2.7 proposal: RGBA = clamp((1−B)C_b + B·C_e, 0, 1), A = clamp(B, 0, 1). */
-static void ew_colour_map(const struct energy_wave *ew, size_t texels)
+/* digest §2.7 proposal: RGBA = clamp((1−B)C_b + B·C_e, 0, 1), A = clamp(B, 0, 1), texels [from, to). */
+static void ew_colour_map(const struct energy_wave *ew, size_t from, size_t to)
 {
-    for (size_t i = 0; i < texels; i++) {
+    for (size_t i = from; i < to; i++) {
         double B = ew->img[i];
         float *px = ew->rgba + 4 * i;
         for (int c = 0; c < 3; c++) px[c] = ew_clamp01((1.0 - B) * ew->color_b[c] + B * ew->color_e[c]);
@@ -506,9 +573,9 @@ static void ew_colour_map(const struct energy_wave *ew, size_t texels)
     }
 }
 
-static int ew_check_finite(const float *img, size_t texels, struct fx_err *err)
+static int ew_check_finite(const float *img, size_t from, size_t to, struct fx_err *err)
 {
-    for (size_t i = 0; i < texels; i++)
+    for (size_t i = from; i < to; i++)
         if (!isfinite(img[i]))
             return fx_fail(err, "internal", "", "energy_wave rendered a non-finite value at texel %zu", i);
     return 0;
@@ -529,20 +596,50 @@ static int ew_encode(void *self, struct effect_frame *fr, struct fx_err *err)
     return 0;
 }
 
-static int ew_step(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err)
+/* Renders the frame's next pieces into ew->img (and ew->rgba) until slice_end: 0 when the
+ * texture is complete (then in ew->done_img and ew->done_rgba), EFFECT_MORE, or -1 with err. */
+static int ew_render_slice(struct energy_wave *ew, double sim_time, double slice_end, struct fx_err *err)
+{
+    if (!ew->busy && ew_frame_begin(ew, sim_time, err)) return -1;
+    ew->busy = 1;
+    const size_t total = ew_groups(ew);
+    double t0 = clock_now();
+    do {
+        size_t from, to, before = ew->done;
+        if (ew_frame_piece(ew, slice_units(&ew->meter, total - before, t0, slice_end), ew->img, &from, &to, err) ||
+            ew_check_finite(ew->img, from, to, err)) {
+            ew->busy = 0;
+            return -1;
+        }
+        if (ew->output == 1) ew_colour_map(ew, from, to);
+        double t1 = clock_now();
+        slice_record(&ew->meter, ew->done - before, t1 - t0);
+        t0 = t1;
+    } while (ew->done < total && t0 < slice_end);
+    if (ew->done < total) return EFFECT_MORE;
+    ew->busy = 0;
+    float *img = ew->img, *rgba = ew->rgba;
+    ew->img = ew->done_img;
+    ew->rgba = ew->done_rgba;
+    ew->done_img = img;
+    ew->done_rgba = rgba;
+    return 0;
+}
+
+static int ew_step(void *self, double sim_time, double dt, double slice_end, effect_emit_fn emit, void *ctx,
+                   struct fx_err *err)
 {
     struct energy_wave *ew = self;
-    size_t texels = (size_t)ew->width * (size_t)ew->height;
     (void)dt;
-    if (energy_wave_render(ew, sim_time, ew->img, err) || ew_check_finite(ew->img, texels, err)) return -1;
-    if (ew->output == 1) ew_colour_map(ew, texels);
+    int rc = ew_render_slice(ew, sim_time, slice_end, err);
+    if (rc) return rc;
     struct effect_frame fr = {
         .kind = FXS_KIND_TEXTURE,
         .count_or_width = (uint32_t)ew->width,
         .height = (uint32_t)ew->height,
         .encode = ew_encode,
         .self = ew,
-        .texels = ew->output == 1 ? ew->rgba : ew->img,
+        .texels = ew->output == 1 ? ew->done_rgba : ew->done_img,
         .channels = ew->output == 1 ? 4 : 1,
     };
     if (emit(ctx, &fr)) return -1;
@@ -589,11 +686,12 @@ static int ew_apply(void *self, const cJSON *params, struct fx_err *err)
     return energy_wave_set(self, params, err);
 }
 
-/* The effect has no state beyond its parameters: time comes with every step. */
+/* The effect has no state beyond its parameters (time comes with every step) but the frame in
+ * progress, which a reset drops. */
 static int ew_reset(void *self, struct fx_err *err)
 {
-    (void)self;
     (void)err;
+    ((struct energy_wave *)self)->busy = 0;
     return 0;
 }
 

@@ -7,10 +7,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../clock.h"
 #include "compound_eye_layout.h" /* kernels/: EYE_HEX, EYE_SQRT3 */
-#include "fxs_lut.h"
 
 #define EYE_LUT_ZSTD_LEVEL 1 /* level 1: ~5x faster than 3 and within a few % of its size here */
+#define EYE_LUT_BLOCK 65536  /* bytes compressed per unit of the packer's slices */
 
 /* ---- pigment (digest G14, §3.4.1 ring and glow) ------------------------------------ */
 
@@ -79,11 +80,11 @@ int eye_lut_atlas_width(int cells, int dirs) { return dirs * (cells + 2 * EYE_LU
 
 /* Tile (ti, tj) occupies texels [ti*(C+2), (ti+1)*(C+2)) in x (likewise y); its gutter
  * repeats the opposite edge of the cell (the pattern is periodic), so bilinear filtering
- * inside a tile never reads a neighbouring direction. Written a tile row at a time. */
-void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
+ * inside a tile never reads a neighbouring direction. Rows [y0, y1). */
+static void eye_lut_atlas_rows(const struct eye_lut_table *t, uint8_t *atlas, int y0, int y1)
 {
     const int C = t->cells, T = C + 2 * EYE_LUT_GUTTER, W = eye_lut_atlas_width(C, t->dirs);
-    for (int y = 0; y < W; y++) {
+    for (int y = y0; y < y1; y++) {
         int tj = y / T, cj = (y % T - EYE_LUT_GUTTER + C) % C;
         for (int ti = 0; ti < t->dirs; ti++) {
             const float *row = t->samples + 4 * ((size_t)(tj * t->dirs + ti) * C * C + (size_t)cj * C);
@@ -96,10 +97,16 @@ void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
     }
 }
 
-void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
+void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
+{
+    eye_lut_atlas_rows(t, atlas, 0, eye_lut_atlas_width(t->cells, t->dirs));
+}
+
+/* Tiles [from, to) of the macro map. */
+static void eye_lut_macro_tiles(const struct eye_lut_table *t, uint8_t *macro, int from, int to)
 {
     const size_t per = (size_t)t->cells * t->cells;
-    for (int tile = 0; tile < t->dirs * t->dirs; tile++) {
+    for (int tile = from; tile < to; tile++) {
         double acc[4] = {0};
         const float *s = t->samples + 4 * per * tile;
         for (size_t i = 0; i < per; i++)
@@ -108,40 +115,121 @@ void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
     }
 }
 
+void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
+{
+    eye_lut_macro_tiles(t, macro, 0, t->dirs * t->dirs);
+}
+
 /* ---- the container (protocol/fxs_lut.h, PROTOCOL.md §7.6) ------------------------ */
 
-int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err)
+enum { EYE_PACK_ATLAS, EYE_PACK_MACRO, EYE_PACK_ZSTD, EYE_PACK_DONE };
+
+int eye_lut_pack_begin(struct eye_lut_packer *pk, const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err)
 {
     const int W = eye_lut_atlas_width(t->cells, t->dirs);
     size_t pig_bytes = (size_t)t->pw * t->ph * 4;
-    uint8_t *pig = malloc(pig_bytes), *atlas = malloc((size_t)W * W * 4), *macro = malloc((size_t)t->dirs * t->dirs * 4);
-    int rc = -1;
+    *pk = (struct eye_lut_packer){.t = *t, .out = out};
+    pk->pig = malloc(pig_bytes);
+    pk->atlas = malloc((size_t)W * W * 4);
+    pk->macro = malloc((size_t)t->dirs * t->dirs * 4);
     struct fxs_lut_product products[3] = {
-        {.name = "PIGM", .width = (uint32_t)t->pw, .height = (uint32_t)t->ph, .tiles_x = 1, .tiles_y = 1, .rgba = pig},
+        {.name = "PIGM", .width = (uint32_t)t->pw, .height = (uint32_t)t->ph, .tiles_x = 1, .tiles_y = 1, .rgba = pk->pig},
         {.name = "LLUT", .width = (uint32_t)W, .height = (uint32_t)W, .tile = (uint32_t)(t->cells + 2 * EYE_LUT_GUTTER),
-         .tiles_x = (uint32_t)t->dirs, .tiles_y = (uint32_t)t->dirs, .inner = (uint32_t)t->cells, .rgba = atlas},
+         .tiles_x = (uint32_t)t->dirs, .tiles_y = (uint32_t)t->dirs, .inner = (uint32_t)t->cells, .rgba = pk->atlas},
         {.name = "LMAC", .width = (uint32_t)t->dirs, .height = (uint32_t)t->dirs, .tile = 1, .tiles_x = (uint32_t)t->dirs,
-         .tiles_y = (uint32_t)t->dirs, .inner = 1, .rgba = macro},
+         .tiles_y = (uint32_t)t->dirs, .inner = 1, .rgba = pk->macro},
     };
+    memcpy(pk->products, products, sizeof products);
     const struct fxs_lut_info info = {
         (uint32_t)t->lattice, t->tile_h,          t->lens_radius,     t->refractive_index,         t->pigment_depth,
         (uint32_t)t->max_passes, (uint32_t)t->cells, (uint32_t)t->dirs, EYE_LUT_GUTTER, (uint32_t)t->supersample,
     };
-    size_t cap = fxs_lut_bound(products, 3);
+    size_t cap = fxs_lut_bound(pk->products, 3);
     out->len = 0;
-    if (!pig || !atlas || !macro || fx_buf_reserve(out, cap)) {
-        fx_fail(err, "internal", "", "out of memory for a %dx%d lens table", W, W);
-        goto done;
+    if (!pk->pig || !pk->atlas || !pk->macro || fx_buf_reserve(out, cap)) {
+        eye_lut_pack_free(pk);
+        return fx_fail(err, "internal", "", "out of memory for a %dx%d lens table", W, W);
     }
-    for (size_t i = 0; i < pig_bytes; i++) pig[i] = eye_u8(t->pigment[i]);
-    eye_lut_atlas(t, atlas);
-    eye_lut_macro(t, macro);
+    for (size_t i = 0; i < pig_bytes; i++) pk->pig[i] = eye_u8(t->pigment[i]);
+    pk->t.pigment = NULL;
+    for (int k = 0; k < 3; k++) pk->meter[k].probe = 1;
     char msg[128];
-    out->len = fxs_lut_encode(&info, products, 3, EYE_LUT_ZSTD_LEVEL, out->data, cap, msg, sizeof msg);
-    rc = out->len ? 0 : fx_fail(err, "internal", "", "%s", msg);
-done:
-    free(pig);
-    free(atlas);
-    free(macro);
+    if (fxs_lut_encode_begin(&pk->enc, &info, pk->products, 3, EYE_LUT_ZSTD_LEVEL, out->data, cap, msg, sizeof msg)) {
+        eye_lut_pack_free(pk);
+        return fx_fail(err, "internal", "", "%s", msg);
+    }
+    return 0;
+}
+
+/* Does n units of the current stage (rows, tiles, blocks): 1 while the stage has more, 0 when
+ * it is over, -1 with err. */
+static int eye_lut_pack_units(struct eye_lut_packer *pk, size_t n, struct fx_err *err)
+{
+    if (pk->stage == EYE_PACK_ZSTD) {
+        char msg[128];
+        int rc = fxs_lut_encode_some(&pk->enc, n * EYE_LUT_BLOCK, msg, sizeof msg);
+        if (rc < 0) return fx_fail(err, "internal", "", "%s", msg);
+        pk->out->len = pk->enc.len;
+        return rc;
+    }
+    pk->pos += n;
+    if (pk->stage == EYE_PACK_ATLAS)
+        eye_lut_atlas_rows(&pk->t, pk->atlas, (int)(pk->pos - n), (int)pk->pos);
+    else
+        eye_lut_macro_tiles(&pk->t, pk->macro, (int)(pk->pos - n), (int)pk->pos);
+    return 1;
+}
+
+/* Units left in the current stage. */
+static size_t eye_lut_pack_left(const struct eye_lut_packer *pk)
+{
+    const size_t W = (size_t)eye_lut_atlas_width(pk->t.cells, pk->t.dirs);
+    switch (pk->stage) {
+    case EYE_PACK_ATLAS: return W - pk->pos;
+    case EYE_PACK_MACRO: return (size_t)pk->t.dirs * pk->t.dirs - pk->pos;
+    default: {
+        size_t raw = 0;
+        for (int i = pk->enc.cur; i < 3; i++) raw += (size_t)pk->products[i].width * pk->products[i].height * 4;
+        return (raw - pk->enc.done + EYE_LUT_BLOCK - 1) / EYE_LUT_BLOCK;
+    }
+    }
+}
+
+int eye_lut_pack_run(struct eye_lut_packer *pk, double slice_end, struct fx_err *err)
+{
+    double t0 = clock_now();
+    while (pk->stage != EYE_PACK_DONE) {
+        size_t left = eye_lut_pack_left(pk);
+        struct slice_meter *m = &pk->meter[pk->stage];
+        size_t n = left ? slice_units(m, left, t0, slice_end) : 0;
+        int rc = n ? eye_lut_pack_units(pk, n, err) : 0;
+        if (rc < 0) return -1;
+        double t1 = clock_now();
+        slice_record(m, n, t1 - t0);
+        t0 = t1;
+        if (n == left || (pk->stage == EYE_PACK_ZSTD && rc == 0)) {
+            pk->stage++;
+            pk->pos = 0;
+        }
+        if (pk->stage != EYE_PACK_DONE && t0 >= slice_end) return 1;
+    }
+    return 0;
+}
+
+void eye_lut_pack_free(struct eye_lut_packer *pk)
+{
+    fxs_lut_encode_free(&pk->enc);
+    free(pk->pig);
+    free(pk->atlas);
+    free(pk->macro);
+    pk->pig = pk->atlas = pk->macro = NULL;
+}
+
+int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err)
+{
+    struct eye_lut_packer pk;
+    if (eye_lut_pack_begin(&pk, t, out, err)) return -1;
+    int rc = eye_lut_pack_run(&pk, INFINITY, err);
+    eye_lut_pack_free(&pk);
     return rc;
 }

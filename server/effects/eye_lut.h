@@ -12,6 +12,8 @@
 
 #include "buf.h"
 #include "err.h"
+#include "fxs_lut.h"
+#include "../slice.h"
 
 #define EYE_LUT_GUTTER 1 /* texels around each LLUT tile */
 
@@ -45,6 +47,25 @@ struct eye_lut_table {
 
 /* Lays out the three products and packs the container into out (reset to empty first). */
 int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err);
+
+/* The same in pieces, for the daemon's slices (effect.h): begin, then eye_lut_pack_run until it
+ * returns 0 (out holds the container), then free (also to abandon it). The table's samples must
+ * stay as they are until then; the pigment is copied at begin. */
+struct eye_lut_packer {
+    struct eye_lut_table t;
+    struct fx_buf *out;
+    int stage;    /* laying out the atlas, the macro map, compressing, done */
+    size_t pos;   /* atlas rows or macro tiles done in the stage */
+    uint8_t *pig, *atlas, *macro;
+    struct fxs_lut_product products[3];
+    struct fxs_lut_encoder enc;
+    struct slice_meter meter[3]; /* per stage: atlas rows, macro tiles, compressed blocks */
+};
+int eye_lut_pack_begin(struct eye_lut_packer *pk, const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err);
+/* Works until slice_end (INFINITY: to the end): 0 when the container is complete, 1 when work is
+ * left, -1 with err. */
+int eye_lut_pack_run(struct eye_lut_packer *pk, double slice_end, struct fx_err *err);
+void eye_lut_pack_free(struct eye_lut_packer *pk);
 
 /* The LLUT atlas (RGBA8, atlas_w x atlas_w with atlas_w = dirs*(cells+2)) and the LMAC map
  * (dirs x dirs) of a table, as packed; exposed for tests. */

@@ -230,6 +230,13 @@ struct fl_event {
     cl_event ev;
 };
 
+/* A frame's substeps, which may run over several slices of the engine (effect.h): planned, done,
+ * its time budget and the time its substeps took so far (ms). */
+struct fl_frame_plan {
+    int busy, n, done;
+    double budget_ms, spent_ms;
+};
+
 struct flame {
     struct ocl *ocl;
     cl_kernel k[K_N];
@@ -250,9 +257,10 @@ struct flame {
     double h, d, dt, time_scale, space_scale, t_amb, period_ms;
     double emit_ms; /* wall time of the last frame's read-back, encoding and the substep run beside it */
     int enc_threads; /* threads a frame's encoding may use: 1 on a CPU device, else the cores up to FL_ENC_THREADS_MAX */
-    double step_ms; /* recent wall time per substep (moving average; 0 = not measured yet) */
+    double step_ms; /* recent time per substep, the wall time of its slices (moving average; 0 = none yet) */
     double fit_frac; /* the fraction of a substep that the budgets of frames cut short left over */
     int ahead;       /* substeps of the coming frame already run beside the last encoding (0 or 1) */
+    struct fl_frame_plan frame; /* the frame in progress (fl_step) */
     int rs_pending;  /* a resampling step's totals are being read into rs_tot and rs_err (fl_step_end) */
     cl_uint rs_tot[3];
     cl_int rs_err;
@@ -826,6 +834,7 @@ static void fl_clock_reset(struct flame *fl)
     fl->steps = 0;
     fl->sim_seconds = fl->carry = 0;
     fl->ahead = 0;
+    fl->frame.busy = 0;
     fl->next_id = 0;
 }
 
@@ -1072,12 +1081,11 @@ static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struc
     return ret;
 }
 
-/* Real time (§7 of the digest, "time scale"): round(dt_wall * time_scale / dt) substeps with
- * the fraction carried, at most max_substeps (then the stream runs slower than real time). */
-static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, void *ctx, struct fx_err *err)
+/* Plans a frame. Real time (§7 of the digest, "time scale"): round(dt_wall * time_scale / dt)
+ * substeps with the fraction carried, at most max_substeps (then the stream runs slower than
+ * real time). */
+static void fl_plan(struct flame *fl, double dt)
 {
-    struct flame *fl = self;
-    (void)sim_time;
     fl->carry += dt * fl->time_scale;
     /* The substeps this frame owes: none when the one run ahead covered them (carry < 0), and
      * at most max_substeps counting that one. */
@@ -1089,7 +1097,7 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
     } else {
         fl->carry -= n * fl->dt;
     }
-    /* Wall-clock budget: the substeps get the frame period less the last frame's read-back and
+    /* Time budget: the substeps get the frame period less the last frame's read-back and
      * encoding (with the substep that ran beside it) and a margin; as many run as fit at the
      * recent time per substep. The plan comes from the average of earlier frames, since the
      * clock can only be read where the host waits for the device (resampling steps): deciding
@@ -1101,8 +1109,9 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
      * machine streams at a steady frame rate while /metrics reports its real-time factor. A
      * frame still stops once it is over budget. Together with the substep run beside the
      * encoding this raised the default scene's real-time factor on a 2-core host by about a
-     * tenth (docs/performance-log.md). */
-    double t0 = clock_now() * 1e3, budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
+     * tenth (docs/performance-log.md). Times are the frame's own: the engine may run other
+     * streams between its slices. */
+    double budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
     double fitf = fl->step_ms > 0 ? budget / fl->step_ms + fl->fit_frac : n;
     int fit = (int)fitf;
     fl->fit_frac = 0;
@@ -1112,22 +1121,62 @@ static int fl_step(void *self, double sim_time, double dt, effect_emit_fn emit, 
         n = cut;
         fl->fit_frac = fmax(fitf - n, 0); /* < 1: n = floor(fitf), or 1 when fitf < 1 */
     }
-    int done = 0;
-    while (done < n) {
+    fl->frame = (struct fl_frame_plan){.busy = 1, .n = n, .budget_ms = budget};
+}
+
+/* Runs the planned substeps until slice_end (clock.h seconds): it stops before a substep that
+ * would end after it, at the recent time per substep, once one ran; the queue is then drained.
+ * 0 when the substeps are done (or the budget cut them short), EFFECT_MORE, or -1 with err. */
+static int fl_substeps(struct flame *fl, double slice_end, struct fx_err *err)
+{
+    struct fl_frame_plan *f = &fl->frame;
+    double t0 = clock_now() * 1e3, synced_ms = t0, end_ms = slice_end * 1e3;
+    int ran = 0, since_sync = 0;
+    while (f->done < f->n) {
+        if (ran && fl->step_ms > 0 && synced_ms + (since_sync + 1) * fl->step_ms > end_ms) {
+            if (fl_finish(fl, err)) return -1;
+            f->spent_ms += clock_now() * 1e3 - t0;
+            return EFFECT_MORE;
+        }
         int synced = fl->steps % (uint64_t)fl->interval == 0;
         if (fl_step_once(fl, err)) return -1;
-        done++;
-        if (synced && done < n && clock_now() * 1e3 - t0 > budget) {
-            fl_carry_over(fl, n - done);
-            break;
+        f->done++;
+        ran++;
+        since_sync++;
+        if (!synced) continue;
+        synced_ms = clock_now() * 1e3; /* the resampling step waited for the device */
+        since_sync = 0;
+        if (f->done < f->n && f->spent_ms + synced_ms - t0 > f->budget_ms) {
+            fl_carry_over(fl, f->n - f->done);
+            f->n = f->done;
         }
     }
-    if (done > 0) {
-        if (fl_finish(fl, err)) return -1;
-        double per = (clock_now() * 1e3 - t0) / done;
+    if (ran && fl_finish(fl, err)) return -1;
+    f->spent_ms += clock_now() * 1e3 - t0;
+    if (f->done > 0) {
+        double per = f->spent_ms / f->done;
         fl->step_ms = fl->step_ms > 0 ? 0.7 * fl->step_ms + 0.3 * per : per;
     }
-    return fl_emit_frame(fl, emit, ctx, err);
+    return 0;
+}
+
+/* Drops the frame in progress, its undone substeps carried. */
+static void fl_abandon(struct flame *fl)
+{
+    if (fl->frame.busy) fl_carry_over(fl, fl->frame.n - fl->frame.done);
+    fl->frame.busy = 0;
+}
+
+static int fl_step(void *self, double sim_time, double dt, double slice_end, effect_emit_fn emit, void *ctx,
+                   struct fx_err *err)
+{
+    struct flame *fl = self;
+    (void)sim_time;
+    if (!fl->frame.busy) fl_plan(fl, dt);
+    int rc = fl_substeps(fl, slice_end, err);
+    if (rc == EFFECT_MORE) return rc;
+    fl->frame.busy = 0;
+    return rc ? rc : fl_emit_frame(fl, emit, ctx, err);
 }
 
 static void *fl_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
@@ -1135,7 +1184,12 @@ static void *fl_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
     return flame_new(ocl, params, err);
 }
 
-static int fl_apply(void *self, const cJSON *params, struct fx_err *err) { return flame_set(self, params, err); }
+static int fl_apply(void *self, const cJSON *params, struct fx_err *err)
+{
+    fl_abandon(self);
+    return flame_set(self, params, err);
+}
+
 static int fl_reset(void *self, struct fx_err *err) { return fl_restart(self, err); }
 static void fl_destroy(void *self) { flame_free(self); }
 static double fl_sim_seconds(void *self) { return ((struct flame *)self)->sim_seconds; }

@@ -184,7 +184,7 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     for (int f = 0; f < frames; f++) {
         nsum += flame_count(fl);
         double f0 = bench_now();
-        if (flame_effect.step(fl, 0, fmin(f0 - last, 0.25), bench_emit, &out, &err)) bench_die("step", &err);
+        if (flame_effect.step(fl, 0, fmin(f0 - last, 0.25), INFINITY, bench_emit, &out, &err)) bench_die("step", &err);
         last = f0;
         busy += bench_now() - f0;
         due = fmax(due + 1.0 / 30, bench_now()); /* engine_run_due: an overrun starts the next frame at once */

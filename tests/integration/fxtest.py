@@ -100,6 +100,13 @@ class Daemon:
             return None
 
 
+def cpu_seconds(daemon):
+    """User + system CPU time of the daemon so far (/proc/PID/stat)."""
+    with open("/proc/%d/stat" % daemon.proc.pid) as f:
+        rest = f.read().rsplit(")", 1)[1].split()
+    return (int(rest[11]) + int(rest[12])) / os.sysconf("SC_CLK_TCK")
+
+
 async def refusal(daemon, url=None, read=False, **kw):
     """How the daemon refused a WebSocket: "http N" (handshake answered with status N),
     "closed" (the connection was dropped during the handshake, or, with read=True, closed

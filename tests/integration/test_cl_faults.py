@@ -16,7 +16,7 @@ import time
 import urllib.error
 import urllib.request
 
-from fxtest import ROOT, Client, Daemon, Suite
+from fxtest import ROOT, Client, Daemon, Suite, cpu_seconds
 
 CLFAULT = os.path.join(ROOT, "build", "lib", "libclfault.so")
 ENERGY_FPS = 30  # the default energy_wave fps
@@ -52,13 +52,6 @@ def healthz(d):
 
 def last_error(h, stream):
     return next((s.get("last_error", "") for s in h.get("streams", []) if s["stream"] == stream), "")
-
-
-def cpu_seconds(d):
-    """User + system CPU time of the daemon so far (/proc/PID/stat)."""
-    with open("/proc/%d/stat" % d.proc.pid) as f:
-        rest = f.read().rsplit(")", 1)[1].split()
-    return (int(rest[11]) + int(rest[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def rss_kib(d):

@@ -16,6 +16,8 @@
 #include "../ref/kernel_probe.h"
 #include "check.h"
 #include "effects/energy_wave.h"
+#include "fxs_frame.h"
+#include "slices.h"
 #include "effects/wave_sources.h"
 #include "ocl.h"
 #include "params.h"
@@ -858,6 +860,94 @@ static void test_animation_render(void)
     cJSON_Delete(doc);
 }
 
+/* A frame stepped by a new energy_wave effect with the given budget per call (slices.h). */
+static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame *out)
+{
+    struct fx_err err = {0};
+    void *ew = energy_wave_effect.create(tek_ocl, doc, &err);
+    int rc = ew ? slices_step(&energy_wave_effect, ew, 0.7, budget, out, &err) : -1;
+    CHECK(rc == 0, "step with %g s per call: %s", budget, err.message);
+    if (ew) energy_wave_effect.destroy(ew);
+    return rc;
+}
+
+/* Slices do not change the picture: a frame stepped a work-group per call, and a few
+ * milliseconds per call, is the frame stepped whole, byte for byte (its EXR payload), raw Y and
+ * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups. */
+static void test_sliced_frames(void)
+{
+    static const char *const outputs[] = {"Y", "RGBA"};
+    for (int o = 0; o < 2; o++) {
+        char partial[128];
+        snprintf(partial, sizeof partial, "{\"width\":200,\"height\":40,\"output\":\"%s\"}", outputs[o]);
+        cJSON *doc = tek_doc(cJSON_Parse(partial));
+        struct slices_frame whole = {.kind = FXS_KIND_TEXTURE}, piece = {.kind = FXS_KIND_TEXTURE},
+                            ms = {.kind = FXS_KIND_TEXTURE};
+        if (doc && !tek_sliced_frame(doc, INFINITY, &whole) && !tek_sliced_frame(doc, 0, &piece) &&
+            !tek_sliced_frame(doc, 0.003, &ms)) {
+            CHECK(whole.calls == 1 && piece.calls >= 40, "%s: %d calls whole, %d a group at a time", outputs[o],
+                  whole.calls, piece.calls);
+            CHECK(whole.payload && piece.len == whole.len && !memcmp(piece.payload, whole.payload, whole.len),
+                  "%s: the frame in pieces of a group is the whole frame", outputs[o]);
+            CHECK(ms.len == whole.len && !memcmp(ms.payload, whole.payload, whole.len),
+                  "%s: the frame in 3 ms slices (%d) is the whole frame", outputs[o], ms.calls);
+        }
+        slices_free(&whole);
+        slices_free(&piece);
+        slices_free(&ms);
+        cJSON_Delete(doc);
+    }
+}
+
+static int tek_keep_texture(void *ctx, const struct effect_frame *f)
+{
+    if (f->kind == FXS_KIND_TEXTURE) *(struct effect_frame *)ctx = *f;
+    return 0;
+}
+
+/* The frame a step emitted stays as it was while the next one is computed in slices (effect.h),
+ * so the engine can still encode it for a subscriber of another encoding: its texels and its
+ * EXR, after part of the next frame of a pulse running along the curves (a different picture). */
+static void test_emitted_frame_kept(void)
+{
+    cJSON *doc = tek_doc(cJSON_Parse("{\"tori\":[],\"size\":20.4,\"curves\":[{\"p0\":[-13.2,-4.2,1.8],"
+                                     "\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":8.0}],\"animate\":true,"
+                                     "\"width\":200,\"height\":40,\"output\":\"RGBA\"}"));
+    struct fx_err err = {0};
+    void *ew = doc ? energy_wave_effect.create(tek_ocl, doc, &err) : NULL;
+    struct effect_frame first = {0}, next = {0};
+    const size_t bytes = (size_t)200 * 40 * 4 * sizeof(float);
+    float *texels = malloc(bytes);
+    int rc = ew ? energy_wave_effect.step(ew, 0.3, 1.0 / 30, INFINITY, tek_keep_texture, &first, &err) : -1;
+    CHECK(rc == 0 && first.texels && first.channels == 4 && texels, "frame 1: %s", err.message);
+    struct effect_frame exr = first;
+    if (rc || !first.texels || !texels || effect_frame_encode(&exr, &err)) {
+        CHECK(0, "frame 1's EXR: %s", err.message);
+        goto out;
+    }
+    memcpy(texels, first.texels, bytes);
+    uint8_t *payload = malloc(exr.payload_bytes);
+    size_t len = exr.payload_bytes;
+    if (payload) memcpy(payload, exr.payload, len);
+    int calls = 0;
+    while ((rc = energy_wave_effect.step(ew, 0.9, calls ? 0 : 0.6, 0, tek_keep_texture, &next, &err)) == EFFECT_MORE &&
+           ++calls < 4) {}
+    CHECK(rc == EFFECT_MORE && !next.texels, "frame 2 in progress after %d calls (rc %d)", calls, rc);
+    CHECK(!memcmp(first.texels, texels, bytes), "frame 1's texels are as emitted while frame 2 runs");
+    exr = first;
+    exr.payload = NULL;
+    CHECK(payload && !effect_frame_encode(&exr, &err) && exr.payload_bytes == len && !memcmp(exr.payload, payload, len),
+          "frame 1's EXR made again while frame 2 runs is the same: %s", err.message);
+    while (rc == EFFECT_MORE) rc = energy_wave_effect.step(ew, 0.9, 0, INFINITY, tek_keep_texture, &next, &err);
+    CHECK(rc == 0 && next.texels && memcmp(next.texels, texels, bytes), "frame 2 completes, another picture: %s",
+          err.message);
+    free(payload);
+out:
+    free(texels);
+    if (ew) energy_wave_effect.destroy(ew);
+    cJSON_Delete(doc);
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -884,6 +974,8 @@ int main(void)
     RUN(test_epsilon_no_nan);
     RUN(test_sources_near_eye);
     RUN(test_animation_render);
+    RUN(test_sliced_frames);
+    RUN(test_emitted_frame_kept);
     cJSON_Delete(tek_defaults);
     ocl_close(tek_ocl);
     return CHECK_DONE();

@@ -17,6 +17,7 @@
 #include "fxs_lut.h"
 #include "ocl.h"
 #include "params.h"
+#include "slices.h"
 
 #define TEK_N 4096
 
@@ -288,6 +289,62 @@ static void test_atlas_gutters(void)
     }
 }
 
+/* A table or view stepped by a new compound_eye effect with the given budget per call (slices.h). */
+static int tek_sliced_step(const cJSON *doc, double budget, struct slices_frame *out)
+{
+    struct fx_err err = {0};
+    void *ce = compound_eye_effect.create(tek_ocl, doc, &err);
+    int rc = ce ? slices_step(&compound_eye_effect, ce, 0, budget, out, &err) : -1;
+    CHECK(rc == 0 && out->payload, "step with %g s per call: %s", budget, err.message);
+    if (ce) compound_eye_effect.destroy(ce);
+    return rc || !out->payload ? -1 : 0;
+}
+
+/* The products of a table (decompressed) and a bake's EXR payload stepped a work-group or a
+ * packing unit per call are those stepped whole, byte for byte. */
+static void test_sliced_steps(void)
+{
+    static const char *const partials[] = {
+        "{\"lut_cells\":8,\"lut_dirs\":8,\"lut_supersample\":2,\"lattice\":\"hex\"}",
+        "{\"mode\":\"bake\",\"bake_size\":129}",
+    };
+    for (int i = 0; i < 2; i++) {
+        cJSON *doc = params_defaults(compound_eye_params), *p = cJSON_Parse(partials[i]), *full = NULL;
+        struct fx_err err = {0};
+        CHECK(params_merge(compound_eye_params, doc, p, &full, &err) == 0, "merge: %s", err.message);
+        uint16_t kind = i ? FXS_KIND_TEXTURE : FXS_KIND_LUT;
+        struct slices_frame whole = {.kind = kind}, piece = {.kind = kind};
+        if (full && !tek_sliced_step(full, INFINITY, &whole) && !tek_sliced_step(full, 0, &piece)) {
+            CHECK(whole.calls == 1 && piece.calls >= 8, "%s: %d calls whole, %d in pieces", partials[i], whole.calls,
+                  piece.calls);
+            if (i == 1) {
+                CHECK(piece.len == whole.len && !memcmp(piece.payload, whole.payload, whole.len),
+                      "bake: the view in pieces is the whole view");
+            } else {
+                char msg[128] = "";
+                for (int k = 0; k < 3; k++) {
+                    struct fxs_lut_product a, b;
+                    uint8_t *ta = NULL, *tb = NULL;
+                    if (fxs_lut_entry(whole.payload, whole.len, k, &a, msg, sizeof msg) == 3 &&
+                        fxs_lut_entry(piece.payload, piece.len, k, &b, msg, sizeof msg) == 3) {
+                        ta = fxs_lut_texels(whole.payload, whole.len, &a, msg, sizeof msg);
+                        tb = fxs_lut_texels(piece.payload, piece.len, &b, msg, sizeof msg);
+                    }
+                    CHECK(ta && tb && a.raw == b.raw && !memcmp(ta, tb, a.raw),
+                          "table product %d in pieces is the whole one %s", k, msg);
+                    free(ta);
+                    free(tb);
+                }
+            }
+        }
+        slices_free(&whole);
+        slices_free(&piece);
+        cJSON_Delete(doc);
+        cJSON_Delete(p);
+        cJSON_Delete(full);
+    }
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -298,6 +355,7 @@ int main(void)
     RUN(test_partial_work_items);
     RUN(test_table_products);
     RUN(test_atlas_gutters);
+    RUN(test_sliced_steps);
     ocl_close(tek_ocl);
     return CHECK_DONE();
 }

@@ -1,5 +1,6 @@
 /* test_flame_frames.c — the flame effect's frames through its effect_ops, as the engine
- * drives them: one kind 1 frame per step call, real time from the substep plan, a paused
+ * drives them: one kind 1 frame per step, the same in slices (a substep per call) as whole,
+ * real time from the substep plan, a paused
  * stream that does not move, max_substeps counting the substep run ahead, and the substep that runs beside the encoding (flame.c
  * fl_emit_frame): the frame shows the state before it, and the simulation afterwards is
  * the one flame_run gives, bit for bit. A coarse scene (Table 3.1's h, a few hundred
@@ -13,6 +14,7 @@
 #include "fxs_particles.h"
 #include "ocl.h"
 #include "params.h"
+#include "slices.h"
 
 #define TFF_SCENE "{\"h\":0.01125}"
 
@@ -56,7 +58,7 @@ static void tff_frames(struct flame *fl, int frames, struct tff_seen *seen)
 {
     struct fx_err err = {0};
     for (int i = 0; i < frames; i++) {
-        int rc = flame_effect.step(fl, (i + 1) / 30.0, 1.0 / 30, tff_emit, seen, &err);
+        int rc = flame_effect.step(fl, (i + 1) / 30.0, 1.0 / 30, INFINITY, tff_emit, seen, &err);
         CHECK(rc == 0, "step %d: %s", i, err.message);
         if (rc) return;
     }
@@ -158,6 +160,31 @@ out:
     if (b) flame_free(b);
 }
 
+/* A frame stepped a substep per call (the engine's slices, slices.h) is the frame stepped
+ * whole: the same particles, byte for byte, frame after frame. */
+static void test_sliced_frames(void)
+{
+    struct flame *a = tff_new(TFF_SCENE), *b = tff_new(TFF_SCENE);
+    struct slices_frame fa = {.kind = FXS_KIND_PARTICLES}, fb = {.kind = FXS_KIND_PARTICLES};
+    struct fx_err err = {0};
+    int most = 0, frames = 0, same = 1;
+    for (; a && b && frames < 10 && same; frames++) {
+        double t = (frames + 1) / 30.0;
+        if (slices_step(&flame_effect, a, t, INFINITY, &fa, &err) || slices_step(&flame_effect, b, t, 0, &fb, &err)) {
+            CHECK(0, "frame %d: %s", frames, err.message);
+            break;
+        }
+        same = fa.payload && fa.len == fb.len && !memcmp(fa.payload, fb.payload, fa.len);
+        most = fb.calls > most ? fb.calls : most;
+    }
+    CHECK(same, "frame %d in slices differs from the whole one", frames - 1);
+    CHECK(most > 2, "a frame took up to %d calls in slices", most);
+    slices_free(&fa);
+    slices_free(&fb);
+    if (a) flame_free(a);
+    if (b) flame_free(b);
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -166,6 +193,7 @@ int main(void)
     RUN(test_paused);
     RUN(test_max_substeps);
     RUN(test_frame_before_prerun);
+    RUN(test_sliced_frames);
     ocl_close(tff_ocl);
     return CHECK_DONE();
 }

@@ -291,7 +291,11 @@ static void test_lut(void)
     char err[256];
     for (size_t i = 0; i < sizeof a; i++) a[i] = (uint8_t)i;
     for (size_t i = 0; i < sizeof b; i++) b[i] = (uint8_t)(3 * i);
-    size_t n = fxs_lut_encode(&info, prods, 2, 3, payload, sizeof payload, err, sizeof err);
+    struct fxs_lut_encoder enc;
+    int rc = fxs_lut_encode_begin(&enc, &info, prods, 2, 3, payload, sizeof payload, err, sizeof err);
+    while (rc == 0 && (rc = fxs_lut_encode_some(&enc, SIZE_MAX, err, sizeof err)) == 1) {}
+    size_t n = rc == 0 ? enc.len : 0;
+    fxs_lut_encode_free(&enc);
     CHECK(n > 0, "encode: %s", err);
     struct fxs_header h = header_for(FXS_KIND_LUT, FXS_CODEC_LUT_PACK, n, 8);
     struct fxc_lut lut = { 0 };
