@@ -1,6 +1,7 @@
 /* flame.c — effect `flame` (seed 002, Mabuchi 2012; spec: digest 002), host side.
  *
- * Owns the parameter table, the device buffers and the order of kernels/flame.cl launches;
+ * Owns the device buffers and the order of kernels/flame.cl launches (the parameters, their
+ * table and their packing into the kernels' array are flame_params.c's);
  * no per-particle loop runs on the host except building the solids of a scene. State lives
  * in two buffer sets (st[0], st[1]): a substep sorts the current set into the other one,
  * gathers density into the current set's derived arrays and integrates back into the
@@ -17,6 +18,7 @@
 #include "flame.h"
 
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -38,16 +40,6 @@
 #ifndef FL_LOCAL
 #define FL_LOCAL 64 /* work-group size of the per-particle kernels */
 #endif
-#ifndef FL_CELLS_PER_H
-/* Cells of edge 2h: a particle sets up 4 rows, not 9 (cells of h) or 25 (h/2). The row set-up,
- * not the candidates, is most of fl_density's time on the sparse default flame (~8 neighbours),
- * so cells of 2h make the density pass about 1.5x faster there, and the dense lattice blocks
- * of bench_flame faster too; cells of 2.5h or 3h gain nothing more (docs/performance-log.md). */
-#define FL_CELLS_PER_H 0.5
-#endif
-#ifndef FL_XCELLS
-#define FL_XCELLS 4
-#endif
 /* On a GPU device a frame of 2 x 4096 particles or more is encoded as up to this many blocks
  * on as many of the host's cores (PROTOCOL.md §7.5.8), which are free during the device's
  * work: a 50k-particle frame encodes nearly 4x faster as 8 blocks, for 1-2% more bytes. On
@@ -58,159 +50,6 @@
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
-#define FL_VMAX 200.0      /* |v| beyond this (m/s) is a runaway */
-
-/* ---- parameters -------------------------------------------------------------------- */
-
-static const char *const fl_shape_names[] = {"plate", "box", NULL};
-static const char *const fl_pform_names[] = {"difference", "symmetric", NULL};
-static const char *const fl_diff_names[] = {"stabilized", "literal", NULL};
-
-#define FL_F(nm, dflt, lo, hi, un, what, fl, ...) \
-    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = un, .doc = what, .flags = fl, __VA_ARGS__}
-#define FL_I(nm, dflt, lo, hi, un, what, fl, ...) \
-    {.name = nm, .type = PARAM_INT, .def = dflt, .min = lo, .max = hi, .unit = un, .doc = what, .flags = fl, __VA_ARGS__}
-
-static const struct param_def fl_source_fields[] = {
-    {.name = "center", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -100, .max = 100, .unit = "m",
-     .doc = "centre of the burning disc (its top layer)"},
-    FL_F("radius", "0.015", 0.001, 1, "m", "disc radius: a wider disc feeds a wider fire (solid particles at spacing d, 2 layers across `up`)", 0),
-    FL_F("T_init", "2000", 1000, 3000, "K", "temperature the burning solid holds (Mabuchi 2012, Table 3.1)", 0),
-    FL_F("F_init", "100", 0, 300, "", "fuel the burning solid holds: more fuel, a taller and brighter flame (the thesis uses 80-120)", 0),
-    {.name = "enabled", .type = PARAM_BOOL, .def = "true", .unit = "", .doc = "the source burns (off: as if removed)"},
-    {0},
-};
-
-static const struct param_def fl_obstacle_fields[] = {
-    {.name = "shape", .type = PARAM_ENUM, .def = "\"plate\"", .choices = fl_shape_names, .unit = "",
-     .doc = "plate: one layer across the two largest extents of size; box: filled block"},
-    {.name = "size", .type = PARAM_VEC3, .def = "[0.04,0,0.04]", .min = 0, .max = 10, .unit = "m",
-     .doc = "extents along x, y, z"},
-    {.name = "pos", .type = PARAM_VEC3, .def = "[0,0.05,0.03]", .min = -100, .max = 100, .unit = "m",
-     .doc = "centre at time 0 (after a reset)"},
-    {.name = "velocity", .type = PARAM_VEC3, .def = "[0,-0.2,0]", .min = -20, .max = 20, .unit = "m/s",
-     .doc = "the solid moves at this velocity from pos: r(t) = pos + velocity t"},
-    {0},
-};
-
-/* Default scene: the thesis's 3 cm disc (digest §2.13, ch.7's real flame) on a 3.6 cm
- * non-burning base plate 4 mm under it, with h = 3.5 mm (a third of Table 3.1's, so ~10k particles
- * resolve the thesis-size flame) at dt 3 ms (the thesis's 1 ms would need 10 M particle-steps/s
- * for 10k particles in real time). Finer particles on a thesis-size source, not a bigger source,
- * give a flame several times as tall as wide (tests/bench/bench_flame_shape.c measures it,
- * tests/unit/test_flame_shape.c holds it). Without the plate, gas heated by the disc's lower
- * layer stays under it (about a tenth of the burning gas below the source plane, as the
- * thesis's free-floating source has no ground); the plate is an obstacle (digest §2.13), so no
- * new physics. */
-const struct param_def flame_params[] = {
-    {.name = "sources", .group = "sources", .type = PARAM_OBJECT_LIST, .def = "[{\"radius\":0.015}]", .max_len = 16,
-     .fields = fl_source_fields, .unit = "", .doc = "burning solids: discs that hold fuel and heat and feed the flame"},
-    {.name = "obstacles", .group = "sources", .type = PARAM_OBJECT_LIST, .max_len = 16,
-     .def = "[{\"shape\":\"plate\",\"size\":[0.036,0.036,0],\"pos\":[0,0,-0.004],\"velocity\":[0,0,0]}]", .fields = fl_obstacle_fields,
-     .unit = "", .doc = "solids that do not burn (ambient temperature, no fuel): a plate under the fire, a wall, a moving paddle"},
-    {.name = "wind_accel", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -50, .max = 50, .unit = "m/s^2",
-     .doc = "a uniform acceleration of the gas; across `up` the air's drag (wind_drag) limits the drift it gives "
-            "to wind_accel / wind_drag"},
-    /* The wind as the digest's optional drag model (§2.14 [P], f = rho k_drag (v_wind - v)): gas
-     * takes up the velocity of the ambient air the thesis does not simulate, at rate wind_drag,
-     * across `up` only, since buoyancy already is the net vertical force (§2.6 [P]: the air's
-     * resistance to the rise is in k_buo, and §8 B4's exact buoyancy step stays exact; drag on
-     * the vertical too made the flame far shorter). A uniform wind_accel leans a flame whose
-     * burning gas lives ~40 ms and rises at ~2.5 m/s little (10 m/s^2: a tenth of its height,
-     * a quarter as a force density like buoyancy, rho_rest a / rho); a wind *velocity* leans it
-     * like a real flame, by about the ratio of wind to rise speed (2 m/s: about a third of its
-     * height; test_flame_shape.c). The drag also resists the gas's sideways spreading in still
-     * air, so the calm flame is narrower; 25/s leans it well and keeps the default scene at ~10k
-     * particles (other rates: docs/performance-log.md). */
-    {.name = "wind_velocity", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,0]", .min = -20, .max = 20, .unit = "m/s",
-     .doc = "velocity of the surrounding air: the flame leans downwind (the gas takes it up at wind_drag); its "
-            "part along `up` is ignored"},
-    FL_F("wind_drag", "25", 0, 200, "1/s", "how quickly the gas takes up the air's velocity across `up`, "
-         "f = rho k (wind_velocity - v); 0: no air, the gas spreads freely", 0, .group = "forces"),
-    FL_F("k_buo", "0.01", 0, 0.05, "N/(m^3 K)", "buoyancy, the force k_buo (T - T_amb) per volume along `up`: higher, a taller and faster flame (Mabuchi 2012 eq. 3.16)", 0, .group = "forces"),
-    {.name = "up", .group = "forces", .type = PARAM_VEC3, .def = "[0,0,1]", .min = -1, .max = 1, .unit = "direction",
-     .doc = "which way is up (normalised): buoyancy pushes along it and the source discs lie across it", .flags = PARAM_NONZERO},
-    FL_F("k_stiff", "10", 0, 100, "m^2/s^2", "pressure stiffness: how strongly the gas resists compression, p = k (rho - rho_rest) (eq. 3.11)", 0, .group = "forces"),
-    FL_F("k_viscosity", "0.005", 0, 0.05, "N s/m^2", "viscosity: higher smooths the flow, lower lets it swirl (eq. 3.13)", 0, .group = "forces"),
-    FL_F("rho_rest", "1", 0.1, 10, "kg/m^3", "rest density of the gas; pressure p = k (rho - rho_rest), never below 0", 0, .group = "forces"),
-    /* Both forms clamp eq 3.11's p at 0. Unclamped, the difference form (p_j - p_i) pushes the
-     * density-deficient free boundary of a gas with no air around it outward (digest §2.5) far
-     * faster than buoyancy lifts it: on the default scene no burning gas is left after 2.5 s
-     * (1.2k particles), against a flame rising 7.6 cm (centroid at 2.5-3 s) with the clamp
-     * (PROTOCOL.md §11.2). Default symmetric (Mueller's form, digest §9 #3): every figure of the
-     * default scene and every group D behaviour is measured with it. */
-    {.name = "pressure_form", .group = "forces", .type = PARAM_ENUM, .def = "\"symmetric\"", .choices = fl_pform_names, .unit = "",
-     .doc = "how pressure pushes particles apart: symmetric, Mueller 2003's -(p_i+p_j)/2 (the default); difference, "
-            "the thesis's eq. 3.12 with its sign corrected; both with p >= 0"},
-    FL_F("T_amb", "300", 250, 400, "K", "temperature of the surrounding air; new particles start at it", 0, .group = "combustion"),
-    FL_F("T_ign", "1000", 500, 2000, "K", "ignition temperature: gas above it that has fuel burns", 0, .group = "combustion"),
-    FL_F("k_rs", "0.01", 0, 0.05, "", "reaction rate S = k_rs T F: how fast burning gas uses its fuel (eq. 3.17)", 0, .group = "combustion"),
-    FL_F("k_cf", "5", 0, 20, "", "fuel used per unit of reaction, dF/dt = -k_cf S (eq. 3.18)", 0, .group = "combustion"),
-    FL_F("k_pt", "500", 0, 2000, "", "heat released per unit of reaction, dT/dt = k_pt S: higher, a hotter flame (eq. 3.19)", 0, .group = "combustion"),
-    FL_F("k_h", "0.02", 0, 0.1, "m^2/s", "heat diffusion: how quickly heat spreads to neighbours (eq. 3.20)", 0, .group = "diffusion"),
-    FL_F("k_f", "0.001", 0, 0.01, "m^2/(s K)", "fuel diffusion, faster in hot gas (eq. 3.21)", 0, .group = "diffusion"),
-    {.name = "diffusion_mode", .group = "diffusion", .type = PARAM_ENUM, .def = "\"stabilized\"", .choices = fl_diff_names, .unit = "",
-     .doc = "stabilized: each particle's diffusion (and viscosity) weights capped at omega_max, so a step never "
-            "overshoots; literal: the thesis's eqs. 3.13, 3.20 and 3.21 as printed (unstable at its k_f)"},
-    FL_F("omega_max", "0.5", 0.05, 1, "", "stabilized diffusion: the cap on a particle's summed diffusion weights per step", 0, .group = "diffusion"),
-    FL_F("k_cool", "0", 0, 50, "1/s", "cooling toward the air's temperature, not in the thesis: higher, a shorter flame", 0, .group = "combustion"),
-    FL_F("fuel_eps", "0.001", 0, 1, "", "fuel below this no longer burns", 0, .group = "combustion"),
-    FL_I("resample_interval", "5", 1, 20, "steps", "steps between the passes that add particles where the flame thins and remove spent ones", 0, .group = "numerics"),
-    FL_I("insert_nbr_threshold", "24", 4, 60, "", "a burning particle with fewer neighbours gets a new one beside it: lower, fewer particles",
-         0, .group = "numerics"),
-    FL_F("h", "0.0035", 0.002, 0.05, "m", "smoothing length, the radius each particle interacts over: smaller, finer detail and more particles "
-         "(the thesis's Table 3.1: 0.01125)",
-         PARAM_RESTART, .group = "numerics"),
-    FL_F("particle_diameter", "0.5", 0.25, 0.75, "h", "spacing d of the solids' particles and of inserted particles", PARAM_RESTART, .group = "numerics"),
-    FL_F("mass", "0", 0, 1, "kg", "particle mass; 0 derives it so particles at spacing d have the rest density",
-         PARAM_RESTART, .group = "numerics"),
-    FL_F("dt", "0.003", 0.0001, 0.004, "s", "time step of the simulation", 0, .group = "numerics"),
-    FL_I("max_substeps", "24", 1, 256, "steps", "most steps per frame; beyond it the stream runs slower than real "
-                                                "time (see the real-time factor in /metrics)", 0, .group = "numerics"),
-    FL_I("max_particles", "1000000", 1000, 4000000, "", "particle limit; reaching it is a runaway (reset)",
-         PARAM_RESTART, .group = "numerics"),
-    FL_I("seed", "1", 0, 1000000, "", "seed of the insertion directions: runs with the same seed are identical", PARAM_RESTART, .group = "numerics"),
-    FL_F("fps", "30", 1, 240, "1/s", "frames per second of the stream", 0, .group = "output"),
-    FL_F("time_scale", "1", 0, 10, "", "simulated seconds per wall second (0 pauses)", 0, .group = "output"),
-    FL_F("space_scale", "1", 0.001, 1000, "", "world units per simulated metre in the frames", 0, .group = "output"),
-    FL_I("pos_bits", "16", 8, 24, "bits", "position quantisation of the particle codec", 0, .group = "output"),
-    {.name = "velocities", .group = "output", .type = PARAM_BOOL, .def = "false", .unit = "",
-     .doc = "also send each particle's velocity (x space_scale), for velocity lines: about 0.9 byte more per "
-            "particle"},
-    FL_I("vel_bits", "8", 4, 12, "bits", "velocity quantisation per component, sign included (with velocities)", 0,
-         .group = "output"),
-    {0},
-};
-
-/* Built-in presets (presets.h). "thesis-table3.1" is the thesis's base scene: Table 3.1's h and
- * dt with a free-floating 3 cm disc (digest §3: source geometry [P]) and no air (wind_drag 0:
- * the thesis has none); 34 substeps keep its 1 ms steps in real time at 30 fps. The others are
- * looks on the default scale. */
-static const struct effect_preset flame_presets[] = {
-    {"thesis-table3.1", "the thesis's base scene: Table 3.1 (h 11.25 mm, dt 1 ms), a free 3 cm disc, F_init 100, no air drag",
-     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],\"sources\":[{\"radius\":0.015}]}"},
-    {"thesis-f80", "Table 3.1's scene at the low end of the thesis's F_init range (80): a smaller, calmer flame",
-     "{\"h\":0.01125,\"dt\":0.001,\"max_substeps\":34,\"wind_drag\":0,\"obstacles\":[],"
-     "\"sources\":[{\"radius\":0.015,\"F_init\":80}]}"},
-    {"candle", "a narrow candle flame, about 4 cm tall: an 8 mm wick, less buoyancy, finer particles (h 2 mm)",
-     "{\"h\":0.002,\"k_buo\":0.005,\"sources\":[{\"radius\":0.004,\"F_init\":60}],"
-     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.012,0.012,0],\"pos\":[0,0,-0.003],\"velocity\":[0,0,0]}]}"},
-    /* Three logs in a star, each three small discs rising towards the middle (0, 7, 14 mm): their
-     * flames lean together into one broad, low fire. Burning gas starts at the pit's floor all
-     * across, so its lower edge is flat: a pit, not a campfire on open ground. */
-    {"fire-pit", "a broad, low fire in a pit: three logs laid in a star, rising to the middle, on an 11 cm floor "
-                 "(coarser particles, h 5 mm)",
-     "{\"h\":0.005,\"sources\":["
-     "{\"center\":[0,0.04,0],\"radius\":0.008},{\"center\":[0,0.028,0.007],\"radius\":0.008},"
-     "{\"center\":[0,0.016,0.014],\"radius\":0.008},{\"center\":[-0.0346,-0.02,0],\"radius\":0.008},"
-     "{\"center\":[-0.0242,-0.014,0.007],\"radius\":0.008},{\"center\":[-0.0139,-0.008,0.014],\"radius\":0.008},"
-     "{\"center\":[0.0346,-0.02,0],\"radius\":0.008},{\"center\":[0.0242,-0.014,0.007],\"radius\":0.008},"
-     "{\"center\":[0.0139,-0.008,0.014],\"radius\":0.008}],"
-     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.11,0.11,0],\"pos\":[0,0,-0.006],\"velocity\":[0,0,0]}]}"},
-    {"gusty", "the default flame in a light breeze (wind_velocity 2 m/s along x): it leans downwind",
-     "{\"wind_velocity\":[2,0,0]}"},
-    {0},
-};
 
 /* ---- state ------------------------------------------------------------------------- */
 
@@ -253,7 +92,8 @@ struct flame {
     struct fl_event ev[FL_MAX_EVENTS];
     int nev;
     /* parameters */
-    cJSON *doc;
+    struct flame_config cfg; /* as last set */
+    bool configured;         /* cfg holds a set */
     double h, d, dt, time_scale, space_scale, t_amb, period_ms;
     double emit_ms; /* wall time of the last frame's read-back, encoding and the substep run beside it */
     int enc_threads; /* threads a frame's encoding may use: 1 on a CPU device, else the cores up to FL_ENC_THREADS_MAX */
@@ -408,64 +248,10 @@ static int fl_zero_err(struct flame *fl, struct fx_err *err)
     return rc == CL_SUCCESS ? 0 : fl_clfail(err, "clearing the error flag", rc);
 }
 
-/* ---- parameters into the device array --------------------------------------------------- */
-
-static double fl_poly6_sum(double h, double d)
-{
-    /* sum over a cubic lattice of spacing d of (h^2 - r^2)^3 within h, times 315/(64 pi h^9) */
-    int r = (int)ceil(h / d);
-    double s = 0.0;
-    for (int i = -r; i <= r; i++)
-        for (int j = -r; j <= r; j++)
-            for (int k = -r; k <= r; k++) {
-                double r2 = d * d * (i * i + j * j + k * k), q = h * h - r2;
-                if (q > 0) s += q * q * q;
-            }
-    return s * 315.0 / (64.0 * M_PI * pow(h, 9));
-}
-
 static void fl_unit(double v[3])
 {
     double l = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
     for (int k = 0; k < 3; k++) v[k] = l > 0 ? v[k] / l : (k == 2);
-}
-
-static void fl_pack(struct flame *fl, const cJSON *p)
-{
-    double h = fl->h, m = params_num(p, "mass"), rho0 = params_num(p, "rho_rest"), w[3], wv[3];
-    if (m <= 0) m = rho0 / fl_poly6_sum(h, fl->d); /* §9 #6: 1.7626e-7 kg for the thesis's h */
-    float *P = fl->P;
-    memset(fl->P, 0, sizeof fl->P);
-    P[FP_H] = (float)h;
-    P[FP_H2] = (float)(h * h);
-    P[FP_INV_CELL] = (float)(FL_CELLS_PER_H / h);
-    P[FP_INV_CELLX] = (float)(FL_CELLS_PER_H * FL_XCELLS / h);
-    P[FP_MASS] = (float)m;
-    P[FP_POLY6] = (float)(m * 315.0 / (64.0 * M_PI * pow(h, 9)));
-    P[FP_SPIKY] = (float)(45.0 / (M_PI * pow(h, 6)));
-    P[FP_GPOLY6] = (float)(m * 945.0 / (32.0 * M_PI * pow(h, 9)));
-    P[FP_KSTIFF] = (float)params_num(p, "k_stiff");
-    P[FP_RHO0] = (float)rho0;
-    P[FP_KVISC] = (float)params_num(p, "k_viscosity");
-    P[FP_KBUO] = (float)params_num(p, "k_buo");
-    params_vec3(p, "wind_accel", w);
-    params_vec3(p, "wind_velocity", wv);
-    for (int k = 0; k < 3; k++) {
-        P[FP_UP + k] = (float)fl->up[k];
-        P[FP_WIND + k] = (float)w[k];
-        P[FP_WINDV + k] = (float)wv[k];
-    }
-    /* the drag's exact relaxation over one step (kernels/flame.cl fl_forces) */
-    P[FP_DRAG] = (float)-expm1(-params_num(p, "wind_drag") * params_num(p, "dt"));
-    static const struct { int i; const char *name; } direct[] = {
-        {FP_TAMB, "T_amb"}, {FP_TIGN, "T_ign"}, {FP_KRS, "k_rs"}, {FP_KCF, "k_cf"}, {FP_KPT, "k_pt"},
-        {FP_KH, "k_h"}, {FP_KF, "k_f"}, {FP_OMEGA, "omega_max"}, {FP_KCOOL, "k_cool"}, {FP_FEPS, "fuel_eps"},
-        {FP_DT, "dt"}, {FP_NBR_INS, "insert_nbr_threshold"}, {FP_SEED, "seed"}};
-    for (size_t i = 0; i < sizeof direct / sizeof direct[0]; i++) P[direct[i].i] = (float)params_num(p, direct[i].name);
-    P[FP_DIAM] = (float)fl->d;
-    P[FP_VMAX] = (float)FL_VMAX;
-    P[FP_SYMMETRIC] = strcmp(params_str(p, "pressure_form"), "symmetric") == 0;
-    P[FP_LITERAL] = strcmp(params_str(p, "diffusion_mode"), "literal") == 0;
 }
 
 /* ---- solids ------------------------------------------------------------------------------ */
@@ -516,11 +302,11 @@ static uint32_t fl_flag_of(const struct flame *fl, uint32_t type, double T, doub
 }
 
 /* A disc normal to `up` at spacing d, two layers (§9 #17). */
-static int fl_add_source(struct flame *fl, struct fl_host *hp, const cJSON *src)
+static int fl_add_source(struct flame *fl, struct fl_host *hp, const struct flame_source *src)
 {
-    double c[3], e1[3], e2[3], *u = fl->up, zero[3] = {0, 0, 0};
-    params_vec3(src, "center", c);
-    double R = params_num(src, "radius"), T = params_num(src, "T_init"), F = params_num(src, "F_init"), d = fl->d;
+    double e1[3], e2[3], *u = fl->up, zero[3] = {0, 0, 0};
+    const double *c = src->center;
+    double R = src->radius, T = src->T_init, F = src->F_init, d = fl->d;
     double helper[3] = {fabs(u[0]) < 0.9 ? 1 : 0, fabs(u[0]) < 0.9 ? 0 : 1, 0};
     e1[0] = helper[1] * u[2] - helper[2] * u[1];
     e1[1] = helper[2] * u[0] - helper[0] * u[2];
@@ -543,18 +329,15 @@ static int fl_add_source(struct flame *fl, struct fl_host *hp, const cJSON *src)
 }
 
 /* Plate (one layer across the two largest extents) or filled box at spacing d. */
-static int fl_add_obstacle(struct flame *fl, struct fl_host *hp, const cJSON *ob, double t)
+static int fl_add_obstacle(struct flame *fl, struct fl_host *hp, const struct flame_obstacle *ob, double t)
 {
-    double s[3], c[3], v[3];
-    params_vec3(ob, "size", s);
-    params_vec3(ob, "pos", c);
-    params_vec3(ob, "velocity", v);
+    const double *s = ob->size, *c = ob->pos, *v = ob->velocity;
     int cnt[3], thin = 0;
     for (int k = 0; k < 3; k++) {
         cnt[k] = 1 + (int)floor(s[k] / fl->d + 1e-9);
         if (s[k] < s[thin]) thin = k;
     }
-    if (strcmp(params_str(ob, "shape"), "plate") == 0) cnt[thin] = 1;
+    if (ob->shape == FLAME_PLATE) cnt[thin] = 1;
     for (int i = 0; i < cnt[0]; i++)
         for (int j = 0; j < cnt[1]; j++)
             for (int k = 0; k < cnt[2]; k++) {
@@ -566,15 +349,14 @@ static int fl_add_obstacle(struct flame *fl, struct fl_host *hp, const cJSON *ob
     return 0;
 }
 
-static int fl_add_solids(struct flame *fl, struct fl_host *hp, const cJSON *p, struct fx_err *err)
+static int fl_add_solids(struct flame *fl, struct fl_host *hp, const struct flame_config *c, struct fx_err *err)
 {
-    const cJSON *it;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "sources")) {
-        if (params_bool(it, "enabled") && fl_add_source(fl, hp, it)) return fx_fail(err, "internal", "", "out of memory");
-    }
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "obstacles")) {
-        if (fl_add_obstacle(fl, hp, it, fl->sim_seconds)) return fx_fail(err, "internal", "", "out of memory");
-    }
+    for (int i = 0; i < c->n_sources; i++)
+        if (c->sources[i].enabled && fl_add_source(fl, hp, &c->sources[i]))
+            return fx_fail(err, "internal", "", "out of memory");
+    for (int i = 0; i < c->n_obstacles; i++)
+        if (fl_add_obstacle(fl, hp, &c->obstacles[i], fl->sim_seconds))
+            return fx_fail(err, "internal", "", "out of memory");
     return 0;
 }
 
@@ -670,7 +452,7 @@ static int fl_check(const struct flame *fl, cl_int errflag, struct fx_err *err)
         return fx_fail(err, "internal", "", "flame: non-finite particle state (NaN/Inf) after step %llu",
                        (unsigned long long)fl->steps);
     if (errflag & FL_ERR_SPEED)
-        return fx_fail(err, "internal", "", "flame: runaway particle speed above %g m/s after step %llu", FL_VMAX,
+        return fx_fail(err, "internal", "", "flame: runaway particle speed above %g m/s after step %llu", FLAME_VMAX,
                        (unsigned long long)fl->steps);
     return 0;
 }
@@ -772,26 +554,24 @@ void flame_particles_free(struct flame_particles *p)
     memset(p, 0, sizeof *p);
 }
 
-static int fl_read_params(struct flame *fl, const cJSON *p)
+static void fl_read_params(struct flame *fl, const struct flame_config *c)
 {
-    fl->dt = params_num(p, "dt");
-    fl->period_ms = 1000.0 / params_num(p, "fps");
-    fl->time_scale = params_num(p, "time_scale");
-    fl->space_scale = params_num(p, "space_scale");
-    fl->t_amb = params_num(p, "T_amb");
-    fl->interval = (int)params_num(p, "resample_interval");
-    fl->max_substeps = (int)params_num(p, "max_substeps");
-    fl->pos_bits = (int)params_num(p, "pos_bits");
-    fl->velocities = params_bool(p, "velocities");
-    fl->vel_bits = (int)params_num(p, "vel_bits");
-    params_vec3(p, "up", fl->up);
-    fl_unit(fl->up);
-    fl_pack(fl, p);
-    return 0;
+    fl->dt = c->dt;
+    fl->period_ms = 1000.0 / c->fps;
+    fl->time_scale = c->time_scale;
+    fl->space_scale = c->space_scale;
+    fl->t_amb = c->T_amb;
+    fl->interval = c->resample_interval;
+    fl->max_substeps = c->max_substeps;
+    fl->pos_bits = c->pos_bits;
+    fl->velocities = c->velocities;
+    fl->vel_bits = c->vel_bits;
+    flame_params_up(c, fl->up);
+    flame_params_pack(c, fl->P);
 }
 
-/* Replaces the solids (sources, obstacles) by those of the document, keeping the gas. */
-static int fl_rebuild_solids(struct flame *fl, const cJSON *p, struct fx_err *err)
+/* Replaces the solids (sources, obstacles) by those of c, keeping the gas. */
+static int fl_rebuild_solids(struct flame *fl, const struct flame_config *c, struct fx_err *err)
 {
     struct flame_particles cur;
     struct fl_host hp = {0};
@@ -805,27 +585,30 @@ static int fl_rebuild_solids(struct flame *fl, const cJSON *p, struct fx_err *er
     }
     flame_particles_free(&cur);
     if (rc) fx_fail(err, "internal", "", "out of memory");
-    if (!rc) rc = fl_add_solids(fl, &hp, p, err);
+    if (!rc) rc = fl_add_solids(fl, &hp, c, err);
     if (!rc) rc = fl_upload(fl, hp.n, hp.pos, hp.vel, hp.flags, hp.id, err);
     fl_host_free(&hp);
     return rc;
 }
 
-int flame_set(struct flame *fl, const cJSON *params, struct fx_err *err)
+/* The solids change with sources, obstacles and T_amb (an obstacle's temperature). */
+static bool fl_solids_same(const struct flame_config *a, const struct flame_config *b)
 {
-    int solids_changed = !fl->doc ||
-        !cJSON_Compare(cJSON_GetObjectItemCaseSensitive(fl->doc, "sources"),
-                       cJSON_GetObjectItemCaseSensitive(params, "sources"), 1) ||
-        !cJSON_Compare(cJSON_GetObjectItemCaseSensitive(fl->doc, "obstacles"),
-                       cJSON_GetObjectItemCaseSensitive(params, "obstacles"), 1) ||
-        params_num(fl->doc, "T_amb") != params_num(params, "T_amb");
-    cJSON *copy = cJSON_Duplicate(params, 1);
-    if (!copy) return fx_fail(err, "internal", "", "out of memory");
-    cJSON_Delete(fl->doc);
-    fl->doc = copy;
-    fl_read_params(fl, params);
+    static const size_t at[] = {offsetof(struct flame_config, sources), offsetof(struct flame_config, obstacles),
+                                offsetof(struct flame_config, T_amb)};
+    for (size_t i = 0; i < sizeof at / sizeof at[0]; i++)
+        if (!params_same(params_at(flame_params, at[i]), a, b)) return false;
+    return true;
+}
+
+int flame_set(struct flame *fl, const struct flame_config *c, struct fx_err *err)
+{
+    bool solids_changed = !fl->configured || !fl_solids_same(&fl->cfg, c);
+    fl->cfg = *c;
+    fl->configured = true;
+    fl_read_params(fl, c);
     if (fl_upload_prm(fl, err)) return -1;
-    return solids_changed && fl->cap ? fl_rebuild_solids(fl, params, err) : 0;
+    return solids_changed && fl->cap ? fl_rebuild_solids(fl, c, err) : 0;
 }
 
 /* Steps, simulated time, the frame plan's carry and ids back to a fresh start. */
@@ -843,7 +626,7 @@ static int fl_restart(struct flame *fl, struct fx_err *err)
 {
     struct fl_host hp = {0};
     fl_clock_reset(fl);
-    int rc = fl_finish(fl, err) || fl_zero_err(fl, err) || fl_add_solids(fl, &hp, fl->doc, err) ||
+    int rc = fl_finish(fl, err) || fl_zero_err(fl, err) || fl_add_solids(fl, &hp, &fl->cfg, err) ||
              fl_upload(fl, hp.n, hp.pos, hp.vel, hp.flags, hp.id, err);
     fl_host_free(&hp);
     return rc ? -1 : 0;
@@ -864,7 +647,7 @@ static int fl_create_objects(struct flame *fl, struct fx_err *err)
     return rc == CL_SUCCESS ? 0 : fl_clfail(err, "clCreateBuffer", rc);
 }
 
-struct flame *flame_new(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+struct flame *flame_new(struct ocl *ocl, const struct flame_config *c, struct fx_err *err)
 {
     struct flame *fl = calloc(1, sizeof *fl);
     if (!fl) {
@@ -872,12 +655,12 @@ struct flame *flame_new(struct ocl *ocl, const cJSON *params, struct fx_err *err
         return NULL;
     }
     fl->ocl = ocl;
-    fl->h = params_num(params, "h");
-    fl->d = params_num(params, "particle_diameter") * fl->h;
-    fl->max_particles = (int)params_num(params, "max_particles");
+    fl->h = c->h;
+    fl->d = c->particle_diameter * fl->h;
+    fl->max_particles = c->max_particles;
     long cores = ocl_is_cpu(ocl) ? 1 : sysconf(_SC_NPROCESSORS_ONLN);
     fl->enc_threads = cores < 1 ? 1 : cores > FL_ENC_THREADS_MAX ? FL_ENC_THREADS_MAX : (int)cores;
-    if (fl_create_objects(fl, err) || flame_set(fl, params, err) || fl_restart(fl, err)) {
+    if (fl_create_objects(fl, err) || flame_set(fl, c, err) || fl_restart(fl, err)) {
         flame_free(fl);
         return NULL;
     }
@@ -896,7 +679,6 @@ void flame_free(struct flame *fl)
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
     for (int k = 0; k < K_N; k++)
         if (fl->k[k]) clReleaseKernel(fl->k[k]);
-    cJSON_Delete(fl->doc);
     free(fl->h_pos);
     free(fl->h_vel);
     free(fl->h_flags);
@@ -1179,12 +961,12 @@ static int fl_step(void *self, double sim_time, double dt, double slice_end, eff
     return rc ? rc : fl_emit_frame(fl, emit, ctx, err);
 }
 
-static void *fl_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+static void *fl_create(struct ocl *ocl, const void *params, struct fx_err *err)
 {
     return flame_new(ocl, params, err);
 }
 
-static int fl_apply(void *self, const cJSON *params, struct fx_err *err)
+static int fl_apply(void *self, const void *params, struct fx_err *err)
 {
     fl_abandon(self);
     return flame_set(self, params, err);
@@ -1201,6 +983,8 @@ const struct effect_ops flame_effect = {
            "obstacles, with particles born next to flame particles and deleted away from them; every step on "
            "the OpenCL device, advancing in real time (time_scale) and streamed as particle frames.",
     .params = flame_params,
+    .params_size = sizeof(struct flame_config),
+    .param_slots = FP_COUNT,
     .presets = flame_presets,
     .outputs_json = "[{\"kind\":1,\"codec\":\"particles\",\"fields\":\"xyz (x space_scale), T, F, flags "
                     "(type bits 0-1, flame bit 2), with velocities on vx vy vz (x space_scale)\",\"count\":"

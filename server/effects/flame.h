@@ -9,16 +9,15 @@
 #define FX_FLAME_H
 
 #include <stdint.h>
-#include <cjson/cJSON.h>
 
 #include "../effect.h"
 #include "flame_layout.h" /* kernels/: FP_* indices, FL_* flags */
+#include "flame_params.h"
 
 struct ocl;
 struct flame;
 
 extern const struct effect_ops flame_effect;
-extern const struct param_def flame_params[]; /* {0}-terminated */
 
 /* Particle flags (bits of flame_particles.flags, and of the codec's flag byte). */
 enum flame_flag {
@@ -49,9 +48,10 @@ struct flame_particles {
 int flame_particles_alloc(struct flame_particles *p, int n);
 void flame_particles_free(struct flame_particles *p);
 
-/* A simulation from a complete validated document; it starts with the scene's solids. */
-struct flame *flame_new(struct ocl *ocl, const cJSON *params, struct fx_err *err);
-int flame_set(struct flame *fl, const cJSON *params, struct fx_err *err); /* live parameters */
+/* A simulation with the parameters c (params_load of a complete validated document); it
+ * starts with the scene's solids. flame_set changes them live (the caller keeps c). */
+struct flame *flame_new(struct ocl *ocl, const struct flame_config *c, struct fx_err *err);
+int flame_set(struct flame *fl, const struct flame_config *c, struct fx_err *err);
 /* Replaces the particles with p (pos, vel, flags, id), e.g. a test lattice. */
 int flame_load(struct flame *fl, const struct flame_particles *p, struct fx_err *err);
 /* Neighbour search, density, pressure, forces and derivatives for the current state,

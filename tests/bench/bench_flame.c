@@ -48,6 +48,15 @@ static void bench_die(const char *what, const struct fx_err *err)
     exit(1);
 }
 
+/* The typed parameters of a complete document. */
+static struct flame_config bench_typed(const cJSON *doc)
+{
+    struct flame_config c;
+    struct fx_err err = {0};
+    if (params_load(flame_params, doc, &c, sizeof c, &err)) bench_die("parameters", &err);
+    return c;
+}
+
 static cJSON *bench_doc(const char *overrides)
 {
     struct fx_err err;
@@ -111,10 +120,11 @@ static void bench_size(struct ocl *ocl, const char *label, int k, int steps)
 {
     struct fx_err err;
     cJSON *doc = bench_doc("{\"sources\":[],\"k_rs\":0,\"k_buo\":0,\"k_h\":0,\"k_f\":0,\"insert_nbr_threshold\":4}");
-    struct flame *fl = flame_new(ocl, doc, &err);
+    struct flame_config c = bench_typed(doc);
+    struct flame *fl = flame_new(ocl, &c, &err);
     if (!fl) bench_die("flame_new", &err);
     struct flame_particles p;
-    bench_lattice(&p, k, params_num(doc, "h") * params_num(doc, "particle_diameter"));
+    bench_lattice(&p, k, c.h * c.particle_diameter);
     if (flame_load(fl, &p, &err) || flame_run(fl, 5, &err)) bench_die("warm-up", &err);
     struct ocl_kernel_stat a[BENCH_MAX_STATS], b[BENCH_MAX_STATS];
     int na = bench_stats(ocl, a);
@@ -166,9 +176,10 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     struct fx_err err;
     const char *ov = getenv("BENCH_FLAME_SCENE"); /* JSON overrides of the default scene, for experiments */
     cJSON *doc = bench_doc(ov ? ov : "{}");
-    struct flame *fl = flame_effect.create(ocl, doc, &err);
+    struct flame_config c = bench_typed(doc);
+    struct flame *fl = flame_effect.create(ocl, &c, &err);
     if (!fl) bench_die("create", &err);
-    double dt = params_num(doc, "dt");
+    double dt = c.dt;
     double t0 = bench_now();
     if (flame_run(fl, (int)(warm_s / dt), &err)) bench_die("warm-up", &err);
     double warm_wall = bench_now() - t0;

@@ -45,7 +45,10 @@ static struct flame *tff_new(const char *partial)
     struct fx_err err = {0};
     cJSON *def = params_defaults(flame_params), *in = cJSON_Parse(partial), *doc = NULL;
     struct flame *fl = NULL;
-    if (in && params_merge(flame_params, def, in, &doc, &err) == 0) fl = flame_new(tff_ocl, doc, &err);
+    struct flame_config c;
+    if (in && params_merge(flame_params, def, in, &doc, &err) == 0 &&
+        params_load(flame_params, doc, &c, sizeof c, &err) == 0)
+        fl = flame_new(tff_ocl, &c, &err);
     CHECK(fl != NULL, "flame_new(%s): %s", partial, err.message);
     cJSON_Delete(def);
     cJSON_Delete(in);
