@@ -21,12 +21,8 @@
 #include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
-#include "../clock.h"
 #include "../ocl.h"
-#include "fxs_frame.h"
-#include "fxs_particles.h"
 
 #define FL_KERNEL_FILE "flame.cl"
 #ifndef FL_NL
@@ -40,13 +36,6 @@
 #ifndef FL_LOCAL
 #define FL_LOCAL 64 /* work-group size of the per-particle kernels */
 #endif
-/* On a GPU device a frame of 2 x 4096 particles or more is encoded as up to this many blocks
- * on as many of the host's cores (PROTOCOL.md §7.5.8), which are free during the device's
- * work: a 50k-particle frame encodes nearly 4x faster as 8 blocks, for 1-2% more bytes. On
- * a CPU device (PoCL) one thread: the other cores are the ones PoCL's workers step on, so a
- * second encoding thread slows the simulation more than it speeds the encoding. */
-#define FL_ENC_THREADS_MAX 8
-#define FL_FRAME_MARGIN_MS 1.0 /* frame period kept free beyond the substeps and the frame's encoding */
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
@@ -69,13 +58,6 @@ struct fl_event {
     cl_event ev;
 };
 
-/* A frame's substeps, which may run over several slices of the engine (effect.h): planned, done,
- * its time budget and the time its substeps took so far (ms). */
-struct fl_frame_plan {
-    int busy, n, done;
-    double budget_ms, spent_ms;
-};
-
 struct flame {
     struct ocl *ocl;
     cl_kernel k[K_N];
@@ -87,32 +69,19 @@ struct flame {
     int passes;
     uint32_t next_id;
     uint64_t steps;
-    double sim_seconds, carry;
+    double sim_seconds;
     float P[FP_COUNT];
     struct fl_event ev[FL_MAX_EVENTS];
     int nev;
     /* parameters */
     struct flame_config cfg; /* as last set */
     bool configured;         /* cfg holds a set */
-    double h, d, dt, time_scale, space_scale, t_amb, period_ms;
-    double emit_ms; /* wall time of the last frame's read-back, encoding and the substep run beside it */
-    int enc_threads; /* threads a frame's encoding may use: 1 on a CPU device, else the cores up to FL_ENC_THREADS_MAX */
-    double step_ms; /* recent time per substep, the wall time of its slices (moving average; 0 = none yet) */
-    double fit_frac; /* the fraction of a substep that the budgets of frames cut short left over */
-    int ahead;       /* substeps of the coming frame already run beside the last encoding (0 or 1) */
-    struct fl_frame_plan frame; /* the frame in progress (fl_step) */
+    double h, d, dt, t_amb;
     int rs_pending;  /* a resampling step's totals are being read into rs_tot and rs_err (fl_step_end) */
     cl_uint rs_tot[3];
     cl_int rs_err;
-    int interval, max_substeps, max_particles, pos_bits, vel_bits;
-    int velocities;
+    int interval, max_particles;
     double up[3];
-    /* frame buffers */
-    float *h_pos, *h_vel, *xyz, *temp, *fuel, *vel; /* vel: 3 per particle, the frame's velocities */
-    uint32_t *h_flags;
-    uint8_t *flags8;
-    int h_cap;
-    uint8_t *payload; /* the latest frame's codec 2/3 payload, made when wanted (fl_encode) */
 };
 
 static const size_t fl_sizes[8] = {16, 16, 4, 4, 8, 4, 16, 8}; /* bytes per particle of struct fl_set */
@@ -557,15 +526,8 @@ void flame_particles_free(struct flame_particles *p)
 static void fl_read_params(struct flame *fl, const struct flame_config *c)
 {
     fl->dt = c->dt;
-    fl->period_ms = 1000.0 / c->fps;
-    fl->time_scale = c->time_scale;
-    fl->space_scale = c->space_scale;
     fl->t_amb = c->T_amb;
     fl->interval = c->resample_interval;
-    fl->max_substeps = c->max_substeps;
-    fl->pos_bits = c->pos_bits;
-    fl->velocities = c->velocities;
-    fl->vel_bits = c->vel_bits;
     flame_params_up(c, fl->up);
     flame_params_pack(c, fl->P);
 }
@@ -611,13 +573,11 @@ int flame_set(struct flame *fl, const struct flame_config *c, struct fx_err *err
     return solids_changed && fl->cap ? fl_rebuild_solids(fl, c, err) : 0;
 }
 
-/* Steps, simulated time, the frame plan's carry and ids back to a fresh start. */
+/* Steps, simulated time and ids back to a fresh start. */
 static void fl_clock_reset(struct flame *fl)
 {
     fl->steps = 0;
-    fl->sim_seconds = fl->carry = 0;
-    fl->ahead = 0;
-    fl->frame.busy = 0;
+    fl->sim_seconds = 0;
     fl->next_id = 0;
 }
 
@@ -658,8 +618,6 @@ struct flame *flame_new(struct ocl *ocl, const struct flame_config *c, struct fx
     fl->h = c->h;
     fl->d = c->particle_diameter * fl->h;
     fl->max_particles = c->max_particles;
-    long cores = ocl_is_cpu(ocl) ? 1 : sysconf(_SC_NPROCESSORS_ONLN);
-    fl->enc_threads = cores < 1 ? 1 : cores > FL_ENC_THREADS_MAX ? FL_ENC_THREADS_MAX : (int)cores;
     if (fl_create_objects(fl, err) || flame_set(fl, c, err) || fl_restart(fl, err)) {
         flame_free(fl);
         return NULL;
@@ -679,15 +637,6 @@ void flame_free(struct flame *fl)
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
     for (int k = 0; k < K_N; k++)
         if (fl->k[k]) clReleaseKernel(fl->k[k]);
-    free(fl->h_pos);
-    free(fl->h_vel);
-    free(fl->h_flags);
-    free(fl->xyz);
-    free(fl->temp);
-    free(fl->fuel);
-    free(fl->vel);
-    free(fl->flags8);
-    free(fl->payload);
     free(fl);
 }
 
@@ -750,37 +699,22 @@ int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err
 
 int flame_count(const struct flame *fl) { return fl->n; }
 uint64_t flame_steps(const struct flame *fl) { return fl->steps; }
+double flame_sim_seconds(const struct flame *fl) { return fl->sim_seconds; }
 
-/* ---- effect_ops ------------------------------------------------------------------------------ */
+/* ---- substeps for the effect (flame_effect.c) ------------------------------------------------ */
 
-static int fl_frame_buffers(struct flame *fl, int n)
-{
-    if (n <= fl->h_cap) return 0;
-    int cap = n + n / 2 + 1024;
-    float **f[] = {&fl->h_pos, &fl->h_vel, &fl->xyz, &fl->temp, &fl->fuel, &fl->vel};
-    size_t fs[] = {4, 4, 3, 1, 1, 3};
-    for (int i = 0; i < 6; i++) {
-        free(*f[i]);
-        *f[i] = malloc(fs[i] * sizeof(float) * (size_t)cap);
-    }
-    free(fl->h_flags);
-    free(fl->flags8);
-    fl->h_flags = malloc(sizeof(uint32_t) * (size_t)cap);
-    fl->flags8 = malloc((size_t)cap);
-    fl->h_cap = 0;
-    if (!fl->h_pos || !fl->h_vel || !fl->xyz || !fl->temp || !fl->fuel || !fl->vel || !fl->h_flags || !fl->flags8)
-        return -1;
-    fl->h_cap = cap;
-    return 0;
-}
+int flame_substep(struct flame *fl, struct fx_err *err) { return fl_step_once(fl, err); }
+int flame_substep_begin(struct flame *fl, struct fx_err *err) { return fl_step_begin(fl, err); }
+int flame_substep_end(struct flame *fl, struct fx_err *err) { return fl_step_end(fl, err); }
+bool flame_substep_syncs(const struct flame *fl) { return fl->steps % (uint64_t)fl->interval == 0; }
+int flame_finish(struct flame *fl, struct fx_err *err) { return fl_finish(fl, err); }
+int flame_reset(struct flame *fl, struct fx_err *err) { return fl_restart(fl, err); }
 
-/* Reads the particles once (with the error flag) into the frame arrays; returns n, or -1. */
-static int fl_read_frame(struct flame *fl, struct fx_err *err)
+int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, struct fx_err *err)
 {
     int n = fl->n;
-    if (fl_frame_buffers(fl, n)) return fx_fail(err, "internal", "", "out of memory for %d particles", n);
     struct fl_set *S = &fl->st[fl->cur];
-    void *dst[3] = {fl->h_pos, fl->h_vel, fl->h_flags};
+    void *dst[3] = {pos, vel, flags};
     cl_int ef = 0, rc = CL_SUCCESS;
     for (int i = 0; i < 3 && rc == CL_SUCCESS && n > 0; i++)
         rc = clEnqueueReadBuffer(ocl_queue(fl->ocl), *fl_set_mem(S, i), CL_FALSE, 0, fl_sizes[i] * n, dst[i], 0, NULL,
@@ -789,210 +723,6 @@ static int fl_read_frame(struct flame *fl, struct fx_err *err)
         fl_finish(fl, NULL); /* the reads already queued complete before the buffers may change */
         return fl_clfail(err, "reading the frame", rc);
     }
-    if (fl_read_errflag(fl, &ef, err) || fl_check(fl, ef, err)) return -1;
-    float s = (float)fl->space_scale;
-    for (int i = 0; i < n; i++) {
-        for (int k = 0; k < 3; k++) fl->xyz[3 * i + k] = s * fl->h_pos[4 * i + k];
-        for (int k = 0; k < 3 && fl->velocities; k++) fl->vel[3 * i + k] = s * fl->h_vel[4 * i + k];
-        fl->temp[i] = fl->h_pos[4 * i + 3];
-        fl->fuel[i] = fl->h_vel[4 * i + 3];
-        fl->flags8[i] = (uint8_t)fl->h_flags[i];
-    }
-    return n;
+    return fl_read_errflag(fl, &ef, err) || fl_check(fl, ef, err) ? -1 : n;
 }
 
-/* The frame's codec 2/3 payload (effect_frame.encode): made only when a subscriber takes it. */
-static int fl_encode(void *self, struct effect_frame *fr, struct fx_err *err)
-{
-    struct flame *fl = self;
-    struct fxs_particles_opts opts = {.pos_bits = fl->pos_bits, .vel_bits = fl->vel_bits, .threads = fl->enc_threads};
-    size_t len = 0;
-    char msg[160];
-    double t0 = clock_now() * 1e3;
-    free(fl->payload);
-    fl->payload = NULL;
-    if (fxs_particles_encode(&fr->particles, &opts, &fl->payload, &len, msg, sizeof msg))
-        return fx_fail(err, "internal", "", "flame: particle encoding failed: %s", msg);
-    fr->codec = fxs_particles_codec(fl->payload, len);
-    fr->payload = fl->payload;
-    fr->payload_bytes = len;
-    fr->encode_ms = clock_now() * 1e3 - t0;
-    return 0;
-}
-
-/* Simulated seconds one frame of the stream covers. */
-static double fl_frame_sim(const struct flame *fl) { return fl->period_ms * 1e-3 * fl->time_scale; }
-
-/* A frame cut short passes its `undone` substeps on to the next frames, up to one frame's
- * worth of simulated time (beyond that it is dropped: fl_step). */
-static void fl_carry_over(struct flame *fl, int undone)
-{
-    fl->carry = fmin(fl->carry + undone * fl->dt, fl_frame_sim(fl));
-}
-
-/* Reads the particles and emits one kind 1 frame. The next frame's first substep is enqueued
- * before the encoding (when that frame will step at all), so that the device, or PoCL's
- * workers on the CPU's other cores, compute it while the host encodes: the encoding no longer
- * leaves the device idle. It completes before this returns, so no work is left in flight
- * between frames, and its time counts in emit_ms, which the next frame's budget leaves out. */
-static int fl_emit_frame(struct flame *fl, effect_emit_fn emit, void *ctx, struct fx_err *err)
-{
-    double t_read = clock_now() * 1e3;
-    int n = fl_read_frame(fl, err);
-    if (n < 0) return -1;
-    int pre = fl->time_scale > 0 && fl->carry + fl_frame_sim(fl) >= 0.5 * fl->dt;
-    if (pre) {
-        if (fl_step_begin(fl, err)) return -1;
-        fl->carry -= fl->dt;
-        fl->ahead = 1;
-    }
-    struct effect_frame fr = {
-        .kind = FXS_KIND_PARTICLES,
-        .count_or_width = (uint32_t)n,
-        .encode = fl_encode,
-        .self = fl,
-        .particles = {(uint32_t)n, fl->xyz, fl->temp, fl->fuel, fl->flags8, fl->velocities ? fl->vel : NULL},
-    };
-    int ret = emit(ctx, &fr);
-    struct fx_err end_err = {0};
-    if (pre && (fl_step_end(fl, &end_err) || fl_finish(fl, &end_err)) && ret == 0) {
-        *err = end_err;
-        ret = -1;
-    }
-    fl->emit_ms = clock_now() * 1e3 - t_read;
-    return ret;
-}
-
-/* Plans a frame. Real time (§7 of the digest, "time scale"): round(dt_wall * time_scale / dt)
- * substeps with the fraction carried, at most max_substeps (then the stream runs slower than
- * real time). */
-static void fl_plan(struct flame *fl, double dt)
-{
-    fl->carry += dt * fl->time_scale;
-    /* The substeps this frame owes: none when the one run ahead covered them (carry < 0), and
-     * at most max_substeps counting that one. */
-    int n = (int)fmax(floor(fl->carry / fl->dt + 0.5), 0), most = fl->max_substeps - fl->ahead;
-    fl->ahead = 0;
-    if (n > most) {
-        n = most;
-        fl->carry = 0;
-    } else {
-        fl->carry -= n * fl->dt;
-    }
-    /* Time budget: the substeps get the frame period less the last frame's read-back and
-     * encoding (with the substep that ran beside it) and a margin; as many run as fit at the
-     * recent time per substep. The plan comes from the average of earlier frames, since the
-     * clock can only be read where the host waits for the device (resampling steps): deciding
-     * there, all or nothing per 5-step interval, would leave a quarter of each frame's period idle.
-     * The fraction of a substep a cut frame could not use goes to the next frame's budget
-     * (rounding down every frame would waste half a substep a frame), and the simulated time a cut
-     * frame leaves undone is carried up to one frame's worth, so a frame slowed by the host
-     * catches up in the next ones; beyond that it is dropped, and a scene too slow for the
-     * machine streams at a steady frame rate while /metrics reports its real-time factor. A
-     * frame still stops once it is over budget. Together with the substep run beside the
-     * encoding this raised the default scene's real-time factor on a 2-core host by about a
-     * tenth (docs/performance-log.md). Times are the frame's own: the engine may run other
-     * streams between its slices. */
-    double budget = fmax(fl->period_ms - fl->emit_ms - FL_FRAME_MARGIN_MS, 0.5 * fl->period_ms);
-    double fitf = fl->step_ms > 0 ? budget / fl->step_ms + fl->fit_frac : n;
-    int fit = (int)fitf;
-    fl->fit_frac = 0;
-    if (n > fit) {
-        int cut = fit > 1 ? fit : 1;
-        fl_carry_over(fl, n - cut);
-        n = cut;
-        fl->fit_frac = fmax(fitf - n, 0); /* < 1: n = floor(fitf), or 1 when fitf < 1 */
-    }
-    fl->frame = (struct fl_frame_plan){.busy = 1, .n = n, .budget_ms = budget};
-}
-
-/* Runs the planned substeps until slice_end (clock.h seconds): it stops before a substep that
- * would end after it, at the recent time per substep, once one ran; the queue is then drained.
- * 0 when the substeps are done (or the budget cut them short), EFFECT_MORE, or -1 with err. */
-static int fl_substeps(struct flame *fl, double slice_end, struct fx_err *err)
-{
-    struct fl_frame_plan *f = &fl->frame;
-    double t0 = clock_now() * 1e3, synced_ms = t0, end_ms = slice_end * 1e3;
-    int ran = 0, since_sync = 0;
-    while (f->done < f->n) {
-        if (ran && fl->step_ms > 0 && synced_ms + (since_sync + 1) * fl->step_ms > end_ms) {
-            if (fl_finish(fl, err)) return -1;
-            f->spent_ms += clock_now() * 1e3 - t0;
-            return EFFECT_MORE;
-        }
-        int synced = fl->steps % (uint64_t)fl->interval == 0;
-        if (fl_step_once(fl, err)) return -1;
-        f->done++;
-        ran++;
-        since_sync++;
-        if (!synced) continue;
-        synced_ms = clock_now() * 1e3; /* the resampling step waited for the device */
-        since_sync = 0;
-        if (f->done < f->n && f->spent_ms + synced_ms - t0 > f->budget_ms) {
-            fl_carry_over(fl, f->n - f->done);
-            f->n = f->done;
-        }
-    }
-    if (ran && fl_finish(fl, err)) return -1;
-    f->spent_ms += clock_now() * 1e3 - t0;
-    if (f->done > 0) {
-        double per = f->spent_ms / f->done;
-        fl->step_ms = fl->step_ms > 0 ? 0.7 * fl->step_ms + 0.3 * per : per;
-    }
-    return 0;
-}
-
-/* Drops the frame in progress, its undone substeps carried. */
-static void fl_abandon(struct flame *fl)
-{
-    if (fl->frame.busy) fl_carry_over(fl, fl->frame.n - fl->frame.done);
-    fl->frame.busy = 0;
-}
-
-static int fl_step(void *self, double sim_time, double dt, double slice_end, effect_emit_fn emit, void *ctx,
-                   struct fx_err *err)
-{
-    struct flame *fl = self;
-    (void)sim_time;
-    if (!fl->frame.busy) fl_plan(fl, dt);
-    int rc = fl_substeps(fl, slice_end, err);
-    if (rc == EFFECT_MORE) return rc;
-    fl->frame.busy = 0;
-    return rc ? rc : fl_emit_frame(fl, emit, ctx, err);
-}
-
-static void *fl_create(struct ocl *ocl, const void *params, struct fx_err *err)
-{
-    return flame_new(ocl, params, err);
-}
-
-static int fl_apply(void *self, const void *params, struct fx_err *err)
-{
-    fl_abandon(self);
-    return flame_set(self, params, err);
-}
-
-static int fl_reset(void *self, struct fx_err *err) { return fl_restart(self, err); }
-static void fl_destroy(void *self) { flame_free(self); }
-static double fl_sim_seconds(void *self) { return ((struct flame *)self)->sim_seconds; }
-
-const struct effect_ops flame_effect = {
-    .name = "flame",
-    .doc = "SPH flame (Mabuchi 2012): weakly compressible SPH gas carrying temperature and fuel, combustion "
-           "S = k_rs T F, stabilised heat and fuel diffusion, buoyancy, wind, burning solid sources and moving "
-           "obstacles, with particles born next to flame particles and deleted away from them; every step on "
-           "the OpenCL device, advancing in real time (time_scale) and streamed as particle frames.",
-    .params = flame_params,
-    .params_size = sizeof(struct flame_config),
-    .param_slots = FP_COUNT,
-    .presets = flame_presets,
-    .outputs_json = "[{\"kind\":1,\"codec\":\"particles\",\"fields\":\"xyz (x space_scale), T, F, flags "
-                    "(type bits 0-1, flame bit 2), with velocities on vx vy vz (x space_scale)\",\"count\":"
-                    "\"particles\",\"rate\":\"fps\"}]",
-    .create = fl_create,
-    .apply = fl_apply,
-    .step = fl_step,
-    .reset = fl_reset,
-    .destroy = fl_destroy,
-    .sim_seconds = fl_sim_seconds,
-};

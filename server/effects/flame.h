@@ -1,13 +1,14 @@
-/* flame.h — effect `flame` (seed 002, Mabuchi 2012): the SPH flame, every step on the
- * OpenCL device, streamed as kind 1 particle frames.
+/* flame.h — the simulation of effect `flame` (seed 002, Mabuchi 2012): the SPH flame, every
+ * step on the OpenCL device.
  *
- * Besides the effect_ops (flame_effect, registered in registry.c), the module exposes a
- * direct API so tests and benches can load arbitrary particle sets (lattices, isolated
- * particles), evaluate one SPH pass without integrating, run steps, and read the state
- * back to compare with the double-precision C reference (tests/ref/flame_ref.c). */
+ * The effect_ops that stream it (flame_effect) are flame_effect.h's; the parameters
+ * flame_params.h's. The direct API lets tests and benches load arbitrary particle sets
+ * (lattices, isolated particles), evaluate one SPH pass without integrating, run steps, and
+ * read the state back to compare with the double-precision C reference (tests/ref/flame_ref.c). */
 #ifndef FX_FLAME_H
 #define FX_FLAME_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "../effect.h"
@@ -16,8 +17,6 @@
 
 struct ocl;
 struct flame;
-
-extern const struct effect_ops flame_effect;
 
 /* Particle flags (bits of flame_particles.flags, and of the codec's flag byte). */
 enum flame_flag {
@@ -63,6 +62,23 @@ int flame_run(struct flame *fl, int steps, struct fx_err *err);
 int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err);
 int flame_count(const struct flame *fl);
 uint64_t flame_steps(const struct flame *fl); /* steps since creation or reset */
+double flame_sim_seconds(const struct flame *fl); /* simulated seconds since creation or reset */
 void flame_free(struct flame *fl);
+
+/* Substeps as the effect paces them (flame_effect.c, frame_plan.h). flame_substep runs one
+ * (the device may still work on it; no error-flag read); flame_substep_begin enqueues one and
+ * flame_substep_end completes it (a resampling step's totals), so the host can work meanwhile;
+ * flame_substep_syncs: the next substep waits for the device (a resampling step). flame_finish
+ * drains the queue. */
+int flame_substep(struct flame *fl, struct fx_err *err);
+int flame_substep_begin(struct flame *fl, struct fx_err *err);
+int flame_substep_end(struct flame *fl, struct fx_err *err);
+bool flame_substep_syncs(const struct flame *fl);
+int flame_finish(struct flame *fl, struct fx_err *err);
+/* Back to the scene's solids at time 0 (the protocol's reset). */
+int flame_reset(struct flame *fl, struct fx_err *err);
+/* Reads a frame's particles (flame_count of them: pos and vel 4 floats each, flags one) and
+ * checks the error flag: the count, or -1 with err (a runaway included). */
+int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, struct fx_err *err);
 
 #endif

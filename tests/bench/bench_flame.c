@@ -20,6 +20,7 @@
 #include <unistd.h>
 
 #include "effects/flame.h"
+#include "effects/flame_effect.h"
 #include "ocl.h"
 #include "params.h"
 
@@ -177,14 +178,15 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     const char *ov = getenv("BENCH_FLAME_SCENE"); /* JSON overrides of the default scene, for experiments */
     cJSON *doc = bench_doc(ov ? ov : "{}");
     struct flame_config c = bench_typed(doc);
-    struct flame *fl = flame_effect.create(ocl, &c, &err);
-    if (!fl) bench_die("create", &err);
+    void *st = flame_effect.create(ocl, &c, &err);
+    if (!st) bench_die("create", &err);
+    struct flame *fl = flame_effect_sim(st);
     double dt = c.dt;
     double t0 = bench_now();
     if (flame_run(fl, (int)(warm_s / dt), &err)) bench_die("warm-up", &err);
     double warm_wall = bench_now() - t0;
     struct bench_out out = {0, 0};
-    double sim0 = flame_effect.sim_seconds(fl);
+    double sim0 = flame_effect.sim_seconds(st);
     uint64_t st0 = flame_steps(fl);
     struct ocl_kernel_stat ka[BENCH_MAX_STATS], kb[BENCH_MAX_STATS];
     int nka = bench_stats(ocl, ka);
@@ -195,14 +197,14 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     for (int f = 0; f < frames; f++) {
         nsum += flame_count(fl);
         double f0 = bench_now();
-        if (flame_effect.step(fl, 0, fmin(f0 - last, 0.25), INFINITY, bench_emit, &out, &err)) bench_die("step", &err);
+        if (flame_effect.step(st, 0, fmin(f0 - last, 0.25), INFINITY, bench_emit, &out, &err)) bench_die("step", &err);
         last = f0;
         busy += bench_now() - f0;
         due = fmax(due + 1.0 / 30, bench_now()); /* engine_run_due: an overrun starts the next frame at once */
         double wait = due - bench_now();
         if (wait > 0) nanosleep(&(struct timespec){0, (long)(wait * 1e9)}, NULL);
     }
-    double wall = bench_now() - t0, sim = flame_effect.sim_seconds(fl) - sim0;
+    double wall = bench_now() - t0, sim = flame_effect.sim_seconds(st) - sim0;
     double cpu = bench_cpu() - c0, ncpu = (double)sysconf(_SC_NPROCESSORS_ONLN);
     int steps = (int)(flame_steps(fl) - st0);
     double ps = nsum / frames * steps / busy, kernel_ms = bench_split("default", ka, nka, kb, bench_stats(ocl, kb), steps);
@@ -230,7 +232,7 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
            sim / (cpu / ncpu), ncpu);
     printf("flame default kernels %.2f ms of the %.2f ms of work per frame (the rest: launches, waits, read-back, "
            "encoding)\n", kernel_ms / frames, busy * 1e3 / frames);
-    flame_effect.destroy(fl);
+    flame_effect.destroy(st);
     cJSON_Delete(doc);
 }
 

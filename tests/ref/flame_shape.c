@@ -94,7 +94,7 @@ void flame_shape_free(struct flame_shape_acc *a)
 
 const char *flame_shape_preset(const char *name)
 {
-    for (const struct effect_preset *p = flame_effect.presets; p && p->name; p++)
+    for (const struct effect_preset *p = flame_presets; p && p->name; p++)
         if (!strcmp(p->name, name)) return p->params;
     return NULL;
 }
