@@ -40,18 +40,6 @@ static double bea_now_ms(void)
     return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
-/* The typed parameters of a complete document (exits when it does not load). */
-static struct energy_wave_config *bea_typed(const cJSON *doc)
-{
-    static struct energy_wave_config c;
-    struct fx_err err = {0};
-    if (params_load(energy_wave_params, doc, &c, sizeof c, &err)) {
-        fprintf(stderr, "%s\n", err.message);
-        exit(1);
-    }
-    return &c;
-}
-
 static cJSON *bea_doc(const char *scene_json, const char *mode, int divisions)
 {
     cJSON *partial = cJSON_Parse(scene_json), *out = NULL;
@@ -131,13 +119,13 @@ static void bea_one(const char *scene, const char *json, const char *mode, int d
 {
     cJSON *doc = bea_doc(json, mode, divisions);
     struct fx_err err = {0};
-    struct energy_wave *ew = doc ? energy_wave_new(bea_ocl, bea_typed(doc), &err) : NULL;
+    struct energy_wave *ew = doc ? energy_wave_new(bea_ocl, wave_typed(doc), &err) : NULL;
     if (!ew) {
         fprintf(stderr, "bench_energy_accuracy: %s %s: %s\n", scene, mode, err.message);
         cJSON_Delete(doc);
         return;
     }
-    int n = bea_typed(doc)->divisions;
+    int n = wave_typed(doc)->divisions;
     double ms = bea_time(ew, img), rms = bea_rms(img, ref, mx);
     char label[64];
     if (strcmp(mode, "simpson") == 0) snprintf(label, sizeof label, "simpson n=%d", n);
