@@ -3,7 +3,7 @@
  * Owns the device buffers and the order of kernels/flame.cl launches (the parameters, their
  * table and their packing into the kernels' array are flame_params.c's);
  * no per-particle loop runs on the host except building the solids of a scene. State lives
- * in two buffer sets (st[0], st[1]): a substep sorts the current set into the other one,
+ * in two buffer sets (buf.st[0], buf.st[1]): a substep sorts the current set into the other one,
  * gathers density into the current set's derived arrays and integrates back into the
  * current set, so after every step one set holds the state and its derived fields in the
  * same order. Resampling (every resample_interval steps, on the steps whose 0-based index is
@@ -42,15 +42,52 @@
 
 /* ---- state ------------------------------------------------------------------------- */
 
-enum fl_kernel { K_HASH, K_HIST, K_SCAN, K_SCATTER, K_REORDER, K_CSTART, K_DENSITY, K_FORCES, K_COUNT,
-                 K_SCANB, K_COMPACT, K_N };
-static const char *const fl_kernel_names[K_N] = {
-    "fl_hash", "fl_radix_hist", "fl_scan_serial", "fl_radix_scatter", "fl_reorder", "fl_cell_start",
-    "fl_density", "fl_forces", "fl_count", "fl_scan_blocks", "fl_compact"};
+/* The kernels of flame.cl, in the order a substep launches them. */
+enum fl_kernel {
+    FL_K_HASH, FL_K_RADIX_HIST, FL_K_SCAN_SERIAL, FL_K_RADIX_SCATTER, FL_K_REORDER, FL_K_CELL_START, /* sort */
+    FL_K_DENSITY, FL_K_FORCES,                                                                     /* gather */
+    FL_K_RESAMPLE_COUNT, FL_K_SCAN_BLOCKS, FL_K_COMPACT,                                           /* resample */
+    FL_KERNEL_COUNT
+};
+static const char *const fl_kernel_names[FL_KERNEL_COUNT] = {
+    [FL_K_HASH] = "fl_hash",           [FL_K_RADIX_HIST] = "fl_radix_hist",   [FL_K_SCAN_SERIAL] = "fl_scan_serial",
+    [FL_K_RADIX_SCATTER] = "fl_radix_scatter", [FL_K_REORDER] = "fl_reorder", [FL_K_CELL_START] = "fl_cell_start",
+    [FL_K_DENSITY] = "fl_density",     [FL_K_FORCES] = "fl_forces",           [FL_K_RESAMPLE_COUNT] = "fl_count",
+    [FL_K_SCAN_BLOCKS] = "fl_scan_blocks", [FL_K_COMPACT] = "fl_compact"};
 
 /* One state set: particle state plus derived fields, all in the same order. */
 struct fl_set {
     cl_mem pos, vel, flags, id, rho_p, counts, force, dTdF;
+};
+
+/* Device memory: the two state sets and the work arrays of a substep. */
+struct fl_buffers {
+    struct fl_set st[2];
+    int cur;               /* the set that holds the state */
+    cl_mem key[2], val[2]; /* the radix sort's cell keys and particle indices, ping-pong */
+    cl_mem hist;           /* the radix sort's histograms, 256 per block */
+    cl_mem cs;             /* cell-start table of the hash grid */
+    cl_mem sxyz;           /* sorted x, y, z as three arrays of stride cap + FL_PAD (fl_reorder -> fl_density) */
+    cl_mem nl;             /* neighbour lists, FL_NL slots per particle */
+    cl_mem keep_ins, nrm;  /* resampling: what becomes of each particle, and its insertion normal */
+    cl_mem bsum, tot;      /* resampling: per-block sums, and the totals the host reads */
+    cl_mem errflag;        /* FL_ERR_* bits of the last steps */
+    cl_mem prm;            /* the parameter array (FP_*) */
+    int cap, cs_cap;       /* particles the per-particle buffers hold; entries of cs */
+};
+
+/* The hash grid of the current particle count: 2^k cells, sorted in passes of 8 bits. */
+struct fl_grid {
+    uint32_t mask;
+    int passes;
+};
+
+/* A resampling step's totals (survivors, insertions, new count) and error bits, read without
+ * waiting (fl_resample_begin) and applied once the queue is done (fl_resample_end). */
+struct fl_resample {
+    int pending;
+    cl_uint tot[3];
+    cl_int err;
 };
 
 struct fl_event {
@@ -58,30 +95,38 @@ struct fl_event {
     cl_event ev;
 };
 
-struct flame {
-    struct ocl *ocl;
-    cl_kernel k[K_N];
-    struct fl_set st[2];
-    cl_mem key[2], val[2], hist, cs, keep_ins, nrm, nl, bsum, tot, errflag, prm;
-    cl_mem sxyz; /* sorted x, y, z as three arrays of stride cap + FL_PAD (fl_reorder -> fl_density) */
-    int cur, n, cap, cs_cap;
-    uint32_t mask;
-    int passes;
-    uint32_t next_id;
-    uint64_t steps;
-    double sim_seconds;
-    float P[FP_COUNT];
+/* Profiling events of the launches since the last sync, booked to ocl's kernel statistics. */
+struct fl_events {
     struct fl_event ev[FL_MAX_EVENTS];
-    int nev;
-    /* parameters */
+    int n;
+};
+
+/* The parameters as the simulation uses them. */
+struct fl_params {
     struct flame_config cfg; /* as last set */
     bool configured;         /* cfg holds a set */
-    double h, d, dt, t_amb;
-    int rs_pending;  /* a resampling step's totals are being read into rs_tot and rs_err (fl_step_end) */
-    cl_uint rs_tot[3];
-    cl_int rs_err;
-    int interval, max_particles;
-    double up[3];
+    double h, d, dt, t_amb, up[3]; /* d: particle spacing; up: unit */
+    int interval, max_particles;   /* resample_interval */
+    float P[FP_COUNT];             /* the kernels' parameter array (flame_params_pack) */
+};
+
+/* Simulated time and identity since creation or reset. */
+struct fl_clock {
+    uint64_t steps;
+    double sim_seconds;
+    uint32_t next_id; /* the id the next new particle gets */
+};
+
+struct flame {
+    struct ocl *ocl;
+    cl_kernel k[FL_KERNEL_COUNT];
+    int n; /* particles */
+    struct fl_buffers buf;
+    struct fl_grid grid;
+    struct fl_resample rs;
+    struct fl_events events;
+    struct fl_params params;
+    struct fl_clock clock;
 };
 
 static const size_t fl_sizes[8] = {16, 16, 4, 4, 8, 4, 16, 8}; /* bytes per particle of struct fl_set */
@@ -108,11 +153,11 @@ static void fl_release(cl_mem *m)
 
 static void fl_flush_events(struct flame *fl)
 {
-    for (int i = 0; i < fl->nev; i++) {
-        ocl_record(fl->ocl, fl->ev[i].name, fl->ev[i].ev);
-        clReleaseEvent(fl->ev[i].ev);
+    for (int i = 0; i < fl->events.n; i++) {
+        ocl_record(fl->ocl, fl->events.ev[i].name, fl->events.ev[i].ev);
+        clReleaseEvent(fl->events.ev[i].ev);
     }
-    fl->nev = 0;
+    fl->events.n = 0;
 }
 
 /* Completes the queue and books every kernel time. */
@@ -125,7 +170,7 @@ static int fl_finish(struct flame *fl, struct fx_err *err)
 
 static int fl_launch(struct flame *fl, enum fl_kernel k, size_t global, size_t local, struct fx_err *err)
 {
-    if (fl->nev == FL_MAX_EVENTS && fl_finish(fl, err)) return -1;
+    if (fl->events.n == FL_MAX_EVENTS && fl_finish(fl, err)) return -1;
     if (global == 0) return 0;
     if (!local) { /* a fixed work-group size: PoCL compiles one work-group function per size */
         local = FL_LOCAL;
@@ -134,7 +179,7 @@ static int fl_launch(struct flame *fl, enum fl_kernel k, size_t global, size_t l
     cl_event ev;
     cl_int rc = clEnqueueNDRangeKernel(ocl_queue(fl->ocl), fl->k[k], 1, NULL, &global, &local, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fl_clfail(err, fl_kernel_names[k], rc);
-    fl->ev[fl->nev++] = (struct fl_event){fl_kernel_names[k], ev};
+    fl->events.ev[fl->events.n++] = (struct fl_event){fl_kernel_names[k], ev};
     return 0;
 }
 
@@ -152,38 +197,39 @@ static int fl_args(struct flame *fl, enum fl_kernel k, const struct ocl_arg *a, 
 /* Grows every per-particle buffer to hold `want` particles, keeping the current state. */
 static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
 {
-    if (want <= fl->cap) return 0;
-    int cap = fl->cap ? fl->cap : 4096;
+    if (want <= fl->buf.cap) return 0;
+    int cap = fl->buf.cap ? fl->buf.cap : 4096;
     while (cap < want) cap *= 2;
     cl_int rc = CL_SUCCESS;
     struct fl_set ns[2] = {{0}};
     for (int s = 0; s < 2 && rc == CL_SUCCESS; s++)
         for (int i = 0; i < 8 && rc == CL_SUCCESS; i++) *fl_set_mem(&ns[s], i) = fl_buffer(fl, fl_sizes[i] * cap, &rc);
     for (int i = 0; i < 4 && rc == CL_SUCCESS && fl->n > 0; i++) /* the state of the current set */
-        rc = clEnqueueCopyBuffer(ocl_queue(fl->ocl), *fl_set_mem(&fl->st[fl->cur], i), *fl_set_mem(&ns[0], i), 0, 0,
-                                 fl_sizes[i] * fl->n, 0, NULL, NULL);
+        rc = clEnqueueCopyBuffer(ocl_queue(fl->ocl), *fl_set_mem(&fl->buf.st[fl->buf.cur], i), *fl_set_mem(&ns[0], i),
+                                 0, 0, fl_sizes[i] * fl->n, 0, NULL, NULL);
     if (rc == CL_SUCCESS) rc = clFinish(ocl_queue(fl->ocl));
     for (int s = 0; s < 2; s++)
         for (int i = 0; i < 8; i++) {
-            fl_release(fl_set_mem(&fl->st[s], i));
-            if (rc == CL_SUCCESS) *fl_set_mem(&fl->st[s], i) = *fl_set_mem(&ns[s], i);
+            fl_release(fl_set_mem(&fl->buf.st[s], i));
+            if (rc == CL_SUCCESS) *fl_set_mem(&fl->buf.st[s], i) = *fl_set_mem(&ns[s], i);
             else fl_release(fl_set_mem(&ns[s], i));
         }
     if (rc != CL_SUCCESS) {
-        fl->cap = fl->n = 0;
+        fl->buf.cap = fl->n = 0;
         return fl_clfail(err, "allocating particle buffers", rc);
     }
-    fl->cur = 0;
-    cl_mem *aux[] = {&fl->key[0], &fl->key[1], &fl->val[0], &fl->val[1], &fl->keep_ins, &fl->nrm, &fl->nl};
+    fl->buf.cur = 0;
+    cl_mem *aux[] = {&fl->buf.key[0], &fl->buf.key[1], &fl->buf.val[0], &fl->buf.val[1], &fl->buf.keep_ins,
+                     &fl->buf.nrm, &fl->buf.nl};
     size_t asz[] = {4, 4, 4, 4, 8, 16, 4 * FL_NL};
     for (int i = 0; i < 7 && rc == CL_SUCCESS; i++) {
         fl_release(aux[i]);
         *aux[i] = fl_buffer(fl, asz[i] * cap, &rc);
     }
-    fl_release(&fl->sxyz);
-    if (rc == CL_SUCCESS) fl->sxyz = fl_buffer(fl, 3 * sizeof(cl_float) * ((size_t)cap + FL_PAD), &rc);
+    fl_release(&fl->buf.sxyz);
+    if (rc == CL_SUCCESS) fl->buf.sxyz = fl_buffer(fl, 3 * sizeof(cl_float) * ((size_t)cap + FL_PAD), &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "allocating sort buffers", rc);
-    fl->cap = cap;
+    fl->buf.cap = cap;
     return 0;
 }
 
@@ -192,28 +238,30 @@ static int fl_table(struct flame *fl, struct fx_err *err)
 {
     int bits = 10;
     while (bits < 22 && (1 << bits) < 4 * fl->n) bits++;
-    fl->mask = (1u << bits) - 1u;
-    fl->passes = (bits + 7) / 8;
+    fl->grid.mask = (1u << bits) - 1u;
+    fl->grid.passes = (bits + 7) / 8;
     int want = (1 << bits) + 1;
-    if (want <= fl->cs_cap) return 0;
+    if (want <= fl->buf.cs_cap) return 0;
     cl_int rc;
-    fl_release(&fl->cs);
-    fl->cs = fl_buffer(fl, sizeof(cl_uint) * (size_t)want, &rc);
+    fl_release(&fl->buf.cs);
+    fl->buf.cs = fl_buffer(fl, sizeof(cl_uint) * (size_t)want, &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "allocating the cell table", rc);
-    fl->cs_cap = want;
+    fl->buf.cs_cap = want;
     return 0;
 }
 
 static int fl_upload_prm(struct flame *fl, struct fx_err *err)
 {
-    cl_int rc = clEnqueueWriteBuffer(ocl_queue(fl->ocl), fl->prm, CL_TRUE, 0, sizeof fl->P, fl->P, 0, NULL, NULL);
+    cl_int rc = clEnqueueWriteBuffer(ocl_queue(fl->ocl), fl->buf.prm, CL_TRUE, 0, sizeof fl->params.P, fl->params.P, 0,
+                                     NULL, NULL);
     return rc == CL_SUCCESS ? 0 : fl_clfail(err, "uploading parameters", rc);
 }
 
 static int fl_zero_err(struct flame *fl, struct fx_err *err)
 {
     cl_int zero[3] = {0, 0, 0};
-    cl_int rc = clEnqueueWriteBuffer(ocl_queue(fl->ocl), fl->errflag, CL_TRUE, 0, sizeof zero[0], zero, 0, NULL, NULL);
+    cl_int rc =
+        clEnqueueWriteBuffer(ocl_queue(fl->ocl), fl->buf.errflag, CL_TRUE, 0, sizeof zero[0], zero, 0, NULL, NULL);
     return rc == CL_SUCCESS ? 0 : fl_clfail(err, "clearing the error flag", rc);
 }
 
@@ -267,15 +315,15 @@ static void fl_host_free(struct fl_host *hp)
 
 static uint32_t fl_flag_of(const struct flame *fl, uint32_t type, double T, double F)
 {
-    return type | ((T > fl->P[FP_TIGN] && F > fl->P[FP_FEPS]) ? FLAME_IS_FLAME : 0u);
+    return type | ((T > fl->params.P[FP_TIGN] && F > fl->params.P[FP_FEPS]) ? FLAME_IS_FLAME : 0u);
 }
 
 /* A disc normal to `up` at spacing d, two layers (§9 #17). */
 static int fl_add_source(struct flame *fl, struct fl_host *hp, const struct flame_source *src)
 {
-    double e1[3], e2[3], *u = fl->up, zero[3] = {0, 0, 0};
+    double e1[3], e2[3], *u = fl->params.up, zero[3] = {0, 0, 0};
     const double *c = src->center;
-    double R = src->radius, T = src->T_init, F = src->F_init, d = fl->d;
+    double R = src->radius, T = src->T_init, F = src->F_init, d = fl->params.d;
     double helper[3] = {fabs(u[0]) < 0.9 ? 1 : 0, fabs(u[0]) < 0.9 ? 0 : 1, 0};
     e1[0] = helper[1] * u[2] - helper[2] * u[1];
     e1[1] = helper[2] * u[0] - helper[0] * u[2];
@@ -291,7 +339,8 @@ static int fl_add_source(struct flame *fl, struct fl_host *hp, const struct flam
                 if ((i * i + j * j) * d * d > R * R * (1 + 1e-9)) continue;
                 double x[3];
                 for (int k = 0; k < 3; k++) x[k] = c[k] + d * (i * e1[k] + j * e2[k] - layer * u[k]);
-                if (fl_host_push(hp, x, (float)T, zero, (float)F, fl_flag_of(fl, FLAME_SOURCE, T, F), fl->next_id++))
+                if (fl_host_push(hp, x, (float)T, zero, (float)F, fl_flag_of(fl, FLAME_SOURCE, T, F),
+                                 fl->clock.next_id++))
                     return -1;
             }
     return 0;
@@ -303,7 +352,7 @@ static int fl_add_obstacle(struct flame *fl, struct fl_host *hp, const struct fl
     const double *s = ob->size, *c = ob->pos, *v = ob->velocity;
     int cnt[3], thin = 0;
     for (int k = 0; k < 3; k++) {
-        cnt[k] = 1 + (int)floor(s[k] / fl->d + 1e-9);
+        cnt[k] = 1 + (int)floor(s[k] / fl->params.d + 1e-9);
         if (s[k] < s[thin]) thin = k;
     }
     if (ob->shape == FLAME_PLATE) cnt[thin] = 1;
@@ -312,8 +361,9 @@ static int fl_add_obstacle(struct flame *fl, struct fl_host *hp, const struct fl
             for (int k = 0; k < cnt[2]; k++) {
                 int idx[3] = {i, j, k};
                 double x[3];
-                for (int a = 0; a < 3; a++) x[a] = c[a] + v[a] * t + fl->d * (idx[a] - 0.5 * (cnt[a] - 1));
-                if (fl_host_push(hp, x, (float)fl->t_amb, v, 0.0f, FLAME_OBSTACLE, fl->next_id++)) return -1;
+                for (int a = 0; a < 3; a++) x[a] = c[a] + v[a] * t + fl->params.d * (idx[a] - 0.5 * (cnt[a] - 1));
+                if (fl_host_push(hp, x, (float)fl->params.t_amb, v, 0.0f, FLAME_OBSTACLE, fl->clock.next_id++))
+                    return -1;
             }
     return 0;
 }
@@ -324,7 +374,7 @@ static int fl_add_solids(struct flame *fl, struct fl_host *hp, const struct flam
         if (c->sources[i].enabled && fl_add_source(fl, hp, &c->sources[i]))
             return fx_fail(err, "internal", "", "out of memory");
     for (int i = 0; i < c->n_obstacles; i++)
-        if (fl_add_obstacle(fl, hp, &c->obstacles[i], fl->sim_seconds))
+        if (fl_add_obstacle(fl, hp, &c->obstacles[i], fl->clock.sim_seconds))
             return fx_fail(err, "internal", "", "out of memory");
     return 0;
 }
@@ -333,17 +383,18 @@ static int fl_add_solids(struct flame *fl, struct fl_host *hp, const struct flam
 static int fl_upload(struct flame *fl, int n, const float *pos, const float *vel, const uint32_t *flags,
                      const uint32_t *id, struct fx_err *err)
 {
-    if (n > fl->max_particles)
-        return fx_fail(err, "limit", "max_particles", "%d particles exceed max_particles %d", n, fl->max_particles);
+    if (n > fl->params.max_particles)
+        return fx_fail(err, "limit", "max_particles", "%d particles exceed max_particles %d", n,
+                       fl->params.max_particles);
     fl->n = 0;
     if (fl_reserve(fl, n, err)) return -1;
-    fl->cur = 0;
+    fl->buf.cur = 0;
     fl->n = n;
     const void *src[4] = {pos, vel, flags, id};
     cl_int rc = CL_SUCCESS;
     for (int i = 0; i < 4 && rc == CL_SUCCESS && n > 0; i++)
-        rc = clEnqueueWriteBuffer(ocl_queue(fl->ocl), *fl_set_mem(&fl->st[0], i), CL_TRUE, 0, fl_sizes[i] * n, src[i],
-                                  0, NULL, NULL);
+        rc = clEnqueueWriteBuffer(ocl_queue(fl->ocl), *fl_set_mem(&fl->buf.st[0], i), CL_TRUE, 0, fl_sizes[i] * n,
+                                  src[i], 0, NULL, NULL);
     if (rc != CL_SUCCESS) return fl_clfail(err, "uploading particles", rc);
     return fl_table(fl, err);
 }
@@ -354,31 +405,31 @@ static int fl_upload(struct flame *fl, int n, const float *pos, const float *vel
  * fl_reorder) and builds the cell-start table. Returns the index of the sorted set. */
 static int fl_sort(struct flame *fl, struct fx_err *err)
 {
-    struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
-    cl_int n = fl->n, nhist = 256 * FL_BLOCKS, m = (cl_int)fl->mask + 1;
-    cl_uint mask = fl->mask;
-    struct ocl_arg ha[] = {FL_MEM(A->pos), FL_MEM(fl->key[0]), FL_MEM(fl->val[0]), FL_INT(n), FL_INT(mask),
-                          FL_MEM(fl->prm)};
-    if (fl_args(fl, K_HASH, ha, 6, err) || fl_launch(fl, K_HASH, (size_t)n, 0, err)) return -1;
+    struct fl_set *A = &fl->buf.st[fl->buf.cur], *B = &fl->buf.st[1 - fl->buf.cur];
+    cl_int n = fl->n, nhist = 256 * FL_BLOCKS, m = (cl_int)fl->grid.mask + 1;
+    cl_uint mask = fl->grid.mask;
+    struct ocl_arg ha[] = {FL_MEM(A->pos), FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.val[0]), FL_INT(n), FL_INT(mask),
+                          FL_MEM(fl->buf.prm)};
+    if (fl_args(fl, FL_K_HASH, ha, 6, err) || fl_launch(fl, FL_K_HASH, (size_t)n, 0, err)) return -1;
     int s = 0;
-    for (int p = 0; p < fl->passes; p++, s ^= 1) {
+    for (int p = 0; p < fl->grid.passes; p++, s ^= 1) {
         cl_int shift = 8 * p;
-        struct ocl_arg hh[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(shift), FL_MEM(fl->hist)};
-        struct ocl_arg sc[] = {FL_MEM(fl->hist), FL_INT(nhist)};
-        struct ocl_arg sa[] = {FL_MEM(fl->key[s]), FL_MEM(fl->val[s]), FL_MEM(fl->key[s ^ 1]), FL_MEM(fl->val[s ^ 1]),
-                              FL_INT(n), FL_INT(shift), FL_MEM(fl->hist)};
-        if (fl_args(fl, K_HIST, hh, 4, err) || fl_launch(fl, K_HIST, FL_BLOCKS, 1, err) ||
-            fl_args(fl, K_SCAN, sc, 2, err) || fl_launch(fl, K_SCAN, 1, 1, err) ||
-            fl_args(fl, K_SCATTER, sa, 7, err) || fl_launch(fl, K_SCATTER, FL_BLOCKS, 1, err))
+        struct ocl_arg hh[] = {FL_MEM(fl->buf.key[s]), FL_INT(n), FL_INT(shift), FL_MEM(fl->buf.hist)};
+        struct ocl_arg sc[] = {FL_MEM(fl->buf.hist), FL_INT(nhist)};
+        struct ocl_arg sa[] = {FL_MEM(fl->buf.key[s]), FL_MEM(fl->buf.val[s]), FL_MEM(fl->buf.key[s ^ 1]),
+                               FL_MEM(fl->buf.val[s ^ 1]), FL_INT(n), FL_INT(shift), FL_MEM(fl->buf.hist)};
+        if (fl_args(fl, FL_K_RADIX_HIST, hh, 4, err) || fl_launch(fl, FL_K_RADIX_HIST, FL_BLOCKS, 1, err) ||
+            fl_args(fl, FL_K_SCAN_SERIAL, sc, 2, err) || fl_launch(fl, FL_K_SCAN_SERIAL, 1, 1, err) ||
+            fl_args(fl, FL_K_RADIX_SCATTER, sa, 7, err) || fl_launch(fl, FL_K_RADIX_SCATTER, FL_BLOCKS, 1, err))
             return -1;
     }
-    cl_int stride = fl->cap + FL_PAD;
-    struct ocl_arg ra[] = {FL_MEM(fl->val[s]), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
+    cl_int stride = fl->buf.cap + FL_PAD;
+    struct ocl_arg ra[] = {FL_MEM(fl->buf.val[s]), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
                           FL_MEM(A->id), FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id),
-                          FL_MEM(fl->sxyz), FL_INT(stride)};
-    struct ocl_arg ca[] = {FL_MEM(fl->key[s]), FL_INT(n), FL_INT(m), FL_MEM(fl->cs)};
-    if (fl_args(fl, K_REORDER, ra, 12, err) || fl_launch(fl, K_REORDER, (size_t)n, 0, err) ||
-        fl_args(fl, K_CSTART, ca, 4, err) || fl_launch(fl, K_CSTART, (size_t)n + 1, 0, err))
+                          FL_MEM(fl->buf.sxyz), FL_INT(stride)};
+    struct ocl_arg ca[] = {FL_MEM(fl->buf.key[s]), FL_INT(n), FL_INT(m), FL_MEM(fl->buf.cs)};
+    if (fl_args(fl, FL_K_REORDER, ra, 12, err) || fl_launch(fl, FL_K_REORDER, (size_t)n, 0, err) ||
+        fl_args(fl, FL_K_CELL_START, ca, 4, err) || fl_launch(fl, FL_K_CELL_START, (size_t)n + 1, 0, err))
         return -1;
     return 0;
 }
@@ -387,18 +438,19 @@ static int fl_sort(struct flame *fl, struct fx_err *err)
  * from B back into A (integrate = 0: the state is copied unchanged, for flame_eval). */
 static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_err *err)
 {
-    struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
-    cl_int n = fl->n, stride = fl->cap + FL_PAD;
-    cl_uint mask = fl->mask;
-    struct ocl_arg da[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(fl->cs), FL_INT(mask), FL_INT(n), FL_MEM(fl->prm),
-                          FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(fl->nl), FL_MEM(fl->sxyz), FL_INT(stride)};
-    struct ocl_arg fa[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->cs),
-                          FL_INT(mask), FL_INT(n), FL_MEM(fl->prm), FL_MEM(A->rho_p), FL_MEM(A->counts),
-                          FL_MEM(fl->nl), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id), FL_MEM(A->force),
-                          FL_MEM(A->dTdF), FL_INT(integrate), FL_INT(resample), FL_MEM(fl->keep_ins),
-                          FL_MEM(fl->nrm), FL_MEM(fl->errflag)};
-    if (fl_args(fl, K_DENSITY, da, 11, err) || fl_launch(fl, K_DENSITY, (size_t)n, 0, err) ||
-        fl_args(fl, K_FORCES, fa, 22, err) || fl_launch(fl, K_FORCES, (size_t)n, 0, err))
+    struct fl_set *A = &fl->buf.st[fl->buf.cur], *B = &fl->buf.st[1 - fl->buf.cur];
+    cl_int n = fl->n, stride = fl->buf.cap + FL_PAD;
+    cl_uint mask = fl->grid.mask;
+    struct ocl_arg da[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(fl->buf.cs), FL_INT(mask), FL_INT(n),
+                           FL_MEM(fl->buf.prm), FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(fl->buf.nl),
+                           FL_MEM(fl->buf.sxyz), FL_INT(stride)};
+    struct ocl_arg fa[] = {FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->buf.cs),
+                           FL_INT(mask), FL_INT(n), FL_MEM(fl->buf.prm), FL_MEM(A->rho_p), FL_MEM(A->counts),
+                           FL_MEM(fl->buf.nl), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id),
+                           FL_MEM(A->force), FL_MEM(A->dTdF), FL_INT(integrate), FL_INT(resample),
+                           FL_MEM(fl->buf.keep_ins), FL_MEM(fl->buf.nrm), FL_MEM(fl->buf.errflag)};
+    if (fl_args(fl, FL_K_DENSITY, da, 11, err) || fl_launch(fl, FL_K_DENSITY, (size_t)n, 0, err) ||
+        fl_args(fl, FL_K_FORCES, fa, 22, err) || fl_launch(fl, FL_K_FORCES, (size_t)n, 0, err))
         return -1;
     return 0;
 }
@@ -407,7 +459,8 @@ static int fl_gather(struct flame *fl, int integrate, int resample, struct fx_er
  * failed: no read into the caller's variable may outlive the call. */
 static int fl_read_errflag(struct flame *fl, cl_int *errflag, struct fx_err *err)
 {
-    cl_int rc = clEnqueueReadBuffer(ocl_queue(fl->ocl), fl->errflag, CL_FALSE, 0, sizeof *errflag, errflag, 0, NULL, NULL);
+    cl_int rc =
+        clEnqueueReadBuffer(ocl_queue(fl->ocl), fl->buf.errflag, CL_FALSE, 0, sizeof *errflag, errflag, 0, NULL, NULL);
     if (rc != CL_SUCCESS) {
         fl_finish(fl, NULL);
         return fl_clfail(err, "reading the error flag", rc);
@@ -419,10 +472,10 @@ static int fl_check(const struct flame *fl, cl_int errflag, struct fx_err *err)
 {
     if (errflag & FL_ERR_NAN)
         return fx_fail(err, "internal", "", "flame: non-finite particle state (NaN/Inf) after step %llu",
-                       (unsigned long long)fl->steps);
+                       (unsigned long long)fl->clock.steps);
     if (errflag & FL_ERR_SPEED)
         return fx_fail(err, "internal", "", "flame: runaway particle speed above %g m/s after step %llu", FLAME_VMAX,
-                       (unsigned long long)fl->steps);
+                       (unsigned long long)fl->clock.steps);
     return 0;
 }
 
@@ -430,42 +483,44 @@ static int fl_check(const struct flame *fl, cl_int errflag, struct fx_err *err)
  * waiting; fl_resample_end makes B current. */
 static int fl_resample_begin(struct flame *fl, struct fx_err *err)
 {
-    struct fl_set *A = &fl->st[fl->cur], *B = &fl->st[1 - fl->cur];
+    struct fl_set *A = &fl->buf.st[fl->buf.cur], *B = &fl->buf.st[1 - fl->buf.cur];
     cl_int n = fl->n, nb = FL_BLOCKS;
-    cl_uint cap = (cl_uint)(fl->cap < fl->max_particles ? fl->cap : fl->max_particles), idb = fl->next_id;
-    struct ocl_arg ca[] = {FL_MEM(fl->keep_ins), FL_INT(n), FL_MEM(fl->bsum)};
-    struct ocl_arg sa[] = {FL_MEM(fl->bsum), FL_INT(nb), FL_INT(cap), FL_MEM(fl->tot)};
-    struct ocl_arg xa[] = {FL_MEM(fl->keep_ins), FL_INT(n), FL_MEM(fl->bsum), FL_MEM(fl->tot), FL_INT(idb),
-                          FL_MEM(fl->prm), FL_MEM(fl->nrm), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
+    cl_uint cap = (cl_uint)(fl->buf.cap < fl->params.max_particles ? fl->buf.cap : fl->params.max_particles),
+            idb = fl->clock.next_id;
+    struct ocl_arg ca[] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.bsum)};
+    struct ocl_arg sa[] = {FL_MEM(fl->buf.bsum), FL_INT(nb), FL_INT(cap), FL_MEM(fl->buf.tot)};
+    struct ocl_arg xa[] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.bsum), FL_MEM(fl->buf.tot), FL_INT(idb),
+                          FL_MEM(fl->buf.prm), FL_MEM(fl->buf.nrm), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
                           FL_MEM(A->id), FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(A->force), FL_MEM(A->dTdF),
                           FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(B->rho_p),
                           FL_MEM(B->counts), FL_MEM(B->force), FL_MEM(B->dTdF)};
-    if (fl_args(fl, K_COUNT, ca, 3, err) || fl_launch(fl, K_COUNT, FL_BLOCKS, 1, err) ||
-        fl_args(fl, K_SCANB, sa, 4, err) || fl_launch(fl, K_SCANB, 1, 1, err) ||
-        fl_args(fl, K_COMPACT, xa, 23, err) || fl_launch(fl, K_COMPACT, FL_BLOCKS, 1, err))
+    if (fl_args(fl, FL_K_RESAMPLE_COUNT, ca, 3, err) || fl_launch(fl, FL_K_RESAMPLE_COUNT, FL_BLOCKS, 1, err) ||
+        fl_args(fl, FL_K_SCAN_BLOCKS, sa, 4, err) || fl_launch(fl, FL_K_SCAN_BLOCKS, 1, 1, err) ||
+        fl_args(fl, FL_K_COMPACT, xa, 23, err) || fl_launch(fl, FL_K_COMPACT, FL_BLOCKS, 1, err))
         return -1;
     cl_command_queue q = ocl_queue(fl->ocl);
-    cl_int rc = clEnqueueReadBuffer(q, fl->errflag, CL_FALSE, 0, sizeof fl->rs_err, &fl->rs_err, 0, NULL, NULL);
-    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, fl->tot, CL_FALSE, 0, sizeof fl->rs_tot, fl->rs_tot, 0, NULL, NULL);
+    cl_int rc = clEnqueueReadBuffer(q, fl->buf.errflag, CL_FALSE, 0, sizeof fl->rs.err, &fl->rs.err, 0, NULL, NULL);
+    if (rc == CL_SUCCESS)
+        rc = clEnqueueReadBuffer(q, fl->buf.tot, CL_FALSE, 0, sizeof fl->rs.tot, fl->rs.tot, 0, NULL, NULL);
     if (rc != CL_SUCCESS) {
         fl_finish(fl, NULL); /* no read into fl may outlive the call */
         return fl_clfail(err, "reading totals", rc);
     }
-    fl->rs_pending = 1;
+    fl->rs.pending = 1;
     return 0;
 }
 
 /* Waits for fl_resample_begin's totals (survivors, insertions, new n) and applies them. */
 static int fl_resample_end(struct flame *fl, struct fx_err *err)
 {
-    fl->rs_pending = 0;
-    if (fl_finish(fl, err) || fl_check(fl, fl->rs_err, err)) return -1;
-    fl->cur ^= 1;
-    fl->n = (int)fl->rs_tot[2];
-    fl->next_id += fl->rs_tot[1];
-    if (fl->rs_tot[0] + fl->rs_tot[1] >= (cl_uint)fl->max_particles)
+    fl->rs.pending = 0;
+    if (fl_finish(fl, err) || fl_check(fl, fl->rs.err, err)) return -1;
+    fl->buf.cur ^= 1;
+    fl->n = (int)fl->rs.tot[2];
+    fl->clock.next_id += fl->rs.tot[1];
+    if (fl->rs.tot[0] + fl->rs.tot[1] >= (cl_uint)fl->params.max_particles)
         return fx_fail(err, "internal", "", "flame: particle count reached max_particles %d (runaway) at step %llu",
-                       fl->max_particles, (unsigned long long)fl->steps);
+                       fl->params.max_particles, (unsigned long long)fl->clock.steps);
     return fl_table(fl, err);
 }
 
@@ -473,21 +528,21 @@ static int fl_resample_end(struct flame *fl, struct fx_err *err)
  * resampling step's totals wait for fl_step_end. */
 static int fl_step_begin(struct flame *fl, struct fx_err *err)
 {
-    int resample = fl->steps % (uint64_t)fl->interval == 0;
+    int resample = fl->clock.steps % (uint64_t)fl->params.interval == 0;
     if (resample) {
-        int want = 2 * fl->n < fl->max_particles ? 2 * fl->n : fl->max_particles;
+        int want = 2 * fl->n < fl->params.max_particles ? 2 * fl->n : fl->params.max_particles;
         if (fl_reserve(fl, want, err)) return -1;
     }
     if (fl->n > 0 && (fl_sort(fl, err) || fl_gather(fl, 1, resample, err))) return -1;
     if (resample && fl->n > 0 && fl_resample_begin(fl, err)) return -1;
-    fl->steps++;
-    fl->sim_seconds += fl->dt;
+    fl->clock.steps++;
+    fl->clock.sim_seconds += fl->params.dt;
     return 0;
 }
 
 /* Completes the substep fl_step_begin enqueued (the particle count after a resampling step
  * is known only then); nothing to do for the others. */
-static int fl_step_end(struct flame *fl, struct fx_err *err) { return fl->rs_pending ? fl_resample_end(fl, err) : 0; }
+static int fl_step_end(struct flame *fl, struct fx_err *err) { return fl->rs.pending ? fl_resample_end(fl, err) : 0; }
 
 static int fl_step_once(struct flame *fl, struct fx_err *err) { return fl_step_begin(fl, err) || fl_step_end(fl, err); }
 
@@ -525,11 +580,11 @@ void flame_particles_free(struct flame_particles *p)
 
 static void fl_read_params(struct flame *fl, const struct flame_config *c)
 {
-    fl->dt = c->dt;
-    fl->t_amb = c->T_amb;
-    fl->interval = c->resample_interval;
-    flame_params_up(c, fl->up);
-    flame_params_pack(c, fl->P);
+    fl->params.dt = c->dt;
+    fl->params.t_amb = c->T_amb;
+    fl->params.interval = c->resample_interval;
+    flame_params_up(c, fl->params.up);
+    flame_params_pack(c, fl->params.P);
 }
 
 /* Replaces the solids (sources, obstacles) by those of c, keeping the gas. */
@@ -565,20 +620,20 @@ static bool fl_solids_same(const struct flame_config *a, const struct flame_conf
 
 int flame_set(struct flame *fl, const struct flame_config *c, struct fx_err *err)
 {
-    bool solids_changed = !fl->configured || !fl_solids_same(&fl->cfg, c);
-    fl->cfg = *c;
-    fl->configured = true;
+    bool solids_changed = !fl->params.configured || !fl_solids_same(&fl->params.cfg, c);
+    fl->params.cfg = *c;
+    fl->params.configured = true;
     fl_read_params(fl, c);
     if (fl_upload_prm(fl, err)) return -1;
-    return solids_changed && fl->cap ? fl_rebuild_solids(fl, c, err) : 0;
+    return solids_changed && fl->buf.cap ? fl_rebuild_solids(fl, c, err) : 0;
 }
 
 /* Steps, simulated time and ids back to a fresh start. */
 static void fl_clock_reset(struct flame *fl)
 {
-    fl->steps = 0;
-    fl->sim_seconds = 0;
-    fl->next_id = 0;
+    fl->clock.steps = 0;
+    fl->clock.sim_seconds = 0;
+    fl->clock.next_id = 0;
 }
 
 /* The initial state: the scene's solids only (§2.13). */
@@ -586,7 +641,7 @@ static int fl_restart(struct flame *fl, struct fx_err *err)
 {
     struct fl_host hp = {0};
     fl_clock_reset(fl);
-    int rc = fl_finish(fl, err) || fl_zero_err(fl, err) || fl_add_solids(fl, &hp, &fl->cfg, err) ||
+    int rc = fl_finish(fl, err) || fl_zero_err(fl, err) || fl_add_solids(fl, &hp, &fl->params.cfg, err) ||
              fl_upload(fl, hp.n, hp.pos, hp.vel, hp.flags, hp.id, err);
     fl_host_free(&hp);
     return rc ? -1 : 0;
@@ -597,11 +652,12 @@ static int fl_create_objects(struct flame *fl, struct fx_err *err)
     cl_int rc = CL_SUCCESS;
     cl_program prog = ocl_program(fl->ocl, FL_KERNEL_FILE, FL_BUILD_OPTS, err);
     if (!prog) return -1;
-    for (int k = 0; k < K_N && rc == CL_SUCCESS; k++) fl->k[k] = clCreateKernel(prog, fl_kernel_names[k], &rc);
+    for (int k = 0; k < FL_KERNEL_COUNT && rc == CL_SUCCESS; k++)
+        fl->k[k] = clCreateKernel(prog, fl_kernel_names[k], &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "clCreateKernel", rc);
     struct { cl_mem *m; size_t bytes; } fixed[] = {
-        {&fl->hist, 4 * 256 * FL_BLOCKS}, {&fl->bsum, 8 * FL_BLOCKS}, {&fl->tot, 16}, {&fl->errflag, 16},
-        {&fl->prm, sizeof fl->P}};
+        {&fl->buf.hist, 4 * 256 * FL_BLOCKS}, {&fl->buf.bsum, 8 * FL_BLOCKS}, {&fl->buf.tot, 16},
+        {&fl->buf.errflag, 16}, {&fl->buf.prm, sizeof fl->params.P}};
     for (size_t i = 0; i < sizeof fixed / sizeof fixed[0] && rc == CL_SUCCESS; i++)
         *fixed[i].m = fl_buffer(fl, fixed[i].bytes, &rc);
     return rc == CL_SUCCESS ? 0 : fl_clfail(err, "clCreateBuffer", rc);
@@ -615,9 +671,9 @@ struct flame *flame_new(struct ocl *ocl, const struct flame_config *c, struct fx
         return NULL;
     }
     fl->ocl = ocl;
-    fl->h = c->h;
-    fl->d = c->particle_diameter * fl->h;
-    fl->max_particles = c->max_particles;
+    fl->params.h = c->h;
+    fl->params.d = c->particle_diameter * fl->params.h;
+    fl->params.max_particles = c->max_particles;
     if (fl_create_objects(fl, err) || flame_set(fl, c, err) || fl_restart(fl, err)) {
         flame_free(fl);
         return NULL;
@@ -631,11 +687,12 @@ void flame_free(struct flame *fl)
     if (fl->ocl) clFinish(ocl_queue(fl->ocl));
     fl_flush_events(fl);
     for (int s = 0; s < 2; s++)
-        for (int i = 0; i < 8; i++) fl_release(fl_set_mem(&fl->st[s], i));
-    cl_mem *m[] = {&fl->key[0], &fl->key[1], &fl->val[0], &fl->val[1], &fl->hist, &fl->cs, &fl->keep_ins,
-                   &fl->nrm, &fl->nl, &fl->sxyz, &fl->bsum, &fl->tot, &fl->errflag, &fl->prm};
+        for (int i = 0; i < 8; i++) fl_release(fl_set_mem(&fl->buf.st[s], i));
+    cl_mem *m[] = {&fl->buf.key[0], &fl->buf.key[1], &fl->buf.val[0], &fl->buf.val[1], &fl->buf.hist,
+                   &fl->buf.cs, &fl->buf.keep_ins, &fl->buf.nrm, &fl->buf.nl, &fl->buf.sxyz, &fl->buf.bsum,
+                   &fl->buf.tot, &fl->buf.errflag, &fl->buf.prm};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
-    for (int k = 0; k < K_N; k++)
+    for (int k = 0; k < FL_KERNEL_COUNT; k++)
         if (fl->k[k]) clReleaseKernel(fl->k[k]);
     free(fl);
 }
@@ -645,7 +702,7 @@ int flame_load(struct flame *fl, const struct flame_particles *p, struct fx_err 
     if (fl_finish(fl, err) || fl_zero_err(fl, err)) return -1;
     fl_clock_reset(fl);
     for (int i = 0; i < p->n; i++)
-        if (p->id[i] >= fl->next_id) fl->next_id = p->id[i] + 1;
+        if (p->id[i] >= fl->clock.next_id) fl->clock.next_id = p->id[i] + 1;
     return fl_upload(fl, p->n, p->pos, p->vel, p->flags, p->id, err);
 }
 
@@ -670,7 +727,7 @@ int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err
     if (flame_particles_alloc(out, n)) return fx_fail(err, "internal", "", "out of memory for %d particles", n);
     float *rho_p = malloc(8 * (size_t)(n ? n : 1)), *dtdf = malloc(8 * (size_t)(n ? n : 1));
     uint32_t *cnt = malloc(4 * (size_t)(n ? n : 1));
-    struct fl_set *S = &fl->st[fl->cur];
+    struct fl_set *S = &fl->buf.st[fl->buf.cur];
     void *dst[8] = {out->pos, out->vel, out->flags, out->id, rho_p, cnt, out->force, dtdf};
     cl_int rc = rho_p && dtdf && cnt ? CL_SUCCESS : CL_OUT_OF_HOST_MEMORY;
     for (int i = 0; i < 8 && rc == CL_SUCCESS && n > 0; i++)
@@ -698,22 +755,22 @@ int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err
 }
 
 int flame_count(const struct flame *fl) { return fl->n; }
-uint64_t flame_steps(const struct flame *fl) { return fl->steps; }
-double flame_sim_seconds(const struct flame *fl) { return fl->sim_seconds; }
+uint64_t flame_steps(const struct flame *fl) { return fl->clock.steps; }
+double flame_sim_seconds(const struct flame *fl) { return fl->clock.sim_seconds; }
 
 /* ---- substeps for the effect (flame_effect.c) ------------------------------------------------ */
 
 int flame_substep(struct flame *fl, struct fx_err *err) { return fl_step_once(fl, err); }
 int flame_substep_begin(struct flame *fl, struct fx_err *err) { return fl_step_begin(fl, err); }
 int flame_substep_end(struct flame *fl, struct fx_err *err) { return fl_step_end(fl, err); }
-bool flame_substep_syncs(const struct flame *fl) { return fl->steps % (uint64_t)fl->interval == 0; }
+bool flame_substep_syncs(const struct flame *fl) { return fl->clock.steps % (uint64_t)fl->params.interval == 0; }
 int flame_finish(struct flame *fl, struct fx_err *err) { return fl_finish(fl, err); }
 int flame_reset(struct flame *fl, struct fx_err *err) { return fl_restart(fl, err); }
 
 int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, struct fx_err *err)
 {
     int n = fl->n;
-    struct fl_set *S = &fl->st[fl->cur];
+    struct fl_set *S = &fl->buf.st[fl->buf.cur];
     void *dst[3] = {pos, vel, flags};
     cl_int ef = 0, rc = CL_SUCCESS;
     for (int i = 0; i < 3 && rc == CL_SUCCESS && n > 0; i++)
