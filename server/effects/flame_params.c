@@ -1,5 +1,6 @@
 /* flame_params.c — the flame's parameter table, its built-in presets, and the packing of the
- * typed parameters (flame_params.h) into the kernels' parameter array.
+ * typed parameters (flame_params.h) into the kernels' parameter array. Sections (§) without a
+ * document named are the flame's digest's (digest 002, after Mabuchi 2012's thesis).
  *
  * A value the kernels take as it is goes to its FP_* slot straight from the table
  * (PARAM_SLOT); flame_params_pack adds what derives from several (kernel constants of h and
