@@ -9,11 +9,10 @@
 #ifndef FX_COMPOUND_EYE_H
 #define FX_COMPOUND_EYE_H
 
-#include <cjson/cJSON.h>
-
 #include "err.h"
 #include "../params.h"
 #include "compound_eye_layout.h" /* kernels/: struct eye_optics, EYE_* */
+#include "compound_eye_params.h"
 
 struct ocl;
 
@@ -23,13 +22,13 @@ struct ocl;
 extern const struct param_def compound_eye_params[];
 extern const struct effect_ops compound_eye_effect;
 
-/* The optics of a validated parameter document. */
-void eye_optics_from_params(const cJSON *params, struct eye_optics *o);
+/* The optics of the parameters. */
+void eye_optics_from_params(const struct compound_eye_config *params, struct eye_optics *o);
 
 /* Effect state, exposed for tests and the benchmark. */
 struct compound_eye;
-struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, struct fx_err *err);
-int compound_eye_set(struct compound_eye *ce, const cJSON *params, struct fx_err *err);
+struct compound_eye *compound_eye_new(struct ocl *ocl, const struct compound_eye_config *params, struct fx_err *err);
+int compound_eye_set(struct compound_eye *ce, const struct compound_eye_config *params, struct fx_err *err);
 void compound_eye_free(struct compound_eye *ce);
 
 /* Mode lut: computes the three products and packs the kind 4 container; returns its

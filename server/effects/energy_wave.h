@@ -9,9 +9,8 @@
 #ifndef FX_ENERGY_WAVE_H
 #define FX_ENERGY_WAVE_H
 
-#include <cjson/cJSON.h>
-
 #include "../effect.h"
+#include "energy_wave_params.h"
 
 struct ocl;
 struct energy_wave;
@@ -23,9 +22,9 @@ extern const struct effect_ops energy_wave_effect;
 extern const struct param_def energy_wave_params[]; /* {0}-terminated */
 
 /* Creates a renderer from a complete validated parameter document. */
-struct energy_wave *energy_wave_new(struct ocl *ocl, const cJSON *params, struct fx_err *err);
+struct energy_wave *energy_wave_new(struct ocl *ocl, const struct energy_wave_config *params, struct fx_err *err);
 /* Replaces the parameters (complete validated document). */
-int energy_wave_set(struct energy_wave *ew, const cJSON *params, struct fx_err *err);
+int energy_wave_set(struct energy_wave *ew, const struct energy_wave_config *params, struct fx_err *err);
 /* Renders raw B (before any colour map) for stream time sim_time (which drives the W
  * animation when enabled) into out: width*height floats, row 0 at the top. */
 int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err);

@@ -89,8 +89,9 @@ static double bench_ms(struct energy_wave *ew, float *img, int reps, int frames)
 static double bench_run(struct ocl *ocl, const cJSON *doc, float **img, int reps, int frames)
 {
     struct fx_err err;
-    int w = (int)params_num(doc, "width"), h = (int)params_num(doc, "height");
-    struct energy_wave *ew = energy_wave_new(ocl, doc, &err);
+    const struct energy_wave_config *c = wave_typed(doc);
+    int w = c->width, h = c->height;
+    struct energy_wave *ew = energy_wave_new(ocl, c, &err);
     if (!ew) {
         fprintf(stderr, "bench_energy: %s\n", err.message);
         exit(1);
@@ -130,7 +131,8 @@ static void bench_tables(struct ocl *ocl, const char *what, const char *scene, f
 /* RMS of (B − B_ref)/max(|B_ref|, floor) over the reference grid of texels. */
 static double bench_rms(const cJSON *doc, const float *img, const double *ref)
 {
-    int w = (int)params_num(doc, "width"), h = (int)params_num(doc, "height"), n = 0;
+    const struct energy_wave_config *c = wave_typed(doc);
+    int w = c->width, h = c->height, n = 0;
     double se = 0;
     for (int gj = 0; gj < BENCH_ACC_GRID; gj++)
         for (int gi = 0; gi < BENCH_ACC_GRID; gi++, n++) {
@@ -171,7 +173,7 @@ static void bench_animated(struct ocl *ocl, const char *scene, float **img)
         cJSON *doc = bench_doc(scene, "{\"mode\":\"%s\",\"divisions\":%d}", runs[r].mode, runs[r].div ? runs[r].div : 200);
         int adaptive = runs[r].div == 0;
         ms[r] = bench_run(ocl, doc, img, adaptive ? 3 : 1, 8);
-        struct energy_wave *ew = energy_wave_new(ocl, doc, &err);
+        struct energy_wave *ew = energy_wave_new(ocl, wave_typed(doc), &err);
         if (!ew || energy_wave_render(ew, t, *img, &err)) {
             fprintf(stderr, "bench_energy: %s\n", err.message);
             exit(1);

@@ -42,7 +42,9 @@ static struct compound_eye *bench_new(struct ocl *ocl, const char *partial)
 {
     struct fx_err err = {0};
     cJSON *doc = bench_doc(partial);
-    struct compound_eye *ce = compound_eye_new(ocl, doc, &err);
+    struct compound_eye_config c;
+    struct compound_eye *ce = params_load(compound_eye_params, doc, &c, sizeof c, &err) ? NULL
+                                                                                      : compound_eye_new(ocl, &c, &err);
     cJSON_Delete(doc);
     if (!ce) {
         fprintf(stderr, "bench_eye: %s\n", err.message);
@@ -102,8 +104,14 @@ static void bench_rays(struct ocl *ocl)
         d[3 * i + 2] = (float)-z;
     }
     cJSON *doc = bench_doc("{}");
+    struct compound_eye_config c;
+    struct fx_err perr = {0};
+    if (params_load(compound_eye_params, doc, &c, sizeof c, &perr)) {
+        fprintf(stderr, "bench_eye: %s\n", perr.message);
+        exit(1);
+    }
     struct eye_optics o;
-    eye_optics_from_params(doc, &o);
+    eye_optics_from_params(&c, &o);
     cJSON_Delete(doc);
     struct eye_rays_out out = {.land = land};
     struct fx_err err = {0};

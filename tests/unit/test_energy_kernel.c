@@ -111,11 +111,18 @@ static cJSON *tek_doc(cJSON *partial)
     return out;
 }
 
+/* A renderer of the complete document doc (its typed parameters). */
+static struct energy_wave *tek_new(const cJSON *doc, struct fx_err *err)
+{
+    struct energy_wave_config c;
+    return params_load(energy_wave_params, doc, &c, sizeof c, err) ? NULL : energy_wave_new(tek_ocl, &c, err);
+}
+
 /* Renders doc at sim_time into out; 0 on success. */
 static int tek_render(const cJSON *doc, double sim_time, float *out)
 {
     struct fx_err err = {0};
-    struct energy_wave *ew = energy_wave_new(tek_ocl, doc, &err);
+    struct energy_wave *ew = tek_new(doc, &err);
     if (!ew) {
         CHECK(0, "energy_wave_new: %s: %s", err.code, err.message);
         return -1;
@@ -486,7 +493,7 @@ static void test_loop_energy(void)
 {
     cJSON *doc = tek_doc(wave_fig56_partial("{\"width\":64,\"height\":32}"));
     struct fx_err err = {0};
-    struct energy_wave *ew = doc ? energy_wave_new(tek_ocl, doc, &err) : NULL;
+    struct energy_wave *ew = doc ? tek_new(doc, &err) : NULL;
     CHECK(ew != NULL, "energy_wave_new: %s", err.message);
     if (!ew) {
         cJSON_Delete(doc);
@@ -499,7 +506,8 @@ static void test_loop_energy(void)
         if (nw > longest) longest = nw;
     }
     int frames = (int)(2 * wave_anim_period(longest));
-    double rate = params_num(doc, "anim_rate"), *sum = calloc((size_t)frames, sizeof *sum);
+    double rate = 0, *sum = calloc((size_t)frames, sizeof *sum);
+    CHECK(params_number(doc, "anim_rate", &rate) == 0 && rate > 0, "anim_rate");
     static float tex[64 * 32];
     for (int f = 0; f < frames && !energy_wave_render(ew, f / rate, tex, &err); f++)
         for (int k = 0; k < 64 * 32; k++) sum[f] += tex[k];
@@ -864,7 +872,9 @@ static void test_animation_render(void)
 static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame *out)
 {
     struct fx_err err = {0};
-    void *ew = energy_wave_effect.create(tek_ocl, doc, &err);
+    void *typed = effect_typed(&energy_wave_effect, doc, &err);
+    void *ew = typed ? energy_wave_effect.create(tek_ocl, typed, &err) : NULL;
+    free(typed);
     int rc = ew ? slices_step(&energy_wave_effect, ew, 0.7, budget, out, &err) : -1;
     CHECK(rc == 0, "step with %g s per call: %s", budget, err.message);
     if (ew) energy_wave_effect.destroy(ew);
@@ -914,7 +924,9 @@ static void test_emitted_frame_kept(void)
                                      "\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":8.0}],\"animate\":true,"
                                      "\"width\":200,\"height\":40,\"output\":\"RGBA\"}"));
     struct fx_err err = {0};
-    void *ew = doc ? energy_wave_effect.create(tek_ocl, doc, &err) : NULL;
+    void *typed = doc ? effect_typed(&energy_wave_effect, doc, &err) : NULL;
+    void *ew = typed ? energy_wave_effect.create(tek_ocl, typed, &err) : NULL;
+    free(typed);
     struct effect_frame first = {0}, next = {0};
     const size_t bytes = (size_t)200 * 40 * 4 * sizeof(float);
     float *texels = malloc(bytes);

@@ -22,6 +22,13 @@
 #define TEK_N 4096
 
 static struct ocl *tek_ocl;
+
+/* An effect state of the complete document doc (its typed parameters). */
+static struct compound_eye *tek_new(const cJSON *doc, struct fx_err *err)
+{
+    struct compound_eye_config c;
+    return params_load(compound_eye_params, doc, &c, sizeof c, err) ? NULL : compound_eye_new(tek_ocl, &c, err);
+}
 static unsigned long long tek_rng = 0x9e3779b97f4a7c15ull;
 
 static double tek_rand(double lo, double hi)
@@ -210,7 +217,7 @@ static void test_partial_work_items(void)
     cJSON *partial = cJSON_Parse("{\"mode\":\"bake\",\"bake_size\":129}");
     struct fx_err err = {0};
     CHECK(params_merge(compound_eye_params, doc, partial, &bake, &err) == 0, "merge: %s", err.message);
-    struct compound_eye *ce = bake ? compound_eye_new(tek_ocl, bake, &err) : NULL;
+    struct compound_eye *ce = bake ? tek_new(bake, &err) : NULL;
     CHECK(ce != NULL, "compound_eye_new: %s", err.message);
     static float rgba[129 * 129 * 4];
     if (ce && compound_eye_bake(ce, rgba, &err) == 0) {
@@ -237,7 +244,7 @@ static void test_table_products(void)
     cJSON *partial = cJSON_Parse("{\"lut_cells\":8,\"lut_dirs\":8,\"lut_supersample\":1,\"lattice\":\"hex\"}");
     struct fx_err err = {0};
     CHECK(params_merge(compound_eye_params, doc, partial, &small, &err) == 0, "merge: %s", err.message);
-    struct compound_eye *ce = small ? compound_eye_new(tek_ocl, small, &err) : NULL;
+    struct compound_eye *ce = small ? tek_new(small, &err) : NULL;
     CHECK(ce != NULL, "compound_eye_new: %s", err.message);
     const void *data = NULL;
     size_t len = 0;
@@ -293,7 +300,9 @@ static void test_atlas_gutters(void)
 static int tek_sliced_step(const cJSON *doc, double budget, struct slices_frame *out)
 {
     struct fx_err err = {0};
-    void *ce = compound_eye_effect.create(tek_ocl, doc, &err);
+    void *typed = effect_typed(&compound_eye_effect, doc, &err);
+    void *ce = typed ? compound_eye_effect.create(tek_ocl, typed, &err) : NULL;
+    free(typed);
     int rc = ce ? slices_step(&compound_eye_effect, ce, 0, budget, out, &err) : -1;
     CHECK(rc == 0 && out->payload, "step with %g s per call: %s", budget, err.message);
     if (ce) compound_eye_effect.destroy(ce);
