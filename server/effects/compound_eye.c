@@ -171,6 +171,7 @@ struct compound_eye {
     struct slice_meter meter;
     struct eye_lut_packer packer;
     double pack_ms;
+    struct compound_eye_split split; /* of the last table or view */
 };
 
 enum { EYE_IDLE, EYE_TRACING, EYE_PACKING };
@@ -234,6 +235,7 @@ static cl_mem eye_buffer(struct compound_eye *ce, cl_mem_flags flags, size_t byt
 /* Recomputes the pigment tile and uploads it (buffer regrown when needed). */
 static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *err)
 {
+    double t0 = clock_now();
     eye_pigment_size(res, ce->pigment.lattice, &ce->pw, &ce->ph);
     size_t bytes = (size_t)ce->pw * ce->ph * 4 * sizeof(float);
     float *pig = realloc(ce->pig, bytes);
@@ -247,6 +249,7 @@ static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *e
         ce->d_pig_bytes = bytes;
     }
     cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_pig, CL_TRUE, 0, bytes, ce->pig, 0, NULL, NULL);
+    ce->split.pigment = (clock_now() - t0) * 1e3;
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "pigment upload: %s", ocl_errstr(rc));
 }
 
@@ -300,6 +303,28 @@ static size_t eye_items(size_t n)
     return (items + EYE_GROUP - 1) / EYE_GROUP * EYE_GROUP;
 }
 
+/* Device milliseconds of a completed profiling event (0 when the queue does not profile). */
+static double eye_event_ms(cl_event ev)
+{
+    cl_ulong t0 = 0, t1 = 0;
+    if (clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof t0, &t0, NULL) != CL_SUCCESS ||
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) != CL_SUCCESS)
+        return 0.0;
+    return t1 > t0 ? (double)(t1 - t0) * 1e-6 : 0.0;
+}
+
+/* Starts the split of a table or view (the pigment's time is its parameters'). */
+static void eye_split_start(struct compound_eye *ce)
+{
+    ce->split = (struct compound_eye_split){.pigment = ce->split.pigment};
+}
+
+void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split *out)
+{
+    *out = ce->split;
+    out->launch_read = fmax(ce->split.launch_read - ce->split.kernel, 0.0);
+}
+
 /* Runs kernel k (its arguments set) over its 1-D range from work-group ce->done on, a piece at a
  * time until slice_end, reading each piece's results back into host (float4 each, EYE_LANES per
  * work-item, n in all). 0 when every work-item ran, EFFECT_MORE, or -1 with err. */
@@ -318,11 +343,15 @@ static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_
         cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
         rc = clEnqueueReadBuffer(q, out, CL_TRUE, from * f4, (to - from) * f4, host + 4 * from, 0, NULL, NULL);
-        if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
+        if (rc == CL_SUCCESS) {
+            ocl_record(ce->ocl, name, ev);
+            ce->split.kernel += eye_event_ms(ev);
+        }
         clReleaseEvent(ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
         ce->done += m;
         double t1 = clock_now();
+        ce->split.launch_read += (t1 - t0) * 1e3;
         slice_record(&ce->meter, m, t1 - t0);
         t0 = t1;
     } while (ce->done < groups && t0 < slice_end);
@@ -361,6 +390,7 @@ static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
         {sizeof dot, &dot}, {sizeof base, &base}};
     ce->done = 0;
     ce->pack_ms = 0;
+    eye_split_start(ce);
     return ocl_set_args(ce->k_lut, "eye_lut", a, 10, err);
 }
 
@@ -405,6 +435,9 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
         rc = eye_lut_pack_run(&ce->packer, slice_end, err);
         ce->pack_ms += (clock_now() - t0) * 1e3;
         rc = rc > 0 ? EFFECT_MORE : rc;
+        ce->split.atlas = ce->packer.stage_ms[0];
+        ce->split.macro = ce->packer.stage_ms[1];
+        ce->split.zstd = ce->packer.stage_ms[2];
         if (!rc) eye_abandon(ce); /* done: frees the packer */
     }
     if (rc < 0) eye_abandon(ce);
@@ -484,6 +517,7 @@ static int eye_bake_start(struct compound_eye *ce, struct fx_err *err)
         {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
         {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &n8}};
     ce->done = 0;
+    eye_split_start(ce);
     return ocl_set_args(ce->k_bake, "eye_bake", a, 10, err);
 }
 

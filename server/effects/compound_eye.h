@@ -40,4 +40,13 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err);
 int compound_eye_bake_size(const struct compound_eye *ce);
 
+/* Where the last table or view's time went, milliseconds: the kernel on the device, launching
+ * it and reading its results back (the wall time of the kernel's launches less kernel), the
+ * pigment tile (computed and uploaded when its parameters are set) and a table's packing
+ * stages (eye_lut.h: atlas layout, macro map, zstd). */
+struct compound_eye_split {
+    double kernel, launch_read, pigment, atlas, macro, zstd;
+};
+void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split *out);
+
 #endif

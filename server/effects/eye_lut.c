@@ -206,6 +206,7 @@ int eye_lut_pack_run(struct eye_lut_packer *pk, double slice_end, struct fx_err 
         if (rc < 0) return -1;
         double t1 = clock_now();
         slice_record(m, n, t1 - t0);
+        pk->stage_ms[pk->stage] += (t1 - t0) * 1e3;
         t0 = t1;
         if (n == left || (pk->stage == EYE_PACK_ZSTD && rc == 0)) {
             pk->stage++;

@@ -60,6 +60,7 @@ struct eye_lut_packer {
     struct fxs_lut_product products[3];
     struct fxs_lut_encoder enc;
     struct slice_meter meter[3]; /* per stage: atlas rows, macro tiles, compressed blocks */
+    double stage_ms[3];          /* time spent in each stage so far */
 };
 int eye_lut_pack_begin(struct eye_lut_packer *pk, const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err);
 /* Works until slice_end (INFINITY: to the end): 0 when the container is complete, 1 when work is
