@@ -365,16 +365,20 @@ static v3 eye_octa_dir(fv u, fv v)
     return v3_normalize(v3_make(px, py, 1.0f - fabs(px) - fabs(py)));
 }
 
-/* The lens LUT, 8 samples per work-item over the flat index k = tile * C*C + cj*C + ci
- * (global size ceil(D*D*C*C / 8)). Output: out[k], the mean over ss x ss sub-rays spread
- * over the sample's footprint in the cell (digest §8.1). */
+/* The lens LUT, 8 samples per work-item over the flat index k = slot * C*C + cj*C + ci of
+ * the direction tiles to trace, tile tiles[slot] (global size ceil(ntiles*C*C / 8); the
+ * host copies the others by symmetry, server/effects/eye_lut.h). Output: out[k], the mean
+ * over ss x ss sub-rays spread over the sample's footprint in the cell (digest §8.1). */
 __kernel void eye_lut(__global float4 *out, __global const float4 *pig, int pw, int ph, struct eye_optics o,
-                      int cells, int dirs, int ss, float4 dot_col, float4 base_col)
+                      __global const int *tiles, int ntiles, int cells, int dirs, int ss, float4 dot_col, float4 base_col)
 {
-    const int per = cells * cells, total = per * dirs * dirs;
+    const int per = cells * cells, total = per * ntiles;
     iv k = eye_lane_index(), live = k < total;
     k = min(k, total - 1);
-    iv cell = k % per, tile = k / per;
+    int slot[EYE_LANES], t[EYE_LANES];
+    vstore8(k / per, 0, slot);
+    for (int i = 0; i < EYE_LANES; i++) t[i] = tiles[slot[i]];
+    iv cell = k % per, tile = vload8(0, t);
     iv ci = cell % cells, cj = cell / cells, ti = tile % dirs, tj = tile / dirs;
     v3 w = eye_octa_dir(convert_float8(2 * ti + 1) / (float)dirs - 1.0f, convert_float8(2 * tj + 1) / (float)dirs - 1.0f);
     v3 d = v3_mul(w, (fv)-1.0f);

@@ -156,9 +156,10 @@ struct compound_eye {
     struct eye_pigment pigment;
     float *pig;      /* pigment tile, pw x ph RGBA */
     int pw, ph;
-    cl_mem d_pig, d_lut, d_geo, d_out;
-    size_t d_pig_bytes, d_lut_bytes;
-    float *samples;  /* LUT kernel output */
+    cl_mem d_pig, d_lut, d_geo, d_out, d_tiles;
+    size_t d_pig_bytes, d_lut_bytes, d_tiles_bytes;
+    float *samples;  /* LUT kernel output, for the traced tiles (eye_lut.h) */
+    int symmetry, traced; /* the table's mirrors (eye_lut.h) and the tiles traced under them */
     struct fx_buf table;
     /* bake */
     int size, compression;
@@ -368,12 +369,37 @@ static void eye_table_dims(const struct compound_eye *ce, int *cells, int *dirs,
     *ss = (int)params_num(ce->params, "lut_supersample");
 }
 
+/* Chooses the table's symmetry and uploads the tiles to trace under it (buffer regrown when
+ * needed). */
+static int eye_lut_tiles_upload(struct compound_eye *ce, int cells, int dirs, struct fx_err *err)
+{
+    size_t bytes = (size_t)dirs * dirs * sizeof(cl_int);
+    cl_int *tiles = malloc(bytes);
+    if (!tiles) return fx_fail(err, "internal", "", "out of memory for the table's tiles");
+    ce->symmetry = eye_lut_symmetry(ce->optics.lattice, cells, ce->ph);
+    ce->traced = eye_lut_traced_tiles(dirs, ce->symmetry, tiles);
+    if (bytes > ce->d_tiles_bytes) {
+        if (ce->d_tiles) clReleaseMemObject(ce->d_tiles);
+        ce->d_tiles_bytes = 0;
+        if (!(ce->d_tiles = eye_buffer(ce, CL_MEM_READ_ONLY, bytes, NULL, err))) {
+            free(tiles);
+            return -1;
+        }
+        ce->d_tiles_bytes = bytes;
+    }
+    cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_tiles, CL_TRUE, 0, (size_t)ce->traced * sizeof(cl_int),
+                                     tiles, 0, NULL, NULL);
+    free(tiles);
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "upload of the table's tiles: %s", ocl_errstr(rc));
+}
+
 /* Starts a table: the sample buffers (regrown when needed) and the LUT kernel's arguments. */
 static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
 {
     int cells, dirs, ss;
     eye_table_dims(ce, &cells, &dirs, &ss);
-    size_t n = (size_t)cells * cells * dirs * dirs, bytes = n * 4 * sizeof(float);
+    if (eye_lut_tiles_upload(ce, cells, dirs, err)) return -1;
+    size_t n = (size_t)cells * cells * ce->traced, bytes = n * 4 * sizeof(float);
     if (bytes > ce->d_lut_bytes) {
         float *s = realloc(ce->samples, bytes);
         if (!s) return fx_fail(err, "internal", "", "out of memory for %zu table samples", n);
@@ -386,12 +412,12 @@ static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
-        {sizeof ce->optics, &ce->optics}, {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss},
-        {sizeof dot, &dot}, {sizeof base, &base}};
+        {sizeof ce->optics, &ce->optics}, {sizeof(cl_mem), &ce->d_tiles}, {sizeof(int), &ce->traced},
+        {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss}, {sizeof dot, &dot}, {sizeof base, &base}};
     ce->done = 0;
     ce->pack_ms = 0;
     eye_split_start(ce);
-    return ocl_set_args(ce->k_lut, "eye_lut", a, 10, err);
+    return ocl_set_args(ce->k_lut, "eye_lut", a, 12, err);
 }
 
 /* Starts packing the traced samples. */
@@ -408,6 +434,7 @@ static int eye_lut_pack_start(struct compound_eye *ce, struct fx_err *err)
         .pw = ce->pw,
         .ph = ce->ph,
         .samples = ce->samples,
+        .symmetry = ce->symmetry,
     };
     eye_table_dims(ce, &t.cells, &t.dirs, &t.supersample);
     return eye_lut_pack_begin(&ce->packer, &t, &ce->table, err);
@@ -425,7 +452,7 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
     if (ce->busy == EYE_TRACING) {
         int cells, dirs, ss;
         eye_table_dims(ce, &cells, &dirs, &ss);
-        size_t n = (size_t)cells * cells * dirs * dirs;
+        size_t n = (size_t)cells * cells * ce->traced;
         rc = eye_run(ce, ce->k_lut, "eye_lut", n, ce->d_lut, ce->samples, slice_end, err);
         if (!rc && !(rc = eye_lut_pack_start(ce, err))) ce->busy = EYE_PACKING;
         if (!rc && clock_now() >= slice_end) rc = EFFECT_MORE;
@@ -562,7 +589,7 @@ void compound_eye_free(struct compound_eye *ce)
 {
     if (!ce) return;
     eye_abandon(ce);
-    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out};
+    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out, ce->d_tiles};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
     if (ce->k_lut) clReleaseKernel(ce->k_lut);
