@@ -14,6 +14,7 @@
 #include "compound_eye.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -150,6 +151,7 @@ static const char *const eye_lut_keys[] = {
 struct compound_eye {
     struct ocl *ocl;
     cl_kernel k_lut, k_bake;
+    int lanes;       /* rays per work-item of the kernels (compound_eye_program) */
     cJSON *params;   /* the document in use */
     int mode, dirty; /* dirty: the next step has something new to send */
     struct eye_optics optics;
@@ -284,23 +286,35 @@ static cl_float4 eye_f4(const double v[3], double w)
     return f;
 }
 
+int compound_eye_build_options(struct ocl *ocl, char *opts)
+{
+    cl_uint width = 0;
+    if (clGetDeviceInfo(ocl_device(ocl), CL_DEVICE_PREFERRED_VECTOR_WIDTH_FLOAT, sizeof width, &width, NULL) != CL_SUCCESS)
+        width = 0;
+    int lanes = width >= 16 ? 16 : 8;
+    snprintf(opts, COMPOUND_EYE_OPTS_MAX, "%s -DEYE_LANES=%d", COMPOUND_EYE_CL_OPTS, lanes);
+    return lanes;
+}
+
 static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
 {
     cl_int rc;
-    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, COMPOUND_EYE_CL_OPTS, err);
+    char opts[COMPOUND_EYE_OPTS_MAX];
+    ce->lanes = compound_eye_build_options(ce->ocl, opts);
+    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, opts, err);
     if (!prog) return -1;
     ce->k_lut = clCreateKernel(prog, "eye_lut", &rc);
     if (rc == CL_SUCCESS) ce->k_bake = clCreateKernel(prog, "eye_bake", &rc);
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
-/* Work-items for n rays, each tracing EYE_LANES of them (kernels/compound_eye.cl), in whole
+/* Work-items for n rays, each tracing ce->lanes of them (kernels/compound_eye.cl), in whole
  * groups of EYE_GROUP (the kernels store nothing past n). On a CPU device each group is a
  * work-group, every launch alike, since PoCL compiles a kernel once per work-group size; a GPU's
  * driver chooses its own. */
-static size_t eye_items(size_t n)
+static size_t eye_items(const struct compound_eye *ce, size_t n)
 {
-    size_t items = (n + EYE_LANES - 1) / EYE_LANES;
+    size_t lanes = (size_t)ce->lanes, items = (n + lanes - 1) / lanes;
     return (items + EYE_GROUP - 1) / EYE_GROUP * EYE_GROUP;
 }
 
@@ -327,19 +341,19 @@ void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split
 }
 
 /* Runs kernel k (its arguments set) over its 1-D range from work-group ce->done on, a piece at a
- * time until slice_end, reading each piece's results back into host (float4 each, EYE_LANES per
+ * time until slice_end, reading each piece's results back into host (float4 each, ce->lanes per
  * work-item, n in all). 0 when every work-item ran, EFFECT_MORE, or -1 with err. */
 static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_t n, cl_mem out, float *host,
                    double slice_end, struct fx_err *err)
 {
-    const size_t groups = eye_items(n) / EYE_GROUP, f4 = 4 * sizeof(float), local = EYE_GROUP;
+    const size_t groups = eye_items(ce, n) / EYE_GROUP, lanes = (size_t)ce->lanes, f4 = 4 * sizeof(float), local = EYE_GROUP;
     const size_t *wg = ocl_is_cpu(ce->ocl) ? &local : NULL;
     cl_command_queue q = ocl_queue(ce->ocl);
     double t0 = clock_now();
     do {
         size_t m = slice_units(&ce->meter, groups - ce->done, t0, slice_end);
         size_t offset = ce->done * EYE_GROUP, global = m * EYE_GROUP;
-        size_t from = offset * EYE_LANES, to = (offset + global) * EYE_LANES < n ? (offset + global) * EYE_LANES : n;
+        size_t from = offset * lanes, to = (offset + global) * lanes < n ? (offset + global) * lanes : n;
         cl_event ev;
         cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
@@ -482,22 +496,22 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 
 /* ---- mode bake --------------------------------------------------------------------- */
 
-/* The bake kernel reads the atlas as 16 planes of n8 floats (texels rounded up to whole
+/* The bake kernel reads the atlas as 16 planes of npad floats (texels rounded up to whole
  * work-groups, the padding uncovered), so 8 texels' field is one vector load. */
-static void eye_geo_planes(const float *geo, size_t texels, size_t n8, float *planes)
+static void eye_geo_planes(const float *geo, size_t texels, size_t npad, float *planes)
 {
-    memset(planes, 0, n8 * 16 * sizeof(float));
+    memset(planes, 0, npad * 16 * sizeof(float));
     for (size_t k = 0; k < texels; k++)
-        for (int i = 0; i < 16; i++) planes[i * n8 + k] = geo[16 * k + i];
+        for (int i = 0; i < 16; i++) planes[i * npad + k] = geo[16 * k + i];
 }
 
 static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err *err)
 {
     struct eye_mesh mesh;
     ce->size = (int)params_num(p, "bake_size");
-    size_t texels = (size_t)ce->size * ce->size, n8 = eye_items(texels) * EYE_LANES;
+    size_t texels = (size_t)ce->size * ce->size, npad = eye_items(ce, texels) * (size_t)ce->lanes;
     if (eye_model_load(params_str(p, "model"), &mesh, err)) return -1;
-    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(n8 * 16 * sizeof(float));
+    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(npad * 16 * sizeof(float));
     ce->rgba = malloc(texels * 4 * sizeof(float));
     if (!geo || !planes || !ce->rgba) {
         free(geo);
@@ -507,12 +521,12 @@ static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err
     }
     eye_model_atlas(&mesh, ce->size, geo);
     eye_mesh_free(&mesh);
-    eye_geo_planes(geo, texels, n8, planes);
+    eye_geo_planes(geo, texels, npad, planes);
     free(geo);
-    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n8 * 16 * sizeof(float), planes, err);
+    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, npad * 16 * sizeof(float), planes, err);
     free(planes);
     if (!ce->d_geo) return -1;
-    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, n8 * 4 * sizeof(float), NULL, err);
+    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, npad * 4 * sizeof(float), NULL, err);
     return ce->d_out ? 0 : -1;
 }
 
@@ -538,11 +552,11 @@ static int eye_bake_start(struct compound_eye *ce, struct fx_err *err)
         .lens_normal = params_enum(p, "shading_normal", eye_normal_names),
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    int n8 = (int)(eye_items((size_t)ce->size * ce->size) * EYE_LANES);
+    int npad = (int)(eye_items(ce, (size_t)ce->size * ce->size) * (size_t)ce->lanes);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_pig},
         {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
-        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &n8}};
+        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &npad}};
     ce->done = 0;
     eye_split_start(ce);
     return ocl_set_args(ce->k_bake, "eye_bake", a, 10, err);

@@ -23,6 +23,12 @@ struct ocl;
 extern const struct param_def compound_eye_params[];
 extern const struct effect_ops compound_eye_effect;
 
+/* The build options of kernels/compound_eye.cl for the device (COMPOUND_EYE_OPTS_MAX bytes at
+ * most) and the rays per work-item they give its kernels: 16 where the device's preferred
+ * float vector width is 16 (AVX-512), else 8. */
+#define COMPOUND_EYE_OPTS_MAX 96
+int compound_eye_build_options(struct ocl *ocl, char *opts);
+
 /* The optics of a validated parameter document. */
 void eye_optics_from_params(const cJSON *params, struct eye_optics *o);
 
