@@ -2,7 +2,7 @@
  * server/effects/compound_eye.h) against the double-precision reference (tests/ref/eye_ref),
  * plus the digest §6 properties that concern the device code: no NaN or infinity over the
  * whole hemisphere of view directions (every TIR policy, both lattices), lattice
- * translation invariance, partial work-items (8 rays each), and the look-up table
+ * translation invariance, partial work-items (8 or 16 rays each), and the look-up table
  * products (sizes, every LLUT texel against the reference, gutters, macro map). */
 #include <math.h>
 #include <stdlib.h>
@@ -182,8 +182,9 @@ static void test_lattice_translation(void)
     }
 }
 
-/* Each work-item traces 8 rays: a count that leaves a partial work-item traces the same
- * as the full batch, and a bake whose texel count is not a multiple of 8 is whole. */
+/* Each work-item traces 8 or 16 rays (compound_eye_build_options): a count that leaves a
+ * partial work-item traces the same as the full batch, and a bake whose texel count is not a
+ * multiple of either is whole. */
 static void test_partial_work_items(void)
 {
     struct eye_optics o = tek_optics(1, 1.1, 1.491, 10, EYE_TIR_REFLECT);
