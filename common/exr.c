@@ -4,18 +4,15 @@
  * channels ("Y", or "A","B","G","R" as EXR sorts them), data window (0,0)-(W-1,H-1),
  * INCREASING_Y so input row 0 is the top. OpenEXRCore writes through a custom
  * pwrite-style callback into the caller's fx_buf, so no temporary files exist and
- * the buffer can be reused frame after frame. Chunks are encoded with one encode pipeline
- * per thread whose buffers are reused between chunks (a big file's second half on a second
- * thread, exr_write_chunks) and written in order; OpenEXRCore converts the
+ * the buffer can be reused frame after frame. Chunks are encoded in order with one
+ * encode pipeline whose buffers are reused between chunks; OpenEXRCore converts the
  * interleaved floats to half (round to nearest even, overflow to inf, NaN kept) while
  * packing, reading straight from the caller's pixels. Library errors are captured
  * by an error handler so the message reaches the caller instead of stderr. */
 #include "exr.h"
 
-#include <pthread.h>
 #include <stdint.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include <openexr.h>
@@ -104,97 +101,28 @@ static void exr_bind_channels(exr_encode_pipeline_t *pipe, const struct exr_imag
     }
 }
 
-/* Chunks [first, last) encoded by one thread with a pipeline of its own. With keep set, their
- * bytes are kept here, one after another (end[i]: where chunk first + i ends), for the caller
- * to write in order; otherwise each is written as it is made. */
-struct exr_chunks {
-    exr_context_t ctxt;
-    const struct exr_image *img;
-    int lines, first, last, keep;
-    struct fx_buf bytes;
-    size_t *end;
-    exr_result_t rv;
-};
-
-/* A pipeline's write_fn that keeps the chunk's bytes (struct exr_chunks) instead. */
-static exr_result_t exr_keep_chunk(exr_encode_pipeline_t *pipe)
-{
-    struct exr_chunks *c = pipe->encoding_user_data;
-    if (fx_buf_append(&c->bytes, pipe->compressed_buffer, pipe->compressed_bytes)) return EXR_ERR_OUT_OF_MEMORY;
-    c->end[pipe->chunk.start_y / c->lines - c->first] = c->bytes.len;
-    return EXR_ERR_SUCCESS;
-}
-
-/* yield_until_ready_fn of a kept chunk: the caller writes the chunks in order itself. */
-static exr_result_t exr_no_wait(exr_encode_pipeline_t *pipe)
-{
-    (void)pipe;
-    return EXR_ERR_SUCCESS;
-}
-
-static exr_result_t exr_encode_chunk(struct exr_chunks *c, int y, exr_encode_pipeline_t *pipe)
+static exr_result_t exr_encode_chunk(exr_context_t ctxt, const struct exr_image *img, int y,
+                                     exr_encode_pipeline_t *pipe)
 {
     exr_chunk_info_t cinfo;
     int first = pipe->channels == NULL;
-    exr_result_t rv = exr_write_scanline_chunk_info(c->ctxt, 0, y, &cinfo);
+    exr_result_t rv = exr_write_scanline_chunk_info(ctxt, 0, y, &cinfo);
     if (rv != EXR_ERR_SUCCESS) return rv;
-    rv = first ? exr_encoding_initialize(c->ctxt, 0, &cinfo, pipe) : exr_encoding_update(c->ctxt, 0, &cinfo, pipe);
+    rv = first ? exr_encoding_initialize(ctxt, 0, &cinfo, pipe) : exr_encoding_update(ctxt, 0, &cinfo, pipe);
     if (rv != EXR_ERR_SUCCESS) return rv;
-    exr_bind_channels(pipe, c->img, y);
-    if (first) rv = exr_encoding_choose_default_routines(c->ctxt, 0, pipe);
-    if (first && c->keep) {
-        pipe->encoding_user_data = c;
-        pipe->write_fn = exr_keep_chunk;
-        pipe->yield_until_ready_fn = exr_no_wait;
-    }
-    return rv == EXR_ERR_SUCCESS ? exr_encoding_run(c->ctxt, 0, pipe) : rv;
+    exr_bind_channels(pipe, img, y);
+    if (first) rv = exr_encoding_choose_default_routines(ctxt, 0, pipe);
+    return rv == EXR_ERR_SUCCESS ? exr_encoding_run(ctxt, 0, pipe) : rv;
 }
 
-static void *exr_encode_chunks(void *arg)
-{
-    struct exr_chunks *c = arg;
-    exr_encode_pipeline_t pipe = EXR_ENCODE_PIPELINE_INITIALIZER;
-    c->rv = EXR_ERR_SUCCESS;
-    for (int i = c->first; c->rv == EXR_ERR_SUCCESS && i < c->last; i++) c->rv = exr_encode_chunk(c, i * c->lines, &pipe);
-    if (pipe.channels) exr_encoding_destroy(c->ctxt, &pipe);
-    return NULL;
-}
-
-/* Writes the kept chunks of c in order. */
-static exr_result_t exr_write_kept(struct exr_chunks *c)
-{
-    exr_result_t rv = c->rv;
-    for (int i = c->first; rv == EXR_ERR_SUCCESS && i < c->last; i++) {
-        size_t from = i > c->first ? c->end[i - c->first - 1] : 0;
-        rv = exr_write_scanline_chunk(c->ctxt, 0, i * c->lines, c->bytes.data + from, c->end[i - c->first] - from);
-    }
-    return rv;
-}
-
-/* Encodes the chunks. A file of EXR_SPLIT_MIN chunks or more is split in two halves: a second
- * thread encodes the second half while this one encodes the first, both keep their bytes, and
- * this one writes them all in order: the same file, in about half the time on two cores. */
-#define EXR_SPLIT_MIN 64
 static exr_result_t exr_write_chunks(exr_context_t ctxt, const struct exr_image *img)
 {
+    exr_encode_pipeline_t pipe = EXR_ENCODE_PIPELINE_INITIALIZER;
     int32_t lines = 0;
     exr_result_t rv = exr_get_scanlines_per_chunk(ctxt, 0, &lines);
-    if (rv != EXR_ERR_SUCCESS) return rv;
-    int n = (img->height + lines - 1) / lines, half = n / 2;
-    struct exr_chunks c[2] = {{ctxt, img, lines, 0, n, 0, {0}, NULL, 0}, {ctxt, img, lines, half, n, 1, {0}, NULL, 0}};
-    pthread_t thread;
-    if (n < EXR_SPLIT_MIN || !(c[1].end = malloc((size_t)(n - half) * sizeof *c[1].end)) ||
-        pthread_create(&thread, NULL, exr_encode_chunks, &c[1])) {
-        free(c[1].end);
-        exr_encode_chunks(&c[0]); /* alone, writing as it goes */
-        return c[0].rv;
-    }
-    c[0].last = half;
-    exr_encode_chunks(&c[0]);
-    pthread_join(thread, NULL);
-    rv = c[0].rv == EXR_ERR_SUCCESS ? exr_write_kept(&c[1]) : c[0].rv;
-    fx_buf_free(&c[1].bytes);
-    free(c[1].end);
+    for (int y = 0; rv == EXR_ERR_SUCCESS && y < img->height; y += lines)
+        rv = exr_encode_chunk(ctxt, img, y, &pipe);
+    if (pipe.channels) exr_encoding_destroy(ctxt, &pipe);
     return rv;
 }
 
