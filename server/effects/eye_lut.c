@@ -77,24 +77,21 @@ void eye_pigment_tile(const struct eye_pigment *pg, int w, int h, float *rgba)
 
 /* ---- products -------------------------------------------------------------------- */
 
-/* v to 0..255, rounded; v is a colour, in [0, 1] up to rounding (the integer clamp compiles
- * to min/max instructions, so the layout loops vectorise). */
-static uint8_t eye_u8(float v)
-{
-    int i = (int)(v * 255.0f + 0.5f);
-    return (uint8_t)(i < 0 ? 0 : i > 255 ? 255 : i);
-}
+static uint8_t eye_u8(float v) { return (uint8_t)(v <= 0.0f ? 0 : v >= 1.0f ? 255 : (int)(v * 255.0f + 0.5f)); }
 
-/* n values to bytes as eye_u8; with SSE2, 16 at a time (truncating conversion, then the
- * saturating packs clamp to 0..255: the same bytes). */
+/* n values to bytes as eye_u8; with SSE2, 16 at a time (clamped to [0, 1], scaled, truncated,
+ * packed: the same bytes). */
 static void eye_u8_row(const float *v, uint8_t *out, int n)
 {
     int i = 0;
 #ifdef __SSE2__
-    const __m128 scale = _mm_set1_ps(255.0f), half = _mm_set1_ps(0.5f);
+    const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), scale = _mm_set1_ps(255.0f), half = _mm_set1_ps(0.5f);
     for (; i + 16 <= n; i += 16) {
         __m128i q[4];
-        for (int k = 0; k < 4; k++) q[k] = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_loadu_ps(v + i + 4 * k), scale), half));
+        for (int k = 0; k < 4; k++) {
+            __m128 c = _mm_min_ps(_mm_max_ps(_mm_loadu_ps(v + i + 4 * k), zero), one);
+            q[k] = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(c, scale), half));
+        }
         __m128i b = _mm_packus_epi16(_mm_packs_epi32(q[0], q[1]), _mm_packs_epi32(q[2], q[3]));
         _mm_storeu_si128((__m128i *)(void *)(out + i), b);
     }
@@ -111,8 +108,9 @@ int eye_lut_symmetry(int lattice, int cells, int pigment_h)
     return EYE_LUT_MIRROR_X | (lattice != EYE_HEX || (cells % 2 == 0 && pigment_h % 2 == 0) ? EYE_LUT_MIRROR_Y : 0);
 }
 
-/* Tile (ti, tj) is traced when no mirror of the symmetry takes it to a tile before it in the
- * half-planes below: ti + tj <= D-1 for x (its mirror tile has the sum 2D-2 - ti - tj), ti <= tj for y. */
+/* Tile (ti, tj) is traced when it lies in the half-plane that each mirror of the symmetry
+ * keeps: ti + tj <= D-1 for x (which takes it to a tile whose ti + tj is 2D-2 minus its own),
+ * ti <= tj for y (which swaps ti and tj). */
 static int eye_lut_traced(int dirs, int symmetry, int ti, int tj)
 {
     return (!(symmetry & EYE_LUT_MIRROR_X) || ti + tj <= dirs - 1) && (!(symmetry & EYE_LUT_MIRROR_Y) || ti <= tj);
@@ -170,7 +168,7 @@ static void eye_lut_atlas_rows(const struct eye_lut_table *t, const int *source,
             const float *row = t->samples + 4 * ((size_t)(src / 4) * C * C + (size_t)mj * C);
             uint8_t *px = atlas + 4 * ((size_t)y * W + (size_t)ti * T + G);
             if (src & EYE_LUT_MIRROR_X) {
-                uint8_t tmp[4 * 64];
+                uint8_t tmp[4 * 64]; /* lut_cells <= 64 */
                 eye_u8_row(row, tmp, 4 * C);
                 for (int x = 0; x < C; x++) memcpy(px + 4 * x, tmp + 4 * (C - 1 - x), 4);
             } else {
