@@ -16,6 +16,7 @@
 #include <math.h>
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -95,7 +96,7 @@ const struct param_def compound_eye_params[] = {
      .doc = EYE_LUT_DOC("D: direction tiles per axis (hemi-octahedral map)")},
     {EYE_AT(lut_supersample), .group = "table", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
      .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1: a table "
-                        "change takes about 90 ms on 2 CPU cores; 2 is 4x the rays)")},
+                        "change takes some 30-40 ms on 2 CPU cores; 2 is 4x the rays)")},
     EYE_COEF(ka, "0.2", "ambient coefficient a of the Phong shading (Sagawa 2014 eq. 5.31; a client uniform in mode lut)", .group = "shading"),
     EYE_COEF(kd, "0.8", "diffuse coefficient d of the Phong shading (Sagawa 2014 eq. 5.31)", .group = "shading"),
     EYE_COEF(ks, "0.3", "specular coefficient s of the Phong shading (Sagawa 2014 eq. 5.31)", .group = "shading"),
@@ -162,6 +163,7 @@ static const size_t eye_lut_keys[] = {
 struct compound_eye {
     struct ocl *ocl;
     cl_kernel k_lut, k_bake;
+    int lanes;                      /* rays per work-item of the kernels (compound_eye_program) */
     struct compound_eye_config cfg; /* the parameters in use */
     bool configured;                /* cfg holds a set */
     int mode, dirty; /* dirty: the next step has something new to send */
@@ -169,9 +171,10 @@ struct compound_eye {
     struct eye_pigment pigment;
     float *pig;      /* pigment tile, pw x ph RGBA */
     int pw, ph;
-    cl_mem d_pig, d_lut, d_geo, d_out;
-    size_t d_pig_bytes, d_lut_bytes;
-    float *samples;  /* LUT kernel output */
+    cl_mem d_pig, d_lut, d_geo, d_out, d_tiles;
+    size_t d_pig_bytes, d_lut_bytes, d_tiles_bytes;
+    float *samples;  /* LUT kernel output, for the traced tiles (eye_lut.h) */
+    int symmetry, traced; /* the table's mirrors (eye_lut.h) and the tiles traced under them */
     struct fx_buf table;
     /* bake */
     int size, compression;
@@ -184,6 +187,7 @@ struct compound_eye {
     struct slice_meter meter;
     struct eye_lut_packer packer;
     double pack_ms;
+    struct compound_eye_split split; /* of the last table or view */
 };
 
 enum { EYE_IDLE, EYE_TRACING, EYE_PACKING };
@@ -243,6 +247,7 @@ static cl_mem eye_buffer(struct compound_eye *ce, cl_mem_flags flags, size_t byt
 /* Recomputes the pigment tile and uploads it (buffer regrown when needed). */
 static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *err)
 {
+    double t0 = clock_now();
     eye_pigment_size(res, ce->pigment.lattice, &ce->pw, &ce->ph);
     size_t bytes = (size_t)ce->pw * ce->ph * 4 * sizeof(float);
     float *pig = realloc(ce->pig, bytes);
@@ -256,6 +261,7 @@ static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *e
         ce->d_pig_bytes = bytes;
     }
     cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_pig, CL_TRUE, 0, bytes, ce->pig, 0, NULL, NULL);
+    ce->split.pigment = (clock_now() - t0) * 1e3;
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "pigment upload: %s", ocl_errstr(rc));
 }
 
@@ -287,49 +293,87 @@ static cl_float4 eye_f4(const double v[3], double w)
     return f;
 }
 
+int compound_eye_build_options(struct ocl *ocl, char *opts)
+{
+    cl_uint width = 0;
+    if (clGetDeviceInfo(ocl_device(ocl), CL_DEVICE_PREFERRED_VECTOR_WIDTH_FLOAT, sizeof width, &width, NULL) != CL_SUCCESS)
+        width = 0;
+    int lanes = width >= 16 ? 16 : 8;
+    snprintf(opts, COMPOUND_EYE_OPTS_MAX, "%s -DEYE_LANES=%d", COMPOUND_EYE_CL_OPTS, lanes);
+    return lanes;
+}
+
 static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
 {
     cl_int rc;
-    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, COMPOUND_EYE_CL_OPTS, err);
+    char opts[COMPOUND_EYE_OPTS_MAX];
+    ce->lanes = compound_eye_build_options(ce->ocl, opts);
+    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, opts, err);
     if (!prog) return -1;
     ce->k_lut = clCreateKernel(prog, "eye_lut", &rc);
     if (rc == CL_SUCCESS) ce->k_bake = clCreateKernel(prog, "eye_bake", &rc);
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
-/* Work-items for n rays, each tracing EYE_LANES of them (kernels/compound_eye.cl), in whole
+/* Work-items for n rays, each tracing ce->lanes of them (kernels/compound_eye.cl), in whole
  * groups of EYE_GROUP (the kernels store nothing past n). On a CPU device each group is a
  * work-group, every launch alike, since PoCL compiles a kernel once per work-group size; a GPU's
  * driver chooses its own. */
-static size_t eye_items(size_t n)
+static size_t eye_items(const struct compound_eye *ce, size_t n)
 {
-    size_t items = (n + EYE_LANES - 1) / EYE_LANES;
+    size_t lanes = (size_t)ce->lanes, items = (n + lanes - 1) / lanes;
     return (items + EYE_GROUP - 1) / EYE_GROUP * EYE_GROUP;
 }
 
+/* Device milliseconds of a completed profiling event (0 when the queue does not profile). */
+static double eye_event_ms(cl_event ev)
+{
+    cl_ulong t0 = 0, t1 = 0;
+    if (clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof t0, &t0, NULL) != CL_SUCCESS ||
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) != CL_SUCCESS)
+        return 0.0;
+    return t1 > t0 ? (double)(t1 - t0) * 1e-6 : 0.0;
+}
+
+/* Starts the split of a table or view (the pigment's time is its parameters'). */
+static void eye_split_start(struct compound_eye *ce)
+{
+    ce->split = (struct compound_eye_split){.pigment = ce->split.pigment};
+}
+
+void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split *out)
+{
+    *out = ce->split;
+    out->launch_read = fmax(ce->split.launch_read - ce->split.kernel, 0.0);
+}
+
 /* Runs kernel k (its arguments set) over its 1-D range from work-group ce->done on, a piece at a
- * time until slice_end, reading each piece's results back into host (float4 each, EYE_LANES per
+ * time until slice_end, reading each piece's results back into host (float4 each, ce->lanes per
  * work-item, n in all). 0 when every work-item ran, EFFECT_MORE, or -1 with err. */
 static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_t n, cl_mem out, float *host,
                    double slice_end, struct fx_err *err)
 {
-    const size_t groups = eye_items(n) / EYE_GROUP, f4 = 4 * sizeof(float), local = EYE_GROUP;
+    const size_t groups = eye_items(ce, n) / EYE_GROUP, lanes = (size_t)ce->lanes, f4 = 4 * sizeof(float), local = EYE_GROUP;
     const size_t *wg = ocl_is_cpu(ce->ocl) ? &local : NULL;
     cl_command_queue q = ocl_queue(ce->ocl);
     double t0 = clock_now();
     do {
         size_t m = slice_units(&ce->meter, groups - ce->done, t0, slice_end);
         size_t offset = ce->done * EYE_GROUP, global = m * EYE_GROUP;
-        size_t from = offset * EYE_LANES, to = (offset + global) * EYE_LANES < n ? (offset + global) * EYE_LANES : n;
+        size_t from = offset * lanes, to = (offset + global) * lanes < n ? (offset + global) * lanes : n;
         cl_event ev;
         cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
         rc = clEnqueueReadBuffer(q, out, CL_TRUE, from * f4, (to - from) * f4, host + 4 * from, 0, NULL, NULL);
-        if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
+        if (rc == CL_SUCCESS) {
+            ocl_record(ce->ocl, name, ev);
+            ce->split.kernel += eye_event_ms(ev);
+        }
         clReleaseEvent(ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
         ce->done += m;
         double t1 = clock_now();
+        ce->split.launch_read += (t1 - t0) * 1e3;
         slice_record(&ce->meter, m, t1 - t0);
         t0 = t1;
     } while (ce->done < groups && t0 < slice_end);
@@ -346,12 +390,37 @@ static void eye_table_dims(const struct compound_eye *ce, int *cells, int *dirs,
     *ss = ce->cfg.lut_supersample;
 }
 
+/* Chooses the table's symmetry and uploads the tiles to trace under it (buffer regrown when
+ * needed). */
+static int eye_lut_tiles_upload(struct compound_eye *ce, int cells, int dirs, struct fx_err *err)
+{
+    size_t bytes = (size_t)dirs * dirs * sizeof(cl_int);
+    cl_int *tiles = malloc(bytes);
+    if (!tiles) return fx_fail(err, "internal", "", "out of memory for the table's tiles");
+    ce->symmetry = eye_lut_symmetry(ce->optics.lattice, cells, ce->ph);
+    ce->traced = eye_lut_traced_tiles(dirs, ce->symmetry, tiles);
+    if (bytes > ce->d_tiles_bytes) {
+        if (ce->d_tiles) clReleaseMemObject(ce->d_tiles);
+        ce->d_tiles_bytes = 0;
+        if (!(ce->d_tiles = eye_buffer(ce, CL_MEM_READ_ONLY, bytes, NULL, err))) {
+            free(tiles);
+            return -1;
+        }
+        ce->d_tiles_bytes = bytes;
+    }
+    cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_tiles, CL_TRUE, 0, (size_t)ce->traced * sizeof(cl_int),
+                                     tiles, 0, NULL, NULL);
+    free(tiles);
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "upload of the table's tiles: %s", ocl_errstr(rc));
+}
+
 /* Starts a table: the sample buffers (regrown when needed) and the LUT kernel's arguments. */
 static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
 {
     int cells, dirs, ss;
     eye_table_dims(ce, &cells, &dirs, &ss);
-    size_t n = (size_t)cells * cells * dirs * dirs, bytes = n * 4 * sizeof(float);
+    if (eye_lut_tiles_upload(ce, cells, dirs, err)) return -1;
+    size_t n = (size_t)cells * cells * ce->traced, bytes = n * 4 * sizeof(float);
     if (bytes > ce->d_lut_bytes) {
         float *s = realloc(ce->samples, bytes);
         if (!s) return fx_fail(err, "internal", "", "out of memory for %zu table samples", n);
@@ -364,11 +433,12 @@ static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
-        {sizeof ce->optics, &ce->optics}, {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss},
-        {sizeof dot, &dot}, {sizeof base, &base}};
+        {sizeof ce->optics, &ce->optics}, {sizeof(cl_mem), &ce->d_tiles}, {sizeof(int), &ce->traced},
+        {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss}, {sizeof dot, &dot}, {sizeof base, &base}};
     ce->done = 0;
     ce->pack_ms = 0;
-    return ocl_set_args(ce->k_lut, "eye_lut", a, 10, err);
+    eye_split_start(ce);
+    return ocl_set_args(ce->k_lut, "eye_lut", a, 12, err);
 }
 
 /* Starts packing the traced samples. */
@@ -385,6 +455,7 @@ static int eye_lut_pack_start(struct compound_eye *ce, struct fx_err *err)
         .pw = ce->pw,
         .ph = ce->ph,
         .samples = ce->samples,
+        .symmetry = ce->symmetry,
     };
     eye_table_dims(ce, &t.cells, &t.dirs, &t.supersample);
     return eye_lut_pack_begin(&ce->packer, &t, &ce->table, err);
@@ -402,7 +473,7 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
     if (ce->busy == EYE_TRACING) {
         int cells, dirs, ss;
         eye_table_dims(ce, &cells, &dirs, &ss);
-        size_t n = (size_t)cells * cells * dirs * dirs;
+        size_t n = (size_t)cells * cells * ce->traced;
         rc = eye_run(ce, ce->k_lut, "eye_lut", n, ce->d_lut, ce->samples, slice_end, err);
         if (!rc && !(rc = eye_lut_pack_start(ce, err))) ce->busy = EYE_PACKING;
         if (!rc && clock_now() >= slice_end) rc = EFFECT_MORE;
@@ -412,6 +483,9 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
         rc = eye_lut_pack_run(&ce->packer, slice_end, err);
         ce->pack_ms += (clock_now() - t0) * 1e3;
         rc = rc > 0 ? EFFECT_MORE : rc;
+        ce->split.atlas = ce->packer.stage_ms[0];
+        ce->split.macro = ce->packer.stage_ms[1];
+        ce->split.zstd = ce->packer.stage_ms[2];
         if (!rc) eye_abandon(ce); /* done: frees the packer */
     }
     if (rc < 0) eye_abandon(ce);
@@ -429,22 +503,22 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 
 /* ---- mode bake --------------------------------------------------------------------- */
 
-/* The bake kernel reads the atlas as 16 planes of n8 floats (texels rounded up to whole
+/* The bake kernel reads the atlas as 16 planes of npad floats (texels rounded up to whole
  * work-groups, the padding uncovered), so 8 texels' field is one vector load. */
-static void eye_geo_planes(const float *geo, size_t texels, size_t n8, float *planes)
+static void eye_geo_planes(const float *geo, size_t texels, size_t npad, float *planes)
 {
-    memset(planes, 0, n8 * 16 * sizeof(float));
+    memset(planes, 0, npad * 16 * sizeof(float));
     for (size_t k = 0; k < texels; k++)
-        for (int i = 0; i < 16; i++) planes[i * n8 + k] = geo[16 * k + i];
+        for (int i = 0; i < 16; i++) planes[i * npad + k] = geo[16 * k + i];
 }
 
 static int eye_bake_setup(struct compound_eye *ce, const struct compound_eye_config *p, struct fx_err *err)
 {
     struct eye_mesh mesh;
     ce->size = p->bake_size;
-    size_t texels = (size_t)ce->size * ce->size, n8 = eye_items(texels) * EYE_LANES;
+    size_t texels = (size_t)ce->size * ce->size, npad = eye_items(ce, texels) * (size_t)ce->lanes;
     if (eye_model_load(eye_model_names[p->model], &mesh, err)) return -1;
-    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(n8 * 16 * sizeof(float));
+    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(npad * 16 * sizeof(float));
     ce->rgba = malloc(texels * 4 * sizeof(float));
     if (!geo || !planes || !ce->rgba) {
         free(geo);
@@ -454,12 +528,12 @@ static int eye_bake_setup(struct compound_eye *ce, const struct compound_eye_con
     }
     eye_model_atlas(&mesh, ce->size, geo);
     eye_mesh_free(&mesh);
-    eye_geo_planes(geo, texels, n8, planes);
+    eye_geo_planes(geo, texels, npad, planes);
     free(geo);
-    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n8 * 16 * sizeof(float), planes, err);
+    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, npad * 16 * sizeof(float), planes, err);
     free(planes);
     if (!ce->d_geo) return -1;
-    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, n8 * 4 * sizeof(float), NULL, err);
+    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, npad * 4 * sizeof(float), NULL, err);
     return ce->d_out ? 0 : -1;
 }
 
@@ -485,12 +559,13 @@ static int eye_bake_start(struct compound_eye *ce, struct fx_err *err)
         .lens_normal = p->shading_normal,
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    int n8 = (int)(eye_items((size_t)ce->size * ce->size) * EYE_LANES);
+    int npad = (int)(eye_items(ce, (size_t)ce->size * ce->size) * (size_t)ce->lanes);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_pig},
         {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
-        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &n8}};
+        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &npad}};
     ce->done = 0;
+    eye_split_start(ce);
     return ocl_set_args(ce->k_bake, "eye_bake", a, 10, err);
 }
 
@@ -535,7 +610,7 @@ void compound_eye_free(struct compound_eye *ce)
 {
     if (!ce) return;
     eye_abandon(ce);
-    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out};
+    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out, ce->d_tiles};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
     if (ce->k_lut) clReleaseKernel(ce->k_lut);

@@ -61,8 +61,9 @@ int probe_eye_trace(struct ocl *ocl, const struct eye_optics *o, int n, const fl
         {bytes, in_p, NULL, 0}, {bytes, in_d, NULL, 0}, {bytes, NULL, res, 0}, {bytes, NULL, nrm, 0},
         {0, o, NULL, sizeof *o}, {0, &n, NULL, sizeof n},
     };
-    size_t global = ((size_t)n + EYE_LANES - 1) / EYE_LANES;
-    rc = probe_run(ocl, COMPOUND_EYE_CL, COMPOUND_EYE_CL_OPTS, "eye_trace_rays", global, args, 6, err);
+    char opts[COMPOUND_EYE_OPTS_MAX];
+    size_t lanes = (size_t)compound_eye_build_options(ocl, opts), global = ((size_t)n + lanes - 1) / lanes;
+    rc = probe_run(ocl, COMPOUND_EYE_CL, opts, "eye_trace_rays", global, args, 6, err);
     for (int i = 0; i < n && rc == 0; i++) {
         if (out->land) memcpy(out->land + 2 * i, res + 4 * i, 2 * sizeof(float));
         if (out->status) out->status[i] = (int)res[4 * i + 2];
