@@ -422,6 +422,14 @@ static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3
 #define EW_JUMP_S 0.02f
 #define EW_JUMP_BISECT 6
 
+/* The node s = c + w·sinh(u) at u = ua + du·x, and 2 cosh(u) in *jac (ds/du = w·jac/2). */
+static fv ew_sinh_node(fv c, fv w, fv ua, fv du, float x, fv *jac)
+{
+    fv e = exp(mad(du, x, ua)), ie = 1.0f / e;
+    *jac = e + ie;
+    return c + w * 0.5f * (e - ie);
+}
+
 /* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
  * [a, b]): in u the 1/distance peak is smooth, so one Gauss–Legendre rule covers it.
  * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] flagged in *jumped. */
@@ -432,9 +440,8 @@ static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim
     fv t, str, tprev = 0.0f, strprev = 0.0f, sprev = a;
     *jumped = 0;
     for (int k = 0; k < n; k++) {
-        fv e = exp(mad(du, gx[k], ua)), ie = 1.0f / e;
-        fv s = c + w * 0.5f * (e - ie);
-        acc += gw[k] * (e + ie) * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t, &str) * ew_zeta(sc, s);
+        fv jac, s = ew_sinh_node(c, w, ua, du, gx[k], &jac);
+        acc += gw[k] * jac * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t, &str) * ew_zeta(sc, s);
         iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~*jumped & (fabs(t - tprev) > EW_JUMP_T) &
                   (fabs(str - strprev) > EW_JUMP_S);
         *ja = select(*ja, sprev, jump);
@@ -567,11 +574,18 @@ static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, 
     return ew_approach(eps, Sl, Ql, v3_make(R * a.c, R * a.s, (fv)(0.0f)), v3_make(-a.s, a.c, (fv)(0.0f)), w);
 }
 
-/* Closest approaches of the ray line to the torus centre circle (at most two local
- * minima of the distance): 16-point search around the circle, then Newton. */
-static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_peaks *pk)
+/* cos and sin of kπ/8, k = 0…15: the circle search's start points. */
+__constant float ew_circle16_c[16] = {1.0f,  0.923879533f,  0.707106781f,  0.382683432f, 0.0f, -0.382683432f,
+                                      -0.707106781f, -0.923879533f, -1.0f, -0.923879533f, -0.707106781f,
+                                      -0.382683432f, 0.0f, 0.382683432f, 0.707106781f, 0.923879533f};
+__constant float ew_circle16_s[16] = {0.0f, 0.382683432f, 0.707106781f, 0.923879533f, 1.0f, 0.923879533f,
+                                      0.707106781f, 0.382683432f, 0.0f, -0.382683432f, -0.707106781f,
+                                      -0.923879533f, -1.0f, -0.923879533f, -0.707106781f, -0.382683432f};
+
+/* Closest approaches of the ray line (Sl, Ql: in the torus frame) to the torus centre circle
+ * (at most two local minima of the distance): 16-point search around the circle, then Newton. */
+static void ew_torus_peaks(__global const float *to, float eps, v3 Sl, v3 Ql, ew_peaks *pk)
 {
-    v3 Sl = ew_torus_local(to, S), Ql = ew_torus_local(to, v3_add(Q, v3_load(to)));
     fv R = (fv)(to[3]), inv = rsqrt(v3_dot(Ql, Ql));
     v3 qn = v3_mul(Ql, inv);
     v3 a = v3_mul(v3_mad(v3_make((fv)(1.0f), (fv)(0.0f), (fv)(0.0f)), -qn.x, qn), R);
@@ -579,14 +593,14 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_p
     v3 c = v3_perp(Sl, qn);
     ew_circle K = {v3_dot(a, a), v3_dot(b, b), v3_dot(a, b), v3_dot(a, c), v3_dot(b, c), v3_dot(c, c)};
     fv f[16];
-    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, cospi(k / 8.0f), sinpi(k / 8.0f));
+    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, ew_circle16_c[k], ew_circle16_s[k]);
     /* lanes without a strict minimum (a ray along the axis) keep φ = 0 */
     fv b0 = EW_BIG, b1 = EW_BIG;
     ew_angle a0 = {(fv)(1.0f), (fv)(0.0f)}, a1 = a0;
     for (int k = 0; k < 16; k++) {
         iv is_min = (f[k] <= f[(k + 15) & 15]) & (f[k] < f[(k + 1) & 15]);
         iv first = is_min & (f[k] < b0), second = is_min & ~first & (f[k] < b1);
-        fv ck = (fv)(cospi(k / 8.0f)), sk = (fv)(sinpi(k / 8.0f));
+        fv ck = (fv)(ew_circle16_c[k]), sk = (fv)(ew_circle16_s[k]);
         b1 = select(select(b1, f[k], second), b0, first);
         a1.c = select(select(a1.c, ck, second), a0.c, first);
         a1.s = select(select(a1.s, sk, second), a0.s, first);
@@ -598,6 +612,33 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_p
     fv s0 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, a0), &w0);
     fv s1 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, a1), &w1);
     ew_peaks_make(pk, s0, w0, s1, w1, b1 < EW_BIG);
+}
+
+/* ∫_a^b of the torus term ζ coef/max(ε, d) along the ray Sl + sQl (torus frame), with the
+ * span's sinh map around the peak (c, w); 12 Gauss–Legendre nodes. */
+static fv ew_torus_span(const ew_scene *sc, __global const float *to, v3 Sl, v3 Ql, fv c, fv w, fv a, fv b)
+{
+    float R = to[3];
+    fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
+    for (int k = 0; k < EW_GL12_N; k++) {
+        fv jac, s = ew_sinh_node(c, w, ua, du, ew_gl12_x[k], &jac);
+        v3 P = v3_mad(Sl, s, Ql);
+        fv dr = sqrt(P.x * P.x + P.y * P.y) - R;
+        acc += ew_gl12_w[k] * jac * ew_zeta(sc, s) / fmax(sc->eps, sqrt(dr * dr + P.z * P.z));
+    }
+    return acc * 0.5f * du * w * to[7];
+}
+
+/* One torus: its closest approaches, then one span per peak (split halfway between two). */
+static fv ew_torus_int(const ew_scene *sc, __global const float *to, v3 S, v3 Q)
+{
+    v3 Sl = ew_torus_local(to, S), Ql = ew_torus_local(to, v3_add(Q, v3_load(to)));
+    ew_peaks pk;
+    ew_torus_peaks(to, sc->eps, Sl, Ql, &pk);
+    if (!any(pk.two)) return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), (fv)(1.0f));
+    fv mid = select((fv)(1.0f), 0.5f * (pk.s0 + pk.s1), pk.two);
+    return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), mid) +
+           ew_torus_span(sc, to, Sl, Ql, pk.s1, pk.w1, mid, (fv)(1.0f));
 }
 
 /* Closest approaches of the ray line to the lit part [t_lo, t_hi] of a curve (where
@@ -655,10 +696,7 @@ __kernel void ew_render_adaptive(__global float *out, __constant const float *ca
     fv acc = 0.0f;
     for (int k = 0; k < np; k++) acc += ew_point_int(&sc, pts + k * EW_PT_STRIDE, S, Q);
     for (int k = 0; k < nl; k++) acc += ew_line_int(&sc, lns + k * EW_LN_STRIDE, S, Q);
-    for (int k = 0; k < nt; k++) {
-        ew_torus_peaks(tor + k * EW_TO_STRIDE, sc.eps, S, Q, &pk);
-        acc += ew_peaks_int(&sc, 0, tor + k * EW_TO_STRIDE, S, Q, &pk);
-    }
+    for (int k = 0; k < nt; k++) acc += ew_torus_int(&sc, tor + k * EW_TO_STRIDE, S, Q);
     for (int k = 0; k < nc; k++) {
         ew_curve_peaks(cur + k * EW_CV_STRIDE, sc.eps, S, Q, &pk);
         acc += ew_peaks_int(&sc, 1, cur + k * EW_CV_STRIDE, S, Q, &pk);

@@ -242,6 +242,8 @@ struct energy_wave {
     int busy;
     size_t done;
     struct slice_meter meter;
+    /* device time of the frame in progress and of the last one completed */
+    struct energy_wave_split split, last_split;
 };
 
 /* A frame's pieces are counted in groups of EW_GROUP work-items of one row, rows padded to whole
@@ -517,7 +519,18 @@ static int ew_frame_begin(struct energy_wave *ew, double sim_time, struct fx_err
     cl_kernel k = ew_kernel(ew, &name);
     if (ew_upload(ew, nc, err) || ew_set_args(ew, k, name, nc, err)) return -1;
     ew->done = 0;
+    ew->split = (struct energy_wave_split){0};
     return 0;
+}
+
+/* The duration of a completed profiling event, 0 where the device does not say. */
+static double ew_event_ms(cl_event ev)
+{
+    cl_ulong t0, t1;
+    if (clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof t0, &t0, NULL) != CL_SUCCESS ||
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) != CL_SUCCESS || t1 < t0)
+        return 0.0;
+    return (double)(t1 - t0) * 1e-6;
 }
 
 /* Runs the frame's next n work-groups (at most) as one rectangle of the grid, the rest of a row
@@ -538,13 +551,19 @@ static int ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *
     *to = groups[1] > 1 || (x + groups[0]) * span >= w ? (j + groups[1]) * w : j * w + (x + groups[0]) * span;
     const char *name;
     cl_kernel k = ew_kernel(ew, &name);
-    cl_event ev;
+    cl_event ev, rev;
     cl_command_queue q = ocl_queue(ew->ocl);
     cl_int rc = clEnqueueNDRangeKernel(q, k, 2, offset, global, wg, 0, NULL, &ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
     rc = clEnqueueReadBuffer(q, ew->d_out, CL_TRUE, *from * sizeof(float), (*to - *from) * sizeof(float), out + *from,
-                             0, NULL, NULL);
-    if (rc == CL_SUCCESS) ocl_record(ew->ocl, name, ev);
+                             0, NULL, &rev);
+    if (rc == CL_SUCCESS) {
+        ocl_record(ew->ocl, name, ev);
+        ew->split.kernel_ms += ew_event_ms(ev);
+        ew->split.read_back_ms += ew_event_ms(rev);
+        ew->split.pieces++;
+        clReleaseEvent(rev);
+    }
     clReleaseEvent(ev);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
     ew->done += groups[0] * groups[1];
@@ -555,8 +574,12 @@ int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, stru
 {
     size_t from, to;
     ew->busy = 0;
-    return ew_frame_begin(ew, sim_time, err) || ew_frame_piece(ew, ew_groups(ew), out, &from, &to, err) ? -1 : 0;
+    if (ew_frame_begin(ew, sim_time, err) || ew_frame_piece(ew, ew_groups(ew), out, &from, &to, err)) return -1;
+    ew->last_split = ew->split;
+    return 0;
 }
+
+void energy_wave_last_split(const struct energy_wave *ew, struct energy_wave_split *out) { *out = ew->last_split; }
 
 /* ---- effect_ops ---------------------------------------------------------------------- */
 
@@ -618,6 +641,7 @@ static int ew_render_slice(struct energy_wave *ew, double sim_time, double slice
     } while (ew->done < total && t0 < slice_end);
     if (ew->done < total) return EFFECT_MORE;
     ew->busy = 0;
+    ew->last_split = ew->split;
     float *img = ew->img, *rgba = ew->rgba;
     ew->img = ew->done_img;
     ew->rgba = ew->done_rgba;

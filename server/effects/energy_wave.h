@@ -31,6 +31,15 @@ int energy_wave_set(struct energy_wave *ew, const cJSON *params, struct fx_err *
 int energy_wave_render(struct energy_wave *ew, double sim_time, float *out, struct fx_err *err);
 void energy_wave_free(struct energy_wave *ew);
 
+/* Where the device time of the last completed frame went (profiling events): the render
+ * kernel and the read-back of its texels, over the frame's pieces (one, unless the engine's
+ * slices cut it). The rest of a frame's wall time is host work: weights, uploads, launches. */
+struct energy_wave_split {
+    double kernel_ms, read_back_ms;
+    int pieces;
+};
+void energy_wave_last_split(const struct energy_wave *ew, struct energy_wave_split *out);
+
 /* The kernel's curve record (16 floats, kernels/energy_wave.cl) of the Bézier b with strength
  * coef, nw weights and the lit parameter range [t_lo, t_hi]. */
 void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi);
