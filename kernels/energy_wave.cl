@@ -1,8 +1,9 @@
 /* energy_wave.cl — OpenCL kernels of effect energy_wave (seed 000, Watanabe 2016).
  *
- * Each work item renders EW_LANES = 8 adjacent texels of one row as float8 lanes: the
- * code is written branch-free on vectors (select instead of if), so PoCL on a CPU
- * emits AVX code for it, and GPUs run it just as well. Per texel (column i, row j from
+ * Each work item renders EW_LANES adjacent texels of one row as vector lanes (float16 where
+ * the device's native float vector is 16 wide, AVX-512; else float8): the code is written
+ * branch-free on vectors (select instead of if), so PoCL on a CPU emits AVX code for it,
+ * and GPUs run it just as well. Per texel (column i, row j from
  * the top) it computes B = ∫₀¹ ψ(L(s)) ζ(s) ds along L(s) = S + s(E − S),
  * ζ(s) = α/(s+β)², ψ = the sum of point / line / torus / Bézier kernels (digest §2).
  *   ew_render_simpson   the thesis's method: composite Simpson, n+1 samples, fused
@@ -45,8 +46,28 @@ __constant float ew_gl8_x[8] = {0.019855072f, 0.101666761f, 0.237233795f, 0.4082
 __constant float ew_gl8_w[8] = {0.050614268f, 0.111190517f, 0.156853323f, 0.181341892f,
                                 0.181341892f, 0.156853323f, 0.111190517f, 0.050614268f};
 
+#ifndef EW_LANES
+#define EW_LANES EW_LANES_NARROW
+#endif
+#if EW_LANES == EW_LANES_WIDE
+typedef float16 fv;
+typedef int16 iv;
+#define EW_CONVERT_F convert_float16
+#define EW_CONVERT_I convert_int16
+#define EW_VSTORE vstore16
+#define EW_LANE_IDS (iv)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
+#define EW_GATHER(b, i)                                                                                        \
+    (fv)(b[i.s0], b[i.s1], b[i.s2], b[i.s3], b[i.s4], b[i.s5], b[i.s6], b[i.s7], b[i.s8], b[i.s9], b[i.sa],    \
+         b[i.sb], b[i.sc], b[i.sd], b[i.se], b[i.sf])
+#else
 typedef float8 fv;
 typedef int8 iv;
+#define EW_CONVERT_F convert_float8
+#define EW_CONVERT_I convert_int8
+#define EW_VSTORE vstore8
+#define EW_LANE_IDS (iv)(0, 1, 2, 3, 4, 5, 6, 7)
+#define EW_GATHER(b, i) (fv)(b[i.s0], b[i.s1], b[i.s2], b[i.s3], b[i.s4], b[i.s5], b[i.s6], b[i.s7])
+#endif
 typedef struct {
     fv x, y, z;
 } v3;
@@ -127,14 +148,13 @@ static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
 
 static fv ew_gather(__global const float *base, iv idx)
 {
-    return (fv)(base[idx.s0], base[idx.s1], base[idx.s2], base[idx.s3], base[idx.s4], base[idx.s5], base[idx.s6],
-                base[idx.s7]);
+    return EW_GATHER(base, idx);
 }
 
 /* Clamped uniform knot u_i of (3.26) for nw weights: [0,0,0, 1/(nw−2), …, 1,1,1]. */
 static fv ew_knot(iv i, float inv_spans)
 {
-    return clamp(convert_float8(i - 2) * inv_spans, 0.0f, 1.0f);
+    return clamp(EW_CONVERT_F(i - 2) * inv_spans, 0.0f, 1.0f);
 }
 
 /* S(t) = Σ w_i N_i²(t) by de Boor's algorithm on the span holding t. digest 000 §8 #10:
@@ -143,7 +163,7 @@ static fv ew_bspline(__global const float *w, int nw, fv t)
 {
     int spans = nw - 2;
     float inv = 1.0f / (float)spans;
-    iv k = clamp(convert_int8(t * (float)spans), 0, spans - 1) + 2; /* u_k <= t < u_{k+1} */
+    iv k = clamp(EW_CONVERT_I(t * (float)spans), 0, spans - 1) + 2; /* u_k <= t < u_{k+1} */
     fv d0 = ew_gather(w, k - 2), d1 = ew_gather(w, k - 1), d2 = ew_gather(w, k);
     fv u_km1 = ew_knot(k - 1, inv), u_k = ew_knot(k, inv), u_kp1 = ew_knot(k + 1, inv), u_kp2 = ew_knot(k + 2, inv);
     fv a = (t - u_k) / (u_kp2 - u_k);
@@ -269,7 +289,7 @@ static ew_scene ew_scene_make(__constant const float *cam, __global const float 
  * E = V + ν(S − V). digest 000 §8 #14/#17: translation-invariant E, pixel centres. */
 static void ew_texel_rays(__constant const float *cam, int i0, int j, int width, int height, v3 *S, v3 *Q)
 {
-    fv i = convert_float8(min((int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7), width - 1));
+    fv i = EW_CONVERT_F(min((iv)(i0) + EW_LANE_IDS, width - 1));
     fv x = (i + 0.5f) / (float)width - 0.5f;
     fv y = (fv)(0.5f - ((float)j + 0.5f) / (float)height);
     v3 V = v3_make((fv)(cam[EW_CAM_EYE]), (fv)(cam[EW_CAM_EYE + 1]), (fv)(cam[EW_CAM_EYE + 2]));
@@ -284,11 +304,11 @@ static void ew_store(__global float *out, fv B, int i0, int j, int width)
 {
     __global float *row = out + j * width;
     if (i0 + EW_LANES <= width) {
-        vstore8(B, 0, row + i0);
+        EW_VSTORE(B, 0, row + i0);
         return;
     }
     float b[EW_LANES];
-    vstore8(B, 0, b);
+    EW_VSTORE(B, 0, b);
     for (int k = 0; i0 + k < width; k++) row[i0 + k] = b[k];
 }
 
