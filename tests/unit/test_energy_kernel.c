@@ -873,13 +873,14 @@ static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame
 
 /* Slices do not change the picture: a frame stepped a work-group per call, and a few
  * milliseconds per call, is the frame stepped whole, byte for byte (its EXR payload), raw Y and
- * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups. */
+ * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups (of 8 or 16
+ * texels a work-item). */
 static void test_sliced_frames(void)
 {
     static const char *const outputs[] = {"Y", "RGBA"};
     for (int o = 0; o < 2; o++) {
         char partial[128];
-        snprintf(partial, sizeof partial, "{\"width\":200,\"height\":40,\"output\":\"%s\"}", outputs[o]);
+        snprintf(partial, sizeof partial, "{\"width\":300,\"height\":40,\"output\":\"%s\"}", outputs[o]);
         cJSON *doc = tek_doc(cJSON_Parse(partial));
         struct slices_frame whole = {.kind = FXS_KIND_TEXTURE}, piece = {.kind = FXS_KIND_TEXTURE},
                             ms = {.kind = FXS_KIND_TEXTURE};
