@@ -55,6 +55,8 @@ typedef int16 iv;
 #define EW_CONVERT_F convert_float16
 #define EW_CONVERT_I convert_int16
 #define EW_VSTORE vstore16
+#define EW_AS_F as_float16
+#define EW_AS_I as_int16
 #define EW_LANE_IDS (iv)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
 #define EW_GATHER(b, i)                                                                                        \
     (fv)(b[i.s0], b[i.s1], b[i.s2], b[i.s3], b[i.s4], b[i.s5], b[i.s6], b[i.s7], b[i.s8], b[i.s9], b[i.sa],    \
@@ -67,6 +69,8 @@ typedef int8 iv;
 #define EW_VSTORE vstore8
 #define EW_LANE_IDS (iv)(0, 1, 2, 3, 4, 5, 6, 7)
 #define EW_GATHER(b, i) (fv)(b[i.s0], b[i.s1], b[i.s2], b[i.s3], b[i.s4], b[i.s5], b[i.s6], b[i.s7])
+#define EW_AS_F as_float8
+#define EW_AS_I as_int8
 #endif
 typedef struct {
     fv x, y, z;
@@ -107,11 +111,28 @@ static fv ew_zeta(const ew_scene *sc, fv s)
 
 /* ---- cubic solver (digest §2.2 recommended solver) ------------------------------- */
 
+/* ∛x by a bit-level first guess (3% off) and two Halley steps (error cubed each), with no
+ * transcendental call. */
+static fv ew_cbrt(fv x)
+{
+    fv ax = fabs(x);
+    fv y = EW_AS_F(EW_CONVERT_I(EW_CONVERT_F(EW_AS_I(ax)) * (1.0f / 3.0f)) + 0x2a5137a0);
+    for (int k = 0; k < 2; k++) {
+        fv y3 = y * y * y;
+        y *= (y3 + 2.0f * ax) / (2.0f * y3 + ax);
+    }
+    return select(copysign(y, x), (fv)(0.0f), ax == 0.0f);
+}
+
 /* Real roots of x³ + a x² + b x + c = 0, ascending in r0 ≤ r1 ≤ r2; returns the lanes
  * with three real roots (elsewhere r0 = r1 = r2 is the single real root).
  * digest 000 §8 #5/#6/#7: the thesis's Cardano uses θ = arctan(q/r), omits the −a/3
- * shift and picks roots by "imag == 0"; this is the trigonometric form instead, with the
- * −a/3 shift, the double root (r ≈ 0) in the trig branch and one Newton step per root. */
+ * shift and picks roots by "imag == 0"; here, with the −a/3 shift: one real root by
+ * Cardano's ∛(−q ∓ √r) (the larger in size, v = −p/u); three (the double root r ≈ 0
+ * included) as the largest, y = 2√(−p) cos(φ/3) with cos φ = −q/√(−p)³, found as the root
+ * z = y/√(−p) ∈ [1, 2] of z³ − 3z = 2 cos φ by Newton from a fit exact at both ends, and
+ * the other two from the quadratic left after dividing it out. One Newton step per root on
+ * the cubic itself finishes them. No trigonometric call. */
 static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
 {
     fv p = b / 3.0f - a * a / 9.0f;
@@ -120,18 +141,22 @@ static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
     iv three = (p < 0.0f) & (disc <= 1e-5f * q * q);
     fv x[3];
     x[0] = x[1] = x[2] = shift;
-    if (!all(three)) { /* one real root: u = ∛(−q ∓ √r) of the larger size, v = −p/u */
-        fv u = cbrt(-q - copysign(sqrt(fmax(disc, 0.0f)), q));
+    if (!all(three)) {
+        fv u = ew_cbrt(-q - copysign(sqrt(fmax(disc, 0.0f)), q));
         fv one = select(u - p / u, (fv)(0.0f), u == 0.0f) + shift;
         x[0] = x[1] = x[2] = one;
     }
     if (any(three)) {
-        fv mp = fmax(-p, 0.0f), m = 2.0f * sqrt(mp), cphi;
-        fv phi = acos(clamp(-q / sqrt(fmax(mp * mp * mp, 1e-30f)), -1.0f, 1.0f));
-        fv sphi = sincos(phi / 3.0f, &cphi);
-        x[0] = select(x[0], m * (-0.5f * cphi - 0.866025404f * sphi) + shift, three);
-        x[1] = select(x[1], m * (-0.5f * cphi + 0.866025404f * sphi) + shift, three);
-        x[2] = select(x[2], m * cphi + shift, three);
+        fv m = sqrt(fmax(-p, 0.0f)), X1 = 1.0f + clamp(-q / fmax(m * m * m, 1e-30f), -1.0f, 1.0f);
+        fv z = 1.0f + sqrt(X1 * (2.0f / 3.0f)) - 0.0773503f * X1; /* 1 at cos φ = −1, 2 at 1 */
+        for (int k = 0; k < 2; k++) {
+            fv fp = 3.0f * (z * z - 1.0f);
+            z = select(z, z - (z * (z * z - 3.0f) - 2.0f * (X1 - 1.0f)) / fp, fp > 1e-6f);
+        }
+        fv big = m * z + shift, h = -0.5f * (a + big), g = sqrt(fmax(h * h - (b + big * (a + big)), 0.0f));
+        x[0] = select(x[0], h - g, three);
+        x[1] = select(x[1], h + g, three);
+        x[2] = select(x[2], big, three);
     }
     for (int k = 0; k < 3; k++) {
         fv f = ((x[k] + a) * x[k] + b) * x[k] + c, fp = (3.0f * x[k] + 2.0f * a) * x[k] + b;
