@@ -447,13 +447,12 @@ typedef struct {
     iv two;
 } ew_peaks;
 
-/* kind 0: torus, 1: curve, 2: point, 3: line (t*: the nearest curve parameter, str:
- * S(t*); both 0 for the others). */
+/* kind 1: curve, 2: point, 3: line (t*: the nearest curve parameter, str: S(t*); both 0
+ * for the others). Tori have their own span (ew_torus_span). */
 static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3 P, fv *t, fv *str)
 {
     *t = *str = 0.0f;
     switch (kind) {
-    case 0: return ew_torus_k(prim, P, sc->eps);
     case 1: return ew_curve_kt(sc, prim, P, t, str);
     case 2: return ew_point_k(prim, P, sc->eps);
     default: return ew_line_k(prim, P, sc->eps);
@@ -477,9 +476,11 @@ static fv ew_sinh_node(fv c, fv w, fv ua, fv du, float x, fv *jac)
 
 /* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
  * [a, b]): in u the 1/distance peak is smooth, so one Gauss–Legendre rule covers it.
- * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] flagged in *jumped. */
+ * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] (t* there: *jta, *jtb)
+ * flagged in *jumped. */
 static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b,
-                        int n, __constant const float *gx, __constant const float *gw, iv *jumped, fv *ja, fv *jb)
+                        int n, __constant const float *gx, __constant const float *gw, iv *jumped, fv *ja, fv *jb,
+                        fv *jta, fv *jtb)
 {
     fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
     fv t, str, tprev = 0.0f, strprev = 0.0f, sprev = a;
@@ -491,6 +492,8 @@ static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim
                   (fabs(str - strprev) > EW_JUMP_S);
         *ja = select(*ja, sprev, jump);
         *jb = select(*jb, s, jump);
+        *jta = select(*jta, tprev, jump);
+        *jtb = select(*jtb, t, jump);
         *jumped |= jump;
         tprev = t;
         strprev = str;
@@ -502,16 +505,14 @@ static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim
 static fv ew_span_plain(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
     iv jumped;
-    fv ja, jb;
-    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &jumped, &ja, &jb);
+    fv ja, jb, jta, jtb;
+    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &jumped, &ja, &jb, &jta, &jtb);
 }
 
-/* Bisects [a, b] for the jump of t*. */
-static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 Q, fv a, fv b)
+/* Bisects [a, b] (t* there: ta, tb) for the jump of t*. */
+static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 Q, fv a, fv b, fv ta, fv tb)
 {
-    fv ta, tb, str;
-    ew_curve_kt(sc, cv, v3_mad(S, a, Q), &ta, &str);
-    ew_curve_kt(sc, cv, v3_mad(S, b, Q), &tb, &str);
+    fv str;
     for (int it = 0; it < EW_JUMP_BISECT; it++) {
         fv m = 0.5f * (a + b), tm;
         ew_curve_kt(sc, cv, v3_mad(S, m, Q), &tm, &str);
@@ -528,13 +529,11 @@ static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 
 static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
     iv jumped;
-    fv ja = 0.0f, jb = 0.0f;
-    fv acc = kind == 0 ? ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL12_N, ew_gl12_x, ew_gl12_w, &jumped,
-                                       &ja, &jb)
-                       : ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &jumped,
-                                       &ja, &jb);
+    fv ja = 0.0f, jb = 0.0f, jta = 0.0f, jtb = 0.0f;
+    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &jumped, &ja, &jb, &jta,
+                           &jtb);
     if (!any(jumped)) return acc;
-    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb), jumped); /* other lanes: plain redo */
+    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb, jta, jtb), jumped); /* other lanes: plain redo */
     fv redo = ew_span_plain(sc, kind, prim, S, Q, c, w, a, sj) + ew_span_plain(sc, kind, prim, S, Q, c, w, sj, b);
     return select(acc, redo, jumped);
 }
