@@ -17,7 +17,8 @@
  *                       12-point Gauss–Legendre in u, where the 1/distance peak is
  *                       smooth. Where S(t*) jumps (the curve's medial set) the span is
  *                       split at the jump, found by bisection.
- * The ew_test_* kernels run the same device functions for the unit tests (lane 0).
+ * The unit tests reach the device functions through test-only kernels compiled after this
+ * file (tests/ref/energy_wave_probe.cl); the daemon's program has none.
  * The buffer layouts (record strides, camera block) come from energy_wave_layout.h, which the
  * build prepends and server/effects/energy_wave.c includes. */
 
@@ -746,32 +747,4 @@ __kernel void ew_render_adaptive(__global float *out, __constant const float *ca
         acc += ew_peaks_int(&sc, 1, cur + k * EW_CV_STRIDE, S, Q, &pk);
     }
     ew_store(out, acc, i0, j, width);
-}
-
-/* ---- test entry points (energy_wave_dev_*), lane 0 of the same functions ----------- */
-
-__kernel void ew_test_cubic(__global const float *abc, __global float *roots, __global int *nroots)
-{
-    int i = get_global_id(0);
-    fv r0, r1, r2;
-    iv three = ew_cubic((fv)(abc[3 * i]), (fv)(abc[3 * i + 1]), (fv)(abc[3 * i + 2]), &r0, &r1, &r2);
-    nroots[i] = three.s0 ? 3 : 1;
-    roots[3 * i] = r0.s0;
-    roots[3 * i + 1] = three.s0 ? r1.s0 : 0.0f;
-    roots[3 * i + 2] = three.s0 ? r2.s0 : 0.0f;
-}
-
-__kernel void ew_test_bspline(__global const float *w, int nw, __global const float *t, __global float *out)
-{
-    int i = get_global_id(0);
-    out[i] = ew_bspline(w, nw, (fv)(t[i])).s0;
-}
-
-__kernel void ew_test_curve_nearest(__global const float *cv, __global const float *p, __global float *dist,
-                                    __global float *tparam)
-{
-    int i = get_global_id(0);
-    fv t, d = ew_curve_nearest(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
-    dist[i] = d.s0;
-    tparam[i] = t.s0;
 }

@@ -4,8 +4,8 @@
  *
  * Besides the effect_ops (energy_wave_effect, registered in registry.c), the module
  * exposes a direct rendering API so tests and benches can compare the OpenCL kernels with
- * the double-precision C reference (tests/ref/; tests/ref/kernel_probe.h runs the kernel
- * file's test entry points). */
+ * the double-precision C reference (tests/ref/; tests/ref/kernel_probe.h runs test entry points
+ * into the kernel file's device functions, which only the tests compile). */
 #ifndef FX_ENERGY_WAVE_H
 #define FX_ENERGY_WAVE_H
 
