@@ -376,7 +376,7 @@ static cl_mem ew_buffer(struct energy_wave *ew, cl_mem_flags flags, size_t bytes
 }
 
 /* Texels per work-item: 16 where the device's native float vector holds 16 (AVX-512: one
- * instruction per operation on all of them; 1.5x faster there than 8), else 8. */
+ * instruction per operation on all of them), else 8. */
 static int ew_lanes(const struct ocl *ocl)
 {
     cl_uint native = 0;
