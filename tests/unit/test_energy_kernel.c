@@ -23,6 +23,8 @@
 #include "params.h"
 #include "wave_scenes.h"
 
+/* the device functions' test entry points (tests/ref/), compiled after energy_wave.cl */
+#define TEK_PROBE_CL "energy_wave_probe.cl"
 #define TEK_MAX_MODES 8
 #define TEK_MAX_TEXELS (64 * 64)
 
@@ -55,7 +57,7 @@ static int tek_dev_cubic(int n, const float *abc, float *roots, int *nroots, str
         {3 * (size_t)n * f, NULL, roots, 0},
         {(size_t)n * sizeof(int), NULL, nroots, 0},
     };
-    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_cubic", (size_t)n, args, 3, err);
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, TEK_PROBE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_cubic", (size_t)n, args, 3, err);
 }
 
 /* Quadratic B-spline strength S(t) (digest §2.3) of weights w[0..nw-1] at n parameters t. */
@@ -68,7 +70,7 @@ static int tek_dev_bspline(int nw, const float *w, int n, const float *t, float 
         {(size_t)n * f, t, NULL, 0},
         {(size_t)n * f, NULL, out, 0},
     };
-    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_bspline", (size_t)n, args, 4, err);
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, TEK_PROBE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_bspline", (size_t)n, args, 4, err);
 }
 
 /* Nearest point of the Bézier b = {B0, B1, B2} (9 floats) to n points p (3n floats): distance
@@ -87,7 +89,7 @@ static int tek_dev_curve_nearest(const float b[9], int n, const float *p, float 
         {(size_t)n * f, NULL, dist, 0},
         {(size_t)n * f, NULL, tparam, 0},
     };
-    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_curve_nearest", (size_t)n, args, 4, err);
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, TEK_PROBE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_curve_nearest", (size_t)n, args, 4, err);
 }
 
 static int tek_is_simpson(const char *mode) { return strcmp(mode, "simpson") == 0; }
@@ -883,13 +885,14 @@ static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame
 
 /* Slices do not change the picture: a frame stepped a work-group per call, and a few
  * milliseconds per call, is the frame stepped whole, byte for byte (its EXR payload), raw Y and
- * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups. */
+ * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups (of 8 or 16
+ * texels a work-item). */
 static void test_sliced_frames(void)
 {
     static const char *const outputs[] = {"Y", "RGBA"};
     for (int o = 0; o < 2; o++) {
         char partial[128];
-        snprintf(partial, sizeof partial, "{\"width\":200,\"height\":40,\"output\":\"%s\"}", outputs[o]);
+        snprintf(partial, sizeof partial, "{\"width\":300,\"height\":40,\"output\":\"%s\"}", outputs[o]);
         cJSON *doc = tek_doc(cJSON_Parse(partial));
         struct slices_frame whole = {.kind = FXS_KIND_TEXTURE}, piece = {.kind = FXS_KIND_TEXTURE},
                             ms = {.kind = FXS_KIND_TEXTURE};
