@@ -44,7 +44,10 @@ CLIENT_SO   := $(BUILD)/libfxclient.so.$(FXC_VERSION)
 CLIENT_LIBS := $(shell pkg-config --libs libwebsockets libcjson libzstd 2>/dev/null) -lm -lpthread
 # What make install puts in PREFIX/include/fxclient: the public API and the headers it includes.
 CLIENT_HDR  := clients/c/fxclient.h protocol/fxs_frame.h protocol/fxs_bytes.h
-REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c))
+# tests/ref/: the references and probes the tests and benchmarks link, with the tests' own
+# OpenCL entry points (tests/ref/*.cl, embedded as probe_kernels_source; never in the daemon).
+PROBE_KERNELS := $(wildcard tests/ref/*.cl)
+REF_OBJ     := $(patsubst %.c,$(BUILD)/obj/%.o,$(wildcard tests/ref/*.c)) $(BUILD)/obj/gen/probe_kernels.o
 UNIT_BIN    := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(wildcard tests/unit/test_*.c))
 BENCH_BIN   := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(wildcard tests/bench/bench_*.c))
 # tests/bench/*.c that are not bench_*.c: shared by the benchmarks (the fan-out trial), linked into each.
@@ -184,6 +187,10 @@ clean:
 $(BUILD)/gen/kernels.c: $(KERNELS) $(KERNEL_LAYOUTS) tools/embed_kernels.sh
 	@mkdir -p $(@D)
 	tools/embed_kernels.sh $(KERNELS) > $@
+
+$(BUILD)/gen/probe_kernels.c: $(PROBE_KERNELS) tools/embed_kernels.sh
+	@mkdir -p $(@D)
+	tools/embed_kernels.sh -f probe_kernels_source $(PROBE_KERNELS) > $@
 
 $(BUILD)/obj/gen/%.o: $(BUILD)/gen/%.c
 	@mkdir -p $(@D)

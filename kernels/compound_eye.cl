@@ -10,22 +10,40 @@
  * eye_bake (a view texture over a model's UV atlas, §8.2) and eye_trace_rays (raw
  * landings, for the tests and the benchmark).
  *
- * Each work-item traces EYE_LANES = 8 neighbouring rays (adjacent texels or table
- * samples, so their paths are alike) as float8 lanes: PoCL does not vectorise the
- * divergent walks across work-items, but emits AVX for float8 code. Loops run while any
- * lane still needs them, lanes that are done are masked (select instead of if).
+ * Each work-item traces EYE_LANES neighbouring rays (adjacent texels or table samples, so
+ * their paths are alike) as the lanes of one float vector: PoCL does not vectorise the
+ * divergent walks across work-items, but emits SIMD code for vector types. The host builds
+ * with EYE_LANES = the device's preferred float vector width, 16 on AVX-512 (one register
+ * per value, half the instructions of two float8 halves), else 8. Loops run while any lane
+ * still needs them, lanes that are done are masked (select instead of if).
  *
  * The host shares struct eye_optics and the EYE_* constants through compound_eye_layout.h;
  * tests/ref/eye_ref.c is the independent double-precision reference. */
 
-/* The optics record, its enum values and EYE_LANES come from compound_eye_layout.h, which
- * the build prepends. */
+/* The optics record and its enum values come from compound_eye_layout.h, which the build
+ * prepends; EYE_LANES from the build options. */
 #define EYE_MAX_BOUNCES 4 /* digest §7 G8: reflect at most 4 times, then count a miss */
 #define EYE_WALK_MAX 96   /* Voronoi cells walked looking for the entry lens */
 #define EYE_BIG 1e30f /* "none yet" (finite: the build may assume finite math) */
 
+#ifndef EYE_LANES
+#define EYE_LANES 8
+#endif
+#if EYE_LANES == 16
+typedef float16 fv;
+typedef int16 iv; /* lane masks: -1 where true (vector comparisons), 0 elsewhere */
+#define EYE_VLOAD vload16
+#define EYE_VSTORE vstore16
+#define EYE_FLOATS convert_float16
+#define EYE_LANE_IDS ((iv)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15))
+#else
 typedef float8 fv;
-typedef int8 iv; /* lane masks: -1 where true (vector comparisons), 0 elsewhere */
+typedef int8 iv;
+#define EYE_VLOAD vload8
+#define EYE_VSTORE vstore8
+#define EYE_FLOATS convert_float8
+#define EYE_LANE_IDS ((iv)(0, 1, 2, 3, 4, 5, 6, 7))
+#endif
 typedef struct {
     fv x, y, z;
 } v3;
@@ -57,7 +75,12 @@ static v3 v3_sel(v3 a, v3 b, iv m) { return v3_make(select(a.x, b.x, m), select(
 
 static float eye_max_lane(fv v)
 {
-    float4 m4 = fmax(v.lo, v.hi);
+#if EYE_LANES == 16
+    float8 m8 = fmax(v.lo, v.hi);
+#else
+    float8 m8 = v;
+#endif
+    float4 m4 = fmax(m8.lo, m8.hi);
     float2 m2 = fmax(m4.lo, m4.hi);
     return fmax(m2.x, m2.y);
 }
@@ -315,9 +338,9 @@ static struct eye_rgba eye_shade(const struct eye_hit *h, __global const float4 
 {
     float lx[EYE_LANES], ly[EYE_LANES], cr[EYE_LANES], cg[EYE_LANES], cb[EYE_LANES];
     int st[EYE_LANES];
-    vstore8(h->lx, 0, lx);
-    vstore8(h->ly, 0, ly);
-    vstore8(h->status, 0, st);
+    EYE_VSTORE(h->lx, 0, lx);
+    EYE_VSTORE(h->ly, 0, ly);
+    EYE_VSTORE(h->status, 0, st);
     for (int i = 0; i < EYE_LANES; i++) {
         float4 c = st[i] == EYE_ABSORBED ? dot_col
                    : st[i] == EYE_MISSED ? base_col
@@ -326,7 +349,7 @@ static struct eye_rgba eye_shade(const struct eye_hit *h, __global const float4 
         cg[i] = c.y;
         cb[i] = c.z;
     }
-    struct eye_rgba c = {vload8(0, cr), vload8(0, cg), vload8(0, cb), select((fv)1.0f, (fv)0.0f, h->status == EYE_MISSED)};
+    struct eye_rgba c = {EYE_VLOAD(0, cr), EYE_VLOAD(0, cg), EYE_VLOAD(0, cb), select((fv)1.0f, (fv)0.0f, h->status == EYE_MISSED)};
     return c;
 }
 
@@ -334,10 +357,10 @@ static struct eye_rgba eye_shade(const struct eye_hit *h, __global const float4 
 static void eye_store(__global float4 *out, int k0, int n, fv x, fv y, fv z, fv w)
 {
     float a[EYE_LANES], b[EYE_LANES], c[EYE_LANES], e[EYE_LANES];
-    vstore8(x, 0, a);
-    vstore8(y, 0, b);
-    vstore8(z, 0, c);
-    vstore8(w, 0, e);
+    EYE_VSTORE(x, 0, a);
+    EYE_VSTORE(y, 0, b);
+    EYE_VSTORE(z, 0, c);
+    EYE_VSTORE(w, 0, e);
     for (int i = 0; i < EYE_LANES && k0 + i < n; i++) out[k0 + i] = (float4)(a[i], b[i], c[i], e[i]);
 }
 
@@ -351,12 +374,12 @@ static void eye_load(__global const float4 *in, int k0, int n, fv *x, fv *y, fv 
         b[i] = v.y;
         c[i] = v.z;
     }
-    *x = vload8(0, a);
-    *y = vload8(0, b);
-    *z = vload8(0, c);
+    *x = EYE_VLOAD(0, a);
+    *y = EYE_VLOAD(0, b);
+    *z = EYE_VLOAD(0, c);
 }
 
-static iv eye_lane_index(void) { return (int)get_global_id(0) * EYE_LANES + (iv)(0, 1, 2, 3, 4, 5, 6, 7); }
+static iv eye_lane_index(void) { return (int)get_global_id(0) * EYE_LANES + EYE_LANE_IDS; }
 
 /* Hemi-octahedral map: square coordinates (u,v) in [-1,1]^2 -> unit direction, z >= 0. */
 static v3 eye_octa_dir(fv u, fv v)
@@ -365,24 +388,28 @@ static v3 eye_octa_dir(fv u, fv v)
     return v3_normalize(v3_make(px, py, 1.0f - fabs(px) - fabs(py)));
 }
 
-/* The lens LUT, 8 samples per work-item over the flat index k = tile * C*C + cj*C + ci
- * (global size ceil(D*D*C*C / 8)). Output: out[k], the mean over ss x ss sub-rays spread
- * over the sample's footprint in the cell (digest §8.1). */
+/* The lens LUT, EYE_LANES samples per work-item over the flat index k = slot * C*C + cj*C + ci of
+ * the direction tiles to trace, tile tiles[slot] (global size ceil(ntiles*C*C / EYE_LANES); the
+ * host copies the others by symmetry, server/effects/eye_lut.h). Output: out[k], the mean
+ * over ss x ss sub-rays spread over the sample's footprint in the cell (digest §8.1). */
 __kernel void eye_lut(__global float4 *out, __global const float4 *pig, int pw, int ph, struct eye_optics o,
-                      int cells, int dirs, int ss, float4 dot_col, float4 base_col)
+                      __global const int *tiles, int ntiles, int cells, int dirs, int ss, float4 dot_col, float4 base_col)
 {
-    const int per = cells * cells, total = per * dirs * dirs;
+    const int per = cells * cells, total = per * ntiles;
     iv k = eye_lane_index(), live = k < total;
     k = min(k, total - 1);
-    iv cell = k % per, tile = k / per;
+    int slot[EYE_LANES], t[EYE_LANES];
+    EYE_VSTORE(k / per, 0, slot);
+    for (int i = 0; i < EYE_LANES; i++) t[i] = tiles[slot[i]];
+    iv cell = k % per, tile = EYE_VLOAD(0, t);
     iv ci = cell % cells, cj = cell / cells, ti = tile % dirs, tj = tile / dirs;
-    v3 w = eye_octa_dir(convert_float8(2 * ti + 1) / (float)dirs - 1.0f, convert_float8(2 * tj + 1) / (float)dirs - 1.0f);
+    v3 w = eye_octa_dir(EYE_FLOATS(2 * ti + 1) / (float)dirs - 1.0f, EYE_FLOATS(2 * tj + 1) / (float)dirs - 1.0f);
     v3 d = v3_mul(w, (fv)-1.0f);
     struct eye_rgba acc = {(fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f};
     float inv = 1.0f / (float)(cells * ss);
     for (int sy = 0; sy < ss; sy++)
         for (int sx = 0; sx < ss; sx++) {
-            fv qx = (convert_float8(ci * ss + sx) + 0.5f) * inv, qy = (convert_float8(cj * ss + sy) + 0.5f) * inv * o.tile_h;
+            fv qx = (EYE_FLOATS(ci * ss + sx) + 0.5f) * inv, qy = (EYE_FLOATS(cj * ss + sy) + 0.5f) * inv * o.tile_h;
             struct eye_hit h = eye_trace(&o, qx, qy, d, live);
             struct eye_rgba c = eye_shade(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
             acc.r += c.r;
@@ -394,7 +421,7 @@ __kernel void eye_lut(__global float4 *out, __global const float4 *pig, int pw, 
     eye_store(out, (int)get_global_id(0) * EYE_LANES, total, acc.r * m, acc.g * m, acc.b * m, acc.a * m);
 }
 
-/* Raw traces for tests and benches, 8 rays per work-item (global size ceil(n / 8)): ray k
+/* Raw traces for tests and benches, EYE_LANES rays per work-item (global size ceil(n / EYE_LANES)): ray k
  * enters at in_p[k] = (p.x, p.y, _, _) with direction in_d[k] = (d, _). out[k] = (land,
  * status, passes), nrm[k] = (entry normal, entered). */
 __kernel void eye_trace_rays(__global const float4 *in_p, __global const float4 *in_d, __global float4 *out,
@@ -406,8 +433,8 @@ __kernel void eye_trace_rays(__global const float4 *in_p, __global const float4 
     eye_load(in_p, k0, n, &px, &py, &pz);
     eye_load(in_d, k0, n, &d.x, &d.y, &d.z);
     struct eye_hit h = eye_trace(&o, px, py, d, eye_lane_index() < n);
-    eye_store(out, k0, n, h.lx, h.ly, convert_float8(h.status), convert_float8(h.passes));
-    eye_store(nrm, k0, n, h.normal.x, h.normal.y, h.normal.z, convert_float8(h.entered & 1));
+    eye_store(out, k0, n, h.lx, h.ly, EYE_FLOATS(h.status), EYE_FLOATS(h.passes));
+    eye_store(nrm, k0, n, h.normal.x, h.normal.y, h.normal.z, EYE_FLOATS(h.entered & 1));
 }
 
 /* Shading constants of the bake (eq. 5.31, G15). */
@@ -420,18 +447,18 @@ struct eye_shading {
     int pad0, pad1;
 };
 
-/* The baked view texture (digest §8.2), 8 atlas texels per work-item (n8 / 8 of them, which
- * may run a range at a time). geo holds 16 planes of n8 floats (plane i, texel k at geo[i * n8 + k]):
+/* The baked view texture (digest §8.2), EYE_LANES atlas texels per work-item (npad / EYE_LANES of
+ * them, which may run a range at a time). geo holds 16 planes of npad floats (plane i, texel k at geo[i * npad + k]):
  * P, u, N_face, v, dP/du, mask, dP/dv, 0, with u, v the raw OBJ texture coordinates;
  * eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
 __kernel void eye_bake(__global float4 *out, __global const float *geo, __global const float4 *pig, int pw, int ph,
-                       struct eye_optics o, struct eye_shading s, float4 dot_col, float4 base_col, int n8)
+                       struct eye_optics o, struct eye_shading s, float4 dot_col, float4 base_col, int npad)
 {
     const int k0 = (int)get_global_id(0) * EYE_LANES;
-#define EYE_GEO(i) vload8(0, geo + (i) * n8 + k0)
+#define EYE_GEO(i) EYE_VLOAD(0, geo + (i) * npad + k0)
     iv covered = EYE_GEO(11) != 0.0f;
     if (!any(covered)) {
-        eye_store(out, k0, n8, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f);
+        eye_store(out, k0, npad, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f);
         return;
     }
     const v3 up = v3_const(0.0f, 0.0f, 1.0f), eye = v3_const(s.eye.x, s.eye.y, s.eye.z);
@@ -460,6 +487,6 @@ __kernel void eye_bake(__global float4 *out, __global const float *geo, __global
     fv lit = s.ka + s.kd * diff, gloss = s.ks * spec; /* eq. 5.31 */
     fv cr = select((fv)base_col.x, ct.r, traced), cg = select((fv)base_col.y, ct.g, traced);
     fv cb = select((fv)base_col.z, ct.b, traced), zero = 0.0f;
-    eye_store(out, k0, n8, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
+    eye_store(out, k0, npad, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
               select(zero, cb * lit + gloss, covered), select(zero, (fv)1.0f, covered));
 }

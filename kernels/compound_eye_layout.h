@@ -1,6 +1,6 @@
 /* compound_eye_layout.h — what the compound eye's host code and kernels/compound_eye.cl must
- * agree on: the optics record passed by value to every kernel, its enum values, and the rays
- * per work-item. Valid C and OpenCL C: server/effects/compound_eye.h includes it, and the
+ * agree on: the optics record passed by value to every kernel and its enum values (the rays
+ * per work-item are a build option: compound_eye_program). Valid C and OpenCL C: server/effects/compound_eye.h includes it, and the
  * build (tools/embed_kernels.sh) prepends it to compound_eye.cl, so the layout exists once.
  * 4-byte fields only, so host and device lay the struct out alike. */
 #ifndef COMPOUND_EYE_LAYOUT_H
@@ -21,7 +21,6 @@
 #define EYE_ABSORBED 2 /* TIR under policy "absorb": reads as pigment */
 
 #define EYE_SQRT3 1.7320508f /* the hex lattice's period along b, in pitches */
-#define EYE_LANES 8          /* rays per work-item in every kernel (float8 lanes) */
 
 struct eye_optics {
     float r;        /* lens radius, pitches (digest G12: r_rel) */

@@ -1,8 +1,9 @@
 /* energy_wave.cl — OpenCL kernels of effect energy_wave (seed 000, Watanabe 2016).
  *
- * Each work item renders EW_LANES = 8 adjacent texels of one row as float8 lanes: the
- * code is written branch-free on vectors (select instead of if), so PoCL on a CPU
- * emits AVX code for it, and GPUs run it just as well. Per texel (column i, row j from
+ * Each work item renders EW_LANES adjacent texels of one row as vector lanes (float16 where
+ * the device's native float vector is 16 wide, AVX-512; else float8): the code is written
+ * branch-free on vectors (select instead of if), so PoCL on a CPU emits AVX code for it,
+ * and GPUs run it just as well. Per texel (column i, row j from
  * the top) it computes B = ∫₀¹ ψ(L(s)) ζ(s) ds along L(s) = S + s(E − S),
  * ζ(s) = α/(s+β)², ψ = the sum of point / line / torus / Bézier kernels (digest §2).
  *   ew_render_simpson   the thesis's method: composite Simpson, n+1 samples, fused
@@ -16,7 +17,8 @@
  *                       12-point Gauss–Legendre in u, where the 1/distance peak is
  *                       smooth. Where S(t*) jumps (the curve's medial set) the span is
  *                       split at the jump, found by bisection.
- * The ew_test_* kernels run the same device functions for the unit tests (lane 0).
+ * The unit tests reach the device functions through test-only kernels compiled after this
+ * file (tests/ref/energy_wave_probe.cl); the daemon's program has none.
  * The buffer layouts (record strides, camera block) come from energy_wave_layout.h, which the
  * build prepends and server/effects/energy_wave.c includes. */
 
@@ -45,8 +47,32 @@ __constant float ew_gl8_x[8] = {0.019855072f, 0.101666761f, 0.237233795f, 0.4082
 __constant float ew_gl8_w[8] = {0.050614268f, 0.111190517f, 0.156853323f, 0.181341892f,
                                 0.181341892f, 0.156853323f, 0.111190517f, 0.050614268f};
 
+#ifndef EW_LANES
+#define EW_LANES EW_LANES_NARROW
+#endif
+#if EW_LANES == EW_LANES_WIDE
+typedef float16 fv;
+typedef int16 iv;
+#define EW_CONVERT_F convert_float16
+#define EW_CONVERT_I convert_int16
+#define EW_VSTORE vstore16
+#define EW_AS_F as_float16
+#define EW_AS_I as_int16
+#define EW_LANE_IDS (iv)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
+#define EW_GATHER(b, i)                                                                                        \
+    (fv)(b[i.s0], b[i.s1], b[i.s2], b[i.s3], b[i.s4], b[i.s5], b[i.s6], b[i.s7], b[i.s8], b[i.s9], b[i.sa],    \
+         b[i.sb], b[i.sc], b[i.sd], b[i.se], b[i.sf])
+#else
 typedef float8 fv;
 typedef int8 iv;
+#define EW_CONVERT_F convert_float8
+#define EW_CONVERT_I convert_int8
+#define EW_VSTORE vstore8
+#define EW_LANE_IDS (iv)(0, 1, 2, 3, 4, 5, 6, 7)
+#define EW_GATHER(b, i) (fv)(b[i.s0], b[i.s1], b[i.s2], b[i.s3], b[i.s4], b[i.s5], b[i.s6], b[i.s7])
+#define EW_AS_F as_float8
+#define EW_AS_I as_int8
+#endif
 typedef struct {
     fv x, y, z;
 } v3;
@@ -86,11 +112,28 @@ static fv ew_zeta(const ew_scene *sc, fv s)
 
 /* ---- cubic solver (digest §2.2 recommended solver) ------------------------------- */
 
+/* ∛x by a bit-level first guess (3% off) and two Halley steps (error cubed each), with no
+ * transcendental call. */
+static fv ew_cbrt(fv x)
+{
+    fv ax = fabs(x);
+    fv y = EW_AS_F(EW_CONVERT_I(EW_CONVERT_F(EW_AS_I(ax)) * (1.0f / 3.0f)) + 0x2a5137a0);
+    for (int k = 0; k < 2; k++) {
+        fv y3 = y * y * y;
+        y *= (y3 + 2.0f * ax) / (2.0f * y3 + ax);
+    }
+    return select(copysign(y, x), (fv)(0.0f), ax == 0.0f);
+}
+
 /* Real roots of x³ + a x² + b x + c = 0, ascending in r0 ≤ r1 ≤ r2; returns the lanes
  * with three real roots (elsewhere r0 = r1 = r2 is the single real root).
  * digest 000 §8 #5/#6/#7: the thesis's Cardano uses θ = arctan(q/r), omits the −a/3
- * shift and picks roots by "imag == 0"; this is the trigonometric form instead, with the
- * −a/3 shift, the double root (r ≈ 0) in the trig branch and one Newton step per root. */
+ * shift and picks roots by "imag == 0"; here, with the −a/3 shift: one real root by
+ * Cardano's ∛(−q ∓ √r) (the larger in size, v = −p/u); three (the double root r ≈ 0
+ * included) as the largest, y = 2√(−p) cos(φ/3) with cos φ = −q/√(−p)³, found as the root
+ * z = y/√(−p) ∈ [1, 2] of z³ − 3z = 2 cos φ by Newton from a fit exact at both ends, and
+ * the other two from the quadratic left after dividing it out. One Newton step per root on
+ * the cubic itself finishes them. No trigonometric call. */
 static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
 {
     fv p = b / 3.0f - a * a / 9.0f;
@@ -99,18 +142,22 @@ static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
     iv three = (p < 0.0f) & (disc <= 1e-5f * q * q);
     fv x[3];
     x[0] = x[1] = x[2] = shift;
-    if (!all(three)) { /* one real root: u = ∛(−q ∓ √r) of the larger size, v = −p/u */
-        fv u = cbrt(-q - copysign(sqrt(fmax(disc, 0.0f)), q));
+    if (!all(three)) {
+        fv u = ew_cbrt(-q - copysign(sqrt(fmax(disc, 0.0f)), q));
         fv one = select(u - p / u, (fv)(0.0f), u == 0.0f) + shift;
         x[0] = x[1] = x[2] = one;
     }
     if (any(three)) {
-        fv mp = fmax(-p, 0.0f), m = 2.0f * sqrt(mp), cphi;
-        fv phi = acos(clamp(-q / sqrt(fmax(mp * mp * mp, 1e-30f)), -1.0f, 1.0f));
-        fv sphi = sincos(phi / 3.0f, &cphi);
-        x[0] = select(x[0], m * (-0.5f * cphi - 0.866025404f * sphi) + shift, three);
-        x[1] = select(x[1], m * (-0.5f * cphi + 0.866025404f * sphi) + shift, three);
-        x[2] = select(x[2], m * cphi + shift, three);
+        fv m = sqrt(fmax(-p, 0.0f)), X1 = 1.0f + clamp(-q / fmax(m * m * m, 1e-30f), -1.0f, 1.0f);
+        fv z = 1.0f + sqrt(X1 * (2.0f / 3.0f)) - 0.0773503f * X1; /* 1 at cos φ = −1, 2 at 1 */
+        for (int k = 0; k < 2; k++) {
+            fv fp = 3.0f * (z * z - 1.0f);
+            z = select(z, z - (z * (z * z - 3.0f) - 2.0f * (X1 - 1.0f)) / fp, fp > 1e-6f);
+        }
+        fv big = m * z + shift, h = -0.5f * (a + big), g = sqrt(fmax(h * h - (b + big * (a + big)), 0.0f));
+        x[0] = select(x[0], h - g, three);
+        x[1] = select(x[1], h + g, three);
+        x[2] = select(x[2], big, three);
     }
     for (int k = 0; k < 3; k++) {
         fv f = ((x[k] + a) * x[k] + b) * x[k] + c, fp = (3.0f * x[k] + 2.0f * a) * x[k] + b;
@@ -127,14 +174,13 @@ static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
 
 static fv ew_gather(__global const float *base, iv idx)
 {
-    return (fv)(base[idx.s0], base[idx.s1], base[idx.s2], base[idx.s3], base[idx.s4], base[idx.s5], base[idx.s6],
-                base[idx.s7]);
+    return EW_GATHER(base, idx);
 }
 
 /* Clamped uniform knot u_i of (3.26) for nw weights: [0,0,0, 1/(nw−2), …, 1,1,1]. */
 static fv ew_knot(iv i, float inv_spans)
 {
-    return clamp(convert_float8(i - 2) * inv_spans, 0.0f, 1.0f);
+    return clamp(EW_CONVERT_F(i - 2) * inv_spans, 0.0f, 1.0f);
 }
 
 /* S(t) = Σ w_i N_i²(t) by de Boor's algorithm on the span holding t. digest 000 §8 #10:
@@ -143,7 +189,7 @@ static fv ew_bspline(__global const float *w, int nw, fv t)
 {
     int spans = nw - 2;
     float inv = 1.0f / (float)spans;
-    iv k = clamp(convert_int8(t * (float)spans), 0, spans - 1) + 2; /* u_k <= t < u_{k+1} */
+    iv k = clamp(EW_CONVERT_I(t * (float)spans), 0, spans - 1) + 2; /* u_k <= t < u_{k+1} */
     fv d0 = ew_gather(w, k - 2), d1 = ew_gather(w, k - 1), d2 = ew_gather(w, k);
     fv u_km1 = ew_knot(k - 1, inv), u_k = ew_knot(k, inv), u_kp1 = ew_knot(k + 1, inv), u_kp2 = ew_knot(k + 2, inv);
     fv a = (t - u_k) / (u_kp2 - u_k);
@@ -269,7 +315,7 @@ static ew_scene ew_scene_make(__constant const float *cam, __global const float 
  * E = V + ν(S − V). digest 000 §8 #14/#17: translation-invariant E, pixel centres. */
 static void ew_texel_rays(__constant const float *cam, int i0, int j, int width, int height, v3 *S, v3 *Q)
 {
-    fv i = convert_float8(min((int8)(i0) + (int8)(0, 1, 2, 3, 4, 5, 6, 7), width - 1));
+    fv i = EW_CONVERT_F(min((iv)(i0) + EW_LANE_IDS, width - 1));
     fv x = (i + 0.5f) / (float)width - 0.5f;
     fv y = (fv)(0.5f - ((float)j + 0.5f) / (float)height);
     v3 V = v3_make((fv)(cam[EW_CAM_EYE]), (fv)(cam[EW_CAM_EYE + 1]), (fv)(cam[EW_CAM_EYE + 2]));
@@ -284,11 +330,11 @@ static void ew_store(__global float *out, fv B, int i0, int j, int width)
 {
     __global float *row = out + j * width;
     if (i0 + EW_LANES <= width) {
-        vstore8(B, 0, row + i0);
+        EW_VSTORE(B, 0, row + i0);
         return;
     }
     float b[EW_LANES];
-    vstore8(B, 0, b);
+    EW_VSTORE(B, 0, b);
     for (int k = 0; i0 + k < width; k++) row[i0 + k] = b[k];
 }
 
@@ -402,13 +448,12 @@ typedef struct {
     iv two;
 } ew_peaks;
 
-/* kind 0: torus, 1: curve, 2: point, 3: line (t*: the nearest curve parameter, str:
- * S(t*); both 0 for the others). */
+/* kind 1: curve, 2: point, 3: line (t*: the nearest curve parameter, str: S(t*); both 0
+ * for the others). Tori have their own span (ew_torus_span). */
 static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3 P, fv *t, fv *str)
 {
     *t = *str = 0.0f;
     switch (kind) {
-    case 0: return ew_torus_k(prim, P, sc->eps);
     case 1: return ew_curve_kt(sc, prim, P, t, str);
     case 2: return ew_point_k(prim, P, sc->eps);
     default: return ew_line_k(prim, P, sc->eps);
@@ -422,23 +467,34 @@ static fv ew_prim_k(const ew_scene *sc, int kind, __global const float *prim, v3
 #define EW_JUMP_S 0.02f
 #define EW_JUMP_BISECT 6
 
+/* The node s = c + w·sinh(u) at u = ua + du·x, and 2 cosh(u) in *jac (ds/du = w·jac/2). */
+static fv ew_sinh_node(fv c, fv w, fv ua, fv du, float x, fv *jac)
+{
+    fv e = exp(mad(du, x, ua)), ie = 1.0f / e;
+    *jac = e + ie;
+    return c + w * 0.5f * (e - ie);
+}
+
 /* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
  * [a, b]): in u the 1/distance peak is smooth, so one Gauss–Legendre rule covers it.
- * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] flagged in *jumped. */
+ * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] (t* there: *jta, *jtb)
+ * flagged in *jumped. */
 static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b,
-                        int n, __constant const float *gx, __constant const float *gw, iv *jumped, fv *ja, fv *jb)
+                        int n, __constant const float *gx, __constant const float *gw, iv *jumped, fv *ja, fv *jb,
+                        fv *jta, fv *jtb)
 {
     fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
     fv t, str, tprev = 0.0f, strprev = 0.0f, sprev = a;
     *jumped = 0;
     for (int k = 0; k < n; k++) {
-        fv e = exp(mad(du, gx[k], ua)), ie = 1.0f / e;
-        fv s = c + w * 0.5f * (e - ie);
-        acc += gw[k] * (e + ie) * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t, &str) * ew_zeta(sc, s);
+        fv jac, s = ew_sinh_node(c, w, ua, du, gx[k], &jac);
+        acc += gw[k] * jac * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t, &str) * ew_zeta(sc, s);
         iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~*jumped & (fabs(t - tprev) > EW_JUMP_T) &
                   (fabs(str - strprev) > EW_JUMP_S);
         *ja = select(*ja, sprev, jump);
         *jb = select(*jb, s, jump);
+        *jta = select(*jta, tprev, jump);
+        *jtb = select(*jtb, t, jump);
         *jumped |= jump;
         tprev = t;
         strprev = str;
@@ -450,16 +506,14 @@ static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim
 static fv ew_span_plain(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
     iv jumped;
-    fv ja, jb;
-    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &jumped, &ja, &jb);
+    fv ja, jb, jta, jtb;
+    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &jumped, &ja, &jb, &jta, &jtb);
 }
 
-/* Bisects [a, b] for the jump of t*. */
-static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 Q, fv a, fv b)
+/* Bisects [a, b] (t* there: ta, tb) for the jump of t*. */
+static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 Q, fv a, fv b, fv ta, fv tb)
 {
-    fv ta, tb, str;
-    ew_curve_kt(sc, cv, v3_mad(S, a, Q), &ta, &str);
-    ew_curve_kt(sc, cv, v3_mad(S, b, Q), &tb, &str);
+    fv str;
     for (int it = 0; it < EW_JUMP_BISECT; it++) {
         fv m = 0.5f * (a + b), tm;
         ew_curve_kt(sc, cv, v3_mad(S, m, Q), &tm, &str);
@@ -476,13 +530,11 @@ static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 
 static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
     iv jumped;
-    fv ja = 0.0f, jb = 0.0f;
-    fv acc = kind == 0 ? ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL12_N, ew_gl12_x, ew_gl12_w, &jumped,
-                                       &ja, &jb)
-                       : ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &jumped,
-                                       &ja, &jb);
+    fv ja = 0.0f, jb = 0.0f, jta = 0.0f, jtb = 0.0f;
+    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &jumped, &ja, &jb, &jta,
+                           &jtb);
     if (!any(jumped)) return acc;
-    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb), jumped); /* other lanes: plain redo */
+    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb, jta, jtb), jumped); /* other lanes: plain redo */
     fv redo = ew_span_plain(sc, kind, prim, S, Q, c, w, a, sj) + ew_span_plain(sc, kind, prim, S, Q, c, w, sj, b);
     return select(acc, redo, jumped);
 }
@@ -567,11 +619,18 @@ static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, 
     return ew_approach(eps, Sl, Ql, v3_make(R * a.c, R * a.s, (fv)(0.0f)), v3_make(-a.s, a.c, (fv)(0.0f)), w);
 }
 
-/* Closest approaches of the ray line to the torus centre circle (at most two local
- * minima of the distance): 16-point search around the circle, then Newton. */
-static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_peaks *pk)
+/* cos and sin of kπ/8, k = 0…15: the circle search's start points. */
+__constant float ew_circle16_c[16] = {1.0f,  0.923879533f,  0.707106781f,  0.382683432f, 0.0f, -0.382683432f,
+                                      -0.707106781f, -0.923879533f, -1.0f, -0.923879533f, -0.707106781f,
+                                      -0.382683432f, 0.0f, 0.382683432f, 0.707106781f, 0.923879533f};
+__constant float ew_circle16_s[16] = {0.0f, 0.382683432f, 0.707106781f, 0.923879533f, 1.0f, 0.923879533f,
+                                      0.707106781f, 0.382683432f, 0.0f, -0.382683432f, -0.707106781f,
+                                      -0.923879533f, -1.0f, -0.923879533f, -0.707106781f, -0.382683432f};
+
+/* Closest approaches of the ray line (Sl, Ql: in the torus frame) to the torus centre circle
+ * (at most two local minima of the distance): 16-point search around the circle, then Newton. */
+static void ew_torus_peaks(__global const float *to, float eps, v3 Sl, v3 Ql, ew_peaks *pk)
 {
-    v3 Sl = ew_torus_local(to, S), Ql = ew_torus_local(to, v3_add(Q, v3_load(to)));
     fv R = (fv)(to[3]), inv = rsqrt(v3_dot(Ql, Ql));
     v3 qn = v3_mul(Ql, inv);
     v3 a = v3_mul(v3_mad(v3_make((fv)(1.0f), (fv)(0.0f), (fv)(0.0f)), -qn.x, qn), R);
@@ -579,14 +638,14 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_p
     v3 c = v3_perp(Sl, qn);
     ew_circle K = {v3_dot(a, a), v3_dot(b, b), v3_dot(a, b), v3_dot(a, c), v3_dot(b, c), v3_dot(c, c)};
     fv f[16];
-    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, cospi(k / 8.0f), sinpi(k / 8.0f));
+    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, ew_circle16_c[k], ew_circle16_s[k]);
     /* lanes without a strict minimum (a ray along the axis) keep φ = 0 */
     fv b0 = EW_BIG, b1 = EW_BIG;
     ew_angle a0 = {(fv)(1.0f), (fv)(0.0f)}, a1 = a0;
     for (int k = 0; k < 16; k++) {
         iv is_min = (f[k] <= f[(k + 15) & 15]) & (f[k] < f[(k + 1) & 15]);
         iv first = is_min & (f[k] < b0), second = is_min & ~first & (f[k] < b1);
-        fv ck = (fv)(cospi(k / 8.0f)), sk = (fv)(sinpi(k / 8.0f));
+        fv ck = (fv)(ew_circle16_c[k]), sk = (fv)(ew_circle16_s[k]);
         b1 = select(select(b1, f[k], second), b0, first);
         a1.c = select(select(a1.c, ck, second), a0.c, first);
         a1.s = select(select(a1.s, sk, second), a0.s, first);
@@ -598,6 +657,33 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 S, v3 Q, ew_p
     fv s0 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, a0), &w0);
     fv s1 = ew_circle_approach(to, eps, Sl, Ql, ew_circle_refine(&K, a1), &w1);
     ew_peaks_make(pk, s0, w0, s1, w1, b1 < EW_BIG);
+}
+
+/* ∫_a^b of the torus term ζ coef/max(ε, d) along the ray Sl + sQl (torus frame), with the
+ * span's sinh map around the peak (c, w); 12 Gauss–Legendre nodes. */
+static fv ew_torus_span(const ew_scene *sc, __global const float *to, v3 Sl, v3 Ql, fv c, fv w, fv a, fv b)
+{
+    float R = to[3];
+    fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
+    for (int k = 0; k < EW_GL12_N; k++) {
+        fv jac, s = ew_sinh_node(c, w, ua, du, ew_gl12_x[k], &jac);
+        v3 P = v3_mad(Sl, s, Ql);
+        fv dr = sqrt(P.x * P.x + P.y * P.y) - R;
+        acc += ew_gl12_w[k] * jac * ew_zeta(sc, s) / fmax(sc->eps, sqrt(dr * dr + P.z * P.z));
+    }
+    return acc * 0.5f * du * w * to[7];
+}
+
+/* One torus: its closest approaches, then one span per peak (split halfway between two). */
+static fv ew_torus_int(const ew_scene *sc, __global const float *to, v3 S, v3 Q)
+{
+    v3 Sl = ew_torus_local(to, S), Ql = ew_torus_local(to, v3_add(Q, v3_load(to)));
+    ew_peaks pk;
+    ew_torus_peaks(to, sc->eps, Sl, Ql, &pk);
+    if (!any(pk.two)) return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), (fv)(1.0f));
+    fv mid = select((fv)(1.0f), 0.5f * (pk.s0 + pk.s1), pk.two);
+    return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), mid) +
+           ew_torus_span(sc, to, Sl, Ql, pk.s1, pk.w1, mid, (fv)(1.0f));
 }
 
 /* Closest approaches of the ray line to the lit part [t_lo, t_hi] of a curve (where
@@ -655,41 +741,10 @@ __kernel void ew_render_adaptive(__global float *out, __constant const float *ca
     fv acc = 0.0f;
     for (int k = 0; k < np; k++) acc += ew_point_int(&sc, pts + k * EW_PT_STRIDE, S, Q);
     for (int k = 0; k < nl; k++) acc += ew_line_int(&sc, lns + k * EW_LN_STRIDE, S, Q);
-    for (int k = 0; k < nt; k++) {
-        ew_torus_peaks(tor + k * EW_TO_STRIDE, sc.eps, S, Q, &pk);
-        acc += ew_peaks_int(&sc, 0, tor + k * EW_TO_STRIDE, S, Q, &pk);
-    }
+    for (int k = 0; k < nt; k++) acc += ew_torus_int(&sc, tor + k * EW_TO_STRIDE, S, Q);
     for (int k = 0; k < nc; k++) {
         ew_curve_peaks(cur + k * EW_CV_STRIDE, sc.eps, S, Q, &pk);
         acc += ew_peaks_int(&sc, 1, cur + k * EW_CV_STRIDE, S, Q, &pk);
     }
     ew_store(out, acc, i0, j, width);
-}
-
-/* ---- test entry points (energy_wave_dev_*), lane 0 of the same functions ----------- */
-
-__kernel void ew_test_cubic(__global const float *abc, __global float *roots, __global int *nroots)
-{
-    int i = get_global_id(0);
-    fv r0, r1, r2;
-    iv three = ew_cubic((fv)(abc[3 * i]), (fv)(abc[3 * i + 1]), (fv)(abc[3 * i + 2]), &r0, &r1, &r2);
-    nroots[i] = three.s0 ? 3 : 1;
-    roots[3 * i] = r0.s0;
-    roots[3 * i + 1] = three.s0 ? r1.s0 : 0.0f;
-    roots[3 * i + 2] = three.s0 ? r2.s0 : 0.0f;
-}
-
-__kernel void ew_test_bspline(__global const float *w, int nw, __global const float *t, __global float *out)
-{
-    int i = get_global_id(0);
-    out[i] = ew_bspline(w, nw, (fv)(t[i])).s0;
-}
-
-__kernel void ew_test_curve_nearest(__global const float *cv, __global const float *p, __global float *dist,
-                                    __global float *tparam)
-{
-    int i = get_global_id(0);
-    fv t, d = ew_curve_nearest(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
-    dist[i] = d.s0;
-    tparam[i] = t.s0;
 }

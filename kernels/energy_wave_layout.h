@@ -10,7 +10,10 @@
 #define EW_TO_STRIDE 16 /* torus: center.xyz, R, e1.xyz, coef, e2.xyz, 0, axis.xyz (unit), 0 */
 #define EW_CV_STRIDE 16 /* curve: C0.xyz, coef, C1.xyz, |C2|², C2.xyz, C1·C2, |C1|², nw, t_lo, t_hi */
 #define EW_MAX_W 32     /* curve i's weights start at wts[i·EW_MAX_W] */
-#define EW_LANES 8      /* texels per work-item (float8 lanes) */
+/* Texels per work-item, the lanes of its vectors: 16 (float16) where the device's native float
+ * vector is that wide (AVX-512), else 8; the host passes it to the build as -DEW_LANES. */
+#define EW_LANES_WIDE 16
+#define EW_LANES_NARROW 8
 
 /* Camera block (EW_CAM_FLOATS floats): billboard centre C, l·r, l·(H/W)·u and the eye V as
  * xyz triples at these offsets, then ν, α, β and ε. */

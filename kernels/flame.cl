@@ -17,7 +17,7 @@
  *   fl_count/fl_scan_blocks/fl_compact   every resample_interval steps: survivors in order,
  *                     then inserted particles appended in parent order with fresh ids
  *
- * Neighbour gather (§2.11): cells have edge c = h / FL_CELLS_PER_H (flame.c; 2h by default) and
+ * Neighbour gather (§2.11): cells have edge c = h / FL_CELLS_PER_H (flame_params.h; 2h by default) and
  * key(cx,cy,cz) = (cx + P1 cy + P2 cz) mod M, so the cells of one (cy,cz) row with consecutive cx
  * have consecutive keys and, after the sort, consecutive particles: a particle visits at most 4
  * rows (9 with cells of h, 25 with h/2), each one contiguous

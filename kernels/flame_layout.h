@@ -1,6 +1,6 @@
 /* flame_layout.h — what server/effects/flame.c and kernels/flame.cl must agree on: the indices
- * of the parameter array (one __constant float array, FP_COUNT floats, packed by flame.c's
- * fl_pack_params), the particle flag bits and the error bits a step reports. Valid C and
+ * of the parameter array (one __constant float array, FP_COUNT floats, packed by flame_params.c's
+ * flame_params_pack), the particle flag bits and the error bits a step reports. Valid C and
  * OpenCL C: flame.c (and flame.h's public flag enum) include it, and the build
  * (tools/embed_kernels.sh) prepends it to flame.cl, so the layout exists once. */
 #ifndef FLAME_LAYOUT_H

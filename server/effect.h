@@ -2,7 +2,8 @@
  *
  * An effect owns its simulation or generator state and its OpenCL objects; it runs
  * only on the engine thread and never sees sockets. It declares its parameters as a
- * param_def table (params.h), and each step emits zero or more outputs through a
+ * param_def table (params.h) over its typed parameter struct, and is handed that struct
+ * (filled by params_load), never the JSON document; each step emits zero or more outputs through a
  * callback: each with its content (particles, texels) and its default payload, made at
  * once or on demand. The engine makes one frame (header + payload) of each encoding
  * subscribers take (PROTOCOL.md §3.5), once, and the hub fans it out to them. */
@@ -72,6 +73,8 @@ struct effect_ops {
     const char *name;             /* protocol name, e.g. "energy_wave" */
     const char *doc;              /* one paragraph for describe */
     const struct param_def *params; /* {0}-terminated; must contain "fps" (PARAM_FLOAT) */
+    size_t params_size;           /* sizeof the typed parameter struct params names places in */
+    int param_slots;              /* floats of the kernel-argument array its PARAM_SLOTs index (0: none) */
     const char *outputs_json;     /* JSON array describing the outputs, for describe */
     const struct effect_preset *presets; /* built-in read-only presets, {0}-terminated (may be NULL) */
 
@@ -79,17 +82,18 @@ struct effect_ops {
      * some parameter's choices name. Fails when the environment is unusable. */
     int (*init)(const struct effect_env *env, struct fx_err *err);
 
-    /* Cross-parameter rules beyond the table (may be NULL). Called on every merged
-     * document before it is accepted; code bad_param with err->param set. */
-    int (*check)(const cJSON *params, struct fx_err *err);
+    /* Cross-parameter rules beyond the table (may be NULL). Called on the typed struct of
+     * every merged document before it is accepted; code bad_param with err->param set. */
+    int (*check)(const void *params, struct fx_err *err);
 
-    /* Creates the state from a complete validated document. Returns NULL and fills err
-     * (code internal, with the OpenCL build log when a build fails). */
-    void *(*create)(struct ocl *ocl, const cJSON *params, struct fx_err *err);
+    /* Creates the state from the typed struct of a complete validated document (the
+     * effect keeps a copy of what it needs; params is the caller's). Returns NULL and fills
+     * err (code internal, with the OpenCL build log when a build fails). */
+    void *(*create)(struct ocl *ocl, const void *params, struct fx_err *err);
 
-    /* Applies a new complete document between two steps (live change). A parameter
-     * flagged PARAM_RESTART never reaches apply: the engine re-creates instead. */
-    int (*apply)(void *self, const cJSON *params, struct fx_err *err);
+    /* Applies new parameters between two steps (live change), typed as create's. A
+     * parameter flagged PARAM_RESTART never reaches apply: the engine re-creates instead. */
+    int (*apply)(void *self, const void *params, struct fx_err *err);
 
     /* Advances to sim_time (dt seconds after the previous step) and emits frames; 0 once the
      * step is complete. A step that can take long is done in slices: the effect stops between
@@ -116,12 +120,17 @@ struct effect_ops {
 /* The registry (effects/registry.c). */
 const struct effect_ops *effect_find(const char *name);
 const struct effect_ops *const *effect_all(void); /* NULL-terminated */
-/* Runs every effect's init with env; the first failure is returned. */
+/* Checks every effect's parameter table against its typed struct (params_table_check), then
+ * runs every effect's init with env; the first failure is returned. */
 int effects_init(const struct effect_env *env, struct fx_err *err);
 
 /* The one validation path for an effect's parameters (create, set, config, restored
  * state): partial (NULL: none) merged into base (NULL: the effect's defaults) by its
  * table, then its cross-parameter rules. A new complete document, or NULL with err. */
 cJSON *effect_params(const struct effect_ops *ops, const cJSON *base, const cJSON *partial, struct fx_err *err);
+
+/* The typed struct of a complete validated document (params_load into a new allocation of
+ * ops->params_size bytes; free it), or NULL with err. */
+void *effect_typed(const struct effect_ops *ops, const cJSON *doc, struct fx_err *err);
 
 #endif

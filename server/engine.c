@@ -148,23 +148,34 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
 
     cJSON *doc = hub_get_params(eng->hub, s, &rev);
     struct fx_err err = {0};
+    void *typed = doc ? effect_typed(s->effect, doc, &err) : NULL;
+    if (!typed) { /* the hub's documents are validated: a bug, or out of memory */
+        if (!doc) fx_fail(&err, "internal", NULL, "out of memory");
+        engine_drop_fx(sl);
+        engine_fail(eng, sl, &err, "waiting for a parameter change");
+        cJSON_Delete(doc);
+        sl->failed_gen = gen;
+        return -1;
+    }
     engine_forget(sl);
     bool restart = !sl->state || params_restart_changed(s->effect->params, sl->params, doc);
-    if (!restart && s->effect->apply(sl->state, doc, &err) == 0) {
+    if (!restart && s->effect->apply(sl->state, typed, &err) == 0) {
         cJSON_Delete(sl->params);
     } else {
         if (!restart) engine_fail(eng, sl, &err, "re-creating the effect");
         engine_drop_fx(sl);
         memset(&err, 0, sizeof err);
-        sl->state = s->effect->create(eng->ocl, doc, &err);
+        sl->state = s->effect->create(eng->ocl, typed, &err);
         sl->sim_time = 0;
         if (!sl->state) {
             engine_fail(eng, sl, &err, "waiting for a parameter change");
+            free(typed);
             cJSON_Delete(doc);
             sl->failed_gen = gen;
             return -1;
         }
     }
+    free(typed);
     sl->params = doc;
     sl->rev = rev;
     sl->gen = gen;

@@ -6,6 +6,7 @@
 
 #include "clock.h"
 #include "hub.h"
+#include "log.h"
 
 int hub_init(struct hub *hub, int max_streams, bool clustered)
 {
@@ -72,9 +73,12 @@ static int hub_index(const struct hub *hub, const char *name)
 int hub_create(struct hub *hub, const struct effect_ops *effect, const char *name, cJSON *params,
                uint64_t rev, struct fx_err *err)
 {
+    double fps;
     if (!hub_valid_name(name))
         return fx_fail(err, "bad_request", "stream",
                        "stream name must be 1-%d characters of A-Z a-z 0-9 _ . -", STREAM_NAME_MAX - 1);
+    if (params_number(params, "fps", &fps)) /* effect_params makes every document: a bug */
+        return fx_fail(err, "internal", "params", "stream \"%s\": parameters without fps", name);
     pthread_mutex_lock(&hub->mu);
     int rc = 0;
     if (hub_index(hub, name) >= 0)
@@ -98,7 +102,7 @@ int hub_create(struct hub *hub, const struct effect_ops *effect, const char *nam
         s->effect = effect;
         s->channel = hub->next_channel++;
         s->params = params;
-        s->fps = params_num(params, "fps");
+        s->fps = fps;
         s->rev = rev;
         s->params_gen = 1;
         s->lease = (struct stream_lease){.owned = !hub->clustered, .until = INFINITY};
@@ -175,7 +179,8 @@ void hub_set_params(struct hub *hub, struct stream *s, cJSON *doc, uint64_t rev)
     pthread_mutex_lock(&hub->mu);
     cJSON_Delete(s->params);
     s->params = doc;
-    s->fps = params_num(doc, "fps");
+    if (params_number(doc, "fps", &s->fps)) /* effect_params makes every document: a bug */
+        log_error("stream %s: parameters without fps; keeping %g frames/s", s->name, s->fps);
     s->rev = rev;
     s->params_gen++;
     hub_changed(hub);

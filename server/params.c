@@ -3,9 +3,11 @@
  * Everything is driven by an effect's param_def table (params.h). Validation builds a
  * normalised copy of each value (list items completed with field defaults) so the live
  * document is only ever replaced by a fully checked one: a bad value anywhere leaves
- * nothing half-applied. */
+ * nothing half-applied. The typed side (params_load, params_pack, params_table_check) puts
+ * each value where its entry says, and refuses a document or table that does not match. */
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "params.h"
@@ -31,10 +33,17 @@ static void params_subpath(char sub[PARAMS_PATH_MAX], const char *path, const ch
     else snprintf(sub + n, (size_t)(PARAMS_PATH_MAX - n), "%d]", index);
 }
 
-static const struct param_def *params_find(const struct param_def *defs, const char *name)
+const struct param_def *params_find(const struct param_def *defs, const char *name)
 {
     for (; defs->name; defs++)
         if (strcmp(defs->name, name) == 0) return defs;
+    return NULL;
+}
+
+const struct param_def *params_at(const struct param_def *defs, size_t at)
+{
+    for (; defs->name; defs++)
+        if (defs->at == at) return defs;
     return NULL;
 }
 
@@ -295,36 +304,229 @@ cJSON *params_describe(const struct param_def *defs)
     return arr;
 }
 
-double params_num(const cJSON *obj, const char *name)
+/* ---- the typed struct ------------------------------------------------------------- */
+
+/* Bytes one value of d takes in its struct. */
+static size_t params_bytes(const struct param_def *d)
 {
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(obj, name);
-    return cJSON_IsNumber(v) ? v->valuedouble : 0.0;
+    switch (d->type) {
+    case PARAM_FLOAT: return sizeof(double);
+    case PARAM_INT:
+    case PARAM_ENUM: return sizeof(int);
+    case PARAM_BOOL: return sizeof(bool);
+    case PARAM_VEC3:
+    case PARAM_COLOR: return 3 * sizeof(double);
+    case PARAM_FLOAT_LIST:
+    case PARAM_OBJECT_LIST: return (size_t)d->max_len * d->item_size;
+    }
+    return 0;
 }
 
-bool params_bool(const cJSON *obj, const char *name)
+static bool params_is_list(const struct param_def *d)
 {
-    return cJSON_IsTrue(cJSON_GetObjectItemCaseSensitive(obj, name));
+    return d->type == PARAM_FLOAT_LIST || d->type == PARAM_OBJECT_LIST;
 }
 
-const char *params_str(const cJSON *obj, const char *name)
+/* [lo, hi) ranges of one struct, to find overlaps. */
+struct params_span {
+    size_t lo, hi;
+    const char *name;
+};
+
+static int params_claim(struct params_span *sp, int *n, int cap, size_t lo, size_t bytes, size_t size,
+                        const char *name, const char *path, struct fx_err *err)
 {
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(obj, name);
-    return cJSON_IsString(v) ? v->valuestring : "";
+    if (bytes == 0 || lo + bytes > size || lo + bytes < lo)
+        return fx_fail(err, "internal", name, "parameter %s%s: its value does not fit the typed struct", path, name);
+    for (int i = 0; i < *n; i++)
+        if (lo < sp[i].hi && sp[i].lo < lo + bytes)
+            return fx_fail(err, "internal", name, "parameter %s%s: its value overlaps %s's in the typed struct", path,
+                           name, sp[i].name);
+    if (*n == cap) return fx_fail(err, "internal", name, "parameter table too long");
+    sp[(*n)++] = (struct params_span){lo, lo + bytes, name};
+    return 0;
 }
 
-void params_vec3(const cJSON *obj, const char *name, double out[3])
+#define PARAMS_MAX_ENTRIES 128
+
+static int params_check_layout(const struct param_def *defs, size_t size, int slots, const char *path,
+                               struct fx_err *err)
 {
-    const cJSON *v = cJSON_GetObjectItemCaseSensitive(obj, name);
-    for (int i = 0; i < 3; i++) {
-        const cJSON *e = cJSON_IsArray(v) ? cJSON_GetArrayItem(v, i) : NULL;
-        out[i] = cJSON_IsNumber(e) ? e->valuedouble : 0.0;
+    struct params_span sp[PARAMS_MAX_ENTRIES];
+    bool used[PARAMS_MAX_ENTRIES] = {false};
+    int n = 0;
+    for (const struct param_def *d = defs; d->name; d++) {
+        if (params_is_list(d) && (d->max_len < 1 || d->min_len > d->max_len))
+            return fx_fail(err, "internal", d->name, "parameter %s%s: bad length limits", path, d->name);
+        if (d->type == PARAM_FLOAT_LIST && d->item_size != sizeof(double))
+            return fx_fail(err, "internal", d->name, "parameter %s%s: items must be doubles", path, d->name);
+        if (d->type == PARAM_ENUM && (!d->choices || !d->choices[0]))
+            return fx_fail(err, "internal", d->name, "parameter %s%s: no choices", path, d->name);
+        if (params_claim(sp, &n, PARAMS_MAX_ENTRIES, d->at, params_bytes(d), size, d->name, path, err) ||
+            (params_is_list(d) && params_claim(sp, &n, PARAMS_MAX_ENTRIES, d->count_at, sizeof(int), size, d->name,
+                                               path, err)))
+            return -1;
+        if (d->type == PARAM_OBJECT_LIST) {
+            char sub[PARAMS_PATH_MAX];
+            snprintf(sub, sizeof sub, "%s%s[].", path, d->name);
+            if (!d->fields) return fx_fail(err, "internal", d->name, "parameter %s%s: no fields", path, d->name);
+            if (params_check_layout(d->fields, d->item_size, 0, sub, err)) return -1;
+        }
+        if (!d->slot) continue;
+        int width = d->type == PARAM_VEC3 || d->type == PARAM_COLOR ? 3 : 1;
+        if (params_is_list(d) || d->slot < 1 || d->slot - 1 + width > slots || slots > PARAMS_MAX_ENTRIES)
+            return fx_fail(err, "internal", d->name, "parameter %s%s: bad kernel-argument slot %d", path, d->name,
+                           d->slot - 1);
+        for (int k = d->slot - 1; k < d->slot - 1 + width; k++) {
+            if (used[k])
+                return fx_fail(err, "internal", d->name, "parameter %s%s: kernel-argument slot %d taken twice", path,
+                               d->name, k);
+            used[k] = true;
+        }
+    }
+    return 0;
+}
+
+int params_table_check(const struct param_def *defs, size_t size, int slots, struct fx_err *err)
+{
+    if (params_check_layout(defs, size, slots, "", err)) return -1;
+    cJSON *doc = params_defaults(defs);
+    if (!doc) return fx_fail(err, "internal", NULL, "a parameter's default is invalid");
+    void *tmp = malloc(size);
+    int rc = tmp ? params_load(defs, doc, tmp, size, err) : fx_fail(err, "internal", NULL, "out of memory");
+    free(tmp);
+    cJSON_Delete(doc);
+    return rc;
+}
+
+static int params_load_one(const struct param_def *d, const cJSON *v, char *base, const char *path,
+                           struct fx_err *err);
+
+static int params_missing(const struct param_def *d, const char *path, struct fx_err *err)
+{
+    unsigned t = d->type;
+    return fx_fail(err, "internal", d->name, "parameter %s: missing from the document or not a %s", path,
+                   t < sizeof params_type_names / sizeof params_type_names[0] ? params_type_names[t] : "value");
+}
+
+static int params_load_items(const struct param_def *defs, const cJSON *obj, char *base, const char *path,
+                             struct fx_err *err)
+{
+    for (const struct param_def *d = defs; d->name; d++) {
+        char sub[PARAMS_PATH_MAX];
+        if (*path) params_subpath(sub, path, d->name, 0);
+        else snprintf(sub, sizeof sub, "%s", d->name);
+        if (params_load_one(d, cJSON_GetObjectItemCaseSensitive(obj, d->name), base, sub, err)) return -1;
+    }
+    return 0;
+}
+
+static int params_load_numbers(const struct param_def *d, const cJSON *v, double *out, int min_len, int max_len,
+                               const char *path, struct fx_err *err)
+{
+    int n = cJSON_IsArray(v) ? cJSON_GetArraySize(v) : -1;
+    if (n < min_len || n > max_len) return params_missing(d, path, err);
+    int i = 0;
+    for (const cJSON *e = v->child; e; e = e->next, i++) {
+        if (!cJSON_IsNumber(e)) return params_missing(d, path, err);
+        out[i] = e->valuedouble;
+    }
+    return n;
+}
+
+static int params_load_one(const struct param_def *d, const cJSON *v, char *base, const char *path,
+                           struct fx_err *err)
+{
+    void *at = base + d->at;
+    int n;
+    switch (d->type) {
+    case PARAM_FLOAT:
+        if (!cJSON_IsNumber(v)) return params_missing(d, path, err);
+        *(double *)at = v->valuedouble;
+        return 0;
+    case PARAM_INT:
+        if (!cJSON_IsNumber(v)) return params_missing(d, path, err);
+        *(int *)at = (int)v->valuedouble;
+        return 0;
+    case PARAM_BOOL:
+        if (!cJSON_IsBool(v)) return params_missing(d, path, err);
+        *(bool *)at = cJSON_IsTrue(v);
+        return 0;
+    case PARAM_ENUM:
+        for (int i = 0; cJSON_IsString(v) && d->choices[i]; i++)
+            if (strcmp(d->choices[i], v->valuestring) == 0) {
+                *(int *)at = i;
+                return 0;
+            }
+        return params_missing(d, path, err);
+    case PARAM_VEC3:
+    case PARAM_COLOR: return params_load_numbers(d, v, at, 3, 3, path, err) < 0 ? -1 : 0;
+    case PARAM_FLOAT_LIST:
+        if ((n = params_load_numbers(d, v, at, d->min_len, d->max_len, path, err)) < 0) return -1;
+        *(int *)(base + d->count_at) = n;
+        return 0;
+    case PARAM_OBJECT_LIST:
+        n = cJSON_IsArray(v) ? cJSON_GetArraySize(v) : -1;
+        if (n < d->min_len || n > d->max_len) return params_missing(d, path, err);
+        for (int i = 0; i < n; i++) {
+            char sub[PARAMS_PATH_MAX];
+            params_subpath(sub, path, NULL, i);
+            const cJSON *item = cJSON_GetArrayItem(v, i);
+            if (!cJSON_IsObject(item)) return params_missing(d, sub, err);
+            if (params_load_items(d->fields, item, (char *)at + (size_t)i * d->item_size, sub, err)) return -1;
+        }
+        *(int *)(base + d->count_at) = n;
+        return 0;
+    }
+    return params_missing(d, path, err);
+}
+
+int params_load(const struct param_def *defs, const cJSON *doc, void *dst, size_t size, struct fx_err *err)
+{
+    memset(dst, 0, size);
+    if (!cJSON_IsObject(doc)) return fx_fail(err, "internal", NULL, "parameters: not a document");
+    return params_load_items(defs, doc, dst, "", err);
+}
+
+void params_pack(const struct param_def *defs, const void *src, float *slots)
+{
+    const char *base = src;
+    for (const struct param_def *d = defs; d->name; d++) {
+        if (!d->slot) continue;
+        float *out = slots + d->slot - 1;
+        const void *at = base + d->at;
+        switch (d->type) {
+        case PARAM_FLOAT: *out = (float)*(const double *)at; break;
+        case PARAM_INT:
+        case PARAM_ENUM: *out = (float)*(const int *)at; break;
+        case PARAM_BOOL: *out = *(const bool *)at ? 1.0f : 0.0f; break;
+        case PARAM_VEC3:
+        case PARAM_COLOR:
+            for (int k = 0; k < 3; k++) out[k] = (float)((const double *)at)[k];
+            break;
+        case PARAM_FLOAT_LIST:
+        case PARAM_OBJECT_LIST: break; /* params_table_check refuses slots on lists */
+        }
     }
 }
 
-int params_enum(const cJSON *obj, const char *name, const char *const *choices)
+bool params_same(const struct param_def *d, const void *a, const void *b)
 {
-    const char *s = params_str(obj, name);
-    for (int i = 0; choices[i]; i++)
-        if (strcmp(choices[i], s) == 0) return i;
+    const char *pa = (const char *)a + d->at, *pb = (const char *)b + d->at;
+    if (!params_is_list(d)) return memcmp(pa, pb, params_bytes(d)) == 0;
+    int na = *(const int *)((const char *)a + d->count_at), nb = *(const int *)((const char *)b + d->count_at);
+    if (na != nb) return false;
+    if (d->type == PARAM_FLOAT_LIST) return memcmp(pa, pb, (size_t)na * sizeof(double)) == 0;
+    for (int i = 0; i < na; i++)
+        for (const struct param_def *f = d->fields; f->name; f++)
+            if (!params_same(f, pa + (size_t)i * d->item_size, pb + (size_t)i * d->item_size)) return false;
+    return true;
+}
+
+int params_number(const cJSON *doc, const char *name, double *out)
+{
+    const cJSON *v = cJSON_GetObjectItemCaseSensitive(doc, name);
+    if (!cJSON_IsNumber(v)) return -1;
+    *out = v->valuedouble;
     return 0;
 }

@@ -14,6 +14,9 @@
 #include "compound_eye.h"
 
 #include <math.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -28,88 +31,91 @@
 #include "fxs_frame.h"
 
 
-enum eye_mode { EYE_MODE_LUT, EYE_MODE_BAKE };
-static const char *const eye_mode_names[] = {"lut", "bake", NULL};
-static const char *const eye_lattice_names[] = {"square", "hex", NULL};
-static const char *const eye_search_names[] = {"exact", "slices", NULL};
-static const char *const eye_select_names[] = {"all", "thesis4", NULL};
-static const char *const eye_tir_names[] = {"reflect", "miss", "absorb", NULL};
-static const char *const eye_normal_names[] = {"object", "lens", NULL};
+/* An enum parameter's value is its index here: the constants of compound_eye_layout.h and
+ * compound_eye_params.h. */
+static const char *const eye_mode_names[] = {[EYE_MODE_LUT] = "lut", [EYE_MODE_BAKE] = "bake", NULL};
+static const char *const eye_lattice_names[] = {[EYE_SQUARE] = "square", [EYE_HEX] = "hex", NULL};
+static const char *const eye_search_names[] = {[EYE_SEARCH_EXACT] = "exact", [EYE_SEARCH_SLICES] = "slices", NULL};
+static const char *const eye_select_names[] = {[EYE_SELECT_ALL] = "all", [EYE_SELECT_THESIS4] = "thesis4", NULL};
+static const char *const eye_tir_names[] = {[EYE_TIR_REFLECT] = "reflect", [EYE_TIR_MISS] = "miss", [EYE_TIR_ABSORB] = "absorb",
+                                            NULL};
+static const char *const eye_normal_names[] = {[EYE_NORMAL_OBJECT] = "object", [EYE_NORMAL_LENS] = "lens", NULL};
 
 /* ---- parameters -------------------------------------------------------------------- */
 
 #define EYE_LUT_DOC(text) text " (regenerates the lens table)"
+#define EYE_AT(member) PARAM_AT(struct compound_eye_config, member)
 #define EYE_COLOR(nm, dflt, what, ...) \
-    {.name = nm, .type = PARAM_COLOR, .def = dflt, .min = 0, .max = 1, .unit = "linear RGB", .doc = EYE_LUT_DOC(what), __VA_ARGS__}
+    {EYE_AT(nm), .type = PARAM_COLOR, .def = dflt, .min = 0, .max = 1, .unit = "linear RGB", .doc = EYE_LUT_DOC(what), __VA_ARGS__}
 #define EYE_FRAC(nm, dflt, lo, hi, what, ...) \
-    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = "pitch", .doc = EYE_LUT_DOC(what), __VA_ARGS__}
+    {EYE_AT(nm), .type = PARAM_FLOAT, .def = dflt, .min = lo, .max = hi, .unit = "pitch", .doc = EYE_LUT_DOC(what), __VA_ARGS__}
 #define EYE_COEF(nm, dflt, what, ...) \
-    {.name = nm, .type = PARAM_FLOAT, .def = dflt, .min = 0, .max = 1, .unit = "", .doc = what, __VA_ARGS__}
+    {EYE_AT(nm), .type = PARAM_FLOAT, .def = dflt, .min = 0, .max = 1, .unit = "", .doc = what, __VA_ARGS__}
 
 const struct param_def compound_eye_params[] = {
-    {.name = "mode", .group = "output", .type = PARAM_ENUM, .def = "\"lut\"", .choices = eye_mode_names, .unit = "", .flags = PARAM_RESTART,
+    {EYE_AT(mode), .group = "output", .type = PARAM_ENUM, .def = "\"lut\"", .choices = eye_mode_names, .unit = "", .flags = PARAM_RESTART,
      .doc = "lut: send the lens look-up table (kind 4) on each change that affects it, the client shades; "
             "bake: send the model's shaded view texture (kind 2 EXR) on each change"},
-    {.name = "lattice", .group = "lenses", .type = PARAM_ENUM, .def = "\"hex\"", .choices = eye_lattice_names, .unit = "",
+    {EYE_AT(lattice), .group = "lenses", .type = PARAM_ENUM, .def = "\"hex\"", .choices = eye_lattice_names, .unit = "",
      .doc = EYE_LUT_DOC("lens lattice: square (Sagawa 2014, 4 side pupils) or hex (real eyes, 6 side pupils)")},
-    {.name = "density", .group = "lenses", .type = PARAM_FLOAT, .def = "60", .min = 1, .max = 1000, .unit = "cells per UV unit",
+    {EYE_AT(density), .group = "lenses", .type = PARAM_FLOAT, .def = "60", .min = 1, .max = 1000, .unit = "cells per UV unit",
      .doc = "ommatidium density R_t (Sagawa 2014 eq. 5.1): higher, more and smaller lenses; a client uniform in "
             "mode lut (the thesis: 300 on its own UV layout)"},
-    EYE_FRAC("lens_radius", "1.0", 0.5, 3.0,
+    EYE_FRAC(lens_radius, "1.0", 0.5, 3.0,
              "lens sphere radius r / pitch; gap-free coverage needs >= 0.7071 (square) or >= 0.5774 (hex)", .group = "lenses"),
-    {.name = "refractive_index", .group = "lenses", .type = PARAM_FLOAT, .def = "1.491", .min = 1.05, .max = 1.95, .unit = "",
+    {EYE_AT(refractive_index), .group = "lenses", .type = PARAM_FLOAT, .def = "1.491", .min = 1.05, .max = 1.95, .unit = "",
      .doc = EYE_LUT_DOC("lens refractive index n (Sagawa 2014: 1.491, PMMA)")},
-    {.name = "pigment_depth", .group = "lenses", .type = PARAM_FLOAT, .def = "2.0", .min = 2.0, .max = 4.0, .unit = "lens radii",
+    {EYE_AT(pigment_depth), .group = "lenses", .type = PARAM_FLOAT, .def = "2.0", .min = 2.0, .max = 4.0, .unit = "lens radii",
      .doc = EYE_LUT_DOC("depth of the pigment plane below the surface (Sagawa 2014: 2r; below 2r it would cut the lenses)")},
-    {.name = "max_passes", .group = "rays", .type = PARAM_INT, .def = "8", .min = 0, .max = 64, .unit = "",
+    {EYE_AT(max_passes), .group = "rays", .type = PARAM_INT, .def = "8", .min = 0, .max = 64, .unit = "",
      .doc = EYE_LUT_DOC("l: neighbouring lenses a ray may pass through (0: exit the first lens; >= 3 converged)")},
-    {.name = "sphere_search", .group = "rays", .type = PARAM_ENUM, .def = "\"exact\"", .choices = eye_search_names, .unit = "",
+    {EYE_AT(sphere_search), .group = "rays", .type = PARAM_ENUM, .def = "\"exact\"", .choices = eye_search_names, .unit = "",
      .doc = EYE_LUT_DOC("entry lens: exact (walk the crossed cells) or slices (Sagawa 2014's slice planes)")},
-    {.name = "slice_steps", .group = "rays", .type = PARAM_INT, .def = "16", .min = 4, .max = 64, .unit = "",
+    {EYE_AT(slice_steps), .group = "rays", .type = PARAM_INT, .def = "16", .min = 4, .max = 64, .unit = "",
      .doc = EYE_LUT_DOC("slice planes down to depth r, with sphere_search slices")},
-    {.name = "neighbor_select", .group = "rays", .type = PARAM_ENUM, .def = "\"all\"", .choices = eye_select_names, .unit = "",
+    {EYE_AT(neighbor_select), .group = "rays", .type = PARAM_ENUM, .def = "\"all\"", .choices = eye_select_names, .unit = "",
      .doc = EYE_LUT_DOC("next lens: all (any overlapping lens, farthest exit wins) or thesis4 (Sagawa 2014 "
                         "Fig. 5.10: only the 3 neighbouring lenses on the side the ray is heading to)")},
-    {.name = "tir_policy", .group = "rays", .type = PARAM_ENUM, .def = "\"reflect\"", .choices = eye_tir_names, .unit = "",
+    {EYE_AT(tir_policy), .group = "rays", .type = PARAM_ENUM, .def = "\"reflect\"", .choices = eye_tir_names, .unit = "",
      .doc = EYE_LUT_DOC("total internal reflection at exit: reflect (up to 4 times, then miss), miss (base "
                         "colour) or absorb (pigment colour)")},
-    EYE_FRAC("dot_radius", "0.2", 0.05, 0.5, "pigment dot radius", .group = "pigment"),
-    EYE_FRAC("dot_softness", "0.03", 0.0, 0.2, "width of the dot's smoothstep edge", .group = "pigment"),
-    EYE_COLOR("dot_color", "[0.03,0.008,0.005]", "pigment dot colour", .group = "pigment"),
-    EYE_COLOR("base_color", "[0.42,0.06,0.03]", "pigment-free (body fluid) colour, also what missed rays see", .group = "pigment"),
-    EYE_FRAC("ring_inner", "0.21", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)", .group = "pigment"),
-    EYE_FRAC("ring_outer", "0.3", 0.0, 0.5, "outer radius of the optional pigment ring", .group = "pigment"),
-    EYE_COLOR("ring_color", "[0.16,0.03,0.015]", "ring colour", .group = "pigment"),
-    EYE_FRAC("glow_radius", "0", 0.0, 0.5, "radius of an optional additive central glow (0: off)", .group = "pigment"),
-    EYE_COLOR("glow_color", "[0.6,0.15,0.05]", "central glow colour (added)", .group = "pigment"),
-    {.name = "pigment_res", .group = "pigment", .type = PARAM_INT, .def = "128", .min = 32, .max = 256, .unit = "texels",
+    EYE_FRAC(dot_radius, "0.2", 0.05, 0.5, "pigment dot radius", .group = "pigment"),
+    EYE_FRAC(dot_softness, "0.03", 0.0, 0.2, "width of the dot's smoothstep edge", .group = "pigment"),
+    EYE_COLOR(dot_color, "[0.03,0.008,0.005]", "pigment dot colour", .group = "pigment"),
+    EYE_COLOR(base_color, "[0.42,0.06,0.03]", "pigment-free (body fluid) colour, also what missed rays see", .group = "pigment"),
+    EYE_FRAC(ring_inner, "0.21", 0.0, 0.5, "inner radius of an optional pigment ring (off when ring_outer <= ring_inner)", .group = "pigment"),
+    EYE_FRAC(ring_outer, "0.3", 0.0, 0.5, "outer radius of the optional pigment ring", .group = "pigment"),
+    EYE_COLOR(ring_color, "[0.16,0.03,0.015]", "ring colour", .group = "pigment"),
+    EYE_FRAC(glow_radius, "0", 0.0, 0.5, "radius of an optional additive central glow (0: off)", .group = "pigment"),
+    EYE_COLOR(glow_color, "[0.6,0.15,0.05]", "central glow colour (added)", .group = "pigment"),
+    {EYE_AT(pigment_res), .group = "pigment", .type = PARAM_INT, .def = "128", .min = 32, .max = 256, .unit = "texels",
      .doc = EYE_LUT_DOC("pigment tile width (height x sqrt 3 on the hex lattice)")},
-    {.name = "lut_cells", .group = "table", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "texels",
+    {EYE_AT(lut_cells), .group = "table", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "texels",
      .doc = EYE_LUT_DOC("C: in-cell samples per axis of each direction tile")},
-    {.name = "lut_dirs", .group = "table", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
+    {EYE_AT(lut_dirs), .group = "table", .type = PARAM_INT, .def = "32", .min = 8, .max = 64, .unit = "tiles",
      .doc = EYE_LUT_DOC("D: direction tiles per axis (hemi-octahedral map)")},
-    {.name = "lut_supersample", .group = "table", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
+    {EYE_AT(lut_supersample), .group = "table", .type = PARAM_INT, .def = "1", .min = 1, .max = 8, .unit = "",
      .doc = EYE_LUT_DOC("SS: SS x SS rays per table texel, over its footprint in the cell (1: a table "
-                        "change takes about 90 ms on 2 CPU cores; 2 is 4x the rays)")},
-    EYE_COEF("ka", "0.2", "ambient coefficient a of the Phong shading (Sagawa 2014 eq. 5.31; a client uniform in mode lut)", .group = "shading"),
-    EYE_COEF("kd", "0.8", "diffuse coefficient d of the Phong shading (Sagawa 2014 eq. 5.31)", .group = "shading"),
-    EYE_COEF("ks", "0.3", "specular coefficient s of the Phong shading (Sagawa 2014 eq. 5.31)", .group = "shading"),
-    {.name = "shininess", .group = "shading", .type = PARAM_FLOAT, .def = "32", .min = 1, .max = 256, .unit = "",
+                        "change takes some 30-40 ms on 2 CPU cores; 2 is 4x the rays)")},
+    EYE_COEF(ka, "0.2", "ambient coefficient a of the Phong shading (Sagawa 2014 eq. 5.31; a client uniform in mode lut)", .group = "shading"),
+    EYE_COEF(kd, "0.8", "diffuse coefficient d of the Phong shading (Sagawa 2014 eq. 5.31)", .group = "shading"),
+    EYE_COEF(ks, "0.3", "specular coefficient s of the Phong shading (Sagawa 2014 eq. 5.31)", .group = "shading"),
+    {EYE_AT(shininess), .group = "shading", .type = PARAM_FLOAT, .def = "32", .min = 1, .max = 256, .unit = "",
      .doc = "Phong exponent of the specular term"},
-    {.name = "shading_normal", .group = "shading", .type = PARAM_ENUM, .def = "\"lens\"", .choices = eye_normal_names, .unit = "",
+    {EYE_AT(shading_normal), .group = "shading", .type = PARAM_ENUM, .def = "\"lens\"", .choices = eye_normal_names, .unit = "",
      .doc = "normal for Phong: lens (the lens sphere at the entry point, Sagawa 2014 Fig. 6.20 c-d) or object"},
-    {.name = "model", .group = "bake", .type = PARAM_ENUM, .def = "\"hemisphere\"", .choices = eye_model_names, .unit = "",
+    {EYE_AT(model), .group = "bake", .type = PARAM_ENUM, .def = "\"hemisphere\"", .choices = eye_model_names, .unit = "",
      .flags = PARAM_RESTART,
      .doc = "mode bake: a built-in model or the name of an OBJ file (without .obj) in the assets directory"},
-    {.name = "bake_size", .group = "bake", .type = PARAM_INT, .def = "512", .min = 128, .max = 2048, .unit = "texels",
+    {EYE_AT(bake_size), .group = "bake", .type = PARAM_INT, .def = "512", .min = 128, .max = 2048, .unit = "texels",
      .flags = PARAM_RESTART, .doc = "mode bake: width and height of the view texture"},
-    {.name = "eye", .group = "bake", .type = PARAM_VEC3, .def = "[0.4,0.3,3]", .min = -1000, .max = 1000, .unit = "model units",
+    {EYE_AT(eye), .group = "bake", .type = PARAM_VEC3, .def = "[0.4,0.3,3]", .min = -1000, .max = 1000, .unit = "model units",
      .doc = "mode bake: eye position in the model's space"},
-    {.name = "light", .group = "bake", .type = PARAM_VEC3, .def = "[0.4,0.6,1]", .min = -1000, .max = 1000, .unit = "direction",
+    {EYE_AT(light), .group = "bake", .type = PARAM_VEC3, .def = "[0.4,0.6,1]", .min = -1000, .max = 1000, .unit = "direction",
      .flags = PARAM_NONZERO, .doc = "mode bake: direction towards the light, normalised by the server"},
-    {.name = "compression", .group = "bake", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
+    {EYE_AT(compression), .group = "bake", .type = PARAM_ENUM, .def = "\"rle\"", .choices = exr_codec_names, .unit = "",
      .doc = "mode bake: OpenEXR compression of the view texture"},
-    {.name = "fps", .group = "output", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 120, .unit = "1/s",
+    {EYE_AT(fps), .group = "output", .type = PARAM_FLOAT, .def = "30", .min = 1, .max = 120, .unit = "1/s",
      .doc = "steps per second; a step sends a frame only when something changed"},
     {0},
 };
@@ -138,11 +144,18 @@ static const struct effect_preset compound_eye_presets[] = {
 };
 
 /* Every parameter whose change regenerates the lens table (mode lut). */
-static const char *const eye_lut_keys[] = {
-    "lattice", "lens_radius", "refractive_index", "pigment_depth", "max_passes", "sphere_search", "slice_steps",
-    "neighbor_select", "tir_policy", "dot_radius", "dot_softness", "dot_color", "base_color", "ring_inner",
-    "ring_outer", "ring_color", "glow_radius", "glow_color", "pigment_res", "lut_cells", "lut_dirs",
-    "lut_supersample", NULL,
+static const size_t eye_lut_keys[] = {
+    offsetof(struct compound_eye_config, lattice), offsetof(struct compound_eye_config, lens_radius),
+    offsetof(struct compound_eye_config, refractive_index), offsetof(struct compound_eye_config, pigment_depth),
+    offsetof(struct compound_eye_config, max_passes), offsetof(struct compound_eye_config, sphere_search),
+    offsetof(struct compound_eye_config, slice_steps), offsetof(struct compound_eye_config, neighbor_select),
+    offsetof(struct compound_eye_config, tir_policy), offsetof(struct compound_eye_config, dot_radius),
+    offsetof(struct compound_eye_config, dot_softness), offsetof(struct compound_eye_config, dot_color),
+    offsetof(struct compound_eye_config, base_color), offsetof(struct compound_eye_config, ring_inner),
+    offsetof(struct compound_eye_config, ring_outer), offsetof(struct compound_eye_config, ring_color),
+    offsetof(struct compound_eye_config, glow_radius), offsetof(struct compound_eye_config, glow_color),
+    offsetof(struct compound_eye_config, pigment_res), offsetof(struct compound_eye_config, lut_cells),
+    offsetof(struct compound_eye_config, lut_dirs), offsetof(struct compound_eye_config, lut_supersample),
 };
 
 /* ---- state ------------------------------------------------------------------------- */
@@ -150,15 +163,18 @@ static const char *const eye_lut_keys[] = {
 struct compound_eye {
     struct ocl *ocl;
     cl_kernel k_lut, k_bake;
-    cJSON *params;   /* the document in use */
+    int lanes;                      /* rays per work-item of the kernels (compound_eye_program) */
+    struct compound_eye_config cfg; /* the parameters in use */
+    bool configured;                /* cfg holds a set */
     int mode, dirty; /* dirty: the next step has something new to send */
     struct eye_optics optics;
     struct eye_pigment pigment;
     float *pig;      /* pigment tile, pw x ph RGBA */
     int pw, ph;
-    cl_mem d_pig, d_lut, d_geo, d_out;
-    size_t d_pig_bytes, d_lut_bytes;
-    float *samples;  /* LUT kernel output */
+    cl_mem d_pig, d_lut, d_geo, d_out, d_tiles;
+    size_t d_pig_bytes, d_lut_bytes, d_tiles_bytes;
+    float *samples;  /* LUT kernel output, for the traced tiles (eye_lut.h) */
+    int symmetry, traced; /* the table's mirrors (eye_lut.h) and the tiles traced under them */
     struct fx_buf table;
     /* bake */
     int size, compression;
@@ -171,6 +187,7 @@ struct compound_eye {
     struct slice_meter meter;
     struct eye_lut_packer packer;
     double pack_ms;
+    struct compound_eye_split split; /* of the last table or view */
 };
 
 enum { EYE_IDLE, EYE_TRACING, EYE_PACKING };
@@ -183,44 +200,40 @@ static void eye_abandon(struct compound_eye *ce)
     ce->busy = EYE_IDLE;
 }
 
-static void eye_rgb(const cJSON *p, const char *name, double out[3]) { params_vec3(p, name, out); }
-
-void eye_optics_from_params(const cJSON *p, struct eye_optics *o)
+void eye_optics_from_params(const struct compound_eye_config *p, struct eye_optics *o)
 {
     memset(o, 0, sizeof *o);
-    o->lattice = params_enum(p, "lattice", eye_lattice_names);
-    o->r = (float)params_num(p, "lens_radius");
-    o->n = (float)params_num(p, "refractive_index");
-    o->plane = (float)(params_num(p, "pigment_depth") * params_num(p, "lens_radius"));
+    o->lattice = p->lattice;
+    o->r = (float)p->lens_radius;
+    o->n = (float)p->refractive_index;
+    o->plane = (float)(p->pigment_depth * p->lens_radius);
     o->tile_h = o->lattice == EYE_HEX ? (float)EYE_SQRT3 : 1.0f;
-    o->max_passes = (int)params_num(p, "max_passes");
-    o->search = params_enum(p, "sphere_search", eye_search_names);
-    o->slices = (int)params_num(p, "slice_steps");
-    o->select = params_enum(p, "neighbor_select", eye_select_names);
-    o->tir = params_enum(p, "tir_policy", eye_tir_names);
+    o->max_passes = p->max_passes;
+    o->search = p->sphere_search;
+    o->slices = p->slice_steps;
+    o->select = p->neighbor_select;
+    o->tir = p->tir_policy;
 }
 
-static void eye_pigment_from_params(const cJSON *p, struct eye_pigment *pg)
+static void eye_pigment_from_params(const struct compound_eye_config *p, struct eye_pigment *pg)
 {
-    pg->lattice = params_enum(p, "lattice", eye_lattice_names);
-    pg->dot_radius = params_num(p, "dot_radius");
-    pg->softness = params_num(p, "dot_softness");
-    pg->ring_inner = params_num(p, "ring_inner");
-    pg->ring_outer = params_num(p, "ring_outer");
-    pg->glow_radius = params_num(p, "glow_radius");
-    eye_rgb(p, "dot_color", pg->dot);
-    eye_rgb(p, "base_color", pg->base);
-    eye_rgb(p, "ring_color", pg->ring);
-    eye_rgb(p, "glow_color", pg->glow);
+    pg->lattice = p->lattice;
+    pg->dot_radius = p->dot_radius;
+    pg->softness = p->dot_softness;
+    pg->ring_inner = p->ring_inner;
+    pg->ring_outer = p->ring_outer;
+    pg->glow_radius = p->glow_radius;
+    memcpy(pg->dot, p->dot_color, sizeof pg->dot);
+    memcpy(pg->base, p->base_color, sizeof pg->base);
+    memcpy(pg->ring, p->ring_color, sizeof pg->ring);
+    memcpy(pg->glow, p->glow_color, sizeof pg->glow);
 }
 
-static int eye_table_changed(const cJSON *a, const cJSON *b)
+static bool eye_table_changed(const struct compound_eye_config *a, const struct compound_eye_config *b)
 {
-    for (int i = 0; eye_lut_keys[i]; i++)
-        if (!cJSON_Compare(cJSON_GetObjectItemCaseSensitive(a, eye_lut_keys[i]),
-                           cJSON_GetObjectItemCaseSensitive(b, eye_lut_keys[i]), 1))
-            return 1;
-    return 0;
+    for (size_t i = 0; i < sizeof eye_lut_keys / sizeof eye_lut_keys[0]; i++)
+        if (!params_same(params_at(compound_eye_params, eye_lut_keys[i]), a, b)) return true;
+    return false;
 }
 
 static cl_mem eye_buffer(struct compound_eye *ce, cl_mem_flags flags, size_t bytes, void *host, struct fx_err *err)
@@ -234,6 +247,7 @@ static cl_mem eye_buffer(struct compound_eye *ce, cl_mem_flags flags, size_t byt
 /* Recomputes the pigment tile and uploads it (buffer regrown when needed). */
 static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *err)
 {
+    double t0 = clock_now();
     eye_pigment_size(res, ce->pigment.lattice, &ce->pw, &ce->ph);
     size_t bytes = (size_t)ce->pw * ce->ph * 4 * sizeof(float);
     float *pig = realloc(ce->pig, bytes);
@@ -247,22 +261,21 @@ static int eye_pigment_upload(struct compound_eye *ce, int res, struct fx_err *e
         ce->d_pig_bytes = bytes;
     }
     cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_pig, CL_TRUE, 0, bytes, ce->pig, 0, NULL, NULL);
+    ce->split.pigment = (clock_now() - t0) * 1e3;
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "pigment upload: %s", ocl_errstr(rc));
 }
 
-int compound_eye_set(struct compound_eye *ce, const cJSON *params, struct fx_err *err)
+int compound_eye_set(struct compound_eye *ce, const struct compound_eye_config *params, struct fx_err *err)
 {
     eye_abandon(ce);
     ce->meter = (struct slice_meter){.probe = 1}; /* counted in work-groups */
-    if (!ce->params || ce->mode == EYE_MODE_BAKE || eye_table_changed(ce->params, params)) ce->dirty = 1;
-    cJSON *copy = cJSON_Duplicate(params, 1);
-    if (!copy) return fx_fail(err, "internal", "", "out of memory");
-    cJSON_Delete(ce->params);
-    ce->params = copy;
+    if (!ce->configured || ce->mode == EYE_MODE_BAKE || eye_table_changed(&ce->cfg, params)) ce->dirty = 1;
+    ce->cfg = *params;
+    ce->configured = true;
     eye_optics_from_params(params, &ce->optics);
     eye_pigment_from_params(params, &ce->pigment);
-    ce->compression = params_enum(params, "compression", exr_codec_names);
-    return eye_pigment_upload(ce, (int)params_num(params, "pigment_res"), err);
+    ce->compression = params->compression;
+    return eye_pigment_upload(ce, params->pigment_res, err);
 }
 
 /* ---- OpenCL ------------------------------------------------------------------------ */
@@ -280,49 +293,87 @@ static cl_float4 eye_f4(const double v[3], double w)
     return f;
 }
 
+int compound_eye_build_options(struct ocl *ocl, char *opts)
+{
+    cl_uint width = 0;
+    if (clGetDeviceInfo(ocl_device(ocl), CL_DEVICE_PREFERRED_VECTOR_WIDTH_FLOAT, sizeof width, &width, NULL) != CL_SUCCESS)
+        width = 0;
+    int lanes = width >= 16 ? 16 : 8;
+    snprintf(opts, COMPOUND_EYE_OPTS_MAX, "%s -DEYE_LANES=%d", COMPOUND_EYE_CL_OPTS, lanes);
+    return lanes;
+}
+
 static int eye_kernels_create(struct compound_eye *ce, struct fx_err *err)
 {
     cl_int rc;
-    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, COMPOUND_EYE_CL_OPTS, err);
+    char opts[COMPOUND_EYE_OPTS_MAX];
+    ce->lanes = compound_eye_build_options(ce->ocl, opts);
+    cl_program prog = ocl_program(ce->ocl, COMPOUND_EYE_CL, opts, err);
     if (!prog) return -1;
     ce->k_lut = clCreateKernel(prog, "eye_lut", &rc);
     if (rc == CL_SUCCESS) ce->k_bake = clCreateKernel(prog, "eye_bake", &rc);
     return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
 }
 
-/* Work-items for n rays, each tracing EYE_LANES of them (kernels/compound_eye.cl), in whole
+/* Work-items for n rays, each tracing ce->lanes of them (kernels/compound_eye.cl), in whole
  * groups of EYE_GROUP (the kernels store nothing past n). On a CPU device each group is a
  * work-group, every launch alike, since PoCL compiles a kernel once per work-group size; a GPU's
  * driver chooses its own. */
-static size_t eye_items(size_t n)
+static size_t eye_items(const struct compound_eye *ce, size_t n)
 {
-    size_t items = (n + EYE_LANES - 1) / EYE_LANES;
+    size_t lanes = (size_t)ce->lanes, items = (n + lanes - 1) / lanes;
     return (items + EYE_GROUP - 1) / EYE_GROUP * EYE_GROUP;
 }
 
+/* Device milliseconds of a completed profiling event (0 when the queue does not profile). */
+static double eye_event_ms(cl_event ev)
+{
+    cl_ulong t0 = 0, t1 = 0;
+    if (clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_START, sizeof t0, &t0, NULL) != CL_SUCCESS ||
+        clGetEventProfilingInfo(ev, CL_PROFILING_COMMAND_END, sizeof t1, &t1, NULL) != CL_SUCCESS)
+        return 0.0;
+    return t1 > t0 ? (double)(t1 - t0) * 1e-6 : 0.0;
+}
+
+/* Starts the split of a table or view (the pigment's time is its parameters'). */
+static void eye_split_start(struct compound_eye *ce)
+{
+    ce->split = (struct compound_eye_split){.pigment = ce->split.pigment};
+}
+
+void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split *out)
+{
+    *out = ce->split;
+    out->launch_read = fmax(ce->split.launch_read - ce->split.kernel, 0.0);
+}
+
 /* Runs kernel k (its arguments set) over its 1-D range from work-group ce->done on, a piece at a
- * time until slice_end, reading each piece's results back into host (float4 each, EYE_LANES per
+ * time until slice_end, reading each piece's results back into host (float4 each, ce->lanes per
  * work-item, n in all). 0 when every work-item ran, EFFECT_MORE, or -1 with err. */
 static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_t n, cl_mem out, float *host,
                    double slice_end, struct fx_err *err)
 {
-    const size_t groups = eye_items(n) / EYE_GROUP, f4 = 4 * sizeof(float), local = EYE_GROUP;
+    const size_t groups = eye_items(ce, n) / EYE_GROUP, lanes = (size_t)ce->lanes, f4 = 4 * sizeof(float), local = EYE_GROUP;
     const size_t *wg = ocl_is_cpu(ce->ocl) ? &local : NULL;
     cl_command_queue q = ocl_queue(ce->ocl);
     double t0 = clock_now();
     do {
         size_t m = slice_units(&ce->meter, groups - ce->done, t0, slice_end);
         size_t offset = ce->done * EYE_GROUP, global = m * EYE_GROUP;
-        size_t from = offset * EYE_LANES, to = (offset + global) * EYE_LANES < n ? (offset + global) * EYE_LANES : n;
+        size_t from = offset * lanes, to = (offset + global) * lanes < n ? (offset + global) * lanes : n;
         cl_event ev;
         cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
         rc = clEnqueueReadBuffer(q, out, CL_TRUE, from * f4, (to - from) * f4, host + 4 * from, 0, NULL, NULL);
-        if (rc == CL_SUCCESS) ocl_record(ce->ocl, name, ev);
+        if (rc == CL_SUCCESS) {
+            ocl_record(ce->ocl, name, ev);
+            ce->split.kernel += eye_event_ms(ev);
+        }
         clReleaseEvent(ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
         ce->done += m;
         double t1 = clock_now();
+        ce->split.launch_read += (t1 - t0) * 1e3;
         slice_record(&ce->meter, m, t1 - t0);
         t0 = t1;
     } while (ce->done < groups && t0 < slice_end);
@@ -334,9 +385,33 @@ static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_
 /* The table's dimensions from the parameters. */
 static void eye_table_dims(const struct compound_eye *ce, int *cells, int *dirs, int *ss)
 {
-    *cells = (int)params_num(ce->params, "lut_cells");
-    *dirs = (int)params_num(ce->params, "lut_dirs");
-    *ss = (int)params_num(ce->params, "lut_supersample");
+    *cells = ce->cfg.lut_cells;
+    *dirs = ce->cfg.lut_dirs;
+    *ss = ce->cfg.lut_supersample;
+}
+
+/* Chooses the table's symmetry and uploads the tiles to trace under it (buffer regrown when
+ * needed). */
+static int eye_lut_tiles_upload(struct compound_eye *ce, int cells, int dirs, struct fx_err *err)
+{
+    size_t bytes = (size_t)dirs * dirs * sizeof(cl_int);
+    cl_int *tiles = malloc(bytes);
+    if (!tiles) return fx_fail(err, "internal", "", "out of memory for the table's tiles");
+    ce->symmetry = eye_lut_symmetry(ce->optics.lattice, cells, ce->ph);
+    ce->traced = eye_lut_traced_tiles(dirs, ce->symmetry, tiles);
+    if (bytes > ce->d_tiles_bytes) {
+        if (ce->d_tiles) clReleaseMemObject(ce->d_tiles);
+        ce->d_tiles_bytes = 0;
+        if (!(ce->d_tiles = eye_buffer(ce, CL_MEM_READ_ONLY, bytes, NULL, err))) {
+            free(tiles);
+            return -1;
+        }
+        ce->d_tiles_bytes = bytes;
+    }
+    cl_int rc = clEnqueueWriteBuffer(ocl_queue(ce->ocl), ce->d_tiles, CL_TRUE, 0, (size_t)ce->traced * sizeof(cl_int),
+                                     tiles, 0, NULL, NULL);
+    free(tiles);
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "upload of the table's tiles: %s", ocl_errstr(rc));
 }
 
 /* Starts a table: the sample buffers (regrown when needed) and the LUT kernel's arguments. */
@@ -344,7 +419,8 @@ static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
 {
     int cells, dirs, ss;
     eye_table_dims(ce, &cells, &dirs, &ss);
-    size_t n = (size_t)cells * cells * dirs * dirs, bytes = n * 4 * sizeof(float);
+    if (eye_lut_tiles_upload(ce, cells, dirs, err)) return -1;
+    size_t n = (size_t)cells * cells * ce->traced, bytes = n * 4 * sizeof(float);
     if (bytes > ce->d_lut_bytes) {
         float *s = realloc(ce->samples, bytes);
         if (!s) return fx_fail(err, "internal", "", "out of memory for %zu table samples", n);
@@ -357,11 +433,12 @@ static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
-        {sizeof ce->optics, &ce->optics}, {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss},
-        {sizeof dot, &dot}, {sizeof base, &base}};
+        {sizeof ce->optics, &ce->optics}, {sizeof(cl_mem), &ce->d_tiles}, {sizeof(int), &ce->traced},
+        {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss}, {sizeof dot, &dot}, {sizeof base, &base}};
     ce->done = 0;
     ce->pack_ms = 0;
-    return ocl_set_args(ce->k_lut, "eye_lut", a, 10, err);
+    eye_split_start(ce);
+    return ocl_set_args(ce->k_lut, "eye_lut", a, 12, err);
 }
 
 /* Starts packing the traced samples. */
@@ -373,11 +450,12 @@ static int eye_lut_pack_start(struct compound_eye *ce, struct fx_err *err)
         .tile_h = ce->optics.tile_h,
         .lens_radius = ce->optics.r,
         .refractive_index = ce->optics.n,
-        .pigment_depth = (float)params_num(ce->params, "pigment_depth"),
+        .pigment_depth = (float)ce->cfg.pigment_depth,
         .pigment = ce->pig,
         .pw = ce->pw,
         .ph = ce->ph,
         .samples = ce->samples,
+        .symmetry = ce->symmetry,
     };
     eye_table_dims(ce, &t.cells, &t.dirs, &t.supersample);
     return eye_lut_pack_begin(&ce->packer, &t, &ce->table, err);
@@ -395,7 +473,7 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
     if (ce->busy == EYE_TRACING) {
         int cells, dirs, ss;
         eye_table_dims(ce, &cells, &dirs, &ss);
-        size_t n = (size_t)cells * cells * dirs * dirs;
+        size_t n = (size_t)cells * cells * ce->traced;
         rc = eye_run(ce, ce->k_lut, "eye_lut", n, ce->d_lut, ce->samples, slice_end, err);
         if (!rc && !(rc = eye_lut_pack_start(ce, err))) ce->busy = EYE_PACKING;
         if (!rc && clock_now() >= slice_end) rc = EFFECT_MORE;
@@ -405,6 +483,9 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
         rc = eye_lut_pack_run(&ce->packer, slice_end, err);
         ce->pack_ms += (clock_now() - t0) * 1e3;
         rc = rc > 0 ? EFFECT_MORE : rc;
+        ce->split.atlas = ce->packer.stage_ms[0];
+        ce->split.macro = ce->packer.stage_ms[1];
+        ce->split.zstd = ce->packer.stage_ms[2];
         if (!rc) eye_abandon(ce); /* done: frees the packer */
     }
     if (rc < 0) eye_abandon(ce);
@@ -422,22 +503,22 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 
 /* ---- mode bake --------------------------------------------------------------------- */
 
-/* The bake kernel reads the atlas as 16 planes of n8 floats (texels rounded up to whole
+/* The bake kernel reads the atlas as 16 planes of npad floats (texels rounded up to whole
  * work-groups, the padding uncovered), so 8 texels' field is one vector load. */
-static void eye_geo_planes(const float *geo, size_t texels, size_t n8, float *planes)
+static void eye_geo_planes(const float *geo, size_t texels, size_t npad, float *planes)
 {
-    memset(planes, 0, n8 * 16 * sizeof(float));
+    memset(planes, 0, npad * 16 * sizeof(float));
     for (size_t k = 0; k < texels; k++)
-        for (int i = 0; i < 16; i++) planes[i * n8 + k] = geo[16 * k + i];
+        for (int i = 0; i < 16; i++) planes[i * npad + k] = geo[16 * k + i];
 }
 
-static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err *err)
+static int eye_bake_setup(struct compound_eye *ce, const struct compound_eye_config *p, struct fx_err *err)
 {
     struct eye_mesh mesh;
-    ce->size = (int)params_num(p, "bake_size");
-    size_t texels = (size_t)ce->size * ce->size, n8 = eye_items(texels) * EYE_LANES;
-    if (eye_model_load(params_str(p, "model"), &mesh, err)) return -1;
-    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(n8 * 16 * sizeof(float));
+    ce->size = p->bake_size;
+    size_t texels = (size_t)ce->size * ce->size, npad = eye_items(ce, texels) * (size_t)ce->lanes;
+    if (eye_model_load(eye_model_names[p->model], &mesh, err)) return -1;
+    float *geo = malloc(texels * 16 * sizeof(float)), *planes = malloc(npad * 16 * sizeof(float));
     ce->rgba = malloc(texels * 4 * sizeof(float));
     if (!geo || !planes || !ce->rgba) {
         free(geo);
@@ -447,12 +528,12 @@ static int eye_bake_setup(struct compound_eye *ce, const cJSON *p, struct fx_err
     }
     eye_model_atlas(&mesh, ce->size, geo);
     eye_mesh_free(&mesh);
-    eye_geo_planes(geo, texels, n8, planes);
+    eye_geo_planes(geo, texels, npad, planes);
     free(geo);
-    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, n8 * 16 * sizeof(float), planes, err);
+    ce->d_geo = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, npad * 16 * sizeof(float), planes, err);
     free(planes);
     if (!ce->d_geo) return -1;
-    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, n8 * 4 * sizeof(float), NULL, err);
+    ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, npad * 4 * sizeof(float), NULL, err);
     return ce->d_out ? 0 : -1;
 }
 
@@ -461,29 +542,30 @@ int compound_eye_bake_size(const struct compound_eye *ce) { return ce->size; }
 /* Starts a view: the bake kernel's arguments. */
 static int eye_bake_start(struct compound_eye *ce, struct fx_err *err)
 {
-    const cJSON *p = ce->params;
+    const struct compound_eye_config *p = &ce->cfg;
     double eye[3], light[3];
-    params_vec3(p, "eye", eye);
-    params_vec3(p, "light", light);
+    memcpy(eye, p->eye, sizeof eye);
+    memcpy(light, p->light, sizeof light);
     double ll = sqrt(light[0] * light[0] + light[1] * light[1] + light[2] * light[2]);
     for (int k = 0; k < 3; k++) light[k] /= ll;
     struct eye_shading s = {
         .eye = eye_f4(eye, 1.0),
         .light = eye_f4(light, 0.0),
-        .ka = (float)params_num(p, "ka"),
-        .kd = (float)params_num(p, "kd"),
-        .ks = (float)params_num(p, "ks"),
-        .shininess = (float)params_num(p, "shininess"),
-        .density = (float)params_num(p, "density"),
-        .lens_normal = params_enum(p, "shading_normal", eye_normal_names),
+        .ka = (float)p->ka,
+        .kd = (float)p->kd,
+        .ks = (float)p->ks,
+        .shininess = (float)p->shininess,
+        .density = (float)p->density,
+        .lens_normal = p->shading_normal,
     };
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
-    int n8 = (int)(eye_items((size_t)ce->size * ce->size) * EYE_LANES);
+    int npad = (int)(eye_items(ce, (size_t)ce->size * ce->size) * (size_t)ce->lanes);
     const struct ocl_arg a[] = {
         {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_pig},
         {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics}, {sizeof s, &s},
-        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &n8}};
+        {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &npad}};
     ce->done = 0;
+    eye_split_start(ce);
     return ocl_set_args(ce->k_bake, "eye_bake", a, 10, err);
 }
 
@@ -507,7 +589,7 @@ int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err)
 
 /* ---- life cycle -------------------------------------------------------------------- */
 
-struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+struct compound_eye *compound_eye_new(struct ocl *ocl, const struct compound_eye_config *params, struct fx_err *err)
 {
     struct compound_eye *ce = calloc(1, sizeof *ce);
     if (!ce) {
@@ -515,7 +597,7 @@ struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, stru
         return NULL;
     }
     ce->ocl = ocl;
-    ce->mode = params_enum(params, "mode", eye_mode_names);
+    ce->mode = params->mode;
     if (eye_kernels_create(ce, err) || compound_eye_set(ce, params, err) ||
         (ce->mode == EYE_MODE_BAKE && eye_bake_setup(ce, params, err))) {
         compound_eye_free(ce);
@@ -528,12 +610,11 @@ void compound_eye_free(struct compound_eye *ce)
 {
     if (!ce) return;
     eye_abandon(ce);
-    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out};
+    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out, ce->d_tiles};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
     if (ce->k_lut) clReleaseKernel(ce->k_lut);
     if (ce->k_bake) clReleaseKernel(ce->k_bake);
-    cJSON_Delete(ce->params);
     free(ce->pig);
     free(ce->samples);
     free(ce->rgba);
@@ -548,7 +629,7 @@ static int eye_emit_table(struct compound_eye *ce, double slice_end, effect_emit
 {
     int rc = eye_table_slice(ce, slice_end, err);
     if (rc) return rc;
-    int W = eye_lut_atlas_width((int)params_num(ce->params, "lut_cells"), (int)params_num(ce->params, "lut_dirs"));
+    int W = eye_lut_atlas_width(ce->cfg.lut_cells, ce->cfg.lut_dirs);
     struct effect_frame fr = {
         .kind = FXS_KIND_LUT,
         .codec = FXS_CODEC_LUT_PACK,
@@ -611,25 +692,26 @@ static int eye_step(void *self, double sim_time, double dt, double slice_end, ef
 /* The assets directory's OBJ files become choices of `model` (eye_model.h). */
 static int eye_init(const struct effect_env *env, struct fx_err *err) { return eye_models_set_dir(env->assets_dir, err); }
 
-static int eye_check(const cJSON *p, struct fx_err *err)
+static int eye_check(const void *typed, struct fx_err *err)
 {
-    int hex = !strcmp(params_str(p, "lattice"), "hex");
-    double r = params_num(p, "lens_radius"), rmin = hex ? 1.0 / EYE_SQRT3 : sqrt(0.5);
+    const struct compound_eye_config *p = typed;
+    int hex = p->lattice == EYE_HEX;
+    double r = p->lens_radius, rmin = hex ? 1.0 / EYE_SQRT3 : sqrt(0.5);
     if (r < rmin - 1e-9)
         return fx_fail(err, "bad_param", "lens_radius",
                        "lens_radius %g leaves gaps between the lenses of the %s lattice (needs >= %.4f)", r,
                        hex ? "hex" : "square", rmin);
-    if (params_num(p, "ring_inner") > params_num(p, "ring_outer"))
+    if (p->ring_inner > p->ring_outer)
         return fx_fail(err, "bad_param", "ring_inner", "ring_inner must not exceed ring_outer");
-    return eye_model_check(params_str(p, "model"), err);
+    return eye_model_check(eye_model_names[p->model], err);
 }
 
-static void *eye_create(struct ocl *ocl, const cJSON *params, struct fx_err *err)
+static void *eye_create(struct ocl *ocl, const void *params, struct fx_err *err)
 {
     return compound_eye_new(ocl, params, err);
 }
 
-static int eye_apply(void *self, const cJSON *params, struct fx_err *err) { return compound_eye_set(self, params, err); }
+static int eye_apply(void *self, const void *params, struct fx_err *err) { return compound_eye_set(self, params, err); }
 
 /* A reset sends the current table (or view) again, computed afresh. */
 static int eye_reset(void *self, struct fx_err *err)
@@ -650,6 +732,7 @@ const struct effect_ops compound_eye_effect = {
            "it changes, for one look-up per pixel on the client; mode bake sends a model's shaded view texture "
            "(kind 2 EXR) whenever the view changes.",
     .params = compound_eye_params,
+    .params_size = sizeof(struct compound_eye_config),
     .presets = compound_eye_presets,
     .outputs_json = "[{\"kind\":4,\"codec\":\"lut_pack\",\"products\":\"PIGM, LLUT, LMAC (RGBA8, zstd)\","
                     "\"size\":\"LLUT atlas lut_dirs*(lut_cells+2) square\",\"rate\":\"on change, mode lut\"},"

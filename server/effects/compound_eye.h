@@ -9,11 +9,10 @@
 #ifndef FX_COMPOUND_EYE_H
 #define FX_COMPOUND_EYE_H
 
-#include <cjson/cJSON.h>
-
 #include "err.h"
 #include "../params.h"
 #include "compound_eye_layout.h" /* kernels/: struct eye_optics, EYE_* */
+#include "compound_eye_params.h"
 
 struct ocl;
 
@@ -23,13 +22,19 @@ struct ocl;
 extern const struct param_def compound_eye_params[];
 extern const struct effect_ops compound_eye_effect;
 
-/* The optics of a validated parameter document. */
-void eye_optics_from_params(const cJSON *params, struct eye_optics *o);
+/* The build options of kernels/compound_eye.cl for the device (COMPOUND_EYE_OPTS_MAX bytes at
+ * most) and the rays per work-item they give its kernels: 16 where the device's preferred
+ * float vector width is 16 (AVX-512), else 8. */
+#define COMPOUND_EYE_OPTS_MAX 96
+int compound_eye_build_options(struct ocl *ocl, char *opts);
+
+/* The optics of the parameters. */
+void eye_optics_from_params(const struct compound_eye_config *params, struct eye_optics *o);
 
 /* Effect state, exposed for tests and the benchmark. */
 struct compound_eye;
-struct compound_eye *compound_eye_new(struct ocl *ocl, const cJSON *params, struct fx_err *err);
-int compound_eye_set(struct compound_eye *ce, const cJSON *params, struct fx_err *err);
+struct compound_eye *compound_eye_new(struct ocl *ocl, const struct compound_eye_config *params, struct fx_err *err);
+int compound_eye_set(struct compound_eye *ce, const struct compound_eye_config *params, struct fx_err *err);
 void compound_eye_free(struct compound_eye *ce);
 
 /* Mode lut: computes the three products and packs the kind 4 container; returns its
@@ -39,5 +44,14 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 /* Mode bake: renders the view texture into rgba (size*size*4 floats, row 0 at the top). */
 int compound_eye_bake(struct compound_eye *ce, float *rgba, struct fx_err *err);
 int compound_eye_bake_size(const struct compound_eye *ce);
+
+/* Where the last table or view's time went, milliseconds: the kernel on the device, launching
+ * it and reading its results back (the wall time of the kernel's launches less kernel), the
+ * pigment tile (computed and uploaded when its parameters are set) and a table's packing
+ * stages (eye_lut.h: atlas layout, macro map, zstd). */
+struct compound_eye_split {
+    double kernel, launch_read, pigment, atlas, macro, zstd;
+};
+void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split *out);
 
 #endif

@@ -6,6 +6,9 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "../clock.h"
 #include "compound_eye_layout.h" /* kernels/: EYE_HEX, EYE_SQRT3 */
@@ -76,48 +79,140 @@ void eye_pigment_tile(const struct eye_pigment *pg, int w, int h, float *rgba)
 
 static uint8_t eye_u8(float v) { return (uint8_t)(v <= 0.0f ? 0 : v >= 1.0f ? 255 : (int)(v * 255.0f + 0.5f)); }
 
+/* n values to bytes as eye_u8; with SSE2, 16 at a time (clamped to [0, 1], scaled, truncated,
+ * packed: the same bytes). */
+static void eye_u8_row(const float *v, uint8_t *out, int n)
+{
+    int i = 0;
+#ifdef __SSE2__
+    const __m128 zero = _mm_setzero_ps(), one = _mm_set1_ps(1.0f), scale = _mm_set1_ps(255.0f), half = _mm_set1_ps(0.5f);
+    for (; i + 16 <= n; i += 16) {
+        __m128i q[4];
+        for (int k = 0; k < 4; k++) {
+            __m128 c = _mm_min_ps(_mm_max_ps(_mm_loadu_ps(v + i + 4 * k), zero), one);
+            q[k] = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(c, scale), half));
+        }
+        __m128i b = _mm_packus_epi16(_mm_packs_epi32(q[0], q[1]), _mm_packs_epi32(q[2], q[3]));
+        _mm_storeu_si128((__m128i *)(void *)(out + i), b);
+    }
+#endif
+    for (; i < n; i++) out[i] = eye_u8(v[i]);
+}
+
 int eye_lut_atlas_width(int cells, int dirs) { return dirs * (cells + 2 * EYE_LUT_GUTTER); }
+
+/* ---- symmetry ---------------------------------------------------------------------- */
+
+int eye_lut_symmetry(int lattice, int cells, int pigment_h)
+{
+    return EYE_LUT_MIRROR_X | (lattice != EYE_HEX || (cells % 2 == 0 && pigment_h % 2 == 0) ? EYE_LUT_MIRROR_Y : 0);
+}
+
+/* Tile (ti, tj) is traced when it lies in the half-plane that each mirror of the symmetry
+ * keeps: ti + tj <= D-1 for x (which takes it to a tile whose ti + tj is 2D-2 minus its own),
+ * ti <= tj for y (which swaps ti and tj). */
+static int eye_lut_traced(int dirs, int symmetry, int ti, int tj)
+{
+    return (!(symmetry & EYE_LUT_MIRROR_X) || ti + tj <= dirs - 1) && (!(symmetry & EYE_LUT_MIRROR_Y) || ti <= tj);
+}
+
+int eye_lut_traced_tiles(int dirs, int symmetry, int *tiles)
+{
+    int n = 0;
+    for (int tj = 0; tj < dirs; tj++)
+        for (int ti = 0; ti < dirs; ti++)
+            if (eye_lut_traced(dirs, symmetry, ti, tj)) tiles[n++] = tj * dirs + ti;
+    return n;
+}
+
+/* Where each tile's samples come from: source[tile] = slot * 4 + flags, slot the traced tile's
+ * index among the samples, flags the mirrors (EYE_LUT_MIRROR_*) that take the tile to it. */
+static void eye_lut_sources(const struct eye_lut_table *t, int *source)
+{
+    const int D = t->dirs;
+    int slot = 0;
+    for (int tile = 0; tile < D * D; tile++) source[tile] = -1;
+    for (int tile = 0; tile < D * D; tile++)
+        if (eye_lut_traced(D, t->symmetry, tile % D, tile / D)) source[tile] = slot++ * 4;
+    for (int tj = 0; tj < D; tj++)
+        for (int ti = 0; ti < D; ti++)
+            for (int m = 1; m < 4 && source[tj * D + ti] < 0; m++) {
+                if ((m & t->symmetry) != m) continue;
+                int mi = ti, mj = tj, s;
+                if (m & EYE_LUT_MIRROR_Y) s = mi, mi = mj, mj = s;
+                if (m & EYE_LUT_MIRROR_X) s = mi, mi = D - 1 - mj, mj = D - 1 - s;
+                if (eye_lut_traced(D, t->symmetry, mi, mj)) source[tj * D + ti] = source[mj * D + mi] | m;
+            }
+}
+
+/* In-cell row of the mirror image of row cj under y (the hex lattice's mirror row is at a
+ * quarter of its period). */
+static int eye_lut_mirror_row(const struct eye_lut_table *t, int cj)
+{
+    const int C = t->cells;
+    return t->lattice == EYE_HEX ? (C / 2 - 1 - cj + C) % C : C - 1 - cj;
+}
+
+/* ---- products ---------------------------------------------------------------------- */
 
 /* Tile (ti, tj) occupies texels [ti*(C+2), (ti+1)*(C+2)) in x (likewise y); its gutter
  * repeats the opposite edge of the cell (the pattern is periodic), so bilinear filtering
  * inside a tile never reads a neighbouring direction. Rows [y0, y1). */
-static void eye_lut_atlas_rows(const struct eye_lut_table *t, uint8_t *atlas, int y0, int y1)
+static void eye_lut_atlas_rows(const struct eye_lut_table *t, const int *source, uint8_t *atlas, int y0, int y1)
 {
-    const int C = t->cells, T = C + 2 * EYE_LUT_GUTTER, W = eye_lut_atlas_width(C, t->dirs);
+    const int C = t->cells, G = EYE_LUT_GUTTER, T = C + 2 * G, W = eye_lut_atlas_width(C, t->dirs);
     for (int y = y0; y < y1; y++) {
-        int tj = y / T, cj = (y % T - EYE_LUT_GUTTER + C) % C;
+        int tj = y / T, cj = (y % T - G + C) % C;
         for (int ti = 0; ti < t->dirs; ti++) {
-            const float *row = t->samples + 4 * ((size_t)(tj * t->dirs + ti) * C * C + (size_t)cj * C);
-            uint8_t *px = atlas + 4 * ((size_t)y * W + (size_t)ti * T);
-            for (int x = 0; x < T; x++) {
-                const float *s = row + 4 * ((x - EYE_LUT_GUTTER + C) % C);
-                for (int k = 0; k < 4; k++) px[4 * x + k] = eye_u8(s[k]);
+            int src = source[tj * t->dirs + ti], mj = src & EYE_LUT_MIRROR_Y ? eye_lut_mirror_row(t, cj) : cj;
+            const float *row = t->samples + 4 * ((size_t)(src / 4) * C * C + (size_t)mj * C);
+            uint8_t *px = atlas + 4 * ((size_t)y * W + (size_t)ti * T + G);
+            if (src & EYE_LUT_MIRROR_X) {
+                uint8_t tmp[4 * 64]; /* lut_cells <= 64 */
+                eye_u8_row(row, tmp, 4 * C);
+                for (int x = 0; x < C; x++) memcpy(px + 4 * x, tmp + 4 * (C - 1 - x), 4);
+            } else {
+                eye_u8_row(row, px, 4 * C);
             }
+            memcpy(px - 4 * G, px + 4 * (C - G), 4 * G); /* gutters: the opposite edge */
+            memcpy(px + 4 * C, px, 4 * G);
         }
     }
 }
 
-void eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
+/* Calls f with the table's sources (eye_lut_sources): 0, or -1 when out of memory. */
+static int eye_lut_with_sources(const struct eye_lut_table *t, uint8_t *dst,
+                                void (*f)(const struct eye_lut_table *, const int *, uint8_t *, int, int), int n)
 {
-    eye_lut_atlas_rows(t, atlas, 0, eye_lut_atlas_width(t->cells, t->dirs));
+    int *source = malloc((size_t)t->dirs * t->dirs * sizeof *source);
+    if (!source) return -1;
+    eye_lut_sources(t, source);
+    f(t, source, dst, 0, n);
+    free(source);
+    return 0;
 }
 
-/* Tiles [from, to) of the macro map. */
-static void eye_lut_macro_tiles(const struct eye_lut_table *t, uint8_t *macro, int from, int to)
+int eye_lut_atlas(const struct eye_lut_table *t, uint8_t *atlas)
+{
+    return eye_lut_with_sources(t, atlas, eye_lut_atlas_rows, eye_lut_atlas_width(t->cells, t->dirs));
+}
+
+/* Tiles [from, to) of the macro map (a mirror only reorders a tile's samples). */
+static void eye_lut_macro_tiles(const struct eye_lut_table *t, const int *source, uint8_t *macro, int from, int to)
 {
     const size_t per = (size_t)t->cells * t->cells;
     for (int tile = from; tile < to; tile++) {
         double acc[4] = {0};
-        const float *s = t->samples + 4 * per * tile;
+        const float *s = t->samples + 4 * per * (size_t)(source[tile] / 4);
         for (size_t i = 0; i < per; i++)
             for (int k = 0; k < 4; k++) acc[k] += s[4 * i + k];
         for (int k = 0; k < 4; k++) macro[4 * tile + k] = eye_u8((float)(acc[k] / per));
     }
 }
 
-void eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
+int eye_lut_macro(const struct eye_lut_table *t, uint8_t *macro)
 {
-    eye_lut_macro_tiles(t, macro, 0, t->dirs * t->dirs);
+    return eye_lut_with_sources(t, macro, eye_lut_macro_tiles, t->dirs * t->dirs);
 }
 
 /* ---- the container (protocol/fxs_lut.h, PROTOCOL.md §7.6) ------------------------ */
@@ -132,6 +227,7 @@ int eye_lut_pack_begin(struct eye_lut_packer *pk, const struct eye_lut_table *t,
     pk->pig = malloc(pig_bytes);
     pk->atlas = malloc((size_t)W * W * 4);
     pk->macro = malloc((size_t)t->dirs * t->dirs * 4);
+    pk->source = malloc((size_t)t->dirs * t->dirs * sizeof *pk->source);
     struct fxs_lut_product products[3] = {
         {.name = "PIGM", .width = (uint32_t)t->pw, .height = (uint32_t)t->ph, .tiles_x = 1, .tiles_y = 1, .rgba = pk->pig},
         {.name = "LLUT", .width = (uint32_t)W, .height = (uint32_t)W, .tile = (uint32_t)(t->cells + 2 * EYE_LUT_GUTTER),
@@ -146,11 +242,12 @@ int eye_lut_pack_begin(struct eye_lut_packer *pk, const struct eye_lut_table *t,
     };
     size_t cap = fxs_lut_bound(pk->products, 3);
     out->len = 0;
-    if (!pk->pig || !pk->atlas || !pk->macro || fx_buf_reserve(out, cap)) {
+    if (!pk->pig || !pk->atlas || !pk->macro || !pk->source || fx_buf_reserve(out, cap)) {
         eye_lut_pack_free(pk);
         return fx_fail(err, "internal", "", "out of memory for a %dx%d lens table", W, W);
     }
     for (size_t i = 0; i < pig_bytes; i++) pk->pig[i] = eye_u8(t->pigment[i]);
+    eye_lut_sources(t, pk->source);
     pk->t.pigment = NULL;
     for (int k = 0; k < 3; k++) pk->meter[k].probe = 1;
     char msg[128];
@@ -174,9 +271,9 @@ static int eye_lut_pack_units(struct eye_lut_packer *pk, size_t n, struct fx_err
     }
     pk->pos += n;
     if (pk->stage == EYE_PACK_ATLAS)
-        eye_lut_atlas_rows(&pk->t, pk->atlas, (int)(pk->pos - n), (int)pk->pos);
+        eye_lut_atlas_rows(&pk->t, pk->source, pk->atlas, (int)(pk->pos - n), (int)pk->pos);
     else
-        eye_lut_macro_tiles(&pk->t, pk->macro, (int)(pk->pos - n), (int)pk->pos);
+        eye_lut_macro_tiles(&pk->t, pk->source, pk->macro, (int)(pk->pos - n), (int)pk->pos);
     return 1;
 }
 
@@ -206,6 +303,7 @@ int eye_lut_pack_run(struct eye_lut_packer *pk, double slice_end, struct fx_err 
         if (rc < 0) return -1;
         double t1 = clock_now();
         slice_record(m, n, t1 - t0);
+        pk->stage_ms[pk->stage] += (t1 - t0) * 1e3;
         t0 = t1;
         if (n == left || (pk->stage == EYE_PACK_ZSTD && rc == 0)) {
             pk->stage++;
@@ -222,7 +320,9 @@ void eye_lut_pack_free(struct eye_lut_packer *pk)
     free(pk->pig);
     free(pk->atlas);
     free(pk->macro);
+    free(pk->source);
     pk->pig = pk->atlas = pk->macro = NULL;
+    pk->source = NULL;
 }
 
 int eye_lut_pack(const struct eye_lut_table *t, struct fx_buf *out, struct fx_err *err)

@@ -1,24 +1,22 @@
-/* flame.h — effect `flame` (seed 002, Mabuchi 2012): the SPH flame, every step on the
- * OpenCL device, streamed as kind 1 particle frames.
+/* flame.h — the simulation of effect `flame` (seed 002, Mabuchi 2012): the SPH flame, every
+ * step on the OpenCL device.
  *
- * Besides the effect_ops (flame_effect, registered in registry.c), the module exposes a
- * direct API so tests and benches can load arbitrary particle sets (lattices, isolated
- * particles), evaluate one SPH pass without integrating, run steps, and read the state
- * back to compare with the double-precision C reference (tests/ref/flame_ref.c). */
+ * The effect_ops that stream it (flame_effect) are flame_effect.h's; the parameters
+ * flame_params.h's. The direct API lets tests and benches load arbitrary particle sets
+ * (lattices, isolated particles), evaluate one SPH pass without integrating, run steps, and
+ * read the state back to compare with the double-precision C reference (tests/ref/flame_ref.c). */
 #ifndef FX_FLAME_H
 #define FX_FLAME_H
 
+#include <stdbool.h>
 #include <stdint.h>
-#include <cjson/cJSON.h>
 
 #include "../effect.h"
 #include "flame_layout.h" /* kernels/: FP_* indices, FL_* flags */
+#include "flame_params.h"
 
 struct ocl;
 struct flame;
-
-extern const struct effect_ops flame_effect;
-extern const struct param_def flame_params[]; /* {0}-terminated */
 
 /* Particle flags (bits of flame_particles.flags, and of the codec's flag byte). */
 enum flame_flag {
@@ -49,9 +47,10 @@ struct flame_particles {
 int flame_particles_alloc(struct flame_particles *p, int n);
 void flame_particles_free(struct flame_particles *p);
 
-/* A simulation from a complete validated document; it starts with the scene's solids. */
-struct flame *flame_new(struct ocl *ocl, const cJSON *params, struct fx_err *err);
-int flame_set(struct flame *fl, const cJSON *params, struct fx_err *err); /* live parameters */
+/* A simulation with the parameters c (params_load of a complete validated document); it
+ * starts with the scene's solids. flame_set changes them live (the caller keeps c). */
+struct flame *flame_new(struct ocl *ocl, const struct flame_config *c, struct fx_err *err);
+int flame_set(struct flame *fl, const struct flame_config *c, struct fx_err *err);
 /* Replaces the particles with p (pos, vel, flags, id), e.g. a test lattice. */
 int flame_load(struct flame *fl, const struct flame_particles *p, struct fx_err *err);
 /* Neighbour search, density, pressure, forces and derivatives for the current state,
@@ -63,6 +62,23 @@ int flame_run(struct flame *fl, int steps, struct fx_err *err);
 int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err);
 int flame_count(const struct flame *fl);
 uint64_t flame_steps(const struct flame *fl); /* steps since creation or reset */
+double flame_sim_seconds(const struct flame *fl); /* simulated seconds since creation or reset */
 void flame_free(struct flame *fl);
+
+/* Substeps as the effect paces them (flame_effect.c, frame_plan.h). flame_substep runs one
+ * (the device may still work on it; no error-flag read); flame_substep_begin enqueues one and
+ * flame_substep_end completes it (a resampling step's totals), so the host can work meanwhile;
+ * flame_substep_syncs: the next substep waits for the device (a resampling step). flame_finish
+ * drains the queue. */
+int flame_substep(struct flame *fl, struct fx_err *err);
+int flame_substep_begin(struct flame *fl, struct fx_err *err);
+int flame_substep_end(struct flame *fl, struct fx_err *err);
+bool flame_substep_syncs(const struct flame *fl);
+int flame_finish(struct flame *fl, struct fx_err *err);
+/* Back to the scene's solids at time 0 (the protocol's reset). */
+int flame_reset(struct flame *fl, struct fx_err *err);
+/* Reads a frame's particles (flame_count of them: pos and vel 4 floats each, flags one) and
+ * checks the error flag: the count, or -1 with err (a runaway included). */
+int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, struct fx_err *err);
 
 #endif

@@ -9,7 +9,6 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "../params.h"
 #include "../vec3.h"
 
 /* ---- B-spline strength (seed 000 eqs. 3.24-3.26) ----------------------------------- */
@@ -144,11 +143,10 @@ void light_rig_build(const struct light_rig *lr, const struct wave_sources *src,
 /* The default ramp (an empty `ramp`): three bands of eq. 2.5's shape in the wave's own colour
  * C_e, so changing color_energy changes the light the wave casts and the lit side shows the
  * wave's hue, not a near-white: 0.3 C_e, 0.05 + 0.6 C_e, 0.2 + 0.8 C_e. */
-static void lr_ramp_from_energy(const cJSON *p, struct fxs_rig_consts *k)
+static void lr_ramp_from_energy(const struct energy_wave_config *p, struct fxs_rig_consts *k)
 {
     static const double m_min[3] = {-1, -0.3, 0}, base[3] = {0, 0.05, 0.2}, gain[3] = {0.3, 0.6, 0.8};
-    double ce[3];
-    params_vec3(p, "color_energy", ce);
+    const double *ce = p->color_energy;
     for (int i = 0; i < 3; i++) {
         k->bands[i].m_min = m_min[i];
         for (int c = 0; c < 3; c++) k->bands[i].rgb[c] = fmin(1.0, base[i] + gain[i] * ce[c]);
@@ -158,10 +156,10 @@ static void lr_ramp_from_energy(const cJSON *p, struct fxs_rig_consts *k)
 
 /* The shadow plane: I, unit normal Y and an orthonormal in-plane pair (digest gap 3: the
  * plane is (I, Y); X, Z derived). */
-static void lr_plane(const cJSON *p, struct fxs_rig_consts *k)
+static void lr_plane(const struct energy_wave_config *p, struct fxs_rig_consts *k)
 {
-    params_vec3(p, "shadow_plane_point", k->plane_i);
-    params_vec3(p, "shadow_plane_normal", k->plane_y);
+    memcpy(k->plane_i, p->shadow_plane_point, sizeof k->plane_i);
+    memcpy(k->plane_y, p->shadow_plane_normal, sizeof k->plane_y);
     vec3_normalize(k->plane_y);
     const double *Y = k->plane_y;
     double helper[3] = {0, 0, 0};
@@ -172,49 +170,44 @@ static void lr_plane(const cJSON *p, struct fxs_rig_consts *k)
     vec3_cross(k->plane_x, Y, k->plane_z); /* X, Y, Z right-handed: Z = X × Y (eq. 2.12) */
 }
 
-static void lr_constants(const cJSON *p, struct fxs_rig_consts *k)
+static void lr_constants(const struct energy_wave_config *p, struct fxs_rig_consts *k)
 {
     memset(k, 0, sizeof *k);
-    k->flags = (params_bool(p, "features") ? FXS_RIG_FEATURES : 0) | (params_bool(p, "outline") ? FXS_RIG_OUTLINE : 0) |
-               (params_bool(p, "shadow") ? FXS_RIG_SHADOW : 0);
-    k->strength = params_num(p, "light_strength");
-    k->outline_width = params_num(p, "outline_width");
-    params_vec3(p, "outline_color", k->outline_rgb);
-    k->shadow_theta = params_num(p, "shadow_theta") * M_PI / 180.0;
-    k->shadow_opacity = params_num(p, "shadow_opacity");
-    params_vec3(p, "shadow_color", k->shadow_rgb);
+    k->flags = (p->features ? FXS_RIG_FEATURES : 0) | (p->outline ? FXS_RIG_OUTLINE : 0) |
+               (p->shadow ? FXS_RIG_SHADOW : 0);
+    k->strength = p->light_strength;
+    k->outline_width = p->outline_width;
+    memcpy(k->outline_rgb, p->outline_color, sizeof k->outline_rgb);
+    k->shadow_theta = p->shadow_theta * M_PI / 180.0;
+    k->shadow_opacity = p->shadow_opacity;
+    memcpy(k->shadow_rgb, p->shadow_color, sizeof k->shadow_rgb);
     lr_plane(p, k);
-    const cJSON *it;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "ramp")) {
-        if (k->n_bands >= FXS_RIG_MAX_BANDS) break;
+    for (int i = 0; i < p->n_ramp; i++) {
         struct fxs_rig_band *b = &k->bands[k->n_bands++];
-        b->m_min = params_num(it, "m_min");
-        params_vec3(it, "color", b->rgb);
+        b->m_min = p->ramp[i].m_min;
+        memcpy(b->rgb, p->ramp[i].color, sizeof b->rgb);
     }
     if (!k->n_bands) lr_ramp_from_energy(p, k);
 }
 
-void light_rig_read(const cJSON *params, struct light_rig *lr)
+void light_rig_read(const struct energy_wave_config *params, struct light_rig *lr)
 {
-    lr->curve_segments = (int)params_num(params, "curve_segments");
-    lr->torus_segments = (int)params_num(params, "torus_segments");
+    lr->curve_segments = params->curve_segments;
+    lr->torus_segments = params->torus_segments;
     lr_constants(params, &lr->k);
 }
 
-int light_rig_check(const cJSON *params, struct fx_err *err)
+int light_rig_check(const struct energy_wave_config *params, struct fx_err *err)
 {
-    const cJSON *it;
-    int i = 0;
     double prev = -INFINITY;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(params, "ramp")) {
-        double m = params_num(it, "m_min");
+    for (int i = 0; i < params->n_ramp; i++) {
+        double m = params->ramp[i].m_min;
         if (m <= prev) {
             char path[32];
             snprintf(path, sizeof path, "ramp[%d].m_min", i);
             return fx_fail(err, "bad_param", path, "ramp bands must ascend: m_min %g after %g", m, prev);
         }
         prev = m;
-        i++;
     }
     return 0;
 }

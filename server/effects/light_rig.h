@@ -9,8 +9,6 @@
 #ifndef FX_LIGHT_RIG_H
 #define FX_LIGHT_RIG_H
 
-#include <cjson/cJSON.h>
-
 #include "err.h"
 #include "fxs_rig.h"
 #include "wave_sources.h"
@@ -23,9 +21,9 @@ struct light_rig {
 
 /* Cross-field rules of the rig's parameters in a complete energy_wave document (the ramp's
  * bands ascend strictly in m_min). 0, or -1 with err naming the field. */
-int light_rig_check(const cJSON *params, struct fx_err *err);
+int light_rig_check(const struct energy_wave_config *params, struct fx_err *err);
 /* Reads the settings from a complete validated document. */
-void light_rig_read(const cJSON *params, struct light_rig *lr);
+void light_rig_read(const struct energy_wave_config *params, struct light_rig *lr);
 /* The rig of the sources whose curves have the weights w (wave_sources_weights) this frame. */
 void light_rig_build(const struct light_rig *lr, const struct wave_sources *src, const double w[][WAVE_MAX_W],
                      struct fxs_rig *out);

@@ -1,71 +1,66 @@
-/* wave_sources.c — see wave_sources.h. Reads the validated document (params.h accessors);
+/* wave_sources.c — see wave_sources.h. Reads the typed parameters (energy_wave_params.h);
  * no state. */
 #include "wave_sources.h"
 
 #include <math.h>
 #include <string.h>
 
-#include "../params.h"
 #include "../vec3.h"
 
-static void ws_read_points_lines(const cJSON *p, struct wave_sources *s)
+static void ws_read_points_lines(const struct energy_wave_config *p, struct wave_sources *s)
 {
-    const cJSON *it;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "points")) {
-        if (s->np >= WAVE_MAX_SRC) break;
+    for (int i = 0; i < p->n_points; i++) {
         struct wave_point *pt = &s->point[s->np++];
-        params_vec3(it, "pos", pt->pos);
-        pt->coef = params_num(it, "coef");
+        memcpy(pt->pos, p->points[i].pos, sizeof pt->pos);
+        pt->coef = p->points[i].coef;
     }
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "lines")) {
-        if (s->nl >= WAVE_MAX_SRC) break;
+    for (int i = 0; i < p->n_lines; i++) {
         struct wave_line *ln = &s->line[s->nl++];
-        params_vec3(it, "pos", ln->pos);
-        params_vec3(it, "dir", ln->dir);
+        memcpy(ln->pos, p->lines[i].pos, sizeof ln->pos);
+        memcpy(ln->dir, p->lines[i].dir, sizeof ln->dir);
         vec3_normalize(ln->dir);
-        ln->coef = params_num(it, "coef");
+        ln->coef = p->lines[i].coef;
     }
 }
 
 /* Torus frame: e3 = axis, e1 any unit normal to it, e2 = e3 × e1 (the field is symmetric
  * about the axis, so the choice of e1 does not matter). */
-static void ws_read_tori(const cJSON *p, struct wave_sources *s)
+static void ws_read_tori(const struct energy_wave_config *p, struct wave_sources *s)
 {
-    const cJSON *it;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "tori")) {
-        if (s->nt >= WAVE_MAX_SRC) break;
+    for (int i = 0; i < p->n_tori; i++) {
         struct wave_torus *t = &s->torus[s->nt++];
-        params_vec3(it, "center", t->c);
-        params_vec3(it, "axis", t->e3);
+        memcpy(t->c, p->tori[i].center, sizeof t->c);
+        memcpy(t->e3, p->tori[i].axis, sizeof t->e3);
         vec3_normalize(t->e3);
         vec3_any_normal(t->e3, t->e1);
         vec3_cross(t->e3, t->e1, t->e2);
-        t->R = params_num(it, "R");
-        t->coef = params_num(it, "coef");
+        t->R = p->tori[i].R;
+        t->coef = p->tori[i].coef;
     }
 }
 
-static void ws_read_curves(const cJSON *p, struct wave_sources *s)
+static void ws_read_curves(const struct energy_wave_config *p, struct wave_sources *s)
 {
-    static const char *const names[3] = {"p0", "p1", "p2"};
-    const cJSON *it, *w;
-    cJSON_ArrayForEach(it, cJSON_GetObjectItemCaseSensitive(p, "curves")) {
-        if (s->nc >= WAVE_MAX_SRC) break;
+    for (int i = 0; i < p->n_curves; i++) {
+        const struct energy_wave_curve *in = &p->curves[i];
         struct wave_curve *c = &s->curve[s->nc++];
-        for (int k = 0; k < 3; k++) params_vec3(it, names[k], c->b[k]);
-        c->coef = params_num(it, "coef");
-        cJSON_ArrayForEach(w, cJSON_GetObjectItemCaseSensitive(it, "W")) if (c->nw < WAVE_MAX_W) c->w[c->nw++] = w->valuedouble;
+        memcpy(c->b[0], in->p0, sizeof c->b[0]);
+        memcpy(c->b[1], in->p1, sizeof c->b[1]);
+        memcpy(c->b[2], in->p2, sizeof c->b[2]);
+        c->coef = in->coef;
+        c->nw = in->n_W;
+        memcpy(c->w, in->W, sizeof c->w[0] * (size_t)in->n_W);
     }
 }
 
-void wave_sources_read(const cJSON *params, struct wave_sources *s)
+void wave_sources_read(const struct energy_wave_config *params, struct wave_sources *s)
 {
     memset(s, 0, sizeof *s);
     ws_read_points_lines(params, s);
     ws_read_tori(params, s);
     ws_read_curves(params, s);
-    s->animate = params_bool(params, "animate");
-    s->anim_rate = params_num(params, "anim_rate");
+    s->animate = params->animate;
+    s->anim_rate = params->anim_rate;
 }
 
 void wave_sources_weights(const struct wave_sources *s, double sim_time, double w[][WAVE_MAX_W])

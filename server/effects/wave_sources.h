@@ -7,10 +7,7 @@
 #ifndef FX_WAVE_SOURCES_H
 #define FX_WAVE_SOURCES_H
 
-#include <cjson/cJSON.h>
-
-#define WAVE_MAX_SRC 16 /* sources of each type */
-#define WAVE_MAX_W 32   /* strength weights per curve */
+#include "energy_wave_params.h" /* WAVE_MAX_SRC, WAVE_MAX_W */
 
 struct wave_point {
     double pos[3], coef;
@@ -43,7 +40,7 @@ struct wave_sources {
 };
 
 /* Unpacks a complete validated energy_wave document (directions normalised, torus frames built). */
-void wave_sources_read(const cJSON *params, struct wave_sources *s);
+void wave_sources_read(const struct energy_wave_config *params, struct wave_sources *s);
 
 /* Each curve's weights at stream time sim_time: W, times the pulses when animate is on. */
 void wave_sources_weights(const struct wave_sources *s, double sim_time, double w[][WAVE_MAX_W]);

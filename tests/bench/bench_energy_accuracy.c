@@ -119,13 +119,13 @@ static void bea_one(const char *scene, const char *json, const char *mode, int d
 {
     cJSON *doc = bea_doc(json, mode, divisions);
     struct fx_err err = {0};
-    struct energy_wave *ew = doc ? energy_wave_new(bea_ocl, doc, &err) : NULL;
+    struct energy_wave *ew = doc ? energy_wave_new(bea_ocl, wave_typed(doc), &err) : NULL;
     if (!ew) {
         fprintf(stderr, "bench_energy_accuracy: %s %s: %s\n", scene, mode, err.message);
         cJSON_Delete(doc);
         return;
     }
-    int n = (int)params_num(doc, "divisions");
+    int n = wave_typed(doc)->divisions;
     double ms = bea_time(ew, img), rms = bea_rms(img, ref, mx);
     char label[64];
     if (strcmp(mode, "simpson") == 0) snprintf(label, sizeof label, "simpson n=%d", n);

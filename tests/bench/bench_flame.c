@@ -24,6 +24,7 @@
 #include <unistd.h>
 
 #include "effects/flame.h"
+#include "effects/flame_effect.h"
 #include "ocl.h"
 #include "params.h"
 
@@ -51,6 +52,15 @@ static void bench_die(const char *what, const struct fx_err *err)
 {
     fprintf(stderr, "bench_flame: %s: %s\n", what, err->message);
     exit(1);
+}
+
+/* The typed parameters of a complete document. */
+static struct flame_config bench_typed(const cJSON *doc)
+{
+    struct flame_config c;
+    struct fx_err err = {0};
+    if (params_load(flame_params, doc, &c, sizeof c, &err)) bench_die("parameters", &err);
+    return c;
 }
 
 static cJSON *bench_doc(const char *overrides)
@@ -117,10 +127,11 @@ static void bench_size(struct ocl *ocl, int k, int steps)
     char label[16];
     struct fx_err err;
     cJSON *doc = bench_doc("{\"sources\":[],\"k_rs\":0,\"k_buo\":0,\"k_h\":0,\"k_f\":0,\"insert_nbr_threshold\":4}");
-    struct flame *fl = flame_new(ocl, doc, &err);
+    struct flame_config c = bench_typed(doc);
+    struct flame *fl = flame_new(ocl, &c, &err);
     if (!fl) bench_die("flame_new", &err);
     struct flame_particles p;
-    bench_lattice(&p, k, params_num(doc, "h") * params_num(doc, "particle_diameter"));
+    bench_lattice(&p, k, c.h * c.particle_diameter);
     if (flame_load(fl, &p, &err) || flame_run(fl, 5, &err)) bench_die("warm-up", &err);
     struct ocl_kernel_stat a[BENCH_MAX_STATS], b[BENCH_MAX_STATS];
     int na = bench_stats(ocl, a);
@@ -175,14 +186,16 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     struct fx_err err;
     const char *ov = getenv("BENCH_FLAME_SCENE"); /* JSON overrides of the default scene, for experiments */
     cJSON *doc = bench_doc(ov ? ov : "{}");
-    struct flame *fl = flame_effect.create(ocl, doc, &err);
-    if (!fl) bench_die("create", &err);
-    double dt = params_num(doc, "dt");
+    struct flame_config c = bench_typed(doc);
+    void *st = flame_effect.create(ocl, &c, &err);
+    if (!st) bench_die("create", &err);
+    struct flame *fl = flame_effect_sim(st);
+    double dt = c.dt;
     double t0 = bench_now();
     if (flame_run(fl, (int)(warm_s / dt), &err)) bench_die("warm-up", &err);
     double warm_wall = bench_now() - t0;
     struct bench_out out = {0, 0};
-    double sim0 = flame_effect.sim_seconds(fl);
+    double sim0 = flame_effect.sim_seconds(st);
     uint64_t st0 = flame_steps(fl);
     struct ocl_kernel_stat ka[BENCH_MAX_STATS], kb[BENCH_MAX_STATS];
     int nka = bench_stats(ocl, ka);
@@ -193,14 +206,14 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
     for (int f = 0; f < frames; f++) {
         nsum += flame_count(fl);
         double f0 = bench_now();
-        if (flame_effect.step(fl, 0, fmin(f0 - last, 0.25), INFINITY, bench_emit, &out, &err)) bench_die("step", &err);
+        if (flame_effect.step(st, 0, fmin(f0 - last, 0.25), INFINITY, bench_emit, &out, &err)) bench_die("step", &err);
         last = f0;
         busy += bench_now() - f0;
         due = fmax(due + 1.0 / 30, bench_now()); /* engine_run_due: an overrun starts the next frame at once */
         double wait = due - bench_now();
         if (wait > 0) nanosleep(&(struct timespec){0, (long)(wait * 1e9)}, NULL);
     }
-    double wall = bench_now() - t0, sim = flame_effect.sim_seconds(fl) - sim0;
+    double wall = bench_now() - t0, sim = flame_effect.sim_seconds(st) - sim0;
     double cpu = bench_cpu() - c0, ncpu = (double)sysconf(_SC_NPROCESSORS_ONLN);
     int steps = (int)(flame_steps(fl) - st0);
     double ps = nsum / frames * steps / busy, kernel_ms = bench_split("default", ka, nka, kb, bench_stats(ocl, kb), steps);
@@ -228,7 +241,7 @@ static void bench_default(struct ocl *ocl, double warm_s, int frames)
            sim / (cpu / ncpu), ncpu);
     printf("flame default kernels %.2f ms of the %.2f ms of work per frame (the rest: launches, waits, read-back, "
            "encoding)\n", kernel_ms / frames, busy * 1e3 / frames);
-    flame_effect.destroy(fl);
+    flame_effect.destroy(st);
     cJSON_Delete(doc);
 }
 

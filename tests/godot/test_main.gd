@@ -5,8 +5,9 @@
 # write to Godot's stdin without blocking it): it asks for fxctl to run (fxctl-go), for the
 # daemon to be killed and restarted (restart-go), and dumps decoded particles for the driver
 # to compare with libfxclient's decoding of the same frames (godot-flame-SEQ.bin).
-# Assertions are on what the add-on hands the engine (images, MultiMesh counts, lights): the
-# dummy renderer runs no shaders. Times: a game frame's wall time less what the kernel says
+# Assertions are on what the add-on hands the engine (images, MultiMesh counts, lights, the
+# wave material's uniforms as FxTexture.uniforms records them): the dummy renderer runs no
+# shaders and keeps no uniforms. Times: a game frame's wall time less what the kernel says
 # the main thread waited for a CPU (/proc/thread-self/schedstat), so other processes on a
 # loaded machine do not count as the add-on blocking the loop, and a call that sleeps does.
 extends SceneTree
@@ -171,6 +172,7 @@ func _run() -> void:
 	yield(_test_eye(), "completed")
 	yield(_test_dump(), "completed")
 	yield(_test_set(), "completed")
+	yield(_test_look(), "completed")
 	yield(_test_unknown_stream(), "completed")
 	yield(_test_restart(), "completed")
 	for c in [a, b]:
@@ -326,6 +328,96 @@ func _test_set() -> void:
 	var lines: MultiMesh = flame._lines.multimesh
 	check(f.velocities and f.image.get_height() == 2 * f.rows and lines.visible_instance_count == f.count and f.count > 0,
 			"velocities: the frame's second layer and a velocity line per particle (%d)" % lines.visible_instance_count)
+
+
+# The wave drawn as the page draws it, and lit in the rig's colour: the material follows the
+# stream's colour and the display levels, another client's color_energy and light_strength
+# reach the material and the lights. Properties are read with get(): a node without them fails
+# the check instead of stopping the scene.
+func _test_look() -> void:
+	var end := _seconds(10)
+	while (wave.get("uniforms") == null or not wave.uniforms.has("floor_b") or rig.lights_shown == 0) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	var u = wave.get("uniforms")
+	u = u if u != null else {}
+	check(_near3(u.get("color_energy"), Vector3(0.05, 0.35, 1.0)) and _near3(u.get("color_background"), Vector3()),
+			"energy: the material has the stream's color_energy and color_background (%s, %s)" % [u.get("color_energy"), u.get("color_background")])
+	check(u.get("floor_k") == wave.get("floor_level") and u.get("gain") == wave.get("gain") and u.get("contrast") == wave.get("contrast")
+			and u.get("tone_map") == true and u.get("floor_k") != null,
+			"energy: the material has the display levels (floor %s, gain %s, contrast %s) and the glow tone map" % [u.get("floor_k"), u.get("gain"), u.get("contrast")])
+	var f = wave.last_frame
+	var median := _border_median(f.image)
+	check(u.get("floor_b") != null and abs(u.get("floor_b") - median) <= 1e-6 * median and median > 0.0,
+			"energy: the floor F is the median B on the frame's border (%s, recomputed %f)" % [u.get("floor_b"), median])
+	# the default torus (centre 0, R 3) seen from eye (0,0,48) through center (0,0,18), size 7.5
+	var size = wave.get("quad_size")
+	check(_near3(wave.get("quad_center"), Vector3()) and size != null and abs(size.x - 12.0) < 1e-3 and abs(size.y - 12.0) < 1e-3,
+			"energy: the quad is the stream's billboard at the ring's depth (centre %s, size %s)" % [wave.get("quad_center"), size])
+	_check_rig_lights("default", Vector3(0.05, 0.35, 1.0), 1.0)
+	var mid := Vector3()
+	var lights := 0
+	for l in rig.get_children():
+		if l is OmniLight and l.visible:
+			mid += l.transform.origin
+			lights += 1
+	check(lights == 6 and rig.lit_segments == 12 and (mid / lights).length() < 1e-3,
+			"energy: the torus's 12 chords as 6 lights round its centre (%d lights, mean %s)" % [lights, mid / max(lights, 1)])
+	# another client turns the wave red and halves its light
+	var red := Vector3(0.9, 0.2, 0.1)
+	b.set_params("energy", {"color_energy": [red.x, red.y, red.z], "light_strength": 0.5})
+	end = _seconds(10)
+	while not (_near3(wave.get("uniforms").get("color_energy") if wave.get("uniforms") != null else null, red)
+			and rig.last_frame.rig["constants"] != null and rig.last_frame.rig["constants"]["strength"] == 0.5) and OS.get_ticks_msec() < end:
+		yield(self, "idle_frame")
+	u = wave.get("uniforms") if wave.get("uniforms") != null else {}
+	check(_near3(u.get("color_energy"), red), "energy: another client's color_energy reaches the material through the params event (%s)" % u.get("color_energy"))
+	_check_rig_lights("after the set", red, 0.5)
+
+
+# The rig's lights: in the colour of the default ramp's lit band, 0.2 + 0.8 C_e (linear; a
+# Light takes sRGB), their energies adding up to energy_per_strength × the lit segments'
+# strength × light_strength, of the frame they were set from.
+func _check_rig_lights(when: String, ce: Vector3, light_strength: float) -> void:
+	var band := Vector3(0.2, 0.2, 0.2) + 0.8 * ce
+	var want := Color(_srgb(band.x), _srgb(band.y), _srgb(band.z))
+	var colours_ok: bool = rig.lights_shown > 0
+	var energy := 0.0
+	for l in rig.get_children():
+		if l is OmniLight and l.visible:
+			colours_ok = colours_ok and _near3(Vector3(l.light_color.r, l.light_color.g, l.light_color.b), Vector3(want.r, want.g, want.b))
+			energy += l.light_energy
+	var strength := 0.0
+	for s in rig.last_frame.rig["segments"]:
+		strength += max(s["strength"], 0.0)
+	var k = rig.get("energy_per_strength")
+	var expected: float = (k if k != null else 0.0) * strength * light_strength
+	check(colours_ok, "energy %s: the lights have the ramp's lit band colour %s (C_e %s)" % [when, want, ce])
+	check(expected > 0.0 and abs(energy - expected) <= 1e-3 * expected,
+			"energy %s: the lights' energy is the segments' strength × light_strength %.2f (%.3f, expected %.3f)" % [when, light_strength, energy, expected])
+
+
+static func _near3(v, w: Vector3) -> bool:
+	return typeof(v) == TYPE_VECTOR3 and (v - w).length() < 1e-4
+
+
+static func _srgb(v: float) -> float:
+	return v * 12.92 if v <= 0.0031308 else 1.055 * pow(v, 1.0 / 2.4) - 0.055
+
+
+# The median of B over the outer 2% of rows and columns (at least one), texel by texel.
+static func _border_median(img: Image) -> float:
+	var w := img.get_width()
+	var h := img.get_height()
+	var m := int(max(1, round(0.02 * min(w, h))))
+	var v := []
+	img.lock()
+	for y in range(h):
+		for x in range(w):
+			if y < m or y >= h - m or x < m or x >= w - m:
+				v.append(img.get_pixel(x, y).r)
+	img.unlock()
+	v.sort()
+	return v[v.size() >> 1]
 
 
 static func _unknown(args: Array, _x) -> bool:

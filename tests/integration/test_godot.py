@@ -204,7 +204,7 @@ def unmatched(a, b, ta, tb, tol, ttol):
 def bytes_per_particle(eng_dir, def_dir):
     sizes = {}
     for name, d in (("engine", eng_dir), ("codec 2", def_dir)):
-        for f in os.listdir(d):
+        for f in os.listdir(d) if os.path.isdir(d) else []:  # fxctl never ran when the scene stopped early
             if f.endswith(".json"):
                 j = json.load(open(os.path.join(d, f)))
                 if j["kind"] == 1 and j["count"] > 0:

@@ -94,7 +94,7 @@ void flame_shape_free(struct flame_shape_acc *a)
 
 const char *flame_shape_preset(const char *name)
 {
-    for (const struct effect_preset *p = flame_effect.presets; p && p->name; p++)
+    for (const struct effect_preset *p = flame_presets; p && p->name; p++)
         if (!strcmp(p->name, name)) return p->params;
     return NULL;
 }
@@ -107,9 +107,10 @@ static void fs_vec(const cJSON *v, double out[3])
 int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, struct flame_shape *out,
                     struct fx_err *err)
 {
-    struct flame *fl = flame_new(ocl, doc, err);
+    struct flame_config cfg;
+    struct flame *fl = params_load(flame_params, doc, &cfg, sizeof cfg, err) ? NULL : flame_new(ocl, &cfg, err);
     if (!fl) return -1;
-    double dt = params_num(doc, "dt"), c[3] = {0, 0, 0}, up[3];
+    double dt = cfg.dt, c[3] = {0, 0, 0}, up[3];
     int ns = 0;
     const cJSON *src;
     cJSON_ArrayForEach(src, cJSON_GetObjectItem(doc, "sources")) {
@@ -123,7 +124,7 @@ int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double sec
     fs_vec(cJSON_GetObjectItem(doc, "up"), up);
     int per_frame = (int)lround(1.0 / 30 / dt), rc = flame_run(fl, (int)lround(warm_s / dt), err);
     struct flame_shape_acc acc;
-    flame_shape_init(&acc, c, up, params_num(doc, "T_ign"));
+    flame_shape_init(&acc, c, up, cfg.T_ign);
     for (int f = 0; !rc && f < (int)lround(seconds * 30); f++) {
         struct flame_particles p;
         rc = flame_run(fl, per_frame > 0 ? per_frame : 1, err) || flame_read(fl, &p, err);

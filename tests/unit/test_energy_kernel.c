@@ -23,6 +23,8 @@
 #include "params.h"
 #include "wave_scenes.h"
 
+/* the device functions' test entry points (tests/ref/), compiled after energy_wave.cl */
+#define TEK_PROBE_CL "energy_wave_probe.cl"
 #define TEK_MAX_MODES 8
 #define TEK_MAX_TEXELS (64 * 64)
 
@@ -55,7 +57,7 @@ static int tek_dev_cubic(int n, const float *abc, float *roots, int *nroots, str
         {3 * (size_t)n * f, NULL, roots, 0},
         {(size_t)n * sizeof(int), NULL, nroots, 0},
     };
-    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_cubic", (size_t)n, args, 3, err);
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, TEK_PROBE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_cubic", (size_t)n, args, 3, err);
 }
 
 /* Quadratic B-spline strength S(t) (digest §2.3) of weights w[0..nw-1] at n parameters t. */
@@ -68,7 +70,7 @@ static int tek_dev_bspline(int nw, const float *w, int n, const float *t, float 
         {(size_t)n * f, t, NULL, 0},
         {(size_t)n * f, NULL, out, 0},
     };
-    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_bspline", (size_t)n, args, 4, err);
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, TEK_PROBE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_bspline", (size_t)n, args, 4, err);
 }
 
 /* Nearest point of the Bézier b = {B0, B1, B2} (9 floats) to n points p (3n floats): distance
@@ -87,7 +89,7 @@ static int tek_dev_curve_nearest(const float b[9], int n, const float *p, float 
         {(size_t)n * f, NULL, dist, 0},
         {(size_t)n * f, NULL, tparam, 0},
     };
-    return probe_run(tek_ocl, ENERGY_WAVE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_curve_nearest", (size_t)n, args, 4, err);
+    return probe_run(tek_ocl, ENERGY_WAVE_CL, TEK_PROBE_CL, ENERGY_WAVE_CL_OPTS, "ew_test_curve_nearest", (size_t)n, args, 4, err);
 }
 
 static int tek_is_simpson(const char *mode) { return strcmp(mode, "simpson") == 0; }
@@ -111,11 +113,18 @@ static cJSON *tek_doc(cJSON *partial)
     return out;
 }
 
+/* A renderer of the complete document doc (its typed parameters). */
+static struct energy_wave *tek_new(const cJSON *doc, struct fx_err *err)
+{
+    struct energy_wave_config c;
+    return params_load(energy_wave_params, doc, &c, sizeof c, err) ? NULL : energy_wave_new(tek_ocl, &c, err);
+}
+
 /* Renders doc at sim_time into out; 0 on success. */
 static int tek_render(const cJSON *doc, double sim_time, float *out)
 {
     struct fx_err err = {0};
-    struct energy_wave *ew = energy_wave_new(tek_ocl, doc, &err);
+    struct energy_wave *ew = tek_new(doc, &err);
     if (!ew) {
         CHECK(0, "energy_wave_new: %s: %s", err.code, err.message);
         return -1;
@@ -486,7 +495,7 @@ static void test_loop_energy(void)
 {
     cJSON *doc = tek_doc(wave_fig56_partial("{\"width\":64,\"height\":32}"));
     struct fx_err err = {0};
-    struct energy_wave *ew = doc ? energy_wave_new(tek_ocl, doc, &err) : NULL;
+    struct energy_wave *ew = doc ? tek_new(doc, &err) : NULL;
     CHECK(ew != NULL, "energy_wave_new: %s", err.message);
     if (!ew) {
         cJSON_Delete(doc);
@@ -499,7 +508,8 @@ static void test_loop_energy(void)
         if (nw > longest) longest = nw;
     }
     int frames = (int)(2 * wave_anim_period(longest));
-    double rate = params_num(doc, "anim_rate"), *sum = calloc((size_t)frames, sizeof *sum);
+    double rate = 0, *sum = calloc((size_t)frames, sizeof *sum);
+    CHECK(params_number(doc, "anim_rate", &rate) == 0 && rate > 0, "anim_rate");
     static float tex[64 * 32];
     for (int f = 0; f < frames && !energy_wave_render(ew, f / rate, tex, &err); f++)
         for (int k = 0; k < 64 * 32; k++) sum[f] += tex[k];
@@ -864,7 +874,9 @@ static void test_animation_render(void)
 static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame *out)
 {
     struct fx_err err = {0};
-    void *ew = energy_wave_effect.create(tek_ocl, doc, &err);
+    void *typed = effect_typed(&energy_wave_effect, doc, &err);
+    void *ew = typed ? energy_wave_effect.create(tek_ocl, typed, &err) : NULL;
+    free(typed);
     int rc = ew ? slices_step(&energy_wave_effect, ew, 0.7, budget, out, &err) : -1;
     CHECK(rc == 0, "step with %g s per call: %s", budget, err.message);
     if (ew) energy_wave_effect.destroy(ew);
@@ -873,13 +885,14 @@ static int tek_sliced_frame(const cJSON *doc, double budget, struct slices_frame
 
 /* Slices do not change the picture: a frame stepped a work-group per call, and a few
  * milliseconds per call, is the frame stepped whole, byte for byte (its EXR payload), raw Y and
- * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups. */
+ * colour-mapped RGBA, on a texture whose rows are no whole number of work-groups (of 8 or 16
+ * texels a work-item). */
 static void test_sliced_frames(void)
 {
     static const char *const outputs[] = {"Y", "RGBA"};
     for (int o = 0; o < 2; o++) {
         char partial[128];
-        snprintf(partial, sizeof partial, "{\"width\":200,\"height\":40,\"output\":\"%s\"}", outputs[o]);
+        snprintf(partial, sizeof partial, "{\"width\":300,\"height\":40,\"output\":\"%s\"}", outputs[o]);
         cJSON *doc = tek_doc(cJSON_Parse(partial));
         struct slices_frame whole = {.kind = FXS_KIND_TEXTURE}, piece = {.kind = FXS_KIND_TEXTURE},
                             ms = {.kind = FXS_KIND_TEXTURE};
@@ -914,7 +927,9 @@ static void test_emitted_frame_kept(void)
                                      "\"p1\":[-6.6,9.0,-1.8],\"p2\":[0,0,0],\"coef\":8.0}],\"animate\":true,"
                                      "\"width\":200,\"height\":40,\"output\":\"RGBA\"}"));
     struct fx_err err = {0};
-    void *ew = doc ? energy_wave_effect.create(tek_ocl, doc, &err) : NULL;
+    void *typed = doc ? effect_typed(&energy_wave_effect, doc, &err) : NULL;
+    void *ew = typed ? energy_wave_effect.create(tek_ocl, typed, &err) : NULL;
+    free(typed);
     struct effect_frame first = {0}, next = {0};
     const size_t bytes = (size_t)200 * 40 * 4 * sizeof(float);
     float *texels = malloc(bytes);

@@ -2,8 +2,8 @@
  * server/effects/compound_eye.h) against the double-precision reference (tests/ref/eye_ref),
  * plus the digest §6 properties that concern the device code: no NaN or infinity over the
  * whole hemisphere of view directions (every TIR policy, both lattices), lattice
- * translation invariance, partial work-items (8 rays each), and the look-up table
- * products (sizes, gutters, macro map). */
+ * translation invariance, partial work-items (8 or 16 rays each), and the look-up table
+ * products (sizes, every LLUT texel against the reference, gutters, macro map). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -22,6 +22,13 @@
 #define TEK_N 4096
 
 static struct ocl *tek_ocl;
+
+/* An effect state of the complete document doc (its typed parameters). */
+static struct compound_eye *tek_new(const cJSON *doc, struct fx_err *err)
+{
+    struct compound_eye_config c;
+    return params_load(compound_eye_params, doc, &c, sizeof c, err) ? NULL : compound_eye_new(tek_ocl, &c, err);
+}
 static unsigned long long tek_rng = 0x9e3779b97f4a7c15ull;
 
 static double tek_rand(double lo, double hi)
@@ -182,8 +189,9 @@ static void test_lattice_translation(void)
     }
 }
 
-/* Each work-item traces 8 rays: a count that leaves a partial work-item traces the same
- * as the full batch, and a bake whose texel count is not a multiple of 8 is whole. */
+/* Each work-item traces 8 or 16 rays (compound_eye_build_options): a count that leaves a
+ * partial work-item traces the same as the full batch, and a bake whose texel count is not a
+ * multiple of either is whole. */
 static void test_partial_work_items(void)
 {
     struct eye_optics o = tek_optics(1, 1.1, 1.491, 10, EYE_TIR_REFLECT);
@@ -210,7 +218,7 @@ static void test_partial_work_items(void)
     cJSON *partial = cJSON_Parse("{\"mode\":\"bake\",\"bake_size\":129}");
     struct fx_err err = {0};
     CHECK(params_merge(compound_eye_params, doc, partial, &bake, &err) == 0, "merge: %s", err.message);
-    struct compound_eye *ce = bake ? compound_eye_new(tek_ocl, bake, &err) : NULL;
+    struct compound_eye *ce = bake ? tek_new(bake, &err) : NULL;
     CHECK(ce != NULL, "compound_eye_new: %s", err.message);
     static float rgba[129 * 129 * 4];
     if (ce && compound_eye_bake(ce, rgba, &err) == 0) {
@@ -237,7 +245,7 @@ static void test_table_products(void)
     cJSON *partial = cJSON_Parse("{\"lut_cells\":8,\"lut_dirs\":8,\"lut_supersample\":1,\"lattice\":\"hex\"}");
     struct fx_err err = {0};
     CHECK(params_merge(compound_eye_params, doc, partial, &small, &err) == 0, "merge: %s", err.message);
-    struct compound_eye *ce = small ? compound_eye_new(tek_ocl, small, &err) : NULL;
+    struct compound_eye *ce = small ? tek_new(small, &err) : NULL;
     CHECK(ce != NULL, "compound_eye_new: %s", err.message);
     const void *data = NULL;
     size_t len = 0;
@@ -261,6 +269,96 @@ static void test_table_products(void)
     cJSON_Delete(doc);
     cJSON_Delete(partial);
     cJSON_Delete(small);
+}
+
+/* The pigment of typed parameters (as compound_eye.c reads them). */
+static struct eye_pigment tek_pigment(const struct compound_eye_config *c)
+{
+    struct eye_pigment pg = {
+        .lattice = c->lattice,
+        .dot_radius = c->dot_radius,
+        .softness = c->dot_softness,
+        .ring_inner = c->ring_inner,
+        .ring_outer = c->ring_outer,
+        .glow_radius = c->glow_radius,
+    };
+    memcpy(pg.dot, c->dot_color, sizeof pg.dot);
+    memcpy(pg.base, c->base_color, sizeof pg.base);
+    memcpy(pg.ring, c->ring_color, sizeof pg.ring);
+    memcpy(pg.glow, c->glow_color, sizeof pg.glow);
+    return pg;
+}
+
+/* Every texel of a table's LLUT (those the kernel traced and those copied by symmetry) is the
+ * colour the double-precision reference sees along its sample ray: the pigment where it lands,
+ * the base colour with alpha 0 where it misses, the dot colour where it is absorbed. */
+static void tek_table_vs_reference(const char *partial_json)
+{
+    struct fx_err err = {0};
+    cJSON *defaults = params_defaults(compound_eye_params), *partial = cJSON_Parse(partial_json), *doc = NULL;
+    CHECK(params_merge(compound_eye_params, defaults, partial, &doc, &err) == 0, "merge: %s", err.message);
+    struct compound_eye_config cfg;
+    int loaded = doc && params_load(compound_eye_params, doc, &cfg, sizeof cfg, &err) == 0;
+    struct compound_eye *ce = loaded ? compound_eye_new(tek_ocl, &cfg, &err) : NULL;
+    CHECK(ce != NULL, "compound_eye_new: %s", err.message);
+    const void *data = NULL;
+    size_t len = 0;
+    if (ce && compound_eye_table(ce, &data, &len, &err) == 0) {
+        struct fxs_lut_info info;
+        struct fxs_lut_product e;
+        char msg[128] = "";
+        uint8_t *llut = fxs_lut_header(data, len, &info, msg, sizeof msg) >= 2 && fxs_lut_entry(data, len, 1, &e, msg, sizeof msg) >= 0
+                            ? fxs_lut_texels(data, len, &e, msg, sizeof msg)
+                            : NULL;
+        CHECK(llut != NULL, "LLUT: %s", msg);
+        struct eye_optics o;
+        eye_optics_from_params(&cfg, &o);
+        struct eye_ref_optics ro = tek_ref(&o);
+        struct eye_pigment pg = tek_pigment(&cfg);
+        const int C = (int)info.cells, D = (int)info.dirs, T = C + 2 * EYE_LUT_GUTTER, W = D * T;
+        int agree = 0, n = 0, worst = 0;
+        for (int tj = 0; llut && tj < D; tj++)
+            for (int ti = 0; ti < D; ti++) {
+                double u = (2.0 * ti + 1) / D - 1, v = (2.0 * tj + 1) / D - 1, px = (u + v) / 2, py = (u - v) / 2;
+                double w[3] = {px, py, 1 - fabs(px) - fabs(py)}, wl = sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+                double d[3] = {-w[0] / wl, -w[1] / wl, -w[2] / wl};
+                for (int cj = 0; cj < C; cj++)
+                    for (int ci = 0; ci < C; ci++) {
+                        struct eye_ref_hit h;
+                        eye_ref_trace(&ro, (ci + 0.5) / C, (cj + 0.5) / C * o.tile_h, d, &h);
+                        double want[4] = {0, 0, 0, h.status != EYE_REF_MISSED};
+                        if (h.status == EYE_REF_LANDED) eye_pigment_at(&pg, h.land[0], h.land[1], want);
+                        for (int k = 0; k < 3 && h.status != EYE_REF_LANDED; k++)
+                            want[k] = h.status == EYE_REF_MISSED ? pg.base[k] : pg.dot[k];
+                        const uint8_t *got = llut + 4 * ((size_t)(tj * T + EYE_LUT_GUTTER + cj) * W + ti * T + EYE_LUT_GUTTER + ci);
+                        int diff = 0;
+                        for (int k = 0; k < 4; k++) {
+                            int dk = abs(got[k] - (int)lround(want[k] * 255));
+                            diff = dk > diff ? dk : diff;
+                        }
+                        agree += diff <= 4;
+                        worst = diff > worst ? diff : worst;
+                        n++;
+                    }
+            }
+        CHECK(n > 0 && agree >= 0.995 * n, "%s: %d of %d table texels within 4/255 of the reference (worst %d)",
+              partial_json, agree, n, worst);
+        free(llut);
+    } else {
+        CHECK(0, "table: %s", err.message);
+    }
+    compound_eye_free(ce);
+    cJSON_Delete(defaults);
+    cJSON_Delete(partial);
+    cJSON_Delete(doc);
+}
+
+static void test_table_matches_reference(void)
+{
+    tek_table_vs_reference("{\"lut_cells\":16,\"lut_dirs\":12}"); /* hex, both mirrors */
+    tek_table_vs_reference("{\"lut_cells\":16,\"lut_dirs\":11,\"lattice\":\"square\",\"sphere_search\":\"slices\","
+                           "\"neighbor_select\":\"thesis4\",\"max_passes\":10,\"lut_supersample\":1}");
+    tek_table_vs_reference("{\"lut_cells\":15,\"lut_dirs\":10,\"pigment_res\":129}"); /* hex, x mirror only */
 }
 
 /* The atlas gutter repeats the opposite edge of its own tile; the macro map is the tile mean. */
@@ -293,7 +391,9 @@ static void test_atlas_gutters(void)
 static int tek_sliced_step(const cJSON *doc, double budget, struct slices_frame *out)
 {
     struct fx_err err = {0};
-    void *ce = compound_eye_effect.create(tek_ocl, doc, &err);
+    void *typed = effect_typed(&compound_eye_effect, doc, &err);
+    void *ce = typed ? compound_eye_effect.create(tek_ocl, typed, &err) : NULL;
+    free(typed);
     int rc = ce ? slices_step(&compound_eye_effect, ce, 0, budget, out, &err) : -1;
     CHECK(rc == 0 && out->payload, "step with %g s per call: %s", budget, err.message);
     if (ce) compound_eye_effect.destroy(ce);
@@ -354,6 +454,7 @@ int main(void)
     RUN(test_lattice_translation);
     RUN(test_partial_work_items);
     RUN(test_table_products);
+    RUN(test_table_matches_reference);
     RUN(test_atlas_gutters);
     RUN(test_sliced_steps);
     ocl_close(tek_ocl);

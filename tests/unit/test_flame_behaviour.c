@@ -53,7 +53,8 @@ static struct flame *tfb_new(const char *partial)
         return NULL;
     }
     cJSON_Delete(in);
-    struct flame *fl = flame_new(tfb_ocl, doc, &err);
+    struct flame_config c;
+    struct flame *fl = params_load(flame_params, doc, &c, sizeof c, &err) ? NULL : flame_new(tfb_ocl, &c, &err);
     CHECK(fl != NULL, "flame_new(%s): %s", partial, err.message);
     cJSON_Delete(doc);
     return fl;
@@ -468,8 +469,11 @@ int main(void)
     struct fx_err err = {0};
     if (ocl_open(&tfb_ocl, CHECK_DEVICE(), &err)) return CHECK_ABORT("ocl_open(%s): %s: %s", CHECK_DEVICE(), err.code, err.message);
     tfb_defaults = params_defaults(flame_params);
-    tfb_h = params_num(tfb_defaults, "h");
-    tfb_dt = params_num(tfb_defaults, "dt");
+    struct flame_config defaults;
+    if (!tfb_defaults || params_load(flame_params, tfb_defaults, &defaults, sizeof defaults, &err))
+        return CHECK_ABORT("flame defaults: %s", err.message);
+    tfb_h = defaults.h;
+    tfb_dt = defaults.dt;
     RUN(test_ignition_defaults);
     RUN(test_ignition_base);
     RUN(test_growth_plateau);

@@ -10,6 +10,7 @@
 
 #include "check.h"
 #include "effects/flame.h"
+#include "effects/flame_effect.h"
 #include "fxs_frame.h"
 #include "fxs_particles.h"
 #include "ocl.h"
@@ -40,13 +41,17 @@ static int tff_emit(void *ctx, const struct effect_frame *fr)
     return 0;
 }
 
-static struct flame *tff_new(const char *partial)
+/* A flame effect state (flame_effect.create) of the default scene with `partial` over it. */
+static void *tff_new(const char *partial)
 {
     struct fx_err err = {0};
     cJSON *def = params_defaults(flame_params), *in = cJSON_Parse(partial), *doc = NULL;
-    struct flame *fl = NULL;
-    if (in && params_merge(flame_params, def, in, &doc, &err) == 0) fl = flame_new(tff_ocl, doc, &err);
-    CHECK(fl != NULL, "flame_new(%s): %s", partial, err.message);
+    void *fl = NULL;
+    struct flame_config c;
+    if (in && params_merge(flame_params, def, in, &doc, &err) == 0 &&
+        params_load(flame_params, doc, &c, sizeof c, &err) == 0)
+        fl = flame_effect.create(tff_ocl, &c, &err);
+    CHECK(fl != NULL, "create(%s): %s", partial, err.message);
     cJSON_Delete(def);
     cJSON_Delete(in);
     cJSON_Delete(doc);
@@ -54,7 +59,7 @@ static struct flame *tff_new(const char *partial)
 }
 
 /* Steps `frames` frames of 1/30 s through flame_effect.step: one good frame each. */
-static void tff_frames(struct flame *fl, int frames, struct tff_seen *seen)
+static void tff_frames(void *fl, int frames, struct tff_seen *seen)
 {
     struct fx_err err = {0};
     for (int i = 0; i < frames; i++) {
@@ -69,42 +74,44 @@ static void tff_frames(struct flame *fl, int frames, struct tff_seen *seen)
  * (dt 3 ms) and the rounding of the plan. */
 static void test_real_time(void)
 {
-    struct flame *fl = tff_new(TFF_SCENE);
+    void *fl = tff_new(TFF_SCENE);
     if (!fl) return;
     struct tff_seen seen = {0};
     tff_frames(fl, 30, &seen);
     CHECK_NEAR(flame_effect.sim_seconds(fl), 1.0, 0.0045);
     fxs_particles_free(&seen.last);
-    flame_free(fl);
+    flame_effect.destroy(fl);
 }
 
 /* time_scale 0: frames keep coming, nothing steps (not even ahead of the next frame). */
 static void test_paused(void)
 {
-    struct flame *fl = tff_new("{\"h\":0.01125,\"time_scale\":0}");
+    void *fl = tff_new("{\"h\":0.01125,\"time_scale\":0}");
     if (!fl) return;
     struct tff_seen seen = {0};
-    int n0 = flame_count(fl);
+    struct flame *sim = flame_effect_sim(fl);
+    int n0 = flame_count(sim);
     tff_frames(fl, 10, &seen);
-    CHECK(flame_steps(fl) == 0, "%llu steps while paused", (unsigned long long)flame_steps(fl));
+    CHECK(flame_steps(sim) == 0, "%llu steps while paused", (unsigned long long)flame_steps(sim));
     CHECK(flame_effect.sim_seconds(fl) == 0.0, "sim %g s while paused", flame_effect.sim_seconds(fl));
-    CHECK(flame_count(fl) == n0 && (int)seen.last.n == n0, "count %d, frame %u, solids %d", flame_count(fl),
+    CHECK(flame_count(sim) == n0 && (int)seen.last.n == n0, "count %d, frame %u, solids %d", flame_count(sim),
           seen.last.n, n0);
     fxs_particles_free(&seen.last);
-    flame_free(fl);
+    flame_effect.destroy(fl);
 }
 
 /* max_substeps 2: 2 substeps a frame, the one run ahead of the next frame among them (the
  * last frame's ahead: 10 frames, 21 substeps). */
 static void test_max_substeps(void)
 {
-    struct flame *fl = tff_new("{\"h\":0.01125,\"max_substeps\":2}");
+    void *fl = tff_new("{\"h\":0.01125,\"max_substeps\":2}");
     if (!fl) return;
     struct tff_seen seen = {0};
     tff_frames(fl, 10, &seen);
-    CHECK(flame_steps(fl) == 21, "%llu substeps in 10 frames at max_substeps 2", (unsigned long long)flame_steps(fl));
+    uint64_t steps = flame_steps(flame_effect_sim(fl));
+    CHECK(steps == 21, "%llu substeps in 10 frames at max_substeps 2", (unsigned long long)steps);
     fxs_particles_free(&seen.last);
-    flame_free(fl);
+    flame_effect.destroy(fl);
 }
 
 /* Means of x, y, z and T of a decoded frame or of a read-back state. */
@@ -125,18 +132,18 @@ static void tff_means(int n, const float *xyz, int xyz_stride, const float *t, i
 static void test_frame_before_prerun(void)
 {
     struct fx_err err = {0};
-    struct flame *a = tff_new(TFF_SCENE), *b = tff_new(TFF_SCENE);
+    void *a = tff_new(TFF_SCENE), *b = tff_new(TFF_SCENE);
     if (!a || !b) goto out;
     struct tff_seen seen = {0};
     tff_frames(a, 40, &seen);
-    int steps = (int)flame_steps(a);
+    int steps = (int)flame_steps(flame_effect_sim(a));
     CHECK(steps > 100, "%d steps", steps);
-    if (flame_run(b, steps - 1, &err)) {
+    if (flame_run(flame_effect_sim(b), steps - 1, &err)) {
         CHECK(0, "flame_run: %s", err.message);
         goto out;
     }
     struct flame_particles pb = {0}, pa = {0};
-    if (flame_read(b, &pb, &err) == 0) {
+    if (flame_read(flame_effect_sim(b), &pb, &err) == 0) {
         double mf[4], mb[4];
         CHECK((int)seen.last.n == pb.n, "frame %u particles, state one step before %d", seen.last.n, pb.n);
         tff_means((int)seen.last.n, seen.last.xyz, 3, seen.last.temp, 1, mf);
@@ -145,7 +152,8 @@ static void test_frame_before_prerun(void)
         CHECK_NEAR(mf[3], mb[3], 10.0);
         flame_particles_free(&pb);
     }
-    if (flame_run(b, 1, &err) || flame_read(b, &pb, &err) || flame_read(a, &pa, &err)) {
+    if (flame_run(flame_effect_sim(b), 1, &err) || flame_read(flame_effect_sim(b), &pb, &err) ||
+        flame_read(flame_effect_sim(a), &pa, &err)) {
         CHECK(0, "run/read: %s", err.message);
     } else {
         CHECK(pa.n == pb.n && memcmp(pa.pos, pb.pos, 16 * (size_t)pa.n) == 0 &&
@@ -156,15 +164,15 @@ static void test_frame_before_prerun(void)
     flame_particles_free(&pb);
     fxs_particles_free(&seen.last);
 out:
-    if (a) flame_free(a);
-    if (b) flame_free(b);
+    if (a) flame_effect.destroy(a);
+    if (b) flame_effect.destroy(b);
 }
 
 /* A frame stepped a substep per call (the engine's slices, slices.h) is the frame stepped
  * whole: the same particles, byte for byte, frame after frame. */
 static void test_sliced_frames(void)
 {
-    struct flame *a = tff_new(TFF_SCENE), *b = tff_new(TFF_SCENE);
+    void *a = tff_new(TFF_SCENE), *b = tff_new(TFF_SCENE);
     struct slices_frame fa = {.kind = FXS_KIND_PARTICLES}, fb = {.kind = FXS_KIND_PARTICLES};
     struct fx_err err = {0};
     int most = 0, frames = 0, same = 1;
@@ -181,8 +189,8 @@ static void test_sliced_frames(void)
     CHECK(most > 2, "a frame took up to %d calls in slices", most);
     slices_free(&fa);
     slices_free(&fb);
-    if (a) flame_free(a);
-    if (b) flame_free(b);
+    if (a) flame_effect.destroy(a);
+    if (b) flame_effect.destroy(b);
 }
 
 int main(void)

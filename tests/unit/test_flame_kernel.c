@@ -60,7 +60,8 @@ static struct flame *tfk_new(const char *partial, struct flame_ref_params *rp)
     cJSON *doc = tfk_doc(partial);
     if (!doc) return NULL;
     struct fx_err err = {0};
-    struct flame *fl = flame_new(tfk_ocl, doc, &err);
+    struct flame_config c;
+    struct flame *fl = params_load(flame_params, doc, &c, sizeof c, &err) ? NULL : flame_new(tfk_ocl, &c, &err);
     CHECK(fl != NULL, "flame_new(%s): %s: %s", partial, err.code, err.message);
     if (rp) {
         flame_ref_defaults(rp);

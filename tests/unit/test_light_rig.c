@@ -45,9 +45,12 @@ static void rig_at(const cJSON *p, double t, struct fxs_rig *rig)
 {
     static struct wave_sources src;
     static double w[WAVE_MAX_SRC][WAVE_MAX_W];
+    static struct energy_wave_config c;
     struct light_rig lr;
-    wave_sources_read(p, &src);
-    light_rig_read(p, &lr);
+    struct fx_err err = {0};
+    CHECK(params_load(energy_wave_params, p, &c, sizeof c, &err) == 0, "typed parameters: %s", err.message);
+    wave_sources_read(&c, &src);
+    light_rig_read(&c, &lr);
     wave_sources_weights(&src, t, w);
     light_rig_build(&lr, &src, w, rig);
 }
@@ -239,10 +242,11 @@ static void test_segments_curves(void)
         const cJSON *cv = cJSON_GetObjectItemCaseSensitive(p, "curves"), *it;
         int ci = 0;
         cJSON_ArrayForEach(it, cv) {
-            double b[3][3], w[32], anim[32], coef = params_num(it, "coef");
-            params_vec3(it, "p0", b[0]);
-            params_vec3(it, "p1", b[1]);
-            params_vec3(it, "p2", b[2]);
+            static const char *const bn[3] = {"p0", "p1", "p2"};
+            double b[3][3], w[32], anim[32], coef = cJSON_GetObjectItemCaseSensitive(it, "coef")->valuedouble;
+            for (int k = 0; k < 3; k++)
+                for (int c = 0; c < 3; c++)
+                    b[k][c] = cJSON_GetArrayItem(cJSON_GetObjectItemCaseSensitive(it, bn[k]), c)->valuedouble;
             int nw = 0;
             const cJSON *x;
             cJSON_ArrayForEach(x, cJSON_GetObjectItemCaseSensitive(it, "W")) w[nw++] = x->valuedouble;
@@ -296,8 +300,10 @@ static void test_loop_never_dark(void)
     static struct fxs_rig rig;
     enum { FRAMES = 240 }; /* 8 s at 30 frames/s: several loops of every curve */
     double total[FRAMES], sorted[FRAMES];
+    double rate = 0;
+    CHECK(params_number(p, "anim_rate", &rate) == 0 && rate > 0, "anim_rate");
     for (int f = 0; f < FRAMES; f++) {
-        rig_at(p, f / params_num(p, "anim_rate"), &rig);
+        rig_at(p, f / rate, &rig);
         total[f] = 0;
         for (int i = 0; i < rig.n_seg; i++) total[f] += rig.seg[i].strength;
         sorted[f] = total[f];

@@ -11,6 +11,9 @@
 
 #include "check.h"
 #include "effect.h"
+#include "effects/compound_eye.h"
+#include "effects/energy_wave.h"
+#include "effects/flame.h"
 #include "hub.h"
 #include "jsonfile.h"
 #include "presets.h"
@@ -43,6 +46,16 @@ static void test_builtins_valid(void)
     CHECK(total >= 9, "%d presets", total);
 }
 
+/* The typed parameters of a preset (a partial document over the defaults): 0, or -1. */
+static int tp_typed(const struct effect_ops *ops, const cJSON *preset, void *typed, size_t size)
+{
+    struct fx_err err = {0};
+    cJSON *doc = preset ? effect_params(ops, NULL, preset, &err) : NULL;
+    int rc = doc ? params_load(ops->params, doc, typed, size, &err) : -1;
+    cJSON_Delete(doc);
+    return rc;
+}
+
 /* The thesis presets carry the digests' values (002 Table 3.1 and no air drag, 004 §3). */
 static void test_thesis_values(void)
 {
@@ -50,14 +63,17 @@ static void test_thesis_values(void)
     struct fx_err err = {0};
     CHECK(!presets_load(&ps, NULL, &err), "%s", err.message);
     cJSON *fl = presets_params(&ps, tp_flame(), "thesis-table3.1", &err);
-    CHECK(fl && params_num(fl, "h") == 0.01125 && params_num(fl, "dt") == 0.001 && params_num(fl, "wind_drag") == 0,
-          "flame thesis preset");
+    struct flame_config f;
+    CHECK(!tp_typed(tp_flame(), fl, &f, sizeof f) && f.h == 0.01125 && f.dt == 0.001 &&
+              f.wind_drag == 0, "flame thesis preset");
     cJSON *eye = presets_params(&ps, effect_find("compound_eye"), "thesis", &err);
-    CHECK(eye && params_num(eye, "density") == 300 && params_num(eye, "refractive_index") == 1.491 &&
-              !strcmp(params_str(eye, "lattice"), "square"), "eye thesis preset");
+    struct compound_eye_config e;
+    CHECK(!tp_typed(effect_find("compound_eye"), eye, &e, sizeof e) && e.density == 300 &&
+              e.refractive_index == 1.491 && e.lattice == EYE_SQUARE, "eye thesis preset");
     cJSON *fig = presets_params(&ps, effect_find("energy_wave"), "thesis-fig5.2", &err);
-    const cJSON *torus = fig ? cJSON_GetArrayItem(cJSON_GetObjectItem(fig, "tori"), 0) : NULL;
-    CHECK(torus && params_num(torus, "R") == 3.0 && params_num(torus, "coef") == 7.4, "Fig. 5.2 torus");
+    static struct energy_wave_config w;
+    CHECK(!tp_typed(effect_find("energy_wave"), fig, &w, sizeof w) && w.n_tori == 1 && w.tori[0].R == 3.0 &&
+              w.tori[0].coef == 7.4, "Fig. 5.2 torus");
     cJSON_Delete(fl);
     cJSON_Delete(eye);
     cJSON_Delete(fig);

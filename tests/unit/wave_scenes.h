@@ -7,11 +7,26 @@
 #define WAVE_SCENES_H
 
 #include <stdio.h>
+#include <stdlib.h>
 
 #include <cjson/cJSON.h>
 
 #include "effect.h"
+#include "effects/energy_wave.h"
 #include "presets.h"
+
+/* The typed parameters of a complete document (static: valid until the next call). A document
+ * that does not load is the caller's bug: the message goes to stderr and the process exits. */
+static inline const struct energy_wave_config *wave_typed(const cJSON *doc)
+{
+    static struct energy_wave_config c;
+    struct fx_err err = {0};
+    if (params_load(energy_wave_params, doc, &c, sizeof c, &err)) {
+        fprintf(stderr, "wave_typed: %s\n", err.message);
+        exit(1);
+    }
+    return &c;
+}
 
 /* The preset's partial document with the keys of extra_json (an object, or NULL) over it;
  * NULL on failure. */

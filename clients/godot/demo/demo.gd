@@ -4,6 +4,11 @@
 # quits (tools/screenshot_godot.sh takes README's picture so). The demo's addons/fxstream is a
 # link to clients/godot/addons/fxstream: copy the folder instead where links are not followed
 # (Windows).
+# The scene: the flame, and the energy wave (Wave, an FxTexture) with its light rig (Rig, an
+# FxLightRig) under the same transform, so the rig's lights sit on the drawn ring; the stream's
+# shadow plane (y = -9 in its units, × 0.3) falls on the ground. Its Environment uses the
+# Linear tone map (the wave's material tone-maps itself, hue-preserving) and glow with an HDR
+# threshold of 0.6, which gives the ring its halo.
 # Start fxstreamd first (make run).
 extends Spatial
 

@@ -96,3 +96,13 @@ static func vec3_of(v, fallback: Vector3) -> Vector3:
 	if typeof(v) == TYPE_ARRAY and v.size() == 3:
 		return Vector3(v[0], v[1], v[2])
 	return fallback
+
+
+# The middle of a light-rig segment's span, or its start where the span is endless.
+static func segment_middle(s: Dictionary) -> Vector3:
+	var lo: float = s["a_lo"]
+	var hi: float = s["a_hi"]
+	var a := 0.0
+	if not is_inf(lo) and not is_inf(hi):
+		a = 0.5 * (lo + hi)
+	return s["c"] + s["d"] * a
