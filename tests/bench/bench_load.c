@@ -201,19 +201,20 @@ static void bl_report_stream(const char *what, const struct trial_result *b, con
 /* Server CPU per delivered subscriber-frame at the largest passing load: all of it (the
  * engine's stepping and encoding included), and the sending alone (the daemon's network
  * thread) with its marginal cost between the smallest and the largest passing loads (what one
- * more subscriber-frame costs). The marginal is taken over the network thread only: the
- * engine's share moves between trials with the flame's particle count and the machine's
- * other load, which made the all-in difference negative at times. */
+ * more subscriber-frame costs) when the largest is at least twice the smallest. The marginal is
+ * taken over the network thread only: the engine's share moves between trials with the flame's
+ * particle count and the machine's other load, which made the all-in difference negative at
+ * times. */
 static void bl_report_cpu(const char *what, const struct trial_result *a, const struct trial_result *b)
 {
     if (!b->frames) return;
     printf("bench_load: server CPU per subscriber-frame, %s: %.0f us all-in, %.1f us sending, at %d subscribers", what,
            1e6 * b->cpu_s / (double)b->frames, 1e6 * b->net_cpu_s / (double)b->frames, b->n);
-    if (a->n && b->n > a->n && b->frames > a->frames)
+    if (a->n && b->n >= 2 * a->n && b->frames > a->frames)
         printf("; marginal sending %.1f us (%d -> %d subscribers)\n",
                1e6 * (b->net_cpu_s - a->net_cpu_s) / (double)(b->frames - a->frames), a->n, b->n);
-    else
-        printf("\n");
+    else /* a few subscribers more: the difference is within the noise of one trial's CPU time */
+        printf("; no marginal (passing loads %d -> %d: fewer than twice as many)\n", a->n, b->n);
 }
 
 /* The searches' figures: subscribers per stream, CPU per subscriber-frame, best send rate. */
