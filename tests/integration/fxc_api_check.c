@@ -290,8 +290,11 @@ static void check_engine(struct fxc_client *c)
         p.temperature = malloc(sizeof(float) * (p.capacity + 1));
         d = fxc_decode_particles(&ev.header, ev.payload, &p, err, sizeof err);
     }
+    /* Kelvin at the default flame's scale: no colder than the air (T_amb >= 250 K), no hotter than
+     * a source (T_init 2000 K) plus all the heat its fuel releases, k_pt / k_cf x F_init =
+     * 500 / 5 x 100 K, and a half float's rounding (8 K there). Hot spots reach 9000 K. */
     int sane = d == 0 && p.count > 0;
-    for (uint32_t i = 0; sane && i < p.count; i++) sane = p.temperature[i] > 0 && p.temperature[i] < 10000;
+    for (uint32_t i = 0; sane && i < p.count; i++) sane = p.temperature[i] >= 250 && p.temperature[i] <= 12008;
     check(sane && p.count == ev.header.count_or_width && !p.has_flags && !p.has_fuel,
           "fxc_decode_particles reads an engine frame without flag or fuel arrays: %u particles, T in kelvin (%s)",
           p.count, d ? err : "");

@@ -182,8 +182,21 @@ async def test_encodings(t):
     await e.close()
 
 
+def idle_scores():
+    """Both compute daemons' published scores (fxs:computes) are their leases' cost alone,
+    LEASE_STREAM_COST (0.05) each: what an earlier test's work added has decayed."""
+    z = R.cmd("ZRANGE", "fxs:computes", 0, -1, "WITHSCORES")
+    score = dict(zip(z[0::2], (float(v) for v in z[1::2])))
+    return all(d in score and score[d] <= 0.05 * len(leases(h)) + 0.02 for d, h in (("p", P), ("q", Q)))
+
+
 async def test_spread(t):
-    """Streams with subscribers spread over both compute daemons (least loaded takes)."""
+    """Streams with subscribers spread over both compute daemons (least loaded takes). A daemon
+    takes new streams while its score (engine load + 0.05 a lease) is the least, so the streams
+    are made once both daemons' scores are back to their leases' cost: the engine time an
+    earlier test left on one would otherwise rightly send all four to the other."""
+    t.check(await until(idle_scores, timeout=10), "both compute daemons idle first: %s" %
+            R.cmd("ZRANGE", "fxs:computes", 0, -1, "WITHSCORES"))
     e = await Client.connect(E)
     made = ["sp%d" % i for i in range(4)]
     for n in made:
