@@ -215,7 +215,7 @@ void eye_optics_from_params(const struct compound_eye_config *p, struct eye_opti
     o->tir = p->tir_policy;
 }
 
-static void eye_pigment_from_params(const struct compound_eye_config *p, struct eye_pigment *pg)
+void eye_pigment_from_params(const struct compound_eye_config *p, struct eye_pigment *pg)
 {
     pg->lattice = p->lattice;
     pg->dot_radius = p->dot_radius;

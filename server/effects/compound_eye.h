@@ -15,6 +15,7 @@
 #include "compound_eye_params.h"
 
 struct ocl;
+struct eye_pigment; /* eye_lut.h */
 
 #define COMPOUND_EYE_CL "compound_eye.cl" /* kernels/, and its build options */
 #define COMPOUND_EYE_CL_OPTS "-cl-fast-relaxed-math"
@@ -30,6 +31,8 @@ int compound_eye_build_options(struct ocl *ocl, char *opts);
 
 /* The optics of the parameters. */
 void eye_optics_from_params(const struct compound_eye_config *params, struct eye_optics *o);
+/* The pigment pattern of the parameters (the tests' reference draws the same one). */
+void eye_pigment_from_params(const struct compound_eye_config *params, struct eye_pigment *pg);
 
 /* Effect state, exposed for tests and the benchmark. */
 struct compound_eye;

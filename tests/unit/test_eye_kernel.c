@@ -271,24 +271,6 @@ static void test_table_products(void)
     cJSON_Delete(small);
 }
 
-/* The pigment of typed parameters (as compound_eye.c reads them). */
-static struct eye_pigment tek_pigment(const struct compound_eye_config *c)
-{
-    struct eye_pigment pg = {
-        .lattice = c->lattice,
-        .dot_radius = c->dot_radius,
-        .softness = c->dot_softness,
-        .ring_inner = c->ring_inner,
-        .ring_outer = c->ring_outer,
-        .glow_radius = c->glow_radius,
-    };
-    memcpy(pg.dot, c->dot_color, sizeof pg.dot);
-    memcpy(pg.base, c->base_color, sizeof pg.base);
-    memcpy(pg.ring, c->ring_color, sizeof pg.ring);
-    memcpy(pg.glow, c->glow_color, sizeof pg.glow);
-    return pg;
-}
-
 /* Every texel of a table's LLUT (those the kernel traced and those copied by symmetry) is the
  * colour the double-precision reference sees along its sample ray: the pigment where it lands,
  * the base colour with alpha 0 where it misses, the dot colour where it is absorbed. */
@@ -314,7 +296,8 @@ static void tek_table_vs_reference(const char *partial_json)
         struct eye_optics o;
         eye_optics_from_params(&cfg, &o);
         struct eye_ref_optics ro = tek_ref(&o);
-        struct eye_pigment pg = tek_pigment(&cfg);
+        struct eye_pigment pg;
+        eye_pigment_from_params(&cfg, &pg);
         const int C = (int)info.cells, D = (int)info.dirs, T = C + 2 * EYE_LUT_GUTTER, W = D * T;
         int agree = 0, n = 0, worst = 0;
         for (int tj = 0; llut && tj < D; tj++)
