@@ -33,6 +33,11 @@ enum fxs_kind {
 #define FXS_MAX_FPS_MIN 0.01
 #define FXS_MAX_FPS_MAX 1000.0
 
+/* The range of subscribe's max_particles (PROTOCOL.md §3.5): particles per kind 1 frame, served
+ * as the largest step of the daemon's ladder (1000, 2000, 5000, ... 2000000) at most the value. */
+#define FXS_MAX_PARTICLES_MIN 1000u
+#define FXS_MAX_PARTICLES_MAX 4194304u
+
 /* Codecs of kind 1 (particles) payloads (PROTOCOL.md §7.5; protocol/fxs_particles.h). */
 enum fxs_particle_codec {
     FXS_CODEC_PARTICLES = 2,        /* one block */
@@ -97,7 +102,7 @@ struct fxs_header {
     uint32_t flags;
 };
 
-/* Writes the 64 header bytes at out. */
+/* Writes the 64 header bytes at out (`total` 0: fxs_header_set_total). */
 static inline void fxs_header_pack(const struct fxs_header *h, uint8_t out[FXS_HEADER_BYTES])
 {
     uint64_t t;
@@ -117,6 +122,14 @@ static inline void fxs_header_pack(const struct fxs_header *h, uint8_t out[FXS_H
     fxs_put_u32(out + 52, h->height);
     fxs_put_u32(out + 56, h->flags);
 }
+
+/* The header's u32 at offset 60 (PROTOCOL.md §7.1), outside struct fxs_header so that struct's
+ * layout (part of libfxclient's ABI) stays as it was: in a kind 1 frame that is a subset of the
+ * stream's frame (subscribe's max_particles), `total`, the particle count of the frame it was
+ * drawn from; 0 in every other frame. frame: at least FXS_HEADER_BYTES bytes. */
+#define FXS_HEADER_TOTAL_OFFSET 60
+static inline uint32_t fxs_header_total(const uint8_t *frame) { return fxs_get_u32(frame + FXS_HEADER_TOTAL_OFFSET); }
+static inline void fxs_header_set_total(uint8_t *frame, uint32_t total) { fxs_put_u32(frame + FXS_HEADER_TOTAL_OFFSET, total); }
 
 /* Parses a frame of len bytes. Returns 0 and fills h, or -1 when the bytes are not a
  * valid v1 frame: short buffer, bad magic, header_bytes < 64 or beyond the buffer, or

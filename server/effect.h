@@ -44,6 +44,12 @@ struct effect_frame {
     struct fxs_particles particles;
     const float *texels;
     uint32_t channels;
+    /* Kind 1, for subscribers' budgets (budget.h): each particle's stable id (particles.n of
+     * them; the same particle keeps its id from frame to frame), and the options the effect's
+     * default payload is encoded with, so a subset is encoded alike. Required of kind 1 outputs
+     * (without ids a budget cannot be served: the engine reports an internal error). */
+    const uint32_t *ids;
+    struct fxs_particles_opts particle_opts;
 };
 
 /* Makes the default payload of a frame whose effect defers it (no-op otherwise): 0, or -1 with err. */

@@ -30,13 +30,15 @@
  * costs a few error events and log lines, not a busy loop. A `set` or `reset` retries at
  * once. Each failure reaches the stream's subscribers, the log and /metrics.
  *
- * Encodings (PROTOCOL.md §3.5): each output of a step becomes one frame per encoding that
- * subscribers take, all with the output's seq; an encoding nobody takes is not made, and its
- * older frames leave the hub (a subscriber never gets a frame older than the newest of the
- * kind). The slot keeps each kind's latest output (struct engine_kept), so a subscriber asking
- * for an encoding not made yet gets that frame at once, not at the next change of a stream
- * that emits only on change (the compound eye), nor at the end of a step in progress: a step
- * emits in its last slice, and what it emitted before stays valid meanwhile (effect.h). The
+ * Forms (budget.h: an encoding, PROTOCOL.md §3.5, and for kind 1 a particle budget): each
+ * output of a step becomes one frame per form that subscribers take, all with the output's seq;
+ * a form nobody takes is not made, and its older frames leave the hub (a subscriber never gets
+ * a frame older than the newest of the kind). A budget's frame is a subset of the output's
+ * particles (budget_select), or, when the output fits the budget, the very frame of the full
+ * form (made once, published in both). The slot keeps each kind's latest output (struct
+ * engine_kept), so a subscriber asking for a form not made yet gets that frame at once, not at
+ * the next change of a stream that emits only on change (the compound eye), nor at the end of a
+ * step in progress: a step emits in its last slice, and what it emitted before stays valid meanwhile (effect.h). The
  * time such a catch-up spends encoding counts as the stream's engine time. */
 #include <math.h>
 #include <stdio.h>
@@ -44,6 +46,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "budget.h"
 #include "clock.h"
 #include "engine.h"
 #include "fxs_engine.h"
@@ -61,10 +64,12 @@
 #define ENGINE_PACE_MAX_S 10.0 /* longest window of the achieved fps: a stream stuck reads 0 after it */
 
 /* The latest output of a kind as the effect emitted it (its pointers valid as effect.h says),
- * the header its frames carry, and the encodings published of it (bits 1 << enum fxs_encoding). */
+ * the header its frames carry, the forms published of it (bits 1 << form, budget.h), and for
+ * kind 1 its full frame in each encoding once made (a budget the output fits publishes it too). */
 struct engine_kept {
     bool valid;
-    unsigned published;
+    uint32_t published;
+    struct frame *full[FXS_ENCODING_COUNT];
     struct effect_frame ef;
     struct fxs_header hdr;
 };
@@ -102,10 +107,16 @@ struct engine_slot {
     double pace_shown;   /* and when it and the share were last published */
 };
 
+static void engine_kept_clear(struct engine_kept *k)
+{
+    for (int e = 0; e < FXS_ENCODING_COUNT; e++) frame_unref(k->full[e]);
+    *k = (struct engine_kept){0};
+}
+
 /* The effect's outputs are about to change (apply, reset, re-creation): nothing kept is valid. */
 static void engine_forget(struct engine_slot *sl)
 {
-    for (int k = 0; k <= FXS_KIND_MAX; k++) sl->kept[k].valid = false;
+    for (int k = 0; k <= FXS_KIND_MAX; k++) engine_kept_clear(&sl->kept[k]);
 }
 
 static void engine_drop_fx(struct engine_slot *sl)
@@ -182,25 +193,28 @@ static int engine_sync_params(struct engine *eng, struct engine_slot *sl)
     return 0;
 }
 
-/* The encodings wanted of a stream's frames (bits 1 << enum fxs_encoding): those its subscribers
- * here and on other daemons take (cluster mode); the default also while nobody subscribes (a
- * stream that runs idle keeps its newest frame for the next subscriber, PROTOCOL.md §8.3). */
-static unsigned engine_wanted(const struct stream_status *st)
+/* The forms wanted of a stream's frames of a kind (bits 1 << form, budget_kind_form): those its
+ * subscribers here and on other daemons take (cluster mode); the default also while nobody
+ * subscribes (a stream that runs idle keeps its newest frame for the next subscriber,
+ * PROTOCOL.md §8.3). */
+static uint32_t engine_wanted(const struct stream_status *st, int kind)
 {
-    unsigned m = st->lease.remote_demand;
-    for (int e = 0; e < FXS_ENCODING_COUNT; e++)
-        if (st->subscribers_by[e] > 0) m |= 1u << e;
-    return m ? m : 1u << FXS_ENCODING_DEFAULT;
+    uint32_t m = 0;
+    for (int form = 0; form < BUDGET_FORMS; form++)
+        if (st->subscribers_by[form] > 0 || (st->lease.remote_demand >> form & 1)) m |= 1u << budget_kind_form(form, kind);
+    return m ? m : 1u << BUDGET_FORM_DEFAULT;
 }
 
-/* The payload of an output in an encoding: the effect's (made now when deferred) or the engine
- * encoding, then *buf (free()) holds it. 0, or -1 with err. */
-static int engine_payload(struct engine_kept *k, enum fxs_encoding enc, struct fxs_header *h, const void **payload,
-                          size_t *len, uint8_t **buf, double *encode_ms, struct fx_err *err)
+/* The payload of an output in an encoding: the effect's default one (made now when deferred), or
+ * made here: the engine encoding, or the default codec of a subset's particles (sub: NULL, the
+ * output's own); then *buf (free()) holds it. 0, or -1 with err. */
+static int engine_payload(struct engine_kept *k, enum fxs_encoding enc, const struct fxs_particles *sub,
+                          struct fxs_header *h, const void **payload, size_t *len, uint8_t **buf, double *encode_ms,
+                          struct fx_err *err)
 {
     struct effect_frame *ef = &k->ef;
     *buf = NULL;
-    if (enc == FXS_ENCODING_DEFAULT || !fxs_kind_has_engine_form(ef->kind)) {
+    if (!sub && (enc == FXS_ENCODING_DEFAULT || !fxs_kind_has_engine_form(ef->kind))) {
         if (!ef->payload && effect_frame_encode(ef, err)) return -1;
         if (!ef->payload) return fx_fail(err, "internal", "", "an output of kind %u without a payload", ef->kind);
         *encode_ms += ef->encode_ms;
@@ -211,49 +225,91 @@ static int engine_payload(struct engine_kept *k, enum fxs_encoding enc, struct f
     }
     char msg[200];
     double t0 = clock_now();
-    int rc = ef->kind == FXS_KIND_PARTICLES
-                 ? fxs_engine_encode_particles(&ef->particles, FXS_ENGINE_ZSTD_LEVEL, buf, len, msg, sizeof msg)
-             : ef->texels ? fxs_engine_encode_texture(ef->texels, ef->count_or_width, ef->height, ef->channels,
-                                                      FXS_ENGINE_ZSTD_LEVEL, buf, len, msg, sizeof msg)
-                          : (snprintf(msg, sizeof msg, "the effect gave no texels"), -1);
-    if (rc) return fx_fail(err, "internal", "", "engine encoding of a kind %u frame: %s", ef->kind, msg);
+    const struct fxs_particles *p = sub ? sub : &ef->particles;
+    int rc = ef->kind != FXS_KIND_PARTICLES
+                 ? (ef->texels ? fxs_engine_encode_texture(ef->texels, ef->count_or_width, ef->height, ef->channels,
+                                                           FXS_ENGINE_ZSTD_LEVEL, buf, len, msg, sizeof msg)
+                               : (snprintf(msg, sizeof msg, "the effect gave no texels"), -1))
+             : enc == FXS_ENCODING_ENGINE ? fxs_engine_encode_particles(p, FXS_ENGINE_ZSTD_LEVEL, buf, len, msg, sizeof msg)
+                                          : fxs_particles_encode(p, &ef->particle_opts, buf, len, msg, sizeof msg);
+    if (rc) return fx_fail(err, "internal", "", "%s encoding of a kind %u frame: %s", fxs_encoding_name(enc), ef->kind, msg);
     *encode_ms += (clock_now() - t0) * 1e3;
-    h->codec = FXS_CODEC_ENGINE;
+    h->codec = enc == FXS_ENCODING_ENGINE ? FXS_CODEC_ENGINE : fxs_particles_codec(*buf, *len);
     *payload = *buf;
     return 0;
 }
 
-/* Publishes the kept output of a kind in one encoding (to the hub, and to export in cluster mode). */
-static int engine_publish(struct engine *eng, struct engine_slot *sl, struct engine_kept *k, enum fxs_encoding enc,
-                          double *encode_ms, struct fx_err *err)
+/* A new frame of the kept output in an encoding: of all its particles, or (step > 0) of the
+ * subset of step of them (budget_select; total in its header). NULL with err. */
+static struct frame *engine_frame(struct engine_kept *k, enum fxs_encoding enc, uint32_t step, double *encode_ms,
+                                  struct fx_err *err)
 {
     struct fxs_header h = k->hdr;
+    const struct effect_frame *ef = &k->ef;
+    struct fxs_particles sub = {0};
+    uint32_t *idx = NULL, total = 0;
+    int64_t m = 0;
+    if (step) {
+        if (!ef->ids) {
+            fx_fail(err, "internal", "", "a particle output without ids: no subset of %u particles", step);
+            return NULL;
+        }
+        idx = malloc((size_t)step * sizeof *idx);
+        m = idx ? budget_select(ef->ids, ef->particles.n, step, idx) : -1;
+        if (m < 0 || budget_gather(&ef->particles, idx, (uint32_t)m, &sub)) {
+            free(idx);
+            fx_fail(err, "internal", "", "out of memory for a subset of %u particles", step);
+            return NULL;
+        }
+        free(idx);
+        h.count_or_width = (uint32_t)m;
+        total = ef->particles.n;
+    }
     const void *payload = NULL;
     size_t len = 0;
     uint8_t *buf;
-    if (engine_payload(k, enc, &h, &payload, &len, &buf, encode_ms, err)) return -1;
+    int rc = engine_payload(k, enc, step ? &sub : NULL, &h, &payload, &len, &buf, encode_ms, err);
+    fxs_particles_free(&sub);
+    if (rc) return NULL;
     h.server_time_us = clock_wall_us();
-    struct frame *f = frame_new(&h, payload, len);
+    struct frame *f = frame_new(&h, total, payload, len);
     free(buf);
-    if (!f) return fx_fail(err, "internal", "", "out of memory for a frame of %zu bytes", len);
-    k->published |= 1u << enc;
-    if (eng->export_frame) eng->export_frame(eng->export_ctx, sl->s, sl->lease_gen, frame_ref(f));
-    hub_publish(eng->hub, sl->s, f);
+    if (!f) fx_fail(err, "internal", "", "out of memory for a frame of %zu bytes", len);
+    return f;
+}
+
+/* Publishes the kept output of a kind in one form (to the hub, and to export in cluster mode):
+ * a subset when the form's budget is below its particles, else its full frame in the form's
+ * encoding, made once for every form it serves. */
+static int engine_publish(struct engine *eng, struct engine_slot *sl, struct engine_kept *k, int form,
+                          double *encode_ms, struct fx_err *err)
+{
+    enum fxs_encoding enc = budget_form_encoding(form);
+    uint32_t step = budget_step(budget_form_level(form));
+    bool subset = step && k->ef.particles.n > step;
+    struct frame *f = !subset && k->full[enc] ? frame_ref(k->full[enc]) : NULL;
+    bool made = !f;
+    if (made && !(f = engine_frame(k, enc, subset ? step : 0, encode_ms, err))) return -1;
+    if (made && !subset && k->ef.kind == FXS_KIND_PARTICLES) k->full[enc] = frame_ref(f);
+    k->published |= 1u << form;
+    if (made && eng->export_frame) eng->export_frame(eng->export_ctx, sl->s, sl->lease_gen, frame_ref(f));
+    hub_publish(eng->hub, sl->s, form, f);
     return 0;
 }
 
-/* Publishes the kept output of a kind in each wanted encoding not yet published; the hub drops
- * older frames of the encodings not wanted. */
+/* Publishes the kept output of a kind in each wanted form not yet published; the hub drops older
+ * frames of the forms not wanted. */
 static int engine_publish_wanted(struct engine *eng, struct engine_slot *sl, int kind, double *encode_ms,
                                  struct fx_err *err)
 {
     struct engine_kept *k = &sl->kept[kind];
     struct stream_status st;
     hub_status(eng->hub, sl->s, &st);
-    unsigned want = fxs_kind_has_engine_form(kind) ? engine_wanted(&st) : 1u << FXS_ENCODING_DEFAULT;
-    for (int e = 0; e < FXS_ENCODING_COUNT; e++) {
-        if (!(want >> e & 1)) hub_drop(eng->hub, sl->s, (enum fxs_encoding)e, kind, k->hdr.seq);
-        else if (!(k->published >> e & 1) && engine_publish(eng, sl, k, (enum fxs_encoding)e, encode_ms, err)) return -1;
+    uint32_t want = engine_wanted(&st, kind);
+    for (int form = 0; form < BUDGET_FORMS; form++) {
+        if (budget_kind_form(form, kind) != form) continue; /* not a form of this kind */
+        if (!(want >> form & 1)) hub_drop(eng->hub, sl->s, form, kind, k->hdr.seq);
+        else if (!(k->published >> form & 1) && engine_publish(eng, sl, k, form, encode_ms, err)) return -1;
     }
     return 0;
 }
@@ -271,6 +327,7 @@ static int engine_emit(void *ctx, const struct effect_frame *ef)
     if (ef->kind < 1 || ef->kind > FXS_KIND_MAX) return -1;
     struct engine_slot *sl = c->sl;
     struct engine_kept *k = &sl->kept[ef->kind];
+    engine_kept_clear(k);
     *k = (struct engine_kept){.valid = true, .ef = *ef};
     k->hdr = (struct fxs_header){
         .kind = ef->kind,
@@ -295,7 +352,7 @@ static void engine_catch_up(struct engine *eng, struct engine_slot *sl)
         double ms = 0;
         if (!sl->kept[kind].valid || !fxs_kind_has_engine_form(kind)) continue;
         if (engine_publish_wanted(eng, sl, kind, &ms, &err)) {
-            sl->kept[kind].valid = false;
+            engine_kept_clear(&sl->kept[kind]);
             log_error("stream %s: %s", sl->s->name, err.message);
             hub_stream_error(eng->hub, sl->s, err.message);
         }

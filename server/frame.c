@@ -4,7 +4,7 @@
 
 #include "frame.h"
 
-struct frame *frame_new(const struct fxs_header *hdr, const void *payload, size_t n)
+struct frame *frame_new(const struct fxs_header *hdr, uint32_t total, const void *payload, size_t n)
 {
     if (n > UINT32_MAX) return NULL;
     struct frame *f = malloc(sizeof *f + FRAME_HEADROOM + FXS_HEADER_BYTES + n);
@@ -15,7 +15,9 @@ struct frame *frame_new(const struct fxs_header *hdr, const void *payload, size_
     f->hdr.payload_bytes = (uint32_t)n;
     f->bytes = f->storage + FRAME_HEADROOM;
     f->len = FXS_HEADER_BYTES + n;
+    f->total = total;
     fxs_header_pack(&f->hdr, f->bytes);
+    fxs_header_set_total(f->bytes, total);
     if (n) memcpy(f->bytes + FXS_HEADER_BYTES, payload, n);
     return f;
 }

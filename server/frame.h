@@ -18,13 +18,14 @@
 struct frame {
     atomic_int refs;
     struct fxs_header hdr;
+    uint32_t total; /* the header's `total` (fxs_header_total): kind 1 subsets only, else 0 */
     size_t len;     /* header + payload bytes */
     uint8_t *bytes; /* FRAME_HEADROOM bytes into storage */
     uint8_t storage[];
 };
 
-/* A new frame with one reference: hdr (payload_bytes set from n) packed, payload copied. */
-struct frame *frame_new(const struct fxs_header *hdr, const void *payload, size_t n);
+/* A new frame with one reference: hdr (payload_bytes set from n) and total packed, payload copied. */
+struct frame *frame_new(const struct fxs_header *hdr, uint32_t total, const void *payload, size_t n);
 struct frame *frame_ref(struct frame *f);
 void frame_unref(struct frame *f); /* NULL is fine */
 

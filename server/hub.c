@@ -168,8 +168,8 @@ void stream_ref(struct stream *s) { atomic_fetch_add(&s->refs, 1); }
 void stream_unref(struct stream *s)
 {
     if (!s || atomic_fetch_sub(&s->refs, 1) != 1) return;
-    for (int e = 0; e < FXS_ENCODING_COUNT; e++)
-        for (int k = 0; k <= FXS_KIND_MAX; k++) frame_unref(s->latest[e][k]);
+    for (int form = 0; form < BUDGET_FORMS; form++)
+        for (int k = 0; k <= FXS_KIND_MAX; k++) frame_unref(s->latest[form][k]);
     cJSON_Delete(s->params);
     free(s);
 }
@@ -253,18 +253,24 @@ void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease 
     pthread_mutex_unlock(&hub->mu);
 }
 
-void hub_add_subscriber(struct hub *hub, struct stream *s, enum fxs_encoding enc, int delta)
+void hub_add_subscriber(struct hub *hub, struct stream *s, int form, int delta)
 {
     pthread_mutex_lock(&hub->mu);
     s->subscribers += delta;
-    s->subscribers_by[enc] += delta;
+    s->subscribers_by[form] += delta;
     hub_changed(hub);
     pthread_mutex_unlock(&hub->mu);
 }
 
-void hub_publish(struct hub *hub, struct stream *s, struct frame *f)
+/* The slot of a kind's frames for a subscription of a form (budget_kind_form). */
+static struct frame **hub_slot(struct stream *s, int form, int kind)
 {
-    struct frame **slot = &s->latest[fxs_frame_encoding(f->hdr.kind, f->hdr.codec)][f->hdr.kind];
+    return &s->latest[budget_kind_form(form, kind)][kind];
+}
+
+void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f)
+{
+    struct frame **slot = hub_slot(s, form, f->hdr.kind);
     pthread_mutex_lock(&hub->mu);
     struct frame *old = *slot;
     *slot = f;
@@ -274,9 +280,9 @@ void hub_publish(struct hub *hub, struct stream *s, struct frame *f)
     if (hub->notify) hub->notify(hub->notify_ctx);
 }
 
-void hub_drop(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind, uint64_t seq)
+void hub_drop(struct hub *hub, struct stream *s, int form, int kind, uint64_t seq)
 {
-    struct frame **slot = &s->latest[enc][kind], *old = NULL;
+    struct frame **slot = hub_slot(s, form, kind), *old = NULL;
     pthread_mutex_lock(&hub->mu);
     if (*slot && (*slot)->hdr.seq < seq) {
         old = *slot;
@@ -303,25 +309,19 @@ void hub_stream_recovered(struct hub *hub, struct stream *s)
     pthread_mutex_unlock(&hub->mu);
 }
 
-/* The slot of a kind's frames in an encoding: kinds 3 and 4 have one form (the default's). */
-static struct frame **hub_slot(struct stream *s, enum fxs_encoding enc, int kind)
-{
-    return &s->latest[fxs_kind_has_engine_form(kind) ? enc : FXS_ENCODING_DEFAULT][kind];
-}
-
-struct frame *hub_latest(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind)
+struct frame *hub_latest(struct hub *hub, struct stream *s, int form, int kind)
 {
     pthread_mutex_lock(&hub->mu);
-    struct frame *f = *hub_slot(s, enc, kind);
+    struct frame *f = *hub_slot(s, form, kind);
     if (f) frame_ref(f);
     pthread_mutex_unlock(&hub->mu);
     return f;
 }
 
-uint64_t hub_latest_seq_of(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind)
+uint64_t hub_latest_seq_of(struct hub *hub, struct stream *s, int form, int kind)
 {
     pthread_mutex_lock(&hub->mu);
-    struct frame *f = *hub_slot(s, enc, kind);
+    struct frame *f = *hub_slot(s, form, kind);
     uint64_t seq = f ? f->hdr.seq : 0;
     pthread_mutex_unlock(&hub->mu);
     return seq;
@@ -330,10 +330,12 @@ uint64_t hub_latest_seq_of(struct hub *hub, struct stream *s, enum fxs_encoding 
 uint64_t hub_latest_seq(struct hub *hub, struct stream *s, int kind)
 {
     uint64_t seq = 0;
-    for (int e = 0; e < FXS_ENCODING_COUNT; e++) {
-        uint64_t q = hub_latest_seq_of(hub, s, (enum fxs_encoding)e, kind);
-        if (q > seq) seq = q;
+    pthread_mutex_lock(&hub->mu);
+    for (int form = 0; form < BUDGET_FORMS; form++) {
+        const struct frame *f = s->latest[form][kind];
+        if (f && f->hdr.seq > seq) seq = f->hdr.seq;
     }
+    pthread_mutex_unlock(&hub->mu);
     return seq;
 }
 

@@ -2,10 +2,11 @@
  *
  * A stream is the unit of compute: one effect instance stepped by the engine. The hub
  * holds each stream's parameter document and revision (written by the network thread
- * on `set`, read by the engine between steps), the latest encoded frame per encoding and
- * kind (written by the engine, read by the network thread: latest frame wins), the
- * subscribers of each encoding (what the engine encodes), and its counters. Everything mutable is guarded by one mutex held only for pointer swaps
- * and copies, never during a step or a send. The engine sleeps on the hub's condition
+ * on `set`, read by the engine between steps), the latest encoded frame per form and
+ * kind (written by the engine, read by the network thread: latest frame wins; a form is an
+ * encoding and a particle budget, budget.h), the subscribers of each form (what the engine
+ * encodes), and its counters. Everything mutable is guarded by one mutex held only for pointer
+ * swaps and copies, never during a step or a send. The engine sleeps on the hub's condition
  * variable; the network thread is woken through a callback (lws_cancel_service). */
 #ifndef FX_HUB_H
 #define FX_HUB_H
@@ -16,6 +17,7 @@
 #include <stdint.h>
 #include <cjson/cJSON.h>
 
+#include "budget.h"
 #include "effect.h"
 #include "err.h"
 #include "frame.h"
@@ -33,8 +35,8 @@
  * (CLOCK_MONOTONIC seconds; the lease's TTL counted from before its last renewal was sent, so a
  * daemon that was paused past it stops by itself; INFINITY while Redis is unreachable: the
  * owner keeps serving its own subscribers), continuing the frame numbers of the previous owner
- * from seq_from; remote_demand: the encodings other daemons' subscribers of it take (bits
- * 1 << enum fxs_encoding; 0: none). */
+ * from seq_from; remote_demand: the forms other daemons' subscribers of it take (bits
+ * 1 << form, budget.h; 0: none). */
 struct stream_lease {
     bool owned;
     unsigned remote_demand;
@@ -59,10 +61,10 @@ struct stream {
     struct stream_lease lease;
     bool destroyed;
     int subscribers;
-    int subscribers_by[FXS_ENCODING_COUNT]; /* of each encoding (enum fxs_encoding) */
-    /* The newest frame of each encoding and kind; kinds 3 and 4 only in [FXS_ENCODING_DEFAULT]
-     * (one form for every encoding, fxs_kind_has_engine_form). */
-    struct frame *latest[FXS_ENCODING_COUNT][FXS_KIND_MAX + 1];
+    int subscribers_by[BUDGET_FORMS]; /* of each form (budget.h) */
+    /* The newest frame of each form and kind; kind 2 only at level 0 of each encoding, kinds 3
+     * and 4 only in BUDGET_FORM_DEFAULT (budget_kind_form). */
+    struct frame *latest[BUDGET_FORMS][FXS_KIND_MAX + 1];
     char error[320];  /* last stream-level error, for subscribers and /healthz */
     uint64_t error_gen;
     bool failing;     /* since that error the stream has not stepped successfully */
@@ -126,7 +128,7 @@ void stream_unref(struct stream *s);
 struct stream_status {
     uint64_t rev, params_gen, reset_gen, error_gen;
     struct stream_lease lease;
-    int subscribers, subscribers_by[FXS_ENCODING_COUNT];
+    int subscribers, subscribers_by[BUDGET_FORMS];
     double fps, realtime, achieved_fps, engine_share;
     bool failing;
     char error[320]; /* the latest stream error ("" if none) */
@@ -148,26 +150,28 @@ cJSON *hub_get_params(struct hub *hub, struct stream *s, uint64_t *rev);
 void hub_request_reset(struct hub *hub, struct stream *s);
 /* Cluster mode (lease.c): the stream's lease as Redis last said. */
 void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease *lease);
-/* A subscription of an encoding added (delta +1) or dropped (-1). */
-void hub_add_subscriber(struct hub *hub, struct stream *s, enum fxs_encoding enc, int delta);
+/* A subscription of a form (budget.h) added (delta +1) or dropped (-1). */
+void hub_add_subscriber(struct hub *hub, struct stream *s, int form, int delta);
 
-/* Engine side: publish a frame (takes the reference) as the newest of its kind in the encoding
- * its codec belongs to (fxs_frame_encoding); report a stream error. */
-void hub_publish(struct hub *hub, struct stream *s, struct frame *f);
+/* Engine side: publish a frame (takes the reference) as the newest of its kind in a form (one
+ * frame object may be published in several: a full particle frame within a budget); report a
+ * stream error. */
+void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f);
 void hub_stream_error(struct hub *hub, struct stream *s, const char *message);
-/* Engine side: drops the newest frame of a kind in an encoding when it is older than seq (that
- * encoding is no longer made: a subscriber taking it later waits for the frame of seq). */
-void hub_drop(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind, uint64_t seq);
+/* Engine side: drops the newest frame of a kind in a form when it is older than seq (that form
+ * is no longer made: a subscriber taking it later waits for the frame of seq). */
+void hub_drop(struct hub *hub, struct stream *s, int form, int kind, uint64_t seq);
 /* The stream stepped successfully after errors (clears `failing`; the error text stays). */
 void hub_stream_recovered(struct hub *hub, struct stream *s);
-/* Network side: a reference to the newest frame of a kind in an encoding (NULL if none). */
-struct frame *hub_latest(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind);
-/* The number (header seq) of the newest frame of a kind in any encoding, 0 if none. Frames a
+/* Network side: a reference to the newest frame of a kind for a subscription of a form (kinds
+ * other than 1 in the form budget_kind_form gives; NULL if none). */
+struct frame *hub_latest(struct hub *hub, struct stream *s, int form, int kind);
+/* The number (header seq) of the newest frame of a kind in any form, 0 if none. Frames a
  * daemon publishes must number above it: sessions send a frame only when it is newer than the
  * last they sent. */
 uint64_t hub_latest_seq(struct hub *hub, struct stream *s, int kind);
-/* The number of the newest frame of a kind in one encoding, 0 if none. */
-uint64_t hub_latest_seq_of(struct hub *hub, struct stream *s, enum fxs_encoding enc, int kind);
+/* The number of the newest frame of a kind in one form (as hub_latest), 0 if none. */
+uint64_t hub_latest_seq_of(struct hub *hub, struct stream *s, int form, int kind);
 
 /* Engine: waits until the hub changes or the absolute CLOCK_MONOTONIC deadline (seconds). */
 void hub_wait(struct hub *hub, uint64_t seen_gen, double deadline);

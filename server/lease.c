@@ -313,8 +313,10 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
     int at = a->n++, k = 0; /* wanted here, per encoding */
     snprintf(a->engine_field, sizeof a->engine_field, "%s|engine", l->cfg->node_id);
     for (int i = 0; i < n; i++) {
-        if (st[i].subscribers_by[FXS_ENCODING_DEFAULT] > 0) a->v[a->n++] = ss[i]->name, a->v[a->n++] = l->cfg->node_id, k++;
-        if (st[i].subscribers_by[FXS_ENCODING_ENGINE] > 0) a->v[a->n++] = ss[i]->name, a->v[a->n++] = a->engine_field, k++;
+        if (st[i].subscribers_by[budget_form(FXS_ENCODING_DEFAULT, 0)] > 0)
+            a->v[a->n++] = ss[i]->name, a->v[a->n++] = l->cfg->node_id, k++;
+        if (st[i].subscribers_by[budget_form(FXS_ENCODING_ENGINE, 0)] > 0)
+            a->v[a->n++] = ss[i]->name, a->v[a->n++] = a->engine_field, k++;
     }
     snprintf(a->counts[0], sizeof a->counts[0], "%d", k);
     a->v[at] = a->counts[0];
@@ -335,10 +337,15 @@ static int lease_args_build(struct lease *l, struct stream **ss, int n, struct l
 
 static uint64_t lease_gen_of(const char *token) { return strtoull(token, NULL, 10); }
 
-/* A tick's demand: the encodings other daemons want (bits 1 << enum fxs_encoding). */
+/* A tick's demand: the encodings other daemons want (the script's bits 1 << enum fxs_encoding),
+ * as the forms of their full frames (bits 1 << form, budget.h; budgets are not offered in
+ * cluster mode). */
 static unsigned lease_demand(const redisReply *r)
 {
-    return r->type == REDIS_REPLY_INTEGER ? (unsigned)r->integer & ((1u << FXS_ENCODING_COUNT) - 1) : 0;
+    unsigned forms = 0;
+    for (int e = 0; e < FXS_ENCODING_COUNT && r->type == REDIS_REPLY_INTEGER; e++)
+        if (r->integer >> e & 1) forms |= 1u << budget_form((enum fxs_encoding)e, 0);
+    return forms;
 }
 
 /* The number of the latest frame of kind k in encoding enc in Redis, from its first 24 bytes

@@ -327,7 +327,7 @@ static bool net_pick_frame(struct net *net, struct session *ss)
         int i = (ss->rr + n) % ss->nsubs;
         struct sub *sub = &ss->subs[i];
         for (int k = 1; k <= FXS_KIND_MAX; k++) {
-            struct frame *f = hub_latest(&ss->srv->hub, sub->s, sub->enc, k);
+            struct frame *f = hub_latest(&ss->srv->hub, sub->s, sub->form, k);
             if (!f || f->hdr.seq <= sub->last_seq[k]) {
                 frame_unref(f);
                 continue;
@@ -418,7 +418,7 @@ static bool net_has_frame(struct session *ss)
 {
     for (int i = 0; i < ss->nsubs; i++)
         for (int k = 1; k <= FXS_KIND_MAX; k++) {
-            struct frame *f = hub_latest(&ss->srv->hub, ss->subs[i].s, ss->subs[i].enc, k);
+            struct frame *f = hub_latest(&ss->srv->hub, ss->subs[i].s, ss->subs[i].form, k);
             bool fresh = f && f->hdr.seq > ss->subs[i].last_seq[k];
             frame_unref(f);
             if (fresh) return true;

@@ -67,7 +67,7 @@ static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream 
     h.seq += sub->shift[h.kind];
     *last = h.seq;
     h.channel = s->channel;
-    struct frame *f = frame_new(&h, bytes + h.header_bytes, h.payload_bytes);
+    struct frame *f = frame_new(&h, fxs_header_total(bytes), bytes + h.header_bytes, h.payload_bytes);
     if (!f) return;
     if (h.kind == FXS_KIND_PARTICLES) atomic_store(&s->particles, h.count_or_width);
     if (!latest) {
@@ -75,7 +75,7 @@ static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream 
         hist_observe(&r->latency, fmax(age, 0.0));
         atomic_fetch_add(&r->srv->counters.cluster_frames_relayed, 1);
     }
-    hub_publish(&r->srv->hub, s, f);
+    hub_publish(&r->srv->hub, s, budget_form(fxs_frame_encoding(h.kind, h.codec), 0), f);
 }
 
 /* Whether frames of s should come through Redis: subscribers here, computed elsewhere. */

@@ -6,6 +6,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "budget.h"
 #include "clock.h"
 #include "effect.h"
 #include "log.h"
@@ -153,7 +154,7 @@ void session_open(struct session *ss, struct server *srv, enum access_role role)
 
 static void session_drop_sub(struct session *ss, int i)
 {
-    hub_add_subscriber(&ss->srv->hub, ss->subs[i].s, ss->subs[i].enc, -1);
+    hub_add_subscriber(&ss->srv->hub, ss->subs[i].s, ss->subs[i].form, -1);
     stream_unref(ss->subs[i].s);
     ss->subs[i] = ss->subs[--ss->nsubs];
 }
@@ -399,9 +400,25 @@ static int session_encoding(const cJSON *req, struct fx_err *err)
                    e->valuestring, suggest_text(&sg, hint, sizeof hint));
 }
 
+/* subscribe's `max_particles` as its budget level (budget.h; absent: 0, no budget), or -1 with err. */
+static int session_budget(const struct session *ss, const cJSON *req, struct fx_err *err)
+{
+    const cJSON *mp = cJSON_GetObjectItemCaseSensitive(req, "max_particles");
+    if (!mp) return 0;
+    double v = cJSON_IsNumber(mp) ? mp->valuedouble : NAN;
+    if (!(v >= FXS_MAX_PARTICLES_MIN && v <= FXS_MAX_PARTICLES_MAX && v == floor(v)))
+        return fx_fail(err, "bad_request", "max_particles", "max_particles must be an integer in [%u, %u]",
+                       FXS_MAX_PARTICLES_MIN, FXS_MAX_PARTICLES_MAX);
+    if (ss->srv->cluster)
+        return fx_fail(err, "bad_request", "max_particles",
+                       "max_particles is not offered in cluster mode: frames cross Redis per encoding only, so this "
+                       "daemon could not serve the budget (subscribe without it, or to a single-node daemon)");
+    return budget_level((uint32_t)v);
+}
+
 static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSON *id, struct fx_err *err)
 {
-    static const char *const allowed[] = {"stream", "max_fps", "encoding", NULL};
+    static const char *const allowed[] = {"stream", "max_fps", "encoding", "max_particles", NULL};
     if (session_only(req, "subscribe", allowed, err)) return -1;
     const cJSON *mf = cJSON_GetObjectItemCaseSensitive(req, "max_fps");
     if (mf && !(cJSON_IsNumber(mf) && mf->valuedouble >= FXS_MAX_FPS_MIN && mf->valuedouble <= FXS_MAX_FPS_MAX))
@@ -409,6 +426,9 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
                        FXS_MAX_FPS_MAX);
     int enc = session_encoding(req, err);
     if (enc < 0) return -1;
+    int level = session_budget(ss, req, err);
+    if (level < 0) return -1;
+    int form = budget_form((enum fxs_encoding)enc, level);
     struct stream *s = session_stream(ss, req, err);
     if (!s) return -1;
     int i = session_find_sub(ss, s);
@@ -427,21 +447,21 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
         i = ss->nsubs++;
         memset(&p[i], 0, sizeof p[i]);
         p[i].s = s; /* the reference passes to the subscription */
-        p[i].enc = (enum fxs_encoding)enc;
+        p[i].form = form;
         p[i].step_time = NAN; /* no step sent yet: the first frame (sim_time 0 too) starts one */
         struct stream_status st;
         hub_status(&ss->srv->hub, s, &st);
         p[i].error_gen = st.error_gen;
         if (ss->srv->cfg.pause_idle && !st.subscribers && !st.lease.remote_demand) /* paused: its frames are old */
             for (int k = 1; k <= FXS_KIND_MAX; k++) p[i].paused_seq[k] = hub_latest_seq(&ss->srv->hub, s, k);
-        hub_add_subscriber(&ss->srv->hub, s, p[i].enc, +1);
+        hub_add_subscriber(&ss->srv->hub, s, form, +1);
     } else {
-        stream_unref(s); /* already subscribed: only max_fps and the encoding change */
+        stream_unref(s); /* already subscribed: only max_fps, the encoding and the budget change */
         struct sub *sub = &ss->subs[i];
-        if (sub->enc != (enum fxs_encoding)enc) { /* the newest frames again, in the new encoding */
-            hub_add_subscriber(&ss->srv->hub, sub->s, sub->enc, -1);
-            hub_add_subscriber(&ss->srv->hub, sub->s, (enum fxs_encoding)enc, +1);
-            sub->enc = (enum fxs_encoding)enc;
+        if (sub->form != form) { /* the newest frames again, in the new form */
+            hub_add_subscriber(&ss->srv->hub, sub->s, sub->form, -1);
+            hub_add_subscriber(&ss->srv->hub, sub->s, form, +1);
+            sub->form = form;
             memset(sub->last_seq, 0, sizeof sub->last_seq);
             sub->step_time = NAN;
         }
@@ -450,7 +470,8 @@ static int session_op_subscribe(struct session *ss, const cJSON *req, const cJSO
     cJSON *r = session_reply("subscribed", id);
     cJSON_AddStringToObject(r, "stream", ss->subs[i].s->name);
     cJSON_AddNumberToObject(r, "channel", ss->subs[i].s->channel);
-    cJSON_AddStringToObject(r, "encoding", fxs_encoding_name(ss->subs[i].enc));
+    cJSON_AddStringToObject(r, "encoding", fxs_encoding_name((enum fxs_encoding)enc));
+    if (level) cJSON_AddNumberToObject(r, "max_particles", budget_step(level));
     session_send(ss, r);
     if (ss->srv->wake) ss->srv->wake(ss); /* the current frame goes out right away */
     return 0;

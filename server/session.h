@@ -19,7 +19,8 @@
 
 struct sub {
     struct stream *s;
-    enum fxs_encoding enc; /* which form of kinds 1 and 2 it takes (subscribe's `encoding`) */
+    int form;             /* the form of kinds 1 and 2 it takes (budget.h: subscribe's `encoding`
+                             and `max_particles`) */
     double min_interval;  /* 1 / max_fps, 0 = unlimited */
     double last_sent;     /* CLOCK_MONOTONIC seconds of the last step's first frame sent */
     double step_time;     /* that step's sim_time (NAN before the first): its other kinds are not held back by max_fps */

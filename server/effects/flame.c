@@ -773,13 +773,13 @@ bool flame_substep_syncs(const struct flame *fl) { return fl->clock.steps % (uin
 int flame_finish(struct flame *fl, struct fx_err *err) { return fl_finish(fl, err); }
 int flame_reset(struct flame *fl, struct fx_err *err) { return fl_restart(fl, err); }
 
-int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, struct fx_err *err)
+int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, uint32_t *id, struct fx_err *err)
 {
     int n = fl->n;
     struct fl_set *S = &fl->buf.st[fl->buf.cur];
-    void *dst[3] = {pos, vel, flags};
+    void *dst[4] = {pos, vel, flags, id}; /* struct fl_set's first four */
     cl_int ef = 0, rc = CL_SUCCESS;
-    for (int i = 0; i < 3 && rc == CL_SUCCESS && n > 0; i++)
+    for (int i = 0; i < 4 && rc == CL_SUCCESS && n > 0; i++)
         rc = clEnqueueReadBuffer(ocl_queue(fl->ocl), *fl_set_mem(S, i), CL_FALSE, 0, fl_sizes[i] * n, dst[i], 0, NULL,
                                  NULL);
     if (rc != CL_SUCCESS) {

@@ -77,8 +77,8 @@ bool flame_substep_syncs(const struct flame *fl);
 int flame_finish(struct flame *fl, struct fx_err *err);
 /* Back to the scene's solids at time 0 (the protocol's reset). */
 int flame_reset(struct flame *fl, struct fx_err *err);
-/* Reads a frame's particles (flame_count of them: pos and vel 4 floats each, flags one) and
- * checks the error flag: the count, or -1 with err (a runaway included). */
-int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, struct fx_err *err);
+/* Reads a frame's particles (flame_count of them: pos and vel 4 floats each, flags and the stable
+ * id one each) and checks the error flag: the count, or -1 with err (a runaway included). */
+int flame_read_frame(struct flame *fl, float *pos, float *vel, uint32_t *flags, uint32_t *id, struct fx_err *err);
 
 #endif

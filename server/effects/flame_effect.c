@@ -23,11 +23,11 @@
  * second encoding thread slows the simulation more than it speeds the encoding. */
 #define FL_ENC_THREADS_MAX 8
 
-/* The frame's arrays: as read back (pos, vel 4 floats a particle, flags), and as the codec
- * takes them (xyz and vel scaled, T, F, the flag byte). */
+/* The frame's arrays: as read back (pos, vel 4 floats a particle, flags, stable ids), and as the
+ * codec takes them (xyz and vel scaled, T, F, the flag byte). */
 struct fl_frame_arrays {
     float *h_pos, *h_vel, *xyz, *temp, *fuel, *vel; /* vel: 3 per particle, the frame's velocities */
-    uint32_t *h_flags;
+    uint32_t *h_flags, *h_id;
     uint8_t *flags8;
     int cap;
 };
@@ -52,7 +52,7 @@ struct flame *flame_effect_sim(void *state) { return ((struct flame_stream *)sta
 
 static void fl_frame_arrays_free(struct fl_frame_arrays *f)
 {
-    void *a[] = {f->h_pos, f->h_vel, f->xyz, f->temp, f->fuel, f->vel, f->h_flags, f->flags8};
+    void *a[] = {f->h_pos, f->h_vel, f->xyz, f->temp, f->fuel, f->vel, f->h_flags, f->h_id, f->flags8};
     for (size_t i = 0; i < sizeof a / sizeof a[0]; i++) free(a[i]);
 }
 
@@ -67,11 +67,14 @@ static int fl_frame_buffers(struct fl_frame_arrays *f, int n)
         *fp[i] = malloc(fs[i] * sizeof(float) * (size_t)cap);
     }
     free(f->h_flags);
+    free(f->h_id);
     free(f->flags8);
     f->h_flags = malloc(sizeof(uint32_t) * (size_t)cap);
+    f->h_id = malloc(sizeof(uint32_t) * (size_t)cap);
     f->flags8 = malloc((size_t)cap);
     f->cap = 0;
-    if (!f->h_pos || !f->h_vel || !f->xyz || !f->temp || !f->fuel || !f->vel || !f->h_flags || !f->flags8) return -1;
+    if (!f->h_pos || !f->h_vel || !f->xyz || !f->temp || !f->fuel || !f->vel || !f->h_flags || !f->h_id || !f->flags8)
+        return -1;
     f->cap = cap;
     return 0;
 }
@@ -82,7 +85,7 @@ static int fl_read_frame(struct flame_stream *fs, struct fx_err *err)
     struct fl_frame_arrays *f = &fs->frame;
     int n = flame_count(fs->sim);
     if (fl_frame_buffers(f, n)) return fx_fail(err, "internal", "", "out of memory for %d particles", n);
-    if (flame_read_frame(fs->sim, f->h_pos, f->h_vel, f->h_flags, err) < 0) return -1;
+    if (flame_read_frame(fs->sim, f->h_pos, f->h_vel, f->h_flags, f->h_id, err) < 0) return -1;
     float s = (float)fs->out.space_scale;
     for (int i = 0; i < n; i++) {
         for (int k = 0; k < 3; k++) f->xyz[3 * i + k] = s * f->h_pos[4 * i + k];
@@ -98,14 +101,12 @@ static int fl_read_frame(struct flame_stream *fs, struct fx_err *err)
 static int fl_encode(void *self, struct effect_frame *fr, struct fx_err *err)
 {
     struct flame_stream *fs = self;
-    struct fxs_particles_opts opts = {
-        .pos_bits = fs->out.pos_bits, .vel_bits = fs->out.vel_bits, .threads = fs->out.enc_threads};
     size_t len = 0;
     char msg[160];
     double t0 = clock_now() * 1e3;
     free(fs->payload);
     fs->payload = NULL;
-    if (fxs_particles_encode(&fr->particles, &opts, &fs->payload, &len, msg, sizeof msg))
+    if (fxs_particles_encode(&fr->particles, &fr->particle_opts, &fs->payload, &len, msg, sizeof msg))
         return fx_fail(err, "internal", "", "flame: particle encoding failed: %s", msg);
     fr->codec = fxs_particles_codec(fs->payload, len);
     fr->payload = fs->payload;
@@ -133,6 +134,8 @@ static int fl_emit_frame(struct flame_stream *fs, effect_emit_fn emit, void *ctx
         .encode = fl_encode,
         .self = fs,
         .particles = {(uint32_t)n, f->xyz, f->temp, f->fuel, f->flags8, fs->out.velocities ? f->vel : NULL},
+        .ids = f->h_id,
+        .particle_opts = {.pos_bits = fs->out.pos_bits, .vel_bits = fs->out.vel_bits, .threads = fs->out.enc_threads},
     };
     int ret = emit(ctx, &fr);
     struct fx_err end_err = {0};

@@ -104,8 +104,20 @@ static void fs_vec(const cJSON *v, double out[3])
     for (int k = 0; k < 3; k++) out[k] = cJSON_GetArrayItem(v, k)->valuedouble;
 }
 
+static void fs_add(void *ctx, struct flame_shape_acc *acc, const struct flame_particles *p)
+{
+    (void)ctx;
+    flame_shape_add(acc, p);
+}
+
 int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, struct flame_shape *out,
                     struct fx_err *err)
+{
+    return flame_shape_frames(ocl, doc, warm_s, seconds, fs_add, NULL, out, err);
+}
+
+int flame_shape_frames(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, flame_shape_each each,
+                       void *ctx, struct flame_shape *out, struct fx_err *err)
 {
     struct flame_config cfg;
     struct flame *fl = params_load(flame_params, doc, &cfg, sizeof cfg, err) ? NULL : flame_new(ocl, &cfg, err);
@@ -129,7 +141,7 @@ int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double sec
         struct flame_particles p;
         rc = flame_run(fl, per_frame > 0 ? per_frame : 1, err) || flame_read(fl, &p, err);
         if (rc) break;
-        flame_shape_add(&acc, &p);
+        each(ctx, &acc, &p);
         flame_particles_free(&p);
     }
     flame_shape_result(&acc, out);

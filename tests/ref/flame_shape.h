@@ -37,6 +37,14 @@ struct flame_shape {
 int flame_shape_run(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, struct flame_shape *out,
                     struct fx_err *err);
 
+/* What flame_shape_run does with each state it measures: acc is the run's accumulator, set up for
+ * the scene (its sources' centre, up and T_ign; flame_shape_run's adds p to it). */
+typedef void (*flame_shape_each)(void *ctx, struct flame_shape_acc *acc, const struct flame_particles *p);
+/* flame_shape_run with each(ctx, acc, p) called for every state (p as flame_read gives it, ids
+ * included); out: the run's accumulator's figures. 0 or -1 (err). */
+int flame_shape_frames(struct ocl *ocl, const cJSON *doc, double warm_s, double seconds, flame_shape_each each,
+                       void *ctx, struct flame_shape *out, struct fx_err *err);
+
 /* The JSON overrides of the flame's built-in preset `name`, or NULL. */
 const char *flame_shape_preset(const char *name);
 

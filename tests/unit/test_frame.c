@@ -1,6 +1,7 @@
 /* test_frame.c — the 64-byte binary frame header of fxstream.v1 (protocol/fxs_frame.h).
  *
- * The header is the one thing every client parses, so the tests pin it to the
+ * The header is the one thing every client parses (and the daemon's frames, server/frame.h,
+ * carry a subset's total at offset 60), so the tests pin it to the
  * PROTOCOL.md §7.1 table byte by byte (not only pack/unpack agreeing
  * with each other), round-trip every field at its extremes (sim_time by its bits),
  * and check that malformed frames are rejected while a longer header from a future
@@ -13,6 +14,7 @@
 #include <string.h>
 
 #include "check.h"
+#include "frame.h"
 #include "fxs_frame.h"
 
 static struct fxs_header test_sample(void)
@@ -70,7 +72,10 @@ static void test_offsets(void)
     CHECK(test_le(b + 48, 4) == h.count_or_width, "count_or_width at 48");
     CHECK(test_le(b + 52, 4) == h.height, "height at 52");
     CHECK(test_le(b + 56, 4) == h.flags, "flags at 56");
-    CHECK(test_le(b + 60, 4) == 0, "reserved at 60 is 0");
+    CHECK(test_le(b + 60, 4) == 0, "total at 60 is 0 unless set");
+    fxs_header_set_total(b, 0x01020304u);
+    CHECK(test_le(b + 60, 4) == 0x01020304u && fxs_header_total(b) == 0x01020304u, "total at 60");
+    CHECK(test_le(b + 56, 4) == h.flags, "total leaves flags alone");
 }
 
 static int test_same_bits(double a, double b) { return memcmp(&a, &b, sizeof a) == 0; }
@@ -192,6 +197,20 @@ static void test_reject_payload_mismatch(void)
 }
 
 /* A future version with 16 more header bytes: accepted, payload after byte 80. */
+/* The daemon's frames carry a subset's total at offset 60 (0 for the others). */
+static void test_frame_total(void)
+{
+    struct fxs_header h = test_sample();
+    const uint8_t payload[3] = {1, 2, 3};
+    struct frame *f = frame_new(&h, 123456, payload, sizeof payload), *g = frame_new(&h, 0, payload, sizeof payload);
+    CHECK(f && f->total == 123456 && test_le(f->bytes + 60, 4) == 123456, "total packed");
+    CHECK(g && g->total == 0 && test_le(g->bytes + 60, 4) == 0, "no total: 0");
+    struct fxs_header u;
+    CHECK(f && fxs_header_unpack(f->bytes, f->len, &u) == 0 && u.payload_bytes == 3, "still a valid frame");
+    frame_unref(f);
+    frame_unref(g);
+}
+
 static void test_longer_header(void)
 {
     struct fxs_header h = test_sample(), g;
@@ -221,5 +240,6 @@ int main(void)
     RUN(test_reject_header_bytes);
     RUN(test_reject_payload_mismatch);
     RUN(test_longer_header);
+    RUN(test_frame_total);
     return CHECK_DONE();
 }

@@ -2,14 +2,20 @@
  * all-or-nothing `set`, broadcasts to other subscribers, message size / depth / rate
  * limits. Sessions are driven through session_handle/session_receive and their queued
  * replies read back with session_pop; no engine runs (frames are not needed here). */
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "budget.h"
 #include "check.h"
 #include "log.h"
 #include "session.h"
 
 static struct server t_srv;
+
+/* The forms (budget.h) of full frames in each encoding. */
+#define T_DEFAULT budget_form(FXS_ENCODING_DEFAULT, 0)
+#define T_ENGINE budget_form(FXS_ENCODING_ENGINE, 0)
 
 static void t_server_init(void)
 {
@@ -250,12 +256,12 @@ static void test_subscribe_encoding(void)
     cJSON *r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"engine\"}");
     CHECK(!strcmp(t_op(r), "subscribed") && !strcmp(cJSON_GetObjectItem(r, "encoding")->valuestring, "engine"), "engine");
     cJSON_Delete(r);
-    CHECK(st->subscribers == 1 && st->subscribers_by[FXS_ENCODING_ENGINE] == 1 && st->subscribers_by[FXS_ENCODING_DEFAULT] == 0,
+    CHECK(st->subscribers == 1 && st->subscribers_by[T_ENGINE] == 1 && st->subscribers_by[T_DEFAULT] == 0,
           "counted as engine");
     r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\"}");
     CHECK(!strcmp(cJSON_GetObjectItem(r, "encoding")->valuestring, "default"), "omitted: default");
     cJSON_Delete(r);
-    CHECK(st->subscribers == 1 && st->subscribers_by[FXS_ENCODING_ENGINE] == 0 && st->subscribers_by[FXS_ENCODING_DEFAULT] == 1,
+    CHECK(st->subscribers == 1 && st->subscribers_by[T_ENGINE] == 0 && st->subscribers_by[T_DEFAULT] == 1,
           "re-subscribing moves the subscription to the default");
     r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"engin\"}");
     CHECK(!strcmp(t_code(r), "bad_request") && !strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "encoding") &&
@@ -267,9 +273,73 @@ static void test_subscribe_encoding(void)
     r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"x\",\"max_fps\":0}");
     CHECK(!strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "max_fps"), "max_fps is checked first");
     cJSON_Delete(r);
-    CHECK(st->subscribers_by[FXS_ENCODING_DEFAULT] == 1 && st->subscribers_by[FXS_ENCODING_ENGINE] == 0, "errors changed nothing");
+    CHECK(st->subscribers_by[T_DEFAULT] == 1 && st->subscribers_by[T_ENGINE] == 0, "errors changed nothing");
     cJSON_Delete(t_req(s, "{\"op\":\"unsubscribe\",\"stream\":\"f\"}"));
-    CHECK(st->subscribers == 0 && st->subscribers_by[FXS_ENCODING_DEFAULT] == 0, "unsubscribed");
+    CHECK(st->subscribers == 0 && st->subscribers_by[T_DEFAULT] == 0, "unsubscribed");
+    t_server_free();
+}
+
+/* The `max_particles` of a reply, or -1 when absent. */
+static double t_max_particles(const cJSON *r)
+{
+    const cJSON *v = cJSON_GetObjectItem(r, "max_particles");
+    return cJSON_IsNumber(v) ? v->valuedouble : -1;
+}
+
+/* subscribe's `max_particles`: served as the ladder's step at most the value (the reply says
+ * which), counted in its form beside the encoding; subscribing again replaces it (omitted:
+ * removed); anything but an integer in [1000, 4194304] is bad_request (param max_particles),
+ * checked after max_fps and encoding and before the stream, and changes nothing. */
+static void test_subscribe_budget(void)
+{
+    t_server_init();
+    struct session *s = t_open();
+    t_drain(s);
+    cJSON_Delete(t_req(s, "{\"op\":\"create\",\"effect\":\"flame\",\"stream\":\"f\"}"));
+    struct stream *st = t_srv.hub.streams[0];
+    static const struct { const char *asked; double served; int level; } ladder[] = {
+        {"1000", 1000, 1}, {"1999", 1000, 1}, {"25000", 20000, 5}, {"200000", 200000, 8},
+        {"1e6", 1000000, 10}, {"4194304", 2000000, 11},
+    };
+    for (size_t i = 0; i < sizeof ladder / sizeof ladder[0]; i++) {
+        char req[160];
+        snprintf(req, sizeof req, "{\"op\":\"subscribe\",\"stream\":\"f\",\"max_particles\":%s}", ladder[i].asked);
+        cJSON *r = t_req(s, req);
+        CHECK(!strcmp(t_op(r), "subscribed") && t_max_particles(r) == ladder[i].served, "%s served as %g, not %g",
+              ladder[i].asked, t_max_particles(r), ladder[i].served);
+        cJSON_Delete(r);
+        int form = budget_form(FXS_ENCODING_DEFAULT, ladder[i].level);
+        CHECK(st->subscribers == 1 && st->subscribers_by[form] == 1 && st->subscribers_by[T_DEFAULT] == 0,
+              "%s counted in form %d", ladder[i].asked, form);
+    }
+    cJSON *r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"engine\",\"max_particles\":5000}");
+    CHECK(t_max_particles(r) == 5000 && !strcmp(cJSON_GetObjectItem(r, "encoding")->valuestring, "engine"), "engine, 5000");
+    cJSON_Delete(r);
+    int engine5k = budget_form(FXS_ENCODING_ENGINE, budget_level(5000));
+    CHECK(st->subscribers_by[engine5k] == 1 && st->subscribers == 1, "engine 5000 counted in form %d", engine5k);
+    static const char *const bad[] = {"999", "4194305", "1500.5", "-1000", "\"2000\"", "true", "null", "[2000]", "1e300"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char req[160];
+        snprintf(req, sizeof req, "{\"op\":\"subscribe\",\"stream\":\"f\",\"max_particles\":%s}", bad[i]);
+        r = t_req(s, req);
+        const cJSON *param = cJSON_GetObjectItem(r, "param");
+        CHECK(!strcmp(t_code(r), "bad_request") && cJSON_IsString(param) && !strcmp(param->valuestring, "max_particles"),
+              "max_particles %s -> %s", bad[i], t_code(r));
+        cJSON_Delete(r);
+    }
+    r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"nope\",\"max_particles\":10}");
+    CHECK(!strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "max_particles"), "checked before the stream");
+    cJSON_Delete(r);
+    r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"max_particles\":10,\"encoding\":\"x\"}");
+    CHECK(!strcmp(cJSON_GetObjectItem(r, "param")->valuestring, "encoding"), "checked after encoding");
+    cJSON_Delete(r);
+    CHECK(st->subscribers == 1 && st->subscribers_by[engine5k] == 1, "errors changed nothing");
+    r = t_req(s, "{\"op\":\"subscribe\",\"stream\":\"f\",\"encoding\":\"engine\"}");
+    CHECK(t_max_particles(r) == -1, "omitted: no max_particles in the reply");
+    cJSON_Delete(r);
+    CHECK(st->subscribers_by[engine5k] == 0 && st->subscribers_by[T_ENGINE] == 1, "omitted: the budget is removed");
+    cJSON_Delete(t_req(s, "{\"op\":\"unsubscribe\",\"stream\":\"f\"}"));
+    CHECK(st->subscribers == 0 && st->subscribers_by[T_ENGINE] == 0, "unsubscribed");
     t_server_free();
 }
 
@@ -471,6 +541,7 @@ int main(void)
     RUN(test_set_all_or_nothing);
     RUN(test_broadcast);
     RUN(test_subscribe_encoding);
+    RUN(test_subscribe_budget);
     RUN(test_stream_error_event);
     RUN(test_receive_limits);
     RUN(test_rate_limit);
