@@ -90,6 +90,12 @@ static void fxc_node_free(struct fxc_node *n)
     free(n);
 }
 
+uint32_t fxc_frame_total(const struct fxc_event *ev)
+{
+    if (ev->type != FXC_EVENT_FRAME || ev->header.kind != FXS_KIND_PARTICLES || !ev->payload) return 0;
+    return fxs_header_total(ev->payload - ev->header.header_bytes); /* the message's bytes, header first */
+}
+
 void fxc_event_free(struct fxc_event *ev)
 {
     if (!ev) return;
@@ -579,14 +585,26 @@ int64_t fxc_subscribe(struct fxc_client *c, const char *stream, double max_fps, 
 int64_t fxc_subscribe_encoding(struct fxc_client *c, const char *stream, double max_fps, enum fxs_encoding enc,
                                char *eb, size_t el)
 {
+    return fxc_subscribe_budget(c, stream, max_fps, enc, 0, eb, el);
+}
+
+int64_t fxc_subscribe_budget(struct fxc_client *c, const char *stream, double max_fps, enum fxs_encoding enc,
+                             uint32_t max_particles, char *eb, size_t el)
+{
     if ((unsigned)enc >= FXS_ENCODING_COUNT) {
         fxws_set_err(eb, el, "subscribe: encoding %d is none of FXS_ENCODING_*", (int)enc);
+        return -1;
+    }
+    if (max_particles && (max_particles < FXS_MAX_PARTICLES_MIN || max_particles > FXS_MAX_PARTICLES_MAX)) {
+        fxws_set_err(eb, el, "subscribe: max_particles %u is outside [%u, %u] (0: no budget)", max_particles,
+                     FXS_MAX_PARTICLES_MIN, FXS_MAX_PARTICLES_MAX);
         return -1;
     }
     cJSON *req = fxc_stream_req("subscribe", stream, eb, el);
     if (!req) return -1;
     if ((max_fps > 0 && !cJSON_AddNumberToObject(req, "max_fps", max_fps)) ||
-        (enc != FXS_ENCODING_DEFAULT && !cJSON_AddStringToObject(req, "encoding", fxs_encoding_name(enc)))) {
+        (enc != FXS_ENCODING_DEFAULT && !cJSON_AddStringToObject(req, "encoding", fxs_encoding_name(enc))) ||
+        (max_particles && !cJSON_AddNumberToObject(req, "max_particles", max_particles))) {
         cJSON_Delete(req);
         fxws_set_err(eb, el, "out of memory");
         return -1;

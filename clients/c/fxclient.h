@@ -160,6 +160,17 @@ FXC_API int64_t fxc_subscribe(struct fxc_client *c, const char *stream, double m
  * encoding (and max_fps) of the subscription. */
 FXC_API int64_t fxc_subscribe_encoding(struct fxc_client *c, const char *stream, double max_fps,
                                        enum fxs_encoding enc, char *errbuf, size_t errlen);
+/* fxc_subscribe_encoding with a particle budget (PROTOCOL.md §3.5 `max_particles`): at most
+ * max_particles particles in each kind 1 frame, in [FXS_MAX_PARTICLES_MIN, FXS_MAX_PARTICLES_MAX]
+ * (0: no budget, as fxc_subscribe_encoding). The server serves the largest step of its ladder
+ * (1000, 2000, 5000, ... 2000000) at most the value; the `subscribed` reply's max_particles says
+ * which. A frame with more particles than that comes as a subset of exactly that many, drawn in
+ * proportion and the same particles frame to frame where they survive; fxc_frame_total tells
+ * how many the stream's frame had, so what each particle stands for scales by total / count.
+ * Subscribing again replaces the budget (0 removes it). A value outside the range is refused
+ * here (-1), as the server would. */
+FXC_API int64_t fxc_subscribe_budget(struct fxc_client *c, const char *stream, double max_fps, enum fxs_encoding enc,
+                                     uint32_t max_particles, char *errbuf, size_t errlen);
 FXC_API int64_t fxc_unsubscribe(struct fxc_client *c, const char *stream, char *errbuf, size_t errlen);
 /* {"op":"get","stream"}: the reply is `params` (read values with fxc_param_number/_json). */
 FXC_API int64_t fxc_get(struct fxc_client *c, const char *stream, char *errbuf, size_t errlen);
@@ -219,6 +230,12 @@ FXC_API int fxc_wait(struct fxc_client *c, int64_t id, struct fxc_event *reply, 
  * fxc_send refuses). */
 FXC_API int fxc_request(struct fxc_client *c, const char *json, struct fxc_event *reply, int timeout_ms,
                         char *errbuf, size_t errlen);
+
+/* A kind 1 frame's `total` (PROTOCOL.md §7.1, offset 60) for a frame fxc_poll returned: the
+ * particle count of the stream's frame it is a subset of (a subscription with a budget,
+ * fxc_subscribe_budget), or 0 when it is the whole frame (and for every other kind). Bytes from
+ * elsewhere: fxs_header_total. */
+FXC_API uint32_t fxc_frame_total(const struct fxc_event *ev);
 
 /* Releases what fxc_poll or fxc_wait put in ev and zeroes it. Safe on a zeroed event. */
 FXC_API void fxc_event_free(struct fxc_event *ev);

@@ -36,6 +36,7 @@ struct fxctl_opts {
     double max_fps;    /* subscribe --max-fps, < 0 when not given */
     int kind;          /* subscribe --kind, 0 = every kind */
     const char *encoding; /* subscribe --encoding, NULL when not given */
+    long max_particles;   /* subscribe --max-particles, 0 when not given */
     const char *out_dir;
     int human;         /* stdout is a terminal and no --json: print for people */
     const char *cmd;
@@ -56,17 +57,24 @@ static const char fxctl_help[] =
     "  get NAME                      complete parameters of NAME with their rev\n"
     "  set NAME K=V [K=V ...]        change parameters (all or nothing)\n"
     "  reset NAME                    restart NAME's simulation\n"
-    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--out DIR]\n"
+    "  subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E]\n"
+    "            [--max-particles P] [--out DIR]\n"
     "                                receive N steps of NAME (a step: the frames computed\n"
     "                                together, e.g. energy's texture and its light rig),\n"
     "                                or with --kind N frames of kind K (1 particles,\n"
     "                                2 texture, 3 light rig, 4 look-up table); with\n"
     "                                --encoding engine particles and textures come in\n"
-    "                                the engine encoding (PROTOCOL.md §7.8); prints the\n"
+    "                                the engine encoding (PROTOCOL.md §7.8); with\n"
+    "                                --max-particles at most P particles a frame\n"
+    "                                (1000..4194304; the server serves the largest of\n"
+    "                                its steps 1000, 2000, 5000, ... 2000000 at most P,\n"
+    "                                its reply's max_particles); prints the\n"
     "                                subscribed reply, then one JSON line per frame (stream,\n"
     "                                channel, kind, seq, param_rev, sim_time,\n"
     "                                server_time_us, latency_ms, codec, payload_bytes,\n"
-    "                                width and height, or count, flags) and any params\n"
+    "                                width and height, or count and, when a budget cut\n"
+    "                                the frame to a subset, total: the stream frame's\n"
+    "                                count; flags) and any params\n"
     "                                event of NAME; with --out writes the payload to\n"
     "                                DIR/NAME-SEQ.exr (texture: codec 1 as received, the\n"
     "                                engine encoding's halves as an EXR, its payload to\n"
@@ -169,6 +177,9 @@ static int fxctl_set_opt(struct fxctl_opts *o, const char *name, const char *val
     } else if (!strcmp(name, "--encoding")) {
         if (strcmp(val, "default") && strcmp(val, "engine")) return fxctl_usage("--encoding needs default or engine", val);
         o->encoding = val;
+    } else if (!strcmp(name, "--max-particles")) {
+        if (fxctl_parse_long(val, FXS_MAX_PARTICLES_MIN, &o->max_particles) || o->max_particles > FXS_MAX_PARTICLES_MAX)
+            return fxctl_usage("--max-particles needs an integer in [1000, 4194304]", val);
     } else if (!strcmp(name, "--count")) {
         if (fxctl_parse_long(val, 1, &o->count)) return fxctl_usage("--count needs a positive integer", val);
     } else if (!strcmp(name, "--out")) {
@@ -260,7 +271,8 @@ static const struct fxctl_cmd fxctl_cmds[] = {
     { "get", 1, 1, "stream", "get NAME" },
     { "set", 2, -1, "stream", "set NAME K=V [K=V ...]" },
     { "reset", 1, 1, "stream", "reset NAME" },
-    { "subscribe", 1, 1, "stream", "subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--out DIR]" },
+    { "subscribe", 1, 1, "stream",
+      "subscribe NAME --frames N [--max-fps F] [--kind K] [--encoding E] [--max-particles P] [--out DIR]" },
     { "watch", 0, 0, NULL, "watch [--count N]" },
     { "presets", 0, 1, "effect", "presets [EFFECT]" },
     { "preset", 3, 4, NULL, "preset load NAME PRESET | preset save NAME PRESET [DOC] | preset delete EFFECT PRESET" },
@@ -308,8 +320,9 @@ static int fxctl_validate(const struct fxctl_opts *o, const struct fxctl_cmd *cm
         fprintf(stderr, "fxctl: wrong number of arguments; usage: fxctl %s\nTry 'fxctl --help'.\n", cmd->synopsis);
         return FXCTL_USAGE;
     }
-    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->encoding || o->out_dir))
-        return fxctl_usage("--frames, --max-fps, --kind, --encoding and --out go with subscribe only", NULL);
+    if (!sub && (o->frames || o->max_fps >= 0 || o->kind || o->encoding || o->max_particles || o->out_dir))
+        return fxctl_usage("--frames, --max-fps, --kind, --encoding, --max-particles and --out go with subscribe only",
+                           NULL);
     if (sub && !o->frames) return fxctl_usage("subscribe needs --frames N", NULL);
     if (o->count && strcmp(cmd->name, "watch")) return fxctl_usage("--count goes with watch only", NULL);
     if (!strcmp(cmd->name, "preset")) {
@@ -349,6 +362,7 @@ static int fxctl_build(const struct fxctl_opts *o, const struct fxctl_cmd *cmd, 
     if (!strcmp(cmd->name, "create")) cJSON_AddStringToObject(req, "stream", o->args[i++]);
     if (o->max_fps >= 0) cJSON_AddNumberToObject(req, "max_fps", o->max_fps);
     if (o->encoding) cJSON_AddStringToObject(req, "encoding", o->encoding);
+    if (o->max_particles) cJSON_AddNumberToObject(req, "max_particles", (double)o->max_particles);
     if (i < o->nargs) params = cJSON_AddObjectToObject(req, "params");
     for (; i < o->nargs && !r; i++) r = fxctl_add_kv(params, o->args[i]);
     return r;

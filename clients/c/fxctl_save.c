@@ -32,8 +32,11 @@ void fxctl_frame_line(char *buf, size_t len, const char *stream, const struct fx
     cJSON *name = cJSON_CreateString(stream);
     char *qname = cJSON_PrintUnformatted(name);
     char size[96], sim[32];
+    uint32_t total = fxc_frame_total(ev);
     if (h->kind == FXS_KIND_TEXTURE || h->kind == FXS_KIND_LUT)
         snprintf(size, sizeof size, "\"width\":%" PRIu32 ",\"height\":%" PRIu32, h->count_or_width, h->height);
+    else if (total)
+        snprintf(size, sizeof size, "\"count\":%" PRIu32 ",\"total\":%" PRIu32, h->count_or_width, total);
     else
         snprintf(size, sizeof size, "\"count\":%" PRIu32, h->count_or_width);
     fxctl_fmt_double(sim, sizeof sim, h->sim_time);

@@ -150,6 +150,14 @@ static int ld_opt_max_fps(struct ld_opts *o, const char *v)
     return 0;
 }
 
+static int ld_opt_max_particles(struct ld_opts *o, const char *v)
+{
+    if (ld_parse_long(v, &o->max_particles) || o->max_particles < FXS_MAX_PARTICLES_MIN ||
+        o->max_particles > FXS_MAX_PARTICLES_MAX)
+        return ld_usage("--max-particles needs an integer in [1000, 4194304]", v);
+    return 0;
+}
+
 static int ld_opt_set(struct ld_opts *o, const char *v)
 {
     if (o->nsets >= LD_MAX_SETS) return ld_usage("too many --set options (at most 16)", v);
@@ -237,6 +245,7 @@ static const struct ld_optdef ld_optdefs[] = {
     { "--mode", 1, ld_opt_mode },
     { "--streams", 1, ld_opt_streams },
     { "--max-fps", 1, ld_opt_max_fps },
+    { "--max-particles", 1, ld_opt_max_particles },
     { "--set", 1, ld_opt_set },
     { "--rate", 1, ld_opt_rate },
     { "--duration", 1, ld_opt_duration },
@@ -298,6 +307,7 @@ static int ld_check_set(struct ld_opts *o)
 {
     if (o->streams_spec) return ld_usage("--streams goes with --mode subscribe (set mode uses --set)", NULL);
     if (o->max_fps >= 0) return ld_usage("--max-fps goes with --mode subscribe", NULL);
+    if (o->max_particles) return ld_usage("--max-particles goes with --mode subscribe", NULL);
     if (o->min_delivered >= 0) return ld_usage("--min-delivered goes with --mode subscribe", NULL);
     if (o->max_skipped >= 0) return ld_usage("--max-skipped goes with --mode subscribe", NULL);
     if (o->rate < 0) o->rate = LD_DEFAULT_RATE;

@@ -40,6 +40,7 @@ struct ld_opts {
     enum ld_mode mode;
     const char *streams_spec;
     double max_fps;              /* < 0: not given */
+    long max_particles;          /* subscribe's max_particles; 0: not given */
     struct ld_setspec sets[LD_MAX_SETS];
     int nsets;
     double rate;                 /* < 0: not given */

@@ -180,6 +180,7 @@ static cJSON *ld_options_json(const struct ld_opts *o)
     if (o->mode == LD_SUBSCRIBE)
         cJSON_AddStringToObject(opt, "streams", o->streams_spec ? o->streams_spec : LD_DEFAULT_STREAMS);
     if (o->max_fps > 0) cJSON_AddNumberToObject(opt, "max_fps", o->max_fps);
+    if (o->max_particles) cJSON_AddNumberToObject(opt, "max_particles", (double)o->max_particles);
     if (o->mode == LD_SET) cJSON_AddNumberToObject(opt, "rate", o->rate);
     if (o->mode == LD_SET) cJSON_AddBoolToObject(opt, "keep", o->keep);
     cJSON_AddBoolToObject(opt, "payloads", o->payloads);

@@ -41,6 +41,7 @@ static void ld_send_subscribes(struct ld *ld, struct fxp_conn *c, const struct l
         cJSON_AddNumberToObject(req, "id", k + 1);
         cJSON_AddStringToObject(req, "stream", ld->streams[g->stream[k]].name);
         if (ld->o->max_fps > 0) cJSON_AddNumberToObject(req, "max_fps", ld->o->max_fps);
+        if (ld->o->max_particles) cJSON_AddNumberToObject(req, "max_particles", (double)ld->o->max_particles);
         if (fxp_send_json(c, req)) ld_error(ld, "cannot queue a subscribe request");
         cJSON_Delete(req);
     }

@@ -24,10 +24,10 @@ HEADER = struct.Struct("<4sHHIIQdQIIIIII")  # the 64-byte v1 header, PROTOCOL.md
 def parse_frame(data):
     """Returns the header fields as a dict plus 'payload'."""
     (magic, hbytes, kind, channel, rev, seq, sim_time, t_us, codec, nbytes, w, h, flags,
-     _reserved) = HEADER.unpack_from(data)
+     total) = HEADER.unpack_from(data)
     return dict(magic=magic, header_bytes=hbytes, kind=kind, channel=channel, param_rev=rev,
                 seq=seq, sim_time=sim_time, server_time_us=t_us, codec=codec,
-                payload_bytes=nbytes, width=w, height=h, flags=flags,
+                payload_bytes=nbytes, width=w, height=h, flags=flags, total=total,
                 payload=data[hbytes:])
 
 
