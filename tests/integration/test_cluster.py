@@ -299,6 +299,18 @@ async def test_events(t):
         await x.close()
 
 
+async def test_no_budget(t):
+    """subscribe's max_particles is refused in cluster mode, saying why (frames cross Redis per
+    encoding only): a budgeted subscriber never receives full frames instead."""
+    c = await Client.connect(B)
+    r = await c.request("subscribe", stream="flame", max_particles=5000)
+    t.check(r.get("op") == "error" and r.get("code") == "bad_request" and r.get("param") == "max_particles" and
+            "cluster mode" in r.get("message", ""), "max_particles in cluster mode: bad_request saying why (%s)" % r)
+    r = await c.request("subscribe", stream="flame")
+    t.check(r.get("op") == "subscribed" and "max_particles" not in r, "the connection goes on: subscribe without it")
+    await c.close()
+
+
 async def test_concurrent_sets(t):
     """Sets through two daemons at once: all succeed, distinct consecutive revs, no update lost."""
     base = (await get(A, "c1"))["rev"]
@@ -854,7 +866,7 @@ if __name__ == "__main__":
         A = cluster_daemon(R, "a")
         B = cluster_daemon(R, "b")
         C = cluster_daemon(R, "c")
-        s.run([test_seeded, test_shared_state, test_events, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
+        s.run([test_seeded, test_shared_state, test_events, test_no_budget, test_concurrent_sets, test_rebase, test_reload_same_rev, test_create_race,
                test_reset, test_metrics, test_duplicate_node, test_idle_links, test_flushall, test_bad_values,
                test_redis_down, test_redis_back_empty, test_redis_hung, test_redis_wins, test_flags,
                test_password, test_shutdown])
