@@ -5,8 +5,8 @@
  * server's errors (with its "did you mean"), bad input refused without harm to the
  * connection, a second client's set arriving as an event, frames named by their stream and
  * decoded (particles, light rig, look-up tables; the engine encoding's particles and textures,
- * as a native engine plugin reads them), events that outlive fxc_close, the end of the
- * connection when the daemon stops, and fxc_set_log.
+ * as a native engine plugin reads them; a particle budget's subsets and their total), events
+ * that outlive fxc_close, the end of the connection when the daemon stops, and fxc_set_log.
  *
  * Usage: fxc_api_check URL DAEMON_PID. Prints "ok   what" or "FAIL what" per check and
  * "info ..." lines; exit status 1 on any failure. Every wait is bounded. */
@@ -322,6 +322,48 @@ static void check_engine(struct fxc_client *c)
     }
 }
 
+/* A subset of the flame's particles cut to a budget (fxc_frame_total says from how many). */
+static int is_subset_frame(const struct fxc_event *ev, const void *arg)
+{
+    return is_frame(ev, arg) && fxc_frame_total(ev) > ev->header.count_or_width;
+}
+
+/* A particle budget: fxc_subscribe_budget asks for one, the reply says the step served, frames
+ * come as subsets whose total fxc_frame_total reads, and they decode as any kind 1 frame. */
+static void check_budget(struct fxc_client *c)
+{
+    struct fxc_event ev;
+    struct want_frame flame = { "flame", FXS_KIND_PARTICLES };
+    char err[256];
+    int64_t id = fxc_subscribe_budget(c, "flame", 0, FXS_ENCODING_DEFAULT, 1500, err, sizeof err);
+    int r = fxc_wait(c, id, &ev, 10000, err, sizeof err);
+    check(r == 0 && !strcmp(ev.op, "subscribed") && strstr(ev.json, "\"max_particles\":1000"),
+          "fxc_subscribe_budget(flame, 1500): served as 1000 (%s)", r ? err : ev.json);
+    fxc_event_free(&ev);
+    check(fxc_subscribe_budget(c, "flame", 0, FXS_ENCODING_DEFAULT, 999, err, sizeof err) == -1 && strstr(err, "999"),
+          "a budget below 1000 is refused before sending: %s", err);
+    r = wait_event(c, &ev, 20000, is_subset_frame, &flame);
+    struct fxc_particles p = { .capacity = 1000 };
+    p.xyz = malloc(sizeof(float) * 3 * 1000);
+    p.temperature = malloc(sizeof(float) * 1000);
+    p.flags = malloc(1000);
+    int d = r == 1 ? fxc_decode_particles(&ev.header, ev.payload, &p, err, sizeof err) : -1;
+    check(r == 1 && d == 0 && p.count == 1000 && ev.header.count_or_width == 1000 && fxc_frame_total(&ev) > 1000,
+          "a subset of 1000 decodes into arrays of 1000, fxc_frame_total %u (%s)", r == 1 ? fxc_frame_total(&ev) : 0,
+          d ? err : "");
+    free(p.xyz);
+    free(p.temperature);
+    free(p.flags);
+    fxc_event_free(&ev);
+    id = fxc_subscribe_budget(c, "flame", 0, FXS_ENCODING_DEFAULT, 0, err, sizeof err);
+    r = fxc_wait(c, id, &ev, 10000, err, sizeof err);
+    check(r == 0 && !strstr(ev.json, "max_particles"), "fxc_subscribe_budget(..., 0) removes the budget");
+    fxc_event_free(&ev);
+    id = fxc_unsubscribe(c, "flame", err, sizeof err);
+    fxc_wait(c, id, &ev, 10000, err, sizeof err);
+    fxc_event_free(&ev);
+}
+
 /* The daemon stops: poll reports the end; an event taken before fxc_close outlives it. */
 static void check_end(struct fxc_client *c, long pid)
 {
@@ -383,6 +425,7 @@ int main(int argc, char **argv)
     check_two_clients(argv[1], a);
     check_frames(a);
     check_engine(a);
+    check_budget(a);
     check_failures_and_log(argv[1]);
     check_end(a, atol(argv[2]));
     printf("info longest fxc_poll(..., 0, ...) call: %.3f ms wall, %.3f ms CPU\n", longest_poll_ms,
