@@ -293,7 +293,7 @@ static int engine_publish(struct engine *eng, struct engine_slot *sl, struct eng
     if (made && !subset && k->ef.kind == FXS_KIND_PARTICLES) k->full[enc] = frame_ref(f);
     k->published |= 1u << form;
     if (made && eng->export_frame) eng->export_frame(eng->export_ctx, sl->s, sl->lease_gen, frame_ref(f));
-    hub_publish(eng->hub, sl->s, form, f);
+    hub_publish(eng->hub, sl->s, form, f, !made);
     return 0;
 }
 

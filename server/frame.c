@@ -15,7 +15,6 @@ struct frame *frame_new(const struct fxs_header *hdr, uint32_t total, const void
     f->hdr.payload_bytes = (uint32_t)n;
     f->bytes = f->storage + FRAME_HEADROOM;
     f->len = FXS_HEADER_BYTES + n;
-    f->total = total;
     fxs_header_pack(&f->hdr, f->bytes);
     fxs_header_set_total(f->bytes, total);
     if (n) memcpy(f->bytes + FXS_HEADER_BYTES, payload, n);

@@ -18,7 +18,6 @@
 struct frame {
     atomic_int refs;
     struct fxs_header hdr;
-    uint32_t total; /* the header's `total` (fxs_header_total): kind 1 subsets only, else 0 */
     size_t len;     /* header + payload bytes */
     uint8_t *bytes; /* FRAME_HEADROOM bytes into storage */
     uint8_t storage[];

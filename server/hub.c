@@ -268,7 +268,7 @@ static struct frame **hub_slot(struct stream *s, int form, int kind)
     return &s->latest[budget_kind_form(form, kind)][kind];
 }
 
-void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f)
+void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f, bool again)
 {
     struct frame **slot = hub_slot(s, form, f->hdr.kind);
     pthread_mutex_lock(&hub->mu);
@@ -276,7 +276,7 @@ void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f)
     *slot = f;
     pthread_mutex_unlock(&hub->mu);
     frame_unref(old);
-    atomic_fetch_add(&s->frames_produced, 1);
+    if (!again) atomic_fetch_add(&s->frames_produced, 1);
     if (hub->notify) hub->notify(hub->notify_ctx);
 }
 

@@ -153,10 +153,11 @@ void hub_set_lease(struct hub *hub, struct stream *s, const struct stream_lease 
 /* A subscription of a form (budget.h) added (delta +1) or dropped (-1). */
 void hub_add_subscriber(struct hub *hub, struct stream *s, int form, int delta);
 
-/* Engine side: publish a frame (takes the reference) as the newest of its kind in a form (one
- * frame object may be published in several: a full particle frame within a budget); report a
- * stream error. */
-void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f);
+/* Engine side: publish a frame (takes the reference) as the newest of its kind in a form; again:
+ * the frame is already published in another form (a full particle frame within a budget), so
+ * it does not count as a frame made again. */
+void hub_publish(struct hub *hub, struct stream *s, int form, struct frame *f, bool again);
+/* Engine side: reports a stream error. */
 void hub_stream_error(struct hub *hub, struct stream *s, const char *message);
 /* Engine side: drops the newest frame of a kind in a form when it is older than seq (that form
  * is no longer made: a subscriber taking it later waits for the frame of seq). */

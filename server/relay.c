@@ -75,7 +75,7 @@ static void relay_deliver(struct relay *r, struct relay_sub *sub, struct stream 
         hist_observe(&r->latency, fmax(age, 0.0));
         atomic_fetch_add(&r->srv->counters.cluster_frames_relayed, 1);
     }
-    hub_publish(&r->srv->hub, s, budget_form(fxs_frame_encoding(h.kind, h.codec), 0), f);
+    hub_publish(&r->srv->hub, s, budget_form(fxs_frame_encoding(h.kind, h.codec), 0), f, false);
 }
 
 /* Whether frames of s should come through Redis: subscribers here, computed elsewhere. */
