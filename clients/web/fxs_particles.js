@@ -67,6 +67,7 @@ export function parseHeader(buf) {
     count: v.getUint32(48, true),
     height: v.getUint32(52, true),
     flags: v.getUint32(56, true),
+    total: v.getUint32(60, true), // particles: the stream frame's count this one is a budget's subset of (§3.5), else 0
   };
   h.width = h.count;
   if (h.headerBytes < HEADER_BYTES || h.headerBytes > b.length) throw new Error('frame: bad header_bytes');

@@ -51,6 +51,7 @@ export const FLAME_DEFAULTS = {
   mode: 'volume', rl: 15, threshold: 0.3, intensity: 1.0, smoke: true, smokeT: 1000, smokeColor: '#595959',
   whiteT: 4000, exposure: 1.0, velLines: false, velScale: 0.005, tongues: 1.0, smokeDensity: 1.0, density: 1.0, kernel: VOLUME_KERNEL,
 };
+const HDR_GAIN = 0.08; // hdr: a sprite's emission scale
 const LINE_ALPHA = 0.3; // a hot particle's segment at the particle; × (0.35 + 0.65 heat), fading to the tip
 
 function mulberry32(seed) {
@@ -198,7 +199,7 @@ void main() {
 // emission × heat, smoke density, 1). Below the clip plane (the sources' plane)
 // the kernel is cut with a short fade, so no light is drawn under the base.
 const SPLAT_VERT = /* glsl */ `${COMMON_VERT}
-uniform float smokeT, smokeOn, kernel;
+uniform float smokeT, smokeOn, kernel, weight;  // weight: particles each one stands for, ^(1/3)
 uniform vec2 upScreen;   // world-up component of the camera's right and up vectors
 varying vec4 vW;
 varying vec3 vClip;      // the particle's height above the clip plane, its change across the sprite (x, y)
@@ -210,7 +211,7 @@ void main() {
   if (e <= 0.0 && smoke <= 0.0) { hide(); return; }
   float size = kernel * radius;
   place(ipos, size);
-  vW = vec4(e, e * heat, hot ? 0.0 : smoke, 1.0);
+  vW = weight * vec4(e, e * heat, hot ? 0.0 : smoke, 1.0);
   vClip = vec3(dot(ipos - clipPoint, upW), 0.5 * size * upScreen);
 }`;
 
@@ -298,6 +299,7 @@ export class FlameView {
     this.params = null;
     this.stageKey = '';
     this.count = 0;
+    this.total = 0;
     this.capacity = 0;
     this.newFrame = false;
     this.stage = makeStage();
@@ -310,7 +312,7 @@ export class FlameView {
     this.pbvr = new THREE.ShaderMaterial({
       vertexShader: PBVR_VERT, fragmentShader: PBVR_FRAG,
       uniforms: {
-        ...common, randTex: { value: randomTable() }, alphaTex: { value: spriteTexture(true) }, pass: { value: 0 },
+        ...common, radius: { value: 0.002 }, randTex: { value: randomTable() }, // its own radius: a subset's sprites grow more alphaTex: { value: spriteTexture(true) }, pass: { value: 0 },
         nmax: { value: NMAX }, threshold: { value: 0.3 }, smokeT: { value: 1000 }, smokeOn: { value: 1 },
         smokeAlpha: { value: 0.5 }, smokeColor: { value: new THREE.Color(0.1, 0.1, 0.1) },
       },
@@ -318,13 +320,13 @@ export class FlameView {
     });
     this.hdr = new THREE.ShaderMaterial({
       vertexShader: HDR_VERT, fragmentShader: HDR_FRAG,
-      uniforms: { ...common, alphaTex: { value: spriteTexture(false) }, gain: { value: 0.08 } },
+      uniforms: { ...common, alphaTex: { value: spriteTexture(false) }, gain: { value: HDR_GAIN } },
       depthTest: true, depthWrite: false, blending: THREE.AdditiveBlending, transparent: true,
     });
     this.splat = new THREE.ShaderMaterial({
       vertexShader: SPLAT_VERT, fragmentShader: SPLAT_FRAG,
       uniforms: {
-        ...common, smokeT: { value: 1000 }, smokeOn: { value: 1 }, kernel: { value: VOLUME_KERNEL }, clipFade: { value: 0.001 },
+        ...common, smokeT: { value: 1000 }, smokeOn: { value: 1 }, kernel: { value: VOLUME_KERNEL }, weight: { value: 1 }, clipFade: { value: 0.001 },
         upScreen: { value: new THREE.Vector2() },
       },
       depthTest: false, depthWrite: false, transparent: true, blending: THREE.CustomBlending,
@@ -465,10 +467,11 @@ export class FlameView {
   onFrame(h, buf) {
     if (h.kind !== 1 || (h.codec !== 2 && h.codec !== 3)) return false;
     this.decoder ??= new ParticleDecoder();
-    return this.decoder.decode(h, buf).then((p) => p && this.showParticles(p));
+    return this.decoder.decode(h, buf).then((p) => p && this.showParticles(p, h.total));
   }
 
-  showParticles(p) {
+  // total: the stream's particles when p is a budget's subset of them (PROTOCOL.md §3.5), else 0.
+  showParticles(p, total = 0) {
     if (p.n > this.capacity) {
       // New geometries: three fixes an instanced geometry's largest instance count when it
       // first draws it, so growing the attributes in place would draw only the old count.
@@ -490,6 +493,7 @@ export class FlameView {
       this.ivel.needsUpdate = true;
     }
     this.count = p.n;
+    this.total = Math.max(total, p.n);
     this.geoms.pbvr.instanceCount = this.geoms.hdr.instanceCount = this.geoms.lines.instanceCount = p.n;
     this.newFrame = true;
     return true;
@@ -511,12 +515,19 @@ export class FlameView {
     const pr = this.params || {}, s = this.settings, { scale, d, up, base } = this.frameOf();
     this.pbvr.uniforms.upW.value.copy(up); // the uniforms every material shares
     this.pbvr.uniforms.clipPoint.value.copy(this.clipPoint(up, base, scale));
+    // A subset of the stream's particles (a budget) stands for total / count particles each:
+    // their spacing is (total / count)^(1/3) times the stream's, so the kernels and sprites grow
+    // by that and the summed emission (volume, hdr) by as much again per particle; pbvr's opaque
+    // sprites cover the area the left-out ones would have, (total / count)^(1/2).
+    const stand = this.total / Math.max(1, this.count), grow = Math.cbrt(stand);
     for (const m of [this.pbvr, this.hdr, this.splat]) {
       m.uniforms.tAmb.value = pr.T_amb ?? 300;
       m.uniforms.tMax.value = s.whiteT;
-      m.uniforms.radius.value = d;
+      m.uniforms.radius.value = d * (m === this.pbvr ? Math.sqrt(stand) : grow);
       m.uniforms.pointScale.value = h / (2 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
     }
+    this.splat.uniforms.weight.value = grow;
+    this.hdr.uniforms.gain.value = HDR_GAIN * grow;
     const u = this.pbvr.uniforms, lu = this.lineMat.uniforms;
     u.threshold.value = s.threshold;
     lu.velScale.value = s.velScale; // tAmb, tMax and the table: the uniforms all three materials share
@@ -652,7 +663,7 @@ export class FlameView {
   // point of the sources' outlines on screen, as a fraction of the view's height from the top.
   info() {
     return {
-      mode: this.settings.mode, count: this.count, cam: this.camera.position.toArray(), target: this.orbit?.target?.toArray(),
+      mode: this.settings.mode, count: this.count, total: this.total, cam: this.camera.position.toArray(), target: this.orbit?.target?.toArray(),
       velocities: this.hasVel, lineVertices: this.lineVertices, baseRow: this.baseRow(),
     };
   }

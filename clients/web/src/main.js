@@ -6,7 +6,8 @@
 // Query options: url=, flame=pbvr|hdr (the flame's mode; volume by default), rl=N (PBVR's repeat
 // passes), grid=COLSxROWS, aa=0 (no multisampling), drawfps=N (draw at most N frames a
 // second, e.g. under software WebGL), streams=A,B (show only these streams), views=K,L (only
-// these kinds of view: flame, wave, scene, eye).
+// these kinds of view: flame, wave, scene, eye), particles=N (draw at most N particles a
+// frame of a particle stream: the budget asked of the daemon, budget.js).
 // Every view keeps the View contract of view.js (what main.js may call, and when).
 import * as THREE from 'three';
 import GUI from 'lil-gui';
@@ -14,6 +15,7 @@ import { parseHeader } from '../fxs_particles.js';
 import { Conn } from './conn.js';
 import { StreamPanel } from './panel.js';
 import { STATS_HELP, StreamStats } from './stats.js';
+import { drawLimit, nextBudget } from './budget.js';
 import { FLAME_DEFAULTS, FLAME_MODES, FlameView } from './flame.js';
 import { WAVE_DEFAULTS, WaveView } from './wave.js';
 import { SceneView } from './scene.js';
@@ -208,7 +210,8 @@ async function attach(info) {
   }
   st.maxFps = START_FPS;
   st.minLat = undefined;
-  const sub = await conn.request('subscribe', { stream: st.name, max_fps: st.maxFps });
+  st.maxParticles = schema.outputs?.some((o) => o.kind === 1) ? particleLimit : undefined;
+  const sub = await conn.request('subscribe', subscription(st));
   st.channel = sub.channel;
   byChannel.set(sub.channel, st);
 }
@@ -219,6 +222,12 @@ function detach(st) {
   streams.delete(st.name);
   byChannel.delete(st.channel);
   rebuildViewList();
+}
+
+// The subscribe request of a stream as the page paces it: its rate cap, and its particle budget
+// when it sends particles.
+function subscription(st) {
+  return { stream: st.name, max_fps: st.maxFps, ...(st.maxParticles ? { max_particles: st.maxParticles } : {}) };
 }
 
 let maxSubscriptions = 16;
@@ -275,6 +284,10 @@ function onFrame(buf) {
   const st = byChannel.get(h.channel);
   if (!st) return;
   st.stats.frame(h, buf.byteLength);
+  if (h.kind === 1 && h.count) {
+    st.fullParticles = h.total || h.count;
+    st.bytesPerParticle = buf.byteLength / h.count;
+  }
   if (st.pending.has(h.kind)) st.stats.replace();
   st.pending.set(h.kind, { h, buf });
 }
@@ -317,8 +330,10 @@ function layout() {
 // stream steps, so an energy wave's light rig comes with its texture. The comparison is
 // with the best latency seen, so unsynchronised clocks do not matter. A page drawing under
 // 20 frames/s runs about one message task per frame, so there the caps also share the draw
-// rate among the messages of all subscribed streams' steps.
+// rate among the messages of all subscribed streams' steps. A particle stream's budget
+// (budget.js) moves first: fewer particles before fewer frames.
 const START_FPS = 2;
+const particleLimit = drawLimit(q.get('particles'));
 let rafCount = 0;
 setInterval(() => {
   const drawFps = rafCount / 2;
@@ -330,13 +345,19 @@ setInterval(() => {
     const lat = st.stats.rate.latency;
     if (!Number.isNaN(lat)) st.minLat = Math.min(st.minLat ?? Infinity, lat);
     const excess = Number.isNaN(lat) ? 0 : lat - st.minLat, top = st.params?.fps ?? 30;
+    const budget = st.maxParticles && nextBudget({
+      budget: st.maxParticles, limit: particleLimit, full: st.fullParticles, late: excess > 250, onTime: excess < 50,
+      atTopRate: st.maxFps >= top, bytesPerSec: st.stats.rate.kBps * 1024, bytesPerParticle: st.bytesPerParticle,
+      fps: Math.min(top, st.maxFps), drawFps,
+    });
     let cap = st.maxFps;
-    if (excess > 250) cap = Math.max(0.5, cap * 0.5);
+    if (excess > 250 && !(budget < st.maxParticles)) cap = Math.max(0.5, cap * 0.5);
     else if (excess < 100) cap = Math.min(top, cap * (excess < 50 ? 2 : 1.3));
     if (drawFps < 20) cap = Math.min(cap, Math.max(0.5, drawFps / Math.max(1, messages)));
-    if (Math.abs(cap - st.maxFps) < 0.1 * st.maxFps) continue;
+    if (Math.abs(cap - st.maxFps) < 0.1 * st.maxFps && budget === st.maxParticles) continue;
     st.maxFps = Math.round(cap * 10) / 10;
-    conn.request('subscribe', { stream: st.name, max_fps: st.maxFps }).catch(() => {});
+    st.maxParticles = budget;
+    conn.request('subscribe', subscription(st)).catch(() => {});
   }
 }, 2000);
 
@@ -371,6 +392,12 @@ function frame(t) {
 }
 requestAnimationFrame(frame);
 
+// The flame view's particles, and how many the stream has when the page's budget drew a subset.
+function particlesText(info) {
+  const n = (x) => x.toLocaleString('en-US');
+  return info.total > info.count ? `\n${n(info.count)} of ${n(info.total)} particles (budget)` : `\n${n(info.count)} particles`;
+}
+
 const VIEW_TITLES = { flame: 'flame particles', wave: 'energy wave', scene: 'light rig: toon scene', eye: 'compound eye' };
 setInterval(() => {
   for (const st of streams.values()) st.stats.tick(1);
@@ -379,7 +406,8 @@ setInterval(() => {
     if (!st) continue;
     const lut = v.kind === 'eye' && st.params?.mode === 'lut';
     el.textContent = `${v.stream} · ${VIEW_TITLES[v.kind]} · rev ${st.rev}\n` +
-      `${lut ? st.stats.tableText(v.info().lutRev) : st.stats.text()}${st.error ? '\n⚠ ' + st.error : ''}`;
+      `${lut ? st.stats.tableText(v.info().lutRev) : st.stats.text()}${v.kind === 'flame' ? particlesText(v.info()) : ''}` +
+      `${st.error ? '\n⚠ ' + st.error : ''}`;
     el.title = STATS_HELP;
   }
   const tot = [...streams.values()].reduce((a, s) => ({ fps: a.fps + s.stats.rate.fps, kB: a.kB + s.stats.rate.kBps }), { fps: 0, kB: 0 });
