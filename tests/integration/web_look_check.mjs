@@ -12,7 +12,8 @@
 // - it moves: the mean absolute frame-to-frame luminance change inside the silhouette at
 //   least 3% of its mean luminance;
 // - smoke: grey above the flame with smoke on, gone with it off; the ground grid hidden
-//   behind the flame (no grid-coloured pixels in the flame's core).
+//   behind the flame (no grid-coloured pixels in the flame's core);
+// - a particle budget (?particles=2000) on the same paused frame keeps its extent, brightness and colour.
 // With --shots DIR it also writes the README's pictures there. Last line: "test_web_look: N passed, M failed".
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
@@ -82,11 +83,11 @@ function flameFigures() {
   let peakB = 0;
   for (let i = 0; i < n; i++) peakB = Math.max(peakB, Fb[i]);
   const sil = new Uint8Array(n), silRows = [];
-  let area = 0, holes = 0, white = 0, lapS = 0, lapS2 = 0, lapN = 0, core = 0, coreGrid = 0;
+  let area = 0, holes = 0, white = 0, lapS = 0, lapS2 = 0, lapN = 0, core = 0, coreGrid = 0, lum = 0;
   for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) {
     const i = y * w + x;
     if (!(Fb[i] > 0.05 * peakB)) continue;
-    sil[i] = 1; area++; silRows.push(y);
+    sil[i] = 1; area++; silRows.push(y); lum += L[i];
     if (F[i] < 0.02 * peakF) holes++;
     if (px[4 * i] === 255 && px[4 * i + 1] === 255 && px[4 * i + 2] === 255) white++;
     if (x > 0 && y > 0 && x < w - 1 && y < h - 1) {
@@ -137,7 +138,7 @@ function flameFigures() {
   window.__flameFigPrev = { L, sil };
   const lapMean = lapS / Math.max(1, lapN);
   return {
-    w, h, peak: peakF, area: area / n, holes: holes / area, white: white / area, lapVar: lapS2 / Math.max(1, lapN) - lapMean * lapMean,
+    w, h, peak: peakF, area: area / n, lum: lum / area, holes: holes / area, white: white / area, lapVar: lapS2 / Math.max(1, lapN) - lapMean * lapMean,
     top10, topThird, bottomThird, below: below / area, grey: grey / n, coreGrid: coreGrid / Math.max(1, core), moved,
   };
 }
@@ -208,6 +209,39 @@ async function flameLook(page, fxctl) {
   fxctl('set', 'flame', 'time_scale=1');
 }
 
+// A particle budget (?particles=2000, PROTOCOL.md §3.5) on the same paused frame: the page draws
+// the daemon's subset as standing for total / count particles each, so the flame keeps its extent,
+// brightness and colour (flame.js): silhouette area and mean luminance within 25%, the brightest
+// tenth's colour within 0.1, against the whole frame on the same camera.
+async function budgetLook(ctx, port, fxctl, page) {
+  fxctl('set', 'flame', 'time_scale=0');
+  await sleep(1500);
+  const drawnOn = (p) => p.evaluate(() => window.fxs.stats().flame?.drawn ?? 0);
+  const d0 = await drawnOn(page);
+  await until(async () => (await drawnOn(page)) > d0 + 1, 20000, 200);
+  const whole = await page.evaluate(flameFigures);
+  await page.close();
+  const sub = await ctx.newPage();
+  await sub.setViewportSize({ width: 1200, height: 760 });
+  await sub.goto(`http://127.0.0.1:${port}/?streams=flame&grid=1x1&aa=0&drawfps=1&particles=2000`, { timeout: 20000 });
+  check(await until(async () => (await drawnOn(sub)) > 2, 60000, 500), 'budget: the flame is drawn with ?particles=2000');
+  const info = await sub.evaluate(() => window.fxs.flame());
+  const label = await sub.evaluate(() => document.querySelector('.label')?.textContent ?? '');
+  check(info?.count === 2000 && info.total > 2000 && /2,000 of [\d,]+ particles \(budget\)/.test(label),
+    'budget: the daemon sends a subset of 2000 and the overlay names it', `${info?.count} of ${info?.total}; ${label}`);
+  const part = await sub.evaluate(flameFigures);
+  await sub.screenshot({ path: join(ART, 'web-look-flame-budget.png'), timeout: 120000 });
+  const rel = (a, b) => Math.abs(a - b) / Math.max(1e-9, b);
+  console.log(`  info: whole frame area ${whole.area.toFixed(4)} lum ${whole.lum.toFixed(1)} top10 G/R ${whole.top10.gr.toFixed(3)}; ` +
+    `subset area ${part.area.toFixed(4)} lum ${part.lum.toFixed(1)} top10 G/R ${part.top10.gr.toFixed(3)}`);
+  check(rel(part.area, whole.area) <= 0.25 && rel(part.lum, whole.lum) <= 0.25 && Math.abs(part.top10.gr - whole.top10.gr) <= 0.1,
+    'budget: the subset keeps the flame\'s extent, brightness and colour (area, mean luminance within 25%, top tenth G/R within 0.1)',
+    `area ${part.area.toFixed(4)} vs ${whole.area.toFixed(4)}, lum ${part.lum.toFixed(1)} vs ${whole.lum.toFixed(1)}, ` +
+    `G/R ${part.top10.gr.toFixed(3)} vs ${whole.top10.gr.toFixed(3)}`);
+  fxctl('set', 'flame', 'time_scale=1');
+  return sub;
+}
+
 // The README's pictures: every view of the default page, one at a time, without the stats labels.
 async function viewShots(ctx, port) {
   const page = await ctx.newPage();
@@ -233,8 +267,10 @@ try {
   const logs = collectErrors(page);
   await page.goto(`http://127.0.0.1:${daemon.port}/?streams=flame&grid=1x1&aa=0&drawfps=1`, { timeout: 20000 });
   await flameLook(page, fxctl);
+  const sub = await budgetLook(ctx, daemon.port, fxctl, page);
+  const subLogs = collectErrors(sub);
   if (shotsAt) await viewShots(ctx, daemon.port);
-  check(logs.length === 0, 'no console errors', logs.slice(0, 5).join(' | '));
+  check(logs.length === 0 && subLogs.length === 0, 'no console errors', [...logs, ...subLogs].slice(0, 5).join(' | '));
 } catch (e) {
   check(false, 'browser session', e.stack || String(e));
 }

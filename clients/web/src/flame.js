@@ -309,10 +309,11 @@ export class FlameView {
       upW: { value: new THREE.Vector3(0, 0, 1) }, clipPoint: { value: new THREE.Vector3(0, 0, -1e9) },
       bbT: { value: BB_T }, bbRGB: { value: BB_RGB.map((c) => new THREE.Vector3(...c)) },
     };
+    // pbvr has a radius of its own: a budget's subset grows its sprites more (setUniforms).
     this.pbvr = new THREE.ShaderMaterial({
       vertexShader: PBVR_VERT, fragmentShader: PBVR_FRAG,
       uniforms: {
-        ...common, radius: { value: 0.002 }, randTex: { value: randomTable() }, // its own radius: a subset's sprites grow more alphaTex: { value: spriteTexture(true) }, pass: { value: 0 },
+        ...common, radius: { value: 0.002 }, randTex: { value: randomTable() }, alphaTex: { value: spriteTexture(true) }, pass: { value: 0 },
         nmax: { value: NMAX }, threshold: { value: 0.3 }, smokeT: { value: 1000 }, smokeOn: { value: 1 },
         smokeAlpha: { value: 0.5 }, smokeColor: { value: new THREE.Color(0.1, 0.1, 0.1) },
       },

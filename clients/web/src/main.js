@@ -211,7 +211,7 @@ async function attach(info) {
   st.maxFps = START_FPS;
   st.minLat = undefined;
   st.maxParticles = schema.outputs?.some((o) => o.kind === 1) ? particleLimit : undefined;
-  const sub = await conn.request('subscribe', subscription(st));
+  const sub = await subscribe(st);
   st.channel = sub.channel;
   byChannel.set(sub.channel, st);
 }
@@ -224,10 +224,19 @@ function detach(st) {
   rebuildViewList();
 }
 
-// The subscribe request of a stream as the page paces it: its rate cap, and its particle budget
-// when it sends particles.
-function subscription(st) {
-  return { stream: st.name, max_fps: st.maxFps, ...(st.maxParticles ? { max_particles: st.maxParticles } : {}) };
+// Subscribes to a stream as the page paces it: its rate cap, and its particle budget when it sends
+// particles. A daemon that does not offer budgets (cluster mode, PROTOCOL.md §3.13, or an older
+// one) refuses the option: the page then goes on without one and says why in the overlay.
+async function subscribe(st) {
+  const budget = st.maxParticles ? { max_particles: st.maxParticles } : {};
+  try {
+    return await conn.request('subscribe', { stream: st.name, max_fps: st.maxFps, ...budget });
+  } catch (e) {
+    if (e.param !== 'max_particles') throw e;
+    st.maxParticles = undefined;
+    st.budgetNote = `all particles: the daemon offers no budget (${e.message})`;
+    return conn.request('subscribe', { stream: st.name, max_fps: st.maxFps });
+  }
 }
 
 let maxSubscriptions = 16;
@@ -357,7 +366,7 @@ setInterval(() => {
     if (Math.abs(cap - st.maxFps) < 0.1 * st.maxFps && budget === st.maxParticles) continue;
     st.maxFps = Math.round(cap * 10) / 10;
     st.maxParticles = budget;
-    conn.request('subscribe', subscription(st)).catch(() => {});
+    subscribe(st).catch(() => {});
   }
 }, 2000);
 
@@ -393,9 +402,10 @@ function frame(t) {
 requestAnimationFrame(frame);
 
 // The flame view's particles, and how many the stream has when the page's budget drew a subset.
-function particlesText(info) {
+function particlesText(info, note) {
   const n = (x) => x.toLocaleString('en-US');
-  return info.total > info.count ? `\n${n(info.count)} of ${n(info.total)} particles (budget)` : `\n${n(info.count)} particles`;
+  return info.total > info.count ? `\n${n(info.count)} of ${n(info.total)} particles (budget)` :
+    `\n${n(info.count)} particles${note ? ` (${note})` : ''}`;
 }
 
 const VIEW_TITLES = { flame: 'flame particles', wave: 'energy wave', scene: 'light rig: toon scene', eye: 'compound eye' };
@@ -406,7 +416,7 @@ setInterval(() => {
     if (!st) continue;
     const lut = v.kind === 'eye' && st.params?.mode === 'lut';
     el.textContent = `${v.stream} · ${VIEW_TITLES[v.kind]} · rev ${st.rev}\n` +
-      `${lut ? st.stats.tableText(v.info().lutRev) : st.stats.text()}${v.kind === 'flame' ? particlesText(v.info()) : ''}` +
+      `${lut ? st.stats.tableText(v.info().lutRev) : st.stats.text()}${v.kind === 'flame' ? particlesText(v.info(), st.budgetNote) : ''}` +
       `${st.error ? '\n⚠ ' + st.error : ''}`;
     el.title = STATS_HELP;
   }
