@@ -97,16 +97,30 @@ FXS_RC_INLINE unsigned fxs_rc_get(struct fxs_rc_dec *d, fxs_rc_prob *p)
 }
 
 /* fxs_rc_get with the probability's value pv loaded by the caller, without a branch on the
- * bit: for decisions whose bit only feeds arithmetic (a tree's next node). */
+ * bit: for decisions whose bit only feeds arithmetic (a tree's next node). On x86-64 with
+ * GCC or Clang the subtraction code - bound sets the carry flag that picks both the new
+ * range and the new code (two cmovs on one flag, no setcc/test on the range's chain). */
 FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv)
 {
-    uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * pv, range = bound;
-    unsigned bit = d->code >= bound;
-    uint32_t mask = 0u - bit;
+    uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * pv, range = bound, code = d->code, bit;
+#if defined(__GNUC__) && defined(__x86_64__)
+    uint32_t rhi = d->range - bound, chi;
+    bit = 0;
+    __asm__("movl %[code], %[chi]\n\t"
+            "subl %[bound], %[chi]\n\t"
+            "cmovnc %[rhi], %[range]\n\t"
+            "cmovnc %[chi], %[code]\n\t"
+            "setnc %b[bit]"
+            : [chi] "=&r"(chi), [range] "+r"(range), [code] "+r"(code), [bit] "+q"(bit)
+            : [bound] "r"(bound), [rhi] "r"(rhi)
+            : "cc");
+#else
+    bit = code >= bound;
     FXS_RC_SELECT(bit, range, d->range - bound);
-    d->range = range;
-    d->code -= bound & mask;
-    *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & ~mask)) >> FXS_RC_ADAPT));
+    code -= bound & (0u - bit);
+#endif
+    *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & (bit - 1u))) >> FXS_RC_ADAPT));
+    d->range = range, d->code = code;
     if (d->range < FXS_RC_TOP) {
         d->range <<= 8;
         d->code = d->code << 8 | *d->p++;
