@@ -69,15 +69,6 @@ static inline int fxs_rc_dec_init(struct fxs_rc_dec *d, const uint8_t *rc, size_
     return d->code == 0xFFFFFFFFu ? -1 : 0;
 }
 
-/* x = c ? a : x, without a branch. GCC turns the decoder's selects into branches on the
- * decoded bit, which mispredict on every other decision of a value tree; an explicit cmov
- * keeps the tree's decisions a chain of arithmetic (Clang and other targets: plain C). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define FXS_RC_SELECT(c, x, a) __asm__("testl %1, %1\n\tcmovnzl %2, %0" : "+r"(x) : "r"(c), "r"(a) : "cc")
-#else
-#define FXS_RC_SELECT(c, x, a) ((x) = (c) ? (a) : (x))
-#endif
-
 /* One decision with probability *p (of a 0), which then adapts as the encoder's
  * fxs_rc_bit does. For decisions the caller branches on: the compiler may decode with a
  * branch, which costs least when the bit is predictable. */
@@ -97,10 +88,14 @@ FXS_RC_INLINE unsigned fxs_rc_get(struct fxs_rc_dec *d, fxs_rc_prob *p)
 }
 
 /* fxs_rc_get with the probability's value pv loaded by the caller, without a branch on the
- * bit: for decisions whose bit only feeds arithmetic (a tree's next node). On x86-64 with
- * GCC or Clang the subtraction code - bound sets the carry flag that picks both the new
- * range and the new code (two cmovs on one flag, no setcc/test on the range's chain). */
-FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv)
+ * bit: for decisions whose bit only feeds arithmetic (a tree's next node). *next becomes
+ * p0 after a 0, p1 after a 1 (the next node's probability, loaded by the caller before the
+ * bit is known). On x86-64 the subtraction code - bound sets the carry flag that picks the
+ * new range, the new code and *next: cmovs on one flag, no setcc/test on the range's chain
+ * (and GCC, left to itself, turns these selects into branches on the bit, which mispredict
+ * on every other decision of a value tree). Elsewhere (WebAssembly: Clang) plain selects. */
+FXS_RC_INLINE unsigned fxs_rc_get_next(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv, uint32_t p0, uint32_t p1,
+                                       uint32_t *next)
 {
     uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * pv, range = bound, code = d->code, bit;
 #if defined(__GNUC__) && defined(__x86_64__)
@@ -110,15 +105,18 @@ FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint3
             "subl %[bound], %[chi]\n\t"
             "cmovnc %[rhi], %[range]\n\t"
             "cmovnc %[chi], %[code]\n\t"
+            "cmovnc %[p1], %[p0]\n\t"
             "setnc %b[bit]"
-            : [chi] "=&r"(chi), [range] "+r"(range), [code] "+r"(code), [bit] "+q"(bit)
-            : [bound] "r"(bound), [rhi] "r"(rhi)
+            : [chi] "=&r"(chi), [range] "+r"(range), [code] "+r"(code), [bit] "+q"(bit), [p0] "+r"(p0)
+            : [bound] "r"(bound), [rhi] "r"(rhi), [p1] "r"(p1)
             : "cc");
 #else
     bit = code >= bound;
-    FXS_RC_SELECT(bit, range, d->range - bound);
+    range = bit ? d->range - bound : range;
+    p0 = bit ? p1 : p0;
     code -= bound & (0u - bit);
 #endif
+    *next = p0;
     *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & (bit - 1u))) >> FXS_RC_ADAPT));
     d->range = range, d->code = code;
     if (d->range < FXS_RC_TOP) {
@@ -126,6 +124,13 @@ FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint3
         d->code = d->code << 8 | *d->p++;
     }
     return bit;
+}
+
+/* fxs_rc_get_next for a tree's last decision (no next node). */
+FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv)
+{
+    uint32_t unused;
+    return fxs_rc_get_next(d, p, pv, 0, 0, &unused);
 }
 
 /* n raw bits (n <= 56), LSB first. The buffer is refilled to at least 56 bits on every
@@ -194,13 +199,7 @@ FXS_RC_INLINE uint32_t fxs_rc_get_tree(struct fxs_rc_dec *d, fxs_rc_prob *p, int
     uint32_t m = 1;
     if (bits >= 8) {
         uint32_t pv = p[1];
-        for (int i = 0; i < 7; i++) {
-            uint32_t p0 = p[2 * m], p1 = p[2 * m + 1];
-            unsigned bit = fxs_rc_get_pv(d, p + m, pv);
-            m = 2 * m + bit;
-            pv = p0;
-            FXS_RC_SELECT(bit, pv, p1);
-        }
+        for (int i = 0; i < 7; i++) m = 2 * m + fxs_rc_get_next(d, p + m, pv, p[2 * m], p[2 * m + 1], &pv);
         m = 2 * m + fxs_rc_get_pv(d, p + m, pv);
         return (m - 256u) << (bits - 8) | (uint32_t)fxs_rc_raw(d, bits - 8);
     }
