@@ -252,4 +252,4 @@ $(BUILD)/fuzz/%: tests/fuzz/%.c fuzz-libs
 	$(FUZZ_CC) $(FX_CFLAGS) $(FUZZ_FLAGS) -fsanitize=fuzzer $< $(BUILD)/fz/libfxserver.a $(BUILD)/fz/libfxclient.a \
 	    -o $@ $(FX_LDLIBS)
 
--include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/pic -name '*.d' 2>/dev/null)
