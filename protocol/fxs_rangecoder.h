@@ -2,8 +2,9 @@
  * directions: an adaptive binary range coder (LZMA's: 12-bit probabilities that adapt by
  * 1/32 of the distance to 0 or 4096, 32-bit range, carry propagated through a cache byte)
  * for every modelled decision, a raw LSB-first bit section for the incompressible bits, and
- * the two shapes built on them: integers (unary prefix, Exp-Golomb class, top mantissa bit
- * modelled, the rest raw) and values as bit trees.
+ * the three shapes built on them: integers (unary prefix, Exp-Golomb class, top mantissa bit
+ * modelled, the rest raw), values as bit trees, and small counts (a 3-level bit tree with an
+ * escape, all in the range coder: three decisions without a branch in the common case).
  *
  * Everything is static inline: the codec's hot loops call these once per decision, and the
  * compiler keeps the coder's state in registers only when it sees the whole loop. Only the
@@ -25,6 +26,12 @@
 /* Probabilities of an integer model with u unary decisions: the u decisions, the class in
  * unary (FXS_RC_MAXK), then the top mantissa bit by class (FXS_RC_MAXK). */
 #define FXS_RC_IPROBS(u) ((u) + 2 * FXS_RC_MAXK)
+/* Probabilities of a small-count model: the 3-level tree's 7 (p[1 ... 7]; p[0] unused), then
+ * the escape's Exp-Golomb class in unary. */
+#define FXS_RC_SMALL_ESC 7u
+#define FXS_RC_SPROBS (8 + FXS_RC_MAXK)
+/* The probability of an equiprobable decision ("direct bit"), never adapted. */
+#define FXS_RC_HALF FXS_RC_PROB_INIT
 
 typedef uint16_t fxs_rc_prob;
 
@@ -207,6 +214,29 @@ FXS_RC_INLINE uint32_t fxs_rc_get_tree(struct fxs_rc_dec *d, fxs_rc_prob *p, int
     return m - (1u << bits);
 }
 
+/* A small count z >= 0 with the model p (FXS_RC_SPROBS probabilities): three decisions
+ * down a bit tree give s = 0 ... 7 without a branch (the next node's probability loaded
+ * before the bit is known); s < 7 is z. s = 7 is an escape: e = z - 6 >= 1, its class
+ * k = floor(log2 e) in unary with p[8 + i], then its low k bits as direct bits, high first.
+ * Only the range coder is read. Returns 0, or -1 for a class beyond the limit. */
+FXS_RC_INLINE int fxs_rc_get_small(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t *z)
+{
+    uint32_t pv = p[1], m = 2 + fxs_rc_get_next(d, p + 1, pv, p[2], p[3], &pv), e = 1;
+    m = 2 * m + fxs_rc_get_next(d, p + m, pv, p[2 * m], p[2 * m + 1], &pv);
+    m = 2 * m + fxs_rc_get_pv(d, p + m, pv);
+    *z = m - 8u;
+    if (*z < FXS_RC_SMALL_ESC) return 0;
+    int k = 0;
+    while (fxs_rc_get(d, p + 8 + k))
+        if (++k == FXS_RC_MAXK) return -1;
+    for (int i = 0; i < k; i++) {
+        fxs_rc_prob half = FXS_RC_HALF;
+        e = 2 * e + fxs_rc_get(d, &half);
+    }
+    *z = e + FXS_RC_SMALL_ESC - 1u;
+    return 0;
+}
+
 /* ---- encoder: range coder and raw bits writer --------------------------------------------- */
 
 /* The encoder's whole output state. The hot loops copy it into a local (the compiler keeps
@@ -349,6 +379,22 @@ static inline void fxs_rc_put_tree(struct fxs_rc_enc *w, fxs_rc_prob *p, uint32_
     uint32_t top = v >> low | 1u << b;
     while (b-- > 0) fxs_rc_bit(w, p + (top >> (b + 1)), top >> b & 1u);
     fxs_rc_bits_put(w, v, low);
+}
+
+/* A small count z >= 0 with the model p (FXS_RC_SPROBS probabilities): min(z, 7) as a
+ * 3-level bit tree, and for 7 the escape (fxs_rc_get_small), all in the range coder. */
+static inline void fxs_rc_put_small(struct fxs_rc_enc *w, fxs_rc_prob *p, uint32_t z)
+{
+    uint32_t s = z < FXS_RC_SMALL_ESC ? z : FXS_RC_SMALL_ESC, e = z - FXS_RC_SMALL_ESC + 1u;
+    fxs_rc_put_tree(w, p, s, 3);
+    if (s < FXS_RC_SMALL_ESC) return;
+    int k = 31 - __builtin_clz(e);
+    for (int i = 0; i < k; i++) fxs_rc_bit(w, p + 8 + i, 1);
+    fxs_rc_bit(w, p + 8 + k, 0);
+    for (int i = k - 1; i >= 0; i--) {
+        fxs_rc_prob half = FXS_RC_HALF;
+        fxs_rc_bit(w, &half, e >> i & 1u);
+    }
 }
 
 #endif
