@@ -123,7 +123,7 @@ static uint32_t fxs_pt_lower_part(struct fxs_pt_pt *p, struct fxs_pt_pt *tmp, ui
 }
 
 /* The tree level by level (§7.5.3): each node's count in its lower half, the nodes of a
- * level in order; then each leaf's remaining bits (x, then y and z together: <= 42 bits),
+ * level in order; then each leaf's remaining bits (x, then y and z together: <= 48 bits),
  * in the order the leaves appeared. The points are in tree order: key and q sorted (pts
  * NULL), or pts, partitioned here node by node (frames with an axis over 21 bits). -1 when
  * out of memory. */
