@@ -66,11 +66,12 @@ WEB_SRC     := $(wildcard clients/web/src/*.js clients/web/test/*.js) clients/we
 WEB_OUT     := clients/web/dist/app.js
 # The page decodes particles with the C decoder compiled to WebAssembly (the module
 # imports nothing): clang for wasm32-wasi against Debian's wasi-libc, linked by lld's wasm-ld.
+# -O3: 4-8% faster than -O2 in V8 on real flame frames (docs/particle-codec-performance.md).
 WASM_CC     ?= clang
 WASM_SRC    := clients/web/wasm/fxs_particles_wasm.c protocol/fxs_particles_dec.c protocol/fxs_particles_format.c \
                protocol/fxs_particles_near.c
 WASM_OUT    := clients/web/dist/fxs_particles.wasm
-WASM_FLAGS  := --target=wasm32-wasi --sysroot=/usr -std=c11 -O2 -msimd128 -ffp-contract=off -Wall -Wextra -Werror \
+WASM_FLAGS  := --target=wasm32-wasi --sysroot=/usr -std=c11 -O3 -msimd128 -ffp-contract=off -Wall -Wextra -Werror \
                -Iprotocol -nostartfiles -Wl,--no-entry -Wl,--strip-all
 NPM_STAMP   := node_modules/.package-lock.json
 
@@ -252,4 +253,4 @@ $(BUILD)/fuzz/%: tests/fuzz/%.c fuzz-libs
 	$(FUZZ_CC) $(FX_CFLAGS) $(FUZZ_FLAGS) -fsanitize=fuzzer $< $(BUILD)/fz/libfxserver.a $(BUILD)/fz/libfxclient.a \
 	    -o $@ $(FX_LDLIBS)
 
--include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
+-include $(shell find $(BUILD)/obj $(BUILD)/pic -name '*.d' 2>/dev/null)

@@ -25,63 +25,82 @@ struct fxs_pt_dec {
     /* scratch, one allocation: the sections' padded copy; x, y, z (quantised coordinates
      * in tree order, as doubles for the neighbour search); quantised T and F; each
      * particle's nearest recent neighbour (-1: none) and, in mode 1, the k of its 4 nearest
-     * of the 16 before (fxs_pt_near4); the quantised velocities */
+     * of the 16 before (fxs_pt_near4); the quantised velocities; the tree's two level
+     * lists and its leaves */
     void *scratch;
     double *x, *y, *z;
     uint32_t *qt, *qf, *near4;
     int32_t *nbs, *qv;
+    struct fxs_pt_dnode *lists, *leaves;
 };
 
-/* The kd-tree (§7.5.3), depth first without recursion: the upper child of a split waits on
- * a stack (at most one entry per depth) while the lower one is decoded; each point's
- * coordinates go to x, y, z in tree order. 0, or -1 for a corrupt tree. */
+/* A node of the tree being decoded: its count (a leaf: its depth), its first particle, and
+ * its coordinates' bits above its depth. */
+struct fxs_pt_dnode {
+    uint32_t c, at, b[3];
+};
+
+/* Node nd with the count models cnt of its split's axis: its children, the upper one's
+ * base with the split's bit (ux, uy, uz: the bit on its axis, 0 on the others), go to the
+ * next level's list (nxt, nn) or to the leaves (lf, nl, with their depth d), or nowhere when
+ * empty, without a branch: each is written to both and kept where its count says. -1 for a
+ * count outside 0 ... c. */
+static inline __attribute__((always_inline)) int fxs_pt_dec_node(struct fxs_rc_dec *rc, fxs_rc_prob (*cnt)[FXS_RC_SPROBS],
+                                                                 const struct fxs_pt_dnode *nd, uint32_t ux, uint32_t uy,
+                                                                 uint32_t uz, uint32_t d, struct fxs_pt_dnode *nxt,
+                                                                 uint32_t *nn, struct fxs_pt_dnode *lf, uint32_t *nl)
+{
+    uint32_t c = nd->c, at = nd->at, bx = nd->b[0], by = nd->b[1], bz = nd->b[2], z;
+    if (fxs_rc_get_small(rc, cnt[fxs_pt_cclass(c) * 3], &z)) return -1;
+    uint32_t lo = (c >> 1) + (uint32_t)fxs_pt_unzigzag(z), hi = c - lo;
+    if (lo > c) return -1; /* negative or over c */
+    nxt[*nn] = (struct fxs_pt_dnode){ lo, at, { bx, by, bz } };
+    lf[*nl] = (struct fxs_pt_dnode){ d, at, { bx, by, bz } };
+    *nn += lo >= 2;
+    *nl += lo == 1;
+    nxt[*nn] = (struct fxs_pt_dnode){ hi, at + lo, { bx | ux, by | uy, bz | uz } };
+    lf[*nl] = (struct fxs_pt_dnode){ d, at + lo, { bx | ux, by | uy, bz | uz } };
+    *nn += hi >= 2;
+    *nl += hi == 1;
+    return 0;
+}
+
+/* The kd-tree (§7.5.3) level by level, each level a flat loop over its nodes; the leaves
+ * are listed with their depth, and their remaining bits read after the whole tree (x, then
+ * y and z together); each point's coordinates go to x, y, z in tree order. 0, or -1 for a
+ * corrupt tree. */
 static int fxs_pt_dec_tree(struct fxs_pt_dec *d)
 {
     const struct fxs_pt_frame *f = &d->f;
     struct fxs_rc_dec rc = d->rc;
     const uint8_t *rc_end = d->rc_end, *bits_end = d->bits_end;
+    uint32_t n = f->n, ncur = 0, nl = 0;
+    struct fxs_pt_dnode *cur = d->lists, *nxt = cur + n / 2 + 2, *lf = d->leaves;
     double *x = d->x, *y = d->y, *z = d->z;
-    uint32_t st_c[FXS_PT_MAXD + 1], st_b[FXS_PT_MAXD + 1][3], c = f->n, out = 0, bx = 0, by = 0, bz = 0;
-    int st_d[FXS_PT_MAXD + 1], depth = 0, sp = 0, fdepth = f->depth;
-    for (;;) {
-        while (c >= 2 && depth < fdepth) {
-            int a = f->axis[depth];
-            uint32_t zz, bit = 1u << (f->left[depth][a] - 1);
-            int64_t lo;
-            if (c == 2) { /* lo 1, 0 or 2: the unary decisions alone (a longer code is corrupt) */
-                fxs_rc_prob *p = d->m.cnt[a];
-                lo = !fxs_rc_get(&rc, p) ? 1 : !fxs_rc_get(&rc, p + 1) ? 0 : !fxs_rc_get(&rc, p + 2) ? 2 : -1;
-            } else {
-                if (fxs_rc_get_int(&rc, d->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U, &zz)) return -1;
-                lo = (int64_t)(c >> 1) + fxs_pt_unzigzag(zz);
-            }
-            if (lo < 0 || lo > (int64_t)c || fxs_rc_past(&rc, rc_end, bits_end)) return -1;
-            /* the upper half's base: this one's with the split bit set */
-            uint32_t ux = bx | (bit & (0u - (a == 0))), uy = by | (bit & (0u - (a == 1))), uz = bz | (bit & (0u - (a == 2)));
-            depth++;
-            if (lo && lo < (int64_t)c) {
-                st_c[sp] = c - (uint32_t)lo, st_d[sp] = depth;
-                st_b[sp][0] = ux, st_b[sp][1] = uy, st_b[sp][2] = uz;
-                sp++;
-                c = (uint32_t)lo;
-            } else if (!lo) {
-                bx = ux, by = uy, bz = uz;
-            }
-        }
-        if (c == 1) { /* x, then y and z together (<= 48 bits) */
-            const uint8_t *l = f->left[depth];
-            bx |= (uint32_t)fxs_rc_raw(&rc, l[0]);
-            uint64_t yz = fxs_rc_raw(&rc, l[1] + l[2]);
-            by |= (uint32_t)yz & ((1u << l[1]) - 1u);
-            bz |= (uint32_t)(yz >> l[1]);
-            if (fxs_rc_past(&rc, rc_end, bits_end)) return -1;
-        }
-        x[out] = bx, y[out] = by, z[out] = bz; /* c >= 1 points here: c > 1 only at full depth */
-        for (uint32_t k = 1; k < c; k++) x[out + k] = bx, y[out + k] = by, z[out + k] = bz;
-        out += c;
-        if (!sp) break;
-        sp--;
-        c = st_c[sp], depth = st_d[sp], bx = st_b[sp][0], by = st_b[sp][1], bz = st_b[sp][2];
+    if (n == 1) lf[nl++] = (struct fxs_pt_dnode){ 0, 0, { 0, 0, 0 } };
+    else cur[ncur++] = (struct fxs_pt_dnode){ n, 0, { 0, 0, 0 } };
+    for (int depth = 0; depth < f->depth && ncur; depth++) {
+        int a = f->axis[depth];
+        uint32_t bit = 1u << (f->left[depth][a] - 1), ux = a == 0 ? bit : 0, uy = a == 1 ? bit : 0, uz = a == 2 ? bit : 0;
+        uint32_t nn = 0;
+        fxs_rc_prob (*cnt)[FXS_RC_SPROBS] = d->m.cnt + a;
+        for (uint32_t i = 0; i < ncur; i++)
+            if (fxs_pt_dec_node(&rc, cnt, cur + i, ux, uy, uz, (uint32_t)depth + 1, nxt, &nn, lf, &nl) ||
+                fxs_rc_past(&rc, rc_end, bits_end))
+                return -1;
+        struct fxs_pt_dnode *t = cur;
+        cur = nxt, nxt = t, ncur = nn;
+    }
+    for (uint32_t i = 0; i < ncur; i++) /* identical points at full depth */
+        for (uint32_t j = cur[i].at; j < cur[i].at + cur[i].c; j++) x[j] = cur[i].b[0], y[j] = cur[i].b[1], z[j] = cur[i].b[2];
+    for (uint32_t k = 0; k < nl; k++) {
+        const struct fxs_pt_dnode *e = lf + k;
+        const uint8_t *l = f->left[e->c];
+        x[e->at] = e->b[0] | (uint32_t)fxs_rc_raw(&rc, l[0]);
+        uint64_t yz = fxs_rc_raw(&rc, l[1] + l[2]);
+        y[e->at] = e->b[1] | ((uint32_t)yz & ((1u << l[1]) - 1u));
+        z[e->at] = e->b[2] | (uint32_t)(yz >> l[1]);
+        if (fxs_rc_past(&rc, rc_end, bits_end)) return -1;
     }
     d->rc = rc;
     return 0;
@@ -241,14 +260,17 @@ static int fxs_pt_alloc_out(struct fxs_particles *p, uint32_t n, int vel)
  * -1 when out of memory. */
 static int fxs_pt_dec_scratch(struct fxs_pt_dec *d, const uint8_t *body, uint32_t rl, uint32_t bl)
 {
-    size_t nn = d->f.n, sections = (size_t)rl + bl + 2 * FXS_RC_PAD;
-    uint8_t *s = d->scratch = malloc(24 * nn + 16 * nn + (d->f.vel ? 12 * nn : 0) + sections);
+    /* the level lists: at most n / 2 nodes each, + 2 for the branchless writes past the end */
+    size_t nn = d->f.n, sections = (size_t)rl + bl + 2 * FXS_RC_PAD, nodes = 2 * (nn / 2 + 2) + nn + 2;
+    uint8_t *s = d->scratch = malloc(24 * nn + 16 * nn + (d->f.vel ? 12 * nn : 0) + nodes * sizeof *d->lists + sections);
     if (!s) return -1;
     d->x = (double *)s, d->y = d->x + nn, d->z = d->y + nn;
     d->qt = (uint32_t *)(d->z + nn), d->qf = d->qt + nn, d->near4 = d->qf + nn;
     d->nbs = (int32_t *)(d->near4 + nn);
     d->qv = d->nbs + nn;
-    uint8_t *rc = (uint8_t *)(d->qv + (d->f.vel ? 3 * nn : 0)), *bits = rc + rl + FXS_RC_PAD;
+    d->lists = (struct fxs_pt_dnode *)(d->qv + (d->f.vel ? 3 * nn : 0));
+    d->leaves = d->lists + 2 * (nn / 2 + 2);
+    uint8_t *rc = (uint8_t *)(d->leaves + nn + 2), *bits = rc + rl + FXS_RC_PAD;
     memcpy(rc, body, rl);
     memset(rc + rl, 0, FXS_RC_PAD);
     memcpy(bits, body + rl, bl);
@@ -296,7 +318,7 @@ static const char *fxs_pt_block(const uint8_t *buf, size_t len, struct fxs_pt_fr
     *rl = *bl = 0;
     int r = fxs_pt_header_get(buf, len, f, rl, bl);
     const char *why = r == -1   ? "not a codec 2 payload (short or bad magic)"
-                      : r == -2 ? "unsupported version"
+                      : r == -2 ? "unsupported version (this decoder reads version 3)"
                       : r == -3 ? "unknown attribute mode"
                       : r == -4 ? "non-zero reserved bytes in the velocity block"
                                 : fxs_pt_header_check(f);

@@ -3,8 +3,9 @@
  *
  * One block (PROTOCOL.md §7.5) in three passes over the frame:
  *   - positions: quantised on one step for all three axes, sorted into the kd-tree's
- *     depth-first order by Morton key (radix sort), and the tree coded as each node's count
- *     in its lower half (a stable partition instead for axes over 21 bits);
+ *     depth-first order by Morton key (radix sort), and the tree coded level by level as
+ *     each node's count in its lower half (a stable partition instead for axes over 21
+ *     bits), then the leaves' remaining bits;
  *   - attributes: flags, T and F in tree order, in the mode a static estimate of both
  *     costs picks per frame (0: residuals against the nearest recent particle; 1: values
  *     in contexts of the neighbours' values), after one neighbour search for both
@@ -89,49 +90,82 @@ static inline uint64_t fxs_pt_spread3(uint64_t v)
     return v;
 }
 
-/* The tree over points sorted by Morton key (x above y above z at each bit), depth first
- * without recursion (the upper child of a split waits on a stack of at most one entry per
- * depth): the lower half of a node is found by a branchless binary search. For frames
- * whose axes have <= 21 bits. -1 when out of memory. */
-static int fxs_pt_enc_sorted(struct fxs_pt_enc *e, const uint64_t *key, const uint32_t *q)
+/* A node of the tree being coded: its first point in tree order and its count (a leaf: its
+ * depth). */
+struct fxs_pt_node {
+    uint32_t at, c;
+};
+
+/* The count of a node's lower half: the first of its c sorted keys with bit kb set, by a
+ * branchless binary search. */
+static uint32_t fxs_pt_lower_sorted(const uint64_t *key, uint32_t c, int kb)
+{
+    const uint64_t *base = key;
+    uint32_t len = c;
+    while (len > 1) {
+        uint32_t half = len >> 1;
+        base += half & ((uint32_t)(base[half] >> kb & 1u) - 1u);
+        len -= half;
+    }
+    return (uint32_t)(base - key) + (uint32_t)(~*base >> kb & 1u);
+}
+
+/* The count of a node's lower half: its c points stably partitioned by bit sh of axis a
+ * (through tmp). */
+static uint32_t fxs_pt_lower_part(struct fxs_pt_pt *p, struct fxs_pt_pt *tmp, uint32_t c, int a, int sh)
+{
+    uint32_t lo = 0, hi = 0;
+    for (uint32_t i = 0; i < c; i++)
+        if (!((p[i].q[a] >> sh) & 1u)) p[lo++] = p[i];
+        else tmp[hi++] = p[i];
+    memcpy(p + lo, tmp, hi * sizeof *p);
+    return lo;
+}
+
+/* The tree level by level (§7.5.3): each node's count in its lower half, the nodes of a
+ * level in order; then each leaf's remaining bits (x, then y and z together: <= 48 bits),
+ * in the order the leaves appeared. The points are in tree order: key and q sorted (pts
+ * NULL), or pts, partitioned here node by node (frames with an axis over 21 bits). -1 when
+ * out of memory. */
+static int fxs_pt_enc_tree(struct fxs_pt_enc *e, const uint64_t *key, const uint32_t *q, struct fxs_pt_pt *pts,
+                           struct fxs_pt_pt *tmp)
 {
     const struct fxs_pt_frame *f = &e->f;
     struct fxs_rc_enc w = e->w;
-    uint32_t st_at[FXS_PT_MAXD + 1], st_c[FXS_PT_MAXD + 1], at = 0, c = f->n;
-    int st_d[FXS_PT_MAXD + 1], d = 0, sp = 0;
-    for (;;) {
-        while (c >= 2 && d < f->depth) {
-            int a = f->axis[d], kb = 3 * (f->left[d][a] - 1) + 2 - a;
-            const uint64_t *base = key + at;
-            uint32_t len = c, lo;
-            while (len > 1) { /* first key with bit kb set */
-                uint32_t half = len >> 1;
-                base += half & ((uint32_t)(base[half] >> kb & 1u) - 1u);
-                len -= half;
-            }
-            lo = (uint32_t)(base - key - at) + (uint32_t)(~*base >> kb & 1u);
-            if (fxs_rc_room(&e->rb, &e->bb, &w)) return -1;
-            fxs_rc_put_int(&w, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
-                           fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
-            d++;
-            if (lo && lo < c) {
-                st_at[sp] = at + lo, st_c[sp] = c - lo, st_d[sp] = d, sp++;
-                c = lo;
-            }
+    uint32_t n = f->n, ncur = 0, nl = 0;
+    /* two level lists (a level has at most n / 2 nodes), then the leaves (at, depth) */
+    struct fxs_pt_node *mem = malloc((2 * (n / 2 + 1) + n) * sizeof *mem), *cur = mem, *nxt = cur + n / 2 + 1;
+    struct fxs_pt_node *lf = nxt + n / 2 + 1;
+    int r = 0;
+    if (!mem) return -1;
+    if (n == 1) lf[nl++] = (struct fxs_pt_node){ 0, 0 };
+    else cur[ncur++] = (struct fxs_pt_node){ 0, n };
+    for (int d = 0; d < f->depth && ncur && !r; d++) {
+        int a = f->axis[d], sh = f->left[d][a] - 1;
+        uint32_t nn = 0;
+        for (uint32_t i = 0; i < ncur; i++) {
+            uint32_t at = cur[i].at, c = cur[i].c;
+            uint32_t lo = pts ? fxs_pt_lower_part(pts + at, tmp, c, a, sh) : fxs_pt_lower_sorted(key + at, c, 3 * sh + 2 - a);
+            if ((r = fxs_rc_room(&e->rb, &e->bb, &w))) break;
+            fxs_rc_put_small(&w, e->m.cnt[fxs_pt_cclass(c) * 3 + a], fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
+            struct fxs_pt_node ch[2] = { { at, lo }, { at + lo, c - lo } };
+            for (int k = 0; k < 2; k++)
+                if (ch[k].c >= 2) nxt[nn++] = ch[k];
+                else if (ch[k].c == 1) lf[nl++] = (struct fxs_pt_node){ ch[k].at, (uint32_t)d + 1 };
         }
-        if (c == 1) {
-            if (fxs_rc_room(&e->rb, &e->bb, &w)) return -1;
-            const uint32_t *qa = q + 3 * (size_t)at; /* x, then y and z together (<= 42 bits) */
-            int l1 = f->left[d][1];
-            fxs_rc_bits_put64(&w, qa[0], f->left[d][0]);
-            fxs_rc_bits_put64(&w, (qa[1] & ((1u << l1) - 1u)) | (uint64_t)qa[2] << l1, l1 + f->left[d][2]);
-        }
-        if (!sp) break;
-        sp--;
-        at = st_at[sp], c = st_c[sp], d = st_d[sp];
+        struct fxs_pt_node *t = cur;
+        cur = nxt, nxt = t, ncur = nn;
+    }
+    for (uint32_t k = 0; k < nl && !r; k++) {
+        const uint32_t *qa = pts ? pts[lf[k].at].q : q + 3 * (size_t)lf[k].at;
+        const uint8_t *l = f->left[lf[k].c];
+        if ((r = fxs_rc_room(&e->rb, &e->bb, &w))) break;
+        fxs_rc_bits_put64(&w, qa[0], l[0]);
+        fxs_rc_bits_put64(&w, (qa[1] & ((1u << l[1]) - 1u)) | (uint64_t)qa[2] << l[1], l[1] + l[2]);
     }
     e->w = w;
-    return 0;
+    free(mem);
+    return r;
 }
 
 /* LSD radix sort by key (12-bit digits, constant digits skipped) of k[0]/ix[0] using
@@ -187,40 +221,12 @@ static int fxs_pt_enc_morton(struct fxs_pt_enc *e)
         q[3 * (size_t)j] = qi[0], q[3 * (size_t)j + 1] = qi[1], q[3 * (size_t)j + 2] = qi[2];
     }
     e->order = ix[c];
-    return fxs_pt_enc_sorted(e, k[c], q);
+    return fxs_pt_enc_tree(e, k[c], q, NULL, NULL);
 }
 
-/* The tree by stable partitioning (through scratch), for frames with an axis of more
- * than 21 bits: the same order as the Morton path, ties in input order. */
-static int fxs_pt_enc_node(struct fxs_pt_enc *e, struct fxs_pt_pt *p, struct fxs_pt_pt *tmp, uint32_t c, int d)
-{
-    const struct fxs_pt_frame *f = &e->f;
-    while (c >= 2 && d < f->depth) {
-        int a = f->axis[d], sh = f->left[d][a] - 1;
-        uint32_t lo = 0, hi = 0;
-        for (uint32_t i = 0; i < c; i++)
-            if (!((p[i].q[a] >> sh) & 1u)) p[lo++] = p[i];
-            else tmp[hi++] = p[i];
-        memcpy(p + lo, tmp, hi * sizeof *p);
-        if (fxs_rc_room(&e->rb, &e->bb, &e->w)) return -1;
-        fxs_rc_put_int(&e->w, e->m.cnt[fxs_pt_cclass(c) * 3 + a], FXS_PT_CNT_U,
-                       fxs_pt_zigzag((int32_t)lo - (int32_t)(c >> 1)));
-        d++;
-        if (lo && lo < c) {
-            if (fxs_pt_enc_node(e, p, tmp, lo, d)) return -1;
-            p += lo;
-            c -= lo;
-        }
-    }
-    if (c == 1) {
-        if (fxs_rc_room(&e->rb, &e->bb, &e->w)) return -1;
-        for (int a = 0; a < 3; a++) fxs_rc_bits_put(&e->w, p->q[a], f->left[d][a]);
-    }
-    return 0;
-}
-
-/* The tree of a frame with an axis of more than 21 bits (fxs_pt_enc_node), then e->q in
- * tree order and e->order; -1 when out of memory. */
+/* The tree of a frame with an axis of more than 21 bits (partitioning), then e->q in tree
+ * order and e->order: the same order as the Morton path, ties in input order. -1 when out
+ * of memory. */
 static int fxs_pt_enc_wide(struct fxs_pt_enc *e)
 {
     uint32_t n = e->f.n;
@@ -231,7 +237,7 @@ static int fxs_pt_enc_wide(struct fxs_pt_enc *e)
             memcpy(pts[i].q, e->q + 3 * (size_t)i, sizeof pts[i].q);
             pts[i].i = i;
         }
-        r = fxs_pt_enc_node(e, pts, pts + n, n, 0);
+        r = fxs_pt_enc_tree(e, NULL, NULL, pts, pts + n);
         e->order = e->idx;
         for (uint32_t j = 0; j < n; j++) {
             memcpy(e->q + 3 * (size_t)j, pts[j].q, sizeof pts[j].q);

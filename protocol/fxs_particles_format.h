@@ -11,7 +11,10 @@
  *   - positions as a kd-tree of point counts (split x, y, z alternately, top bit first):
  *     each node with c >= 2 points sends how many lie in its lower half, a lone point
  *     sends its remaining bits raw. The set is unordered, so this costs close to the
- *     set's entropy, and the adaptive count models learn the particles' even spacing;
+ *     set's entropy, and the adaptive count models learn the particles' even spacing.
+ *     The tree goes level by level and a count is a 3-decision bit tree (an escape for
+ *     large ones), so a decoder walks a level as a flat loop without data-dependent
+ *     branches; the leaves' bits follow the whole tree;
  *   - particles are sent in the tree's depth-first order; their flags, T and F in one of
  *     two modes picked per frame: mode 0 predicts each from the nearest of the 8 particles
  *     before it and codes the residual with contexts (smooth fields); mode 1 codes the
@@ -35,15 +38,15 @@
 #include "fxs_rangecoder.h"
 
 #define FXS_PT_MAGIC "FXP2"
-#define FXS_PT_VERSION 2u
+#define FXS_PT_VERSION 3u
 #define FXS_PT_NEAR 8           /* neighbours searched for the attribute prediction */
 #define FXS_PT_SAME 16          /* mode 1: neighbours searched for one with the same flags */
 #define FXS_PT_MAXD 72          /* kd-tree depth: bits of x + y + z */
 #define FXS_PT_HAS_VEL 0x10u    /* attr_mode byte: a velocity block follows the header (§7.5.7) */
 
 /* Integer models (fxs_rc_put_int): U unary decisions, then the Exp-Golomb class in unary,
- * then the top mantissa bit by class; the other mantissa bits go out raw. */
-#define FXS_PT_CNT_U 3
+ * then the top mantissa bit by class; the other mantissa bits go out raw. (The tree's counts
+ * are small counts, fxs_rc_put_small.) */
 #define FXS_PT_T_U 2
 #define FXS_PT_F_U 2
 #define FXS_PT_V_U 2
@@ -55,7 +58,7 @@
 
 /* Every adaptive probability of a block, all starting at 1/2. */
 struct fxs_pt_models {
-    fxs_rc_prob cnt[FXS_PT_CNT_CTX][FXS_RC_IPROBS(FXS_PT_CNT_U)];
+    fxs_rc_prob cnt[FXS_PT_CNT_CTX][FXS_RC_SPROBS];
     fxs_rc_prob t[FXS_PT_T_CTX][FXS_RC_IPROBS(FXS_PT_T_U)];
     fxs_rc_prob f[FXS_PT_F_CTX][FXS_RC_IPROBS(FXS_PT_F_U)];
     fxs_rc_prob same[FXS_PT_FL_CTX];

@@ -2,8 +2,9 @@
  * directions: an adaptive binary range coder (LZMA's: 12-bit probabilities that adapt by
  * 1/32 of the distance to 0 or 4096, 32-bit range, carry propagated through a cache byte)
  * for every modelled decision, a raw LSB-first bit section for the incompressible bits, and
- * the two shapes built on them: integers (unary prefix, Exp-Golomb class, top mantissa bit
- * modelled, the rest raw) and values as bit trees.
+ * the three shapes built on them: integers (unary prefix, Exp-Golomb class, top mantissa bit
+ * modelled, the rest raw), values as bit trees, and small counts (a 3-level bit tree with an
+ * escape, all in the range coder: three decisions without a branch in the common case).
  *
  * Everything is static inline: the codec's hot loops call these once per decision, and the
  * compiler keeps the coder's state in registers only when it sees the whole loop. Only the
@@ -25,6 +26,12 @@
 /* Probabilities of an integer model with u unary decisions: the u decisions, the class in
  * unary (FXS_RC_MAXK), then the top mantissa bit by class (FXS_RC_MAXK). */
 #define FXS_RC_IPROBS(u) ((u) + 2 * FXS_RC_MAXK)
+/* Probabilities of a small-count model: the 3-level tree's 7 (p[1 ... 7]; p[0] unused), then
+ * the escape's Exp-Golomb class in unary. */
+#define FXS_RC_SMALL_ESC 7u
+#define FXS_RC_SPROBS (8 + FXS_RC_MAXK)
+/* The probability of an equiprobable decision ("direct bit"), never adapted. */
+#define FXS_RC_HALF FXS_RC_PROB_INIT
 
 typedef uint16_t fxs_rc_prob;
 
@@ -69,15 +76,6 @@ static inline int fxs_rc_dec_init(struct fxs_rc_dec *d, const uint8_t *rc, size_
     return d->code == 0xFFFFFFFFu ? -1 : 0;
 }
 
-/* x = c ? a : x, without a branch. GCC turns the decoder's selects into branches on the
- * decoded bit, which mispredict on every other decision of a value tree; an explicit cmov
- * keeps the tree's decisions a chain of arithmetic (Clang and other targets: plain C). */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define FXS_RC_SELECT(c, x, a) __asm__("testl %1, %1\n\tcmovnzl %2, %0" : "+r"(x) : "r"(c), "r"(a) : "cc")
-#else
-#define FXS_RC_SELECT(c, x, a) ((x) = (c) ? (a) : (x))
-#endif
-
 /* One decision with probability *p (of a 0), which then adapts as the encoder's
  * fxs_rc_bit does. For decisions the caller branches on: the compiler may decode with a
  * branch, which costs least when the bit is predictable. */
@@ -97,21 +95,49 @@ FXS_RC_INLINE unsigned fxs_rc_get(struct fxs_rc_dec *d, fxs_rc_prob *p)
 }
 
 /* fxs_rc_get with the probability's value pv loaded by the caller, without a branch on the
- * bit: for decisions whose bit only feeds arithmetic (a tree's next node). */
-FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv)
+ * bit: for decisions whose bit only feeds arithmetic (a tree's next node). *next becomes
+ * p0 after a 0, p1 after a 1 (the next node's probability, loaded by the caller before the
+ * bit is known). On x86-64 the subtraction code - bound sets the carry flag that picks the
+ * new range, the new code and *next: cmovs on one flag, no setcc/test on the range's chain
+ * (and GCC, left to itself, turns these selects into branches on the bit, which mispredict
+ * on every other decision of a value tree). Elsewhere (WebAssembly: Clang) plain selects. */
+FXS_RC_INLINE unsigned fxs_rc_get_next(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv, uint32_t p0, uint32_t p1,
+                                       uint32_t *next)
 {
-    uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * pv, range = bound;
-    unsigned bit = d->code >= bound;
-    uint32_t mask = 0u - bit;
-    FXS_RC_SELECT(bit, range, d->range - bound);
-    d->range = range;
-    d->code -= bound & mask;
-    *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & ~mask)) >> FXS_RC_ADAPT));
+    uint32_t bound = (d->range >> FXS_RC_PROB_BITS) * pv, range = bound, code = d->code, bit;
+#if defined(__GNUC__) && defined(__x86_64__)
+    uint32_t rhi = d->range - bound, chi;
+    bit = 0;
+    __asm__("movl %[code], %[chi]\n\t"
+            "subl %[bound], %[chi]\n\t"
+            "cmovnc %[rhi], %[range]\n\t"
+            "cmovnc %[chi], %[code]\n\t"
+            "cmovnc %[p1], %[p0]\n\t"
+            "setnc %b[bit]"
+            : [chi] "=&r"(chi), [range] "+r"(range), [code] "+r"(code), [bit] "+q"(bit), [p0] "+r"(p0)
+            : [bound] "r"(bound), [rhi] "r"(rhi), [p1] "r"(p1)
+            : "cc");
+#else
+    bit = code >= bound;
+    range = bit ? d->range - bound : range;
+    p0 = bit ? p1 : p0;
+    code -= bound & (0u - bit);
+#endif
+    *next = p0;
+    *p = (fxs_rc_prob)(pv - (uint32_t)((int32_t)(pv - (((1u << FXS_RC_PROB_BITS) - 31u) & (bit - 1u))) >> FXS_RC_ADAPT));
+    d->range = range, d->code = code;
     if (d->range < FXS_RC_TOP) {
         d->range <<= 8;
         d->code = d->code << 8 | *d->p++;
     }
     return bit;
+}
+
+/* fxs_rc_get_next for a tree's last decision (no next node). */
+FXS_RC_INLINE unsigned fxs_rc_get_pv(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t pv)
+{
+    uint32_t unused;
+    return fxs_rc_get_next(d, p, pv, 0, 0, &unused);
 }
 
 /* n raw bits (n <= 56), LSB first. The buffer is refilled to at least 56 bits on every
@@ -180,18 +206,35 @@ FXS_RC_INLINE uint32_t fxs_rc_get_tree(struct fxs_rc_dec *d, fxs_rc_prob *p, int
     uint32_t m = 1;
     if (bits >= 8) {
         uint32_t pv = p[1];
-        for (int i = 0; i < 7; i++) {
-            uint32_t p0 = p[2 * m], p1 = p[2 * m + 1];
-            unsigned bit = fxs_rc_get_pv(d, p + m, pv);
-            m = 2 * m + bit;
-            pv = p0;
-            FXS_RC_SELECT(bit, pv, p1);
-        }
+        for (int i = 0; i < 7; i++) m = 2 * m + fxs_rc_get_next(d, p + m, pv, p[2 * m], p[2 * m + 1], &pv);
         m = 2 * m + fxs_rc_get_pv(d, p + m, pv);
         return (m - 256u) << (bits - 8) | (uint32_t)fxs_rc_raw(d, bits - 8);
     }
     while (m < 1u << bits) m = 2 * m + fxs_rc_get(d, p + m);
     return m - (1u << bits);
+}
+
+/* A small count z >= 0 with the model p (FXS_RC_SPROBS probabilities): three decisions
+ * down a bit tree give s = 0 ... 7 without a branch (the next node's probability loaded
+ * before the bit is known); s < 7 is z. s = 7 is an escape: e = z - 6 >= 1, its class
+ * k = floor(log2 e) in unary with p[8 + i], then its low k bits as direct bits, high first.
+ * Only the range coder is read. Returns 0, or -1 for a class beyond the limit. */
+FXS_RC_INLINE int fxs_rc_get_small(struct fxs_rc_dec *d, fxs_rc_prob *p, uint32_t *z)
+{
+    uint32_t pv = p[1], m = 2 + fxs_rc_get_next(d, p + 1, pv, p[2], p[3], &pv), e = 1;
+    m = 2 * m + fxs_rc_get_next(d, p + m, pv, p[2 * m], p[2 * m + 1], &pv);
+    m = 2 * m + fxs_rc_get_pv(d, p + m, pv);
+    *z = m - 8u;
+    if (*z < FXS_RC_SMALL_ESC) return 0;
+    int k = 0;
+    while (fxs_rc_get(d, p + 8 + k))
+        if (++k == FXS_RC_MAXK) return -1;
+    for (int i = 0; i < k; i++) {
+        fxs_rc_prob half = FXS_RC_HALF;
+        e = 2 * e + fxs_rc_get(d, &half);
+    }
+    *z = e + FXS_RC_SMALL_ESC - 1u;
+    return 0;
 }
 
 /* ---- encoder: range coder and raw bits writer --------------------------------------------- */
@@ -336,6 +379,22 @@ static inline void fxs_rc_put_tree(struct fxs_rc_enc *w, fxs_rc_prob *p, uint32_
     uint32_t top = v >> low | 1u << b;
     while (b-- > 0) fxs_rc_bit(w, p + (top >> (b + 1)), top >> b & 1u);
     fxs_rc_bits_put(w, v, low);
+}
+
+/* A small count z >= 0 with the model p (FXS_RC_SPROBS probabilities): min(z, 7) as a
+ * 3-level bit tree, and for 7 the escape (fxs_rc_get_small), all in the range coder. */
+static inline void fxs_rc_put_small(struct fxs_rc_enc *w, fxs_rc_prob *p, uint32_t z)
+{
+    uint32_t s = z < FXS_RC_SMALL_ESC ? z : FXS_RC_SMALL_ESC, e = z - FXS_RC_SMALL_ESC + 1u;
+    fxs_rc_put_tree(w, p, s, 3);
+    if (s < FXS_RC_SMALL_ESC) return;
+    int k = 31 - __builtin_clz(e);
+    for (int i = 0; i < k; i++) fxs_rc_bit(w, p + 8 + i, 1);
+    fxs_rc_bit(w, p + 8 + k, 0);
+    for (int i = k - 1; i >= 0; i--) {
+        fxs_rc_prob half = FXS_RC_HALF;
+        fxs_rc_bit(w, &half, e >> i & 1u);
+    }
 }
 
 #endif

@@ -33,7 +33,9 @@ const ADAPT = 5;
 const TOP = 1 << 24;
 const NEAR = 8, SAME = 16;
 const MAXK = 24;
-const CNT_U = 3, T_U = 2, F_U = 2, V_U = 2;
+const T_U = 2, F_U = 2, V_U = 2;
+const SMALL_ESC = 7, SPROBS = 8 + MAXK; // small counts: a 3-level tree, then the escape's class
+const VERSION = 3;
 const HAS_VEL = 0x10, VEL_BLOCK = 16;
 const IPROBS = (u) => u + 2 * MAXK;
 
@@ -84,7 +86,7 @@ export function payloadOf(buf, header) {
 function parsePayloadHeader(b) {
   if (b.length < HEADER_BYTES || b[0] !== 0x46 || b[1] !== 0x58 || b[2] !== 0x50 || b[3] !== 0x32)
     fail('not a codec 2 payload (short or bad magic)');
-  if (b[4] !== 2) fail('unsupported version');
+  if (b[4] !== VERSION) fail(`unsupported version (this decoder reads version ${VERSION})`);
   if ((b[11] & ~HAS_VEL) > 1) fail('unknown attribute mode');
   const v = new DataView(b.buffer, b.byteOffset, b.byteLength);
   const f = { posBits: b[5], tempBits: b[6], fuelBits: b[7], abits: [b[8], b[9], b[10]], mode: b[11] & 15, n: v.getUint32(12, true) };
@@ -114,8 +116,9 @@ function parsePayloadHeader(b) {
 const corrupt = () => fail('corrupt particle data');
 
 // The decoder of both sections: one adaptive binary range decoder (LZMA's, 12-bit
-// probabilities) for every modelled decision, and the LSB-first raw bits. bit() is the one
-// place a decision is decoded; int() and tree() are the two shapes built on it (§7.5.4).
+// probabilities) for every modelled decision, and the LSB-first raw bits. decide() is the one
+// place a decision is decoded (bit(): with an adaptive probability); int(), tree() and
+// small() are the shapes built on it (§7.5.4).
 // range and code are int32 bit patterns compared unsigned; Math.imul keeps the bound exact
 // (< 2^32). Raw bits: at most 24 per read (acc holds < 32 bits).
 class Decoder {
@@ -130,10 +133,17 @@ class Decoder {
 
   /** One decision with probability P[i] (of a 0), which then adapts; returns the bit. */
   bit(P, i) {
-    const pr = P[i], bound = Math.imul(this.range >>> PROB_BITS, pr);
+    const pr = P[i], bit = this.decide(pr);
+    P[i] = bit ? pr - (pr >> ADAPT) : pr + (((1 << PROB_BITS) - pr) >> ADAPT);
+    return bit;
+  }
+
+  /** One decision with the probability pr (of a 0), not adapted; returns the bit. */
+  decide(pr) {
+    const bound = Math.imul(this.range >>> PROB_BITS, pr);
     let bit;
-    if ((this.code >>> 0) < (bound >>> 0)) { this.range = bound; P[i] = pr + (((1 << PROB_BITS) - pr) >> ADAPT); bit = 0; }
-    else { this.code = (this.code - bound) | 0; this.range = (this.range - bound) | 0; P[i] = pr - (pr >> ADAPT); bit = 1; }
+    if ((this.code >>> 0) < (bound >>> 0)) { this.range = bound; bit = 0; }
+    else { this.code = (this.code - bound) | 0; this.range = (this.range - bound) | 0; bit = 1; }
     if ((this.range >>> 0) < TOP) {
       if (this.rp >= this.rend) corrupt();
       this.range <<= 8;
@@ -159,6 +169,20 @@ class Decoder {
     if (!k) return u;
     const top = this.bit(P, o + u + MAXK + k);
     return ((((2 + top) << (k - 1)) | this.raw(k - 1)) >>> 0) + u - 1;
+  }
+
+  /** A small count with the model P[o ...] of SPROBS probabilities: s = 0 ... 7 down a
+   *  3-level tree (P[o + 1 ... o + 7]); s < 7 is the count, 7 an escape: e = count - 6 >= 1,
+   *  its class k in unary (P[o + 8 + i]), then its low k bits as direct bits (probability
+   *  PROB_INIT, not adapted), high first. */
+  small(P, o) {
+    const s = this.tree(P, o, 3);
+    if (s < SMALL_ESC) return s;
+    let k = 0;
+    while (this.bit(P, o + 8 + k)) if (++k === MAXK) corrupt();
+    let e = 1;
+    for (let i = 0; i < k; i++) e = 2 * e + this.decide(PROB_INIT);
+    return e + SMALL_ESC - 1;
   }
 
   /** A value tree of `bits` bits with the model P[o + 1 ... o + 255]: the top min(bits, 8)
@@ -199,43 +223,43 @@ function schedule(abits) {
   return { axis, left, depth: axis.length };
 }
 
-// The position tree, depth first without recursion: the upper child of a split waits on
-// an explicit stack (at most one entry per depth) while the lower one is decoded. Counts
-// are integers with U = 3. The coordinates (< 2^24) go to X, Y, Z in tree order.
+// The position tree level by level (§7.5.3): each level's nodes in order, a count each
+// (small counts, models by count class and axis), the children with two or more points
+// making the next level and lone ones the leaves, whose remaining bits come after the
+// whole tree. A node's first particle places it, so the coordinates (< 2^24) go to X, Y, Z
+// in tree order. Nodes and leaves are records of 5 integers in typed arrays: count (a
+// leaf: its depth), first particle, x, y, z bits above its depth.
 function decodeTree(f, d, X, Y, Z) {
   const { axis, left, depth } = schedule(f.abits);
-  const CP = IPROBS(CNT_U), P = models(14 * 3 * CP);
-  const bitOf = new Int32Array(depth);
-  for (let k = 0; k < depth; k++) bitOf[k] = 1 << (left[k][axis[k]] - 1);
-  const sc = new Int32Array(depth + 1), sd = new Int32Array(depth + 1);
-  const sx = new Int32Array(depth + 1), sy = new Int32Array(depth + 1), sz = new Int32Array(depth + 1);
-  const n = f.n;
-  let sp = 0, out = 0, c = n, k = 0, bx = 0, by = 0, bz = 0;
-  for (;;) {
-    while (c >= 2 && k < depth) {
-      const a = axis[k], lo = (c >>> 1) + unzigzag(d.int(P, ((c <= 256 ? CCLASS[c] : 13) * 3 + a) * CP, CNT_U));
+  const P = models(14 * 3 * SPROBS), n = f.n, R = 5;
+  let cur = new Int32Array(R * ((n >>> 1) + 1)), next = new Int32Array(cur.length), ncur = 0;
+  const leaves = new Int32Array(R * n);
+  let nl = 0;
+  if (n === 1) nl = 1; // the root is the only leaf, at depth 0, all bits raw
+  else if (n > 1) { cur[0] = n; ncur = 1; }
+  for (let k = 0; k < depth && ncur; k++) {
+    const a = axis[k], bit = 1 << (left[k][a] - 1);
+    let nn = 0;
+    for (let i = 0; i < R * ncur; i += R) {
+      const c = cur[i], at = cur[i + 1], x = cur[i + 2], y = cur[i + 3], z = cur[i + 4];
+      const lo = (c >>> 1) + unzigzag(d.small(P, ((c <= 256 ? CCLASS[c] : 13) * 3 + a) * SPROBS));
       if (lo < 0 || lo > c) corrupt();
-      const bit = bitOf[k++];
-      if (lo && lo < c) {
-        sc[sp] = c - lo; sd[sp] = k;
-        sx[sp] = a === 0 ? bx + bit : bx; sy[sp] = a === 1 ? by + bit : by; sz[sp] = a === 2 ? bz + bit : bz;
-        sp++;
-        c = lo;
-      } else if (!lo) {
-        if (a === 0) bx += bit; else if (a === 1) by += bit; else bz += bit;
+      for (let h = 0; h < 2; h++) { // lower child, then upper
+        const cc = h ? c - lo : lo, o = h ? at + lo : at, u = h ? bit : 0;
+        if (cc === 0) continue;
+        const out = cc >= 2 ? next : leaves, j = cc >= 2 ? R * nn++ : R * nl++;
+        out[j] = cc >= 2 ? cc : k + 1; out[j + 1] = o;
+        out[j + 2] = a === 0 ? x + u : x; out[j + 3] = a === 1 ? y + u : y; out[j + 4] = a === 2 ? z + u : z;
       }
     }
-    if (c === 1) {
-      const l = left[k];
-      bx += d.raw(l[0]); by += d.raw(l[1]); bz += d.raw(l[2]);
-    }
-    if (out + c > n) corrupt();
-    for (let i = 0; i < c; i++, out++) { X[out] = bx; Y[out] = by; Z[out] = bz; }
-    if (sp === 0) break;
-    sp--;
-    c = sc[sp]; k = sd[sp]; bx = sx[sp]; by = sy[sp]; bz = sz[sp];
+    [cur, next, ncur] = [next, cur, nn];
   }
-  if (out !== n) corrupt();
+  for (let i = 0; i < R * ncur; i += R) // identical points at full depth
+    for (let j = cur[i + 1]; j < cur[i + 1] + cur[i]; j++) { X[j] = cur[i + 2]; Y[j] = cur[i + 3]; Z[j] = cur[i + 4]; }
+  for (let i = 0; i < R * nl; i += R) {
+    const l = left[leaves[i]], at = leaves[i + 1];
+    X[at] = leaves[i + 2] + d.raw(l[0]); Y[at] = leaves[i + 3] + d.raw(l[1]); Z[at] = leaves[i + 4] + d.raw(l[2]);
+  }
 }
 
 function outputs(f) {

@@ -195,6 +195,16 @@ function decoderChecks(tag, decode) {
     }
     return null;
   });
+  check('version 2 payload (replaced by version 3) rejected, naming the version', () => {
+    const old = new Uint8Array(readFileSync(join(dir, 'replaced', 'flame64_version2.bin')));
+    if (old[4] !== 2) return 'the file is not a version 2 payload';
+    try {
+      decode(old);
+      return 'accepted';
+    } catch (e) {
+      return e.message === 'particles: unsupported version (this decoder reads version 3)' ? null : e.message;
+    }
+  });
   check('codec 1 payload rejected', () => {
     const bin = new Uint8Array(readFileSync(join(dir, 'flame64.bin')));
     const old = bin.slice();

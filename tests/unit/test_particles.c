@@ -833,6 +833,25 @@ static int write_file(const char *path, const void *data, size_t len)
     return ok ? 0 : -1;
 }
 
+/* A payload of version 2, which version 3 replaced (PROTOCOL.md §7.5.1: the tree's order and
+ * counts changed): flame64 as the version 2 encoder wrote it. Rejected, naming the version. */
+static void test_version2(void)
+{
+    size_t len;
+    char err[200] = "", *buf = read_file(VEC_DIR "/replaced/flame64_version2.bin", &len);
+    struct fxs_particles out;
+    if (!buf) {
+        CHECK(0, "read " VEC_DIR "/replaced/flame64_version2.bin");
+        return;
+    }
+    CHECK(len > 4 && buf[4] == 2, "the file is a version 2 payload");
+    int r = fxs_particles_decode((const uint8_t *)buf, len, &out, err, sizeof err);
+    CHECK(r == -1, "version 2 payload decoded");
+    if (!r) fxs_particles_free(&out);
+    CHECK(!strcmp(err, "particles: unsupported version (this decoder reads version 3)"), "message: %s", err);
+    free(buf);
+}
+
 /* Encodes vector v; writes it (write) or compares it with the committed files. */
 static void vec_one(int v, int write)
 {
@@ -885,5 +904,6 @@ int main(int argc, char **argv)
     RUN(test_truncated);
     RUN(test_corrupt);
     RUN(test_header_limits);
+    RUN(test_version2);
     return CHECK_DONE();
 }
