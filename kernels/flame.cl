@@ -1,8 +1,8 @@
 /* flame.cl — the SPH flame (seed 002, Mabuchi 2012; spec: digest 002) on the device.
  *
  * One substep (digest §2.10, §5.3):
- *   fl_hash           cell key per particle (cells 2h in y and z, h/8 along x by default; keys of
- *                     a box of cells repeated across space, power-of-two table, flame_layout.h)
+ *   fl_hash           cell key per particle (cells 2h in y and z, h/2 along x by default; linear
+ *                     hash, power-of-two table)
  *   fl_radix_hist/scan/scatter   stable LSD radix sort of (key, index), 8 bits a pass
  *   fl_reorder        gathers the state into sorted order (double buffer)
  *   fl_cell_start     cs[k] = number of particles with key < k (so a run of keys is one range)
@@ -17,22 +17,23 @@
  *   fl_count/fl_scan_blocks/fl_compact   every resample_interval steps: survivors in order,
  *                     then inserted particles appended in parent order with fresh ids
  *
- * Neighbour gather (§2.11): cells have edge c = h / FL_CELLS_PER_H (flame_params.h; 2h by default),
- * c / FL_XCELLS along x (h/8), and key(cx,cy,cz) = (cx + cy 2^sy + cz 2^sz) mod M
- * (flame_layout.h), so the cells of one (cy,cz) row with consecutive cx have consecutive keys
- * and, after the sort, consecutive particles: a particle visits at most 4 rows (9 with cells of
- * h, 25 with h/2), each one contiguous range [cs[k0], cs[k0+len]), trimmed to the part of the
- * row the sphere of radius h reaches. Keys repeat across space, so a range can hold particles
- * of far cells; a particle's own rows never share a key, so fl_density accepts a candidate on
- * r <= h alone and counts each neighbour once (the FL_FOR_NEIGHBOURS walk also checks the
- * candidate's own (cy,cz)). The candidate loop (about 6 candidates per neighbour) costs far
- * more than the pair arithmetic, so it runs once a step:
+ * Neighbour gather (§2.11): cells have edge c = h / FL_CELLS_PER_H (flame_params.h; 2h by default) and
+ * key(cx,cy,cz) = (cx + P1 cy + P2 cz) mod M, so the cells of one (cy,cz) row with consecutive cx
+ * have consecutive keys and, after the sort, consecutive particles: a particle visits at most 4
+ * rows (9 with cells of h, 25 with h/2), each one contiguous
+ * range [cs[k0], cs[k0+len]), trimmed to the part of the row the sphere of radius h reaches.
+ * A candidate is accepted when r <= h and (the FL_FOR_NEIGHBOURS walk, and fl_density when two
+ * of its rows' ranges overlap) its own (cy,cz) is the row's, which filters hash collisions and
+ * makes overlapping rows (tiny tables) count each neighbour once. The candidate loop (about 6
+ * candidates per neighbour) costs far more than the pair arithmetic, so it runs once a step:
  * fl_density records the accepted j != i in gather order and fl_forces reads them back
  * (bench_flame: the forces pass 3.5x faster), 8 neighbours at a time as float8 lanes (another
  * 1.6x), the last group masked.
  * Parameters live in one __constant float array; its indices FP_*, the particle flags FL_* and
  * the error bits come from flame_layout.h, which the build prepends and flame.c includes. */
 
+#define FL_HP1 0x9E3779B1u
+#define FL_HP2 0x85EBCA77u
 
 typedef __constant const float *prm_t;
 
@@ -49,16 +50,9 @@ inline int fl_floor(float x)
     return t - ((float)t > x ? 1 : 0);
 }
 
-/* (2^sy, 2^sz) of a table of mask + 1 keys (flame_layout.h) */
-inline uint2 fl_shifts(uint mask)
-{
-    uint b = popcount(mask);
-    return (uint2)(FL_SHIFT_Y(b), FL_SHIFT_Z(b));
-}
+inline uint fl_row_base(int cy, int cz) { return (uint)cy * FL_HP1 + (uint)cz * FL_HP2; }
 
-inline uint fl_row_base(int cy, int cz, uint2 sh) { return ((uint)cy << sh.x) + ((uint)cz << sh.y); }
-
-inline uint fl_key(int3 c, uint mask) { return ((uint)c.x + fl_row_base(c.y, c.z, fl_shifts(mask))) & mask; }
+inline uint fl_key(int3 c, uint mask) { return ((uint)c.x + fl_row_base(c.y, c.z)) & mask; }
 
 inline int fl_is_flame(float4 p, float4 v, prm_t P) { return p.w > P[FP_TIGN] && v.w > P[FP_FEPS]; }
 
@@ -152,7 +146,6 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
     {                                                                                                       \
         const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_, icx_ = P[FP_INV_CELLX];                    \
         const uint m_ = mask + 1u;                                                                          \
-        const uint2 sh_ = fl_shifts(mask);                                                                  \
         const int ylo_ = (int)floor((pi.y - h_) * ic_), yhi_ = (int)floor((pi.y + h_) * ic_);               \
         const int zlo_ = (int)floor((pi.z - h_) * ic_), zhi_ = (int)floor((pi.z + h_) * ic_);               \
         for (int cz_ = zlo_; cz_ <= zhi_; cz_++) {                                                          \
@@ -163,7 +156,7 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
                 if (rr_ < 0.0f) continue;                                                                   \
                 float rx_ = sqrt(rr_) * 1.0001f;                                                                      \
                 int xlo_ = (int)floor((pi.x - rx_) * icx_), xhi_ = (int)floor((pi.x + rx_) * icx_);           \
-                uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_, sh_)) & mask;                                \
+                uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_)) & mask;                                     \
                 uint k1_ = k0_ + (uint)(xhi_ - xlo_ + 1);                                                   \
                 for (int part_ = 0; part_ < 2; part_++) {                                                   \
                     uint a_, b_;                                                                            \
@@ -200,21 +193,19 @@ __constant uint fl_pack8[256] = {FL_P64(0), FL_P64(64), FL_P64(128), FL_P64(192)
 /* Pass 1: density (eq 3.10, j = i included), pressure (eq 3.11 clamped at 0 in both forms: in the
  * difference form a negative p at the free boundary of a gas with no air around it pushes the
  * boundary outward until the flame burns out; PROTOCOL.md §11.2), neighbour counts j != i
- * (nbr | flame_nbr << 16, digest §2.12), and the neighbour list: nl[i * FL_NL + k] for the nbr
- * neighbours j != i in gather order when nbr <= FL_LIST (slots FL_LIST.. take the overflow
- * writes). fl_forces walks the list instead of the grid; a particle with more neighbours keeps
- * no valid list and both passes gather it from the grid again, so no neighbour is ever dropped.
- * The rows the sphere reaches (2 x 2 with cells of 2h, 3 x 3 at most), each trimmed to the
- * sphere, are one range of sorted particles each (two where its keys wrap past the end of the
- * table), scanned 8 candidates at a time as float8 lanes (PoCL emits AVX for it); x, y, z come
- * from the sorted arrays of fl_reorder (sxyz: three plain vload8 instead of two vload16 and
- * shuffles, 10%). The distance test alone accepts each neighbour once: a particle's own rows
- * never share a key (flame_layout.h), so a candidate of another row on the same key is always
- * farther than h. The accepted lanes are appended without a branch: fl_pack8 of their bit
- * mask gives their positions packed to the front, one vstore8 writes all 8 slots from slot nb
- * and nb advances by the popcount (the slots past it are overwritten by the next store or
- * ignored). Appending one set bit at a time instead (a loop with an unpredictable trip count
- * per 8 candidates) makes the density pass about 1.5x slower (docs/performance-log.md). */
+ * (nbr | flame_nbr << 16, digest §2.12), and the neighbour list: nl[i * FL_NL + k] for the nbr neighbours j != i in gather order when nbr <= FL_LIST
+ * (slots FL_LIST.. take the overflow writes). fl_forces walks the list instead of the grid; a
+ * particle with more neighbours keeps no valid list and both passes gather it from the grid
+ * again, so no neighbour is ever dropped. The candidate scan runs 8 candidates at a time as
+ * float8 lanes (PoCL emits AVX for it); the row test, needed only when two rows' ranges
+ * overlap (below), as float compares (floor(y/c) == cy  <=>  cy <= y/c < cy + 1;
+ * convert_int8_rtn is slow on PoCL); x, y, z come from the sorted arrays
+ * of fl_reorder (sxyz: three plain vload8 instead of two vload16 and shuffles, 10%). The
+ * accepted lanes are appended without a branch: fl_pack8 of their bit mask gives their
+ * positions packed to the front, one vstore8 writes all 8 slots from slot nb and nb advances
+ * by the popcount (the slots past it are overwritten by the next store or ignored). Appending
+ * one set bit at a time instead (a loop with an unpredictable trip count per 8 candidates)
+ * makes the density pass about 1.5x slower (docs/performance-log.md). */
 __kernel void fl_density(__global const float4 *pos, __global const float4 *vel, __global const uint *cs, uint mask,
                          int n, prm_t P, __global float2 *rho_p, __global uint *counts, __global uint *nl,
                          __global const float *sxyz, int stride)
@@ -226,11 +217,14 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
     uint nb = 0, fnb = 0;
     const float tign = P[FP_TIGN], feps = P[FP_FEPS];
     __global uint *L = nl + (size_t)i * FL_NL;
-    __global const float *sx = sxyz, *sy = sx + stride, *sz = sy + stride;
     const float h_ = P[FP_H] * 1.0001f, h2_ = P[FP_H2], ic_ = P[FP_INV_CELL], c_ = 1.0f / ic_, icx_ = P[FP_INV_CELLX];
     const uint m_ = mask + 1u;
-    const uint2 sh_ = fl_shifts(mask);
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    /* the rows the sphere reaches (2 x 2 with cells of 2h; FL_ROWS at most, from flame.c), each
+     * one range of sorted particles, or two where its keys wrap past the end of the table */
+    uint ra[2 * FL_ROWS], rb[2 * FL_ROWS];
+    float rcy[2 * FL_ROWS], rcz[2 * FL_ROWS];
+    int nr = 0;
     const int ylo_ = fl_floor((pi.y - h_) * ic_), yhi_ = fl_floor((pi.y + h_) * ic_);
     const int zlo_ = fl_floor((pi.z - h_) * ic_), zhi_ = fl_floor((pi.z + h_) * ic_);
     for (int cz_ = zlo_; cz_ <= zhi_; cz_++) {
@@ -241,28 +235,51 @@ __kernel void fl_density(__global const float4 *pos, __global const float4 *vel,
             if (rr_ < 0.0f) continue;
             float rx_ = sqrt(rr_) * 1.0001f;
             int xlo_ = fl_floor((pi.x - rx_) * icx_), xhi_ = fl_floor((pi.x + rx_) * icx_);
-            uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_, sh_)) & mask;
+            uint k0_ = ((uint)xlo_ + fl_row_base(cy_, cz_)) & mask;
             uint k1_ = k0_ + (uint)(xhi_ - xlo_ + 1);
-            for (int part_ = 0; part_ < 2; part_++) {
-                uint a_, b_;
-                if (part_ == 0) { a_ = cs[k0_]; b_ = cs[min(k1_, m_)]; }
-                else if (k1_ > m_) { a_ = cs[0]; b_ = cs[k1_ - m_]; }
-                else break;
-                for (uint j0 = a_; j0 < b_; j0 += 8u) {
-                    float8 dX = pi.x - vload8(0, sx + j0), dY = pi.y - vload8(0, sy + j0), dZ = pi.z - vload8(0, sz + j0);
-                    float8 r2 = dX * dX + dY * dY + dZ * dZ;
-                    int8 ok = (r2 <= h2_) & (lane < (int)(b_ - j0));
-                    float8 q = h2_ - r2;
-                    w8 += select((float8)(0.0f), q * q * q, ok);
-                    int8 bv = select((int8)(0), (int8)(1, 2, 4, 8, 16, 32, 64, 128), ok);
-                    int4 b4 = bv.lo | bv.hi;
-                    uint bits = (uint)(b4.x | b4.y | b4.z | b4.w);
-                    if ((uint)i - j0 < 8u) bits &= ~(1u << ((uint)i - j0));
-                    uint8 at = ((uint8)(fl_pack8[bits]) >> (uint8)(0, 4, 8, 12, 16, 20, 24, 28)) & 15u;
-                    vstore8(j0 + at, 0, L + min(nb, (uint)FL_LIST));
-                    nb += popcount(bits);
-                }
+            ra[nr] = cs[k0_];
+            rb[nr] = cs[min(k1_, m_)];
+            rcy[nr] = (float)cy_;
+            rcz[nr++] = (float)cz_;
+            if (k1_ > m_) {
+                ra[nr] = cs[0];
+                rb[nr] = cs[k1_ - m_];
+                rcy[nr] = (float)cy_;
+                rcz[nr++] = (float)cz_;
             }
+        }
+    }
+    /* A candidate within h lies in its own row's range, so with ranges that share no particle
+     * the distance test alone accepts each neighbour once; ranges overlap only when the keys
+     * of two rows collide (a small table), and then a candidate must be in the row scanned. */
+    int overlap = 0;
+    for (int u = 0; u < nr; u++)
+        for (int v = u + 1; v < nr; v++)
+            overlap |= ra[u] < rb[u] && ra[v] < rb[v] && ra[u] < rb[v] && ra[v] < rb[u];
+    for (int r_ = 0; r_ < nr; r_++) {
+        const uint a_ = ra[r_], b_ = rb[r_];
+        const float fcy_ = rcy[r_], fcz_ = rcz[r_];
+        /* 8 candidates a step as float8 lanes (sxyz arrays padded by FL_PAD) */
+        for (uint j0 = a_; j0 < b_; j0 += 8u) {
+            float8 dX = pi.x - vload8(0, sxyz + j0);
+            float8 Y = vload8(0, sxyz + stride + j0), Z = vload8(0, sxyz + 2 * stride + j0);
+            float8 dY = pi.y - Y, dZ = pi.z - Z;
+            float8 r2 = dX * dX + dY * dY + dZ * dZ;
+            int8 ok = (r2 <= h2_) & (lane < (int)(b_ - j0));
+            if (overlap) {
+                float8 yc = Y * ic_, zc = Z * ic_; /* floor(yc) == cy  <=>  cy <= yc < cy + 1 */
+                ok &= (yc >= fcy_) & (yc < fcy_ + 1.0f) & (zc >= fcz_) & (zc < fcz_ + 1.0f);
+            }
+            float8 q = h2_ - r2;
+            w8 += select((float8)(0.0f), q * q * q, ok);
+            /* accepted lanes as bits (self excluded), stored packed to the front */
+            int8 bv = select((int8)(0), (int8)(1, 2, 4, 8, 16, 32, 64, 128), ok);
+            int4 b4 = bv.lo | bv.hi;
+            uint bits = (uint)(b4.x | b4.y | b4.z | b4.w);
+            if ((uint)i - j0 < 8u) bits &= ~(1u << ((uint)i - j0));
+            uint8 at = ((uint8)(fl_pack8[bits]) >> (uint8)(0, 4, 8, 12, 16, 20, 24, 28)) & 15u;
+            vstore8(j0 + at, 0, L + min(nb, (uint)FL_LIST));
+            nb += popcount(bits);
         }
     }
     if (nb > FL_LIST) { /* no list: the flame neighbours from the grid (fl_forces counts them otherwise) */
@@ -349,28 +366,24 @@ inline float2 fl_burn(float T, float F, float dTdiff, float dFdiff, int flame, p
 
 /* fl_forces' sums over the list of fl_density (the same neighbours in the same order), 8
  * neighbours a step as float8 lanes, gathered then transposed; the last group's lanes past the
- * list read particle i itself and weigh nothing (1/rho_j is 0 there). Every term carries the
- * factor m 45/(pi h^6) of vol * lap once, so the lanes sum without it and the totals take it
- * (fewer live vectors, fewer spills); the pressure term of either form is one multiply-add
- * per lane, pp = pa p_j + pb. The colour normal only where `normal` (the resampling steps,
- * which alone use it); the callers pass a constant, so each gets its own loop. Returns the
- * flame-neighbour count. */
+ * list read particle i itself and weigh nothing. The colour normal only where `normal` (the
+ * resampling steps, which alone use it); the callers pass a constant, so each gets its own
+ * loop. Returns the flame-neighbour count. */
 __attribute__((always_inline)) inline uint fl_list_sums(struct fl_acc *a, __global const uint *L, uint nbl, int i,
                                                         float4 pi, float4 vi, float2 rpi, __global const float4 *pos,
                                                         __global const float4 *vel, __global const float2 *rho_p,
                                                         prm_t P, const int normal)
 {
     const float tign = P[FP_TIGN], feps = P[FP_FEPS];
-    const float h = P[FP_H], h2 = P[FP_H2], k = P[FP_SPIKY] * P[FP_MASS];
-    const int sym = P[FP_SYMMETRIC] != 0.0f;
-    const float pa = sym ? 0.5f : 1.0f, pb = sym ? 0.5f * rpi.y : -rpi.y; /* eq 3.12 or Mueller's form */
+    const float h = P[FP_H], h2 = P[FP_H2], spiky = P[FP_SPIKY], mass = P[FP_MASS];
+    const float sym = P[FP_SYMMETRIC] != 0.0f ? 1.0f : 0.0f;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     float8 fx = 0.0f, fy = 0.0f, fz = 0.0f, ux = 0.0f, uy = 0.0f, uz = 0.0f, nx = 0.0f, ny = 0.0f, nz = 0.0f,
            sT = 0.0f, sV = 0.0f, sF = 0.0f, sWF = 0.0f;
     int8 nfl = 0;
-    for (uint k8 = 0; k8 < nbl; k8 += 8u) {
-        int8 in = lane < (int)(nbl - k8);
-        uint8 J = select((uint8)((uint)i), vload8(0, L + k8), as_uint8(in));
+    for (uint k = 0; k < nbl; k += 8u) {
+        int8 in = lane < (int)(nbl - k);
+        uint8 J = select((uint8)((uint)i), vload8(0, L + k), as_uint8(in));
         float4 p0 = pos[J.s0], p1 = pos[J.s1], p2 = pos[J.s2], p3 = pos[J.s3], p4 = pos[J.s4], p5 = pos[J.s5],
                p6 = pos[J.s6], p7 = pos[J.s7];
         float4 v0 = vel[J.s0], v1 = vel[J.s1], v2 = vel[J.s2], v3 = vel[J.s3], v4 = vel[J.s4], v5 = vel[J.s5],
@@ -389,18 +402,21 @@ __attribute__((always_inline)) inline uint fl_list_sums(struct fl_acc *a, __glob
         float8 RJ = (float8)(q0.x, q1.x, q2.x, q3.x, q4.x, q5.x, q6.x, q7.x);
         float8 PJ = (float8)(q0.y, q1.y, q2.y, q3.y, q4.y, q5.y, q6.y, q7.y);
         float8 r2 = dX * dX + dY * dY + dZ * dZ, r = sqrt(r2);
-        float8 hr = h - r;
-        float8 wv = select((float8)(0.0f), hr / RJ, in);                     /* eq 3.9, 3.13 per m 45/(pi h^6) */
-        float8 g = wv * (pa * PJ + pb) * select((float8)(0.0f), hr / r, r > 0.0f); /* eq 3.8, 3.12 */
+        float8 vol = select((float8)(0.0f), mass / RJ, in);
+        float8 hr = h - r, lap = spiky * hr;                                 /* eq 3.9 */
+        float8 grad = select((float8)(0.0f), spiky * hr * hr / r, r > 0.0f);
+        float8 pp = sym * (0.5f * (rpi.y + PJ)) + (1.0f - sym) * (PJ - rpi.y);
+        float8 g = vol * pp * grad;                                          /* eq 3.12 */
         fx += g * dX;
         fy += g * dY;
         fz += g * dZ;
+        float8 wv = select((float8)(0.0f), vol * lap, in);                   /* eq 3.13 */
         ux += wv * (VX - vi.x);
         uy += wv * (VY - vi.y);
         uz += wv * (VZ - vi.z);
         sV += wv;
         sT += wv * (TJ - pi.w);                                              /* eq 3.20 */
-        float8 wf = wv * (pi.w + TJ);                                        /* eq 3.21 per 1/2 */
+        float8 wf = wv * 0.5f * (pi.w + TJ);                                 /* eq 3.21 */
         sF += wf * (FJ - vi.w);
         sWF += wf;
         if (normal) {
@@ -411,13 +427,13 @@ __attribute__((always_inline)) inline uint fl_list_sums(struct fl_acc *a, __glob
         }
     }
 #define FL_HSUM8(v) ({ float4 t_ = (v).lo + (v).hi; (t_.x + t_.y) + (t_.z + t_.w); })
-    a->f = k * (float3)(FL_HSUM8(fx), FL_HSUM8(fy), FL_HSUM8(fz));
-    a->visc = k * (float3)(FL_HSUM8(ux), FL_HSUM8(uy), FL_HSUM8(uz));
+    a->f = (float3)(FL_HSUM8(fx), FL_HSUM8(fy), FL_HSUM8(fz));
+    a->visc = (float3)(FL_HSUM8(ux), FL_HSUM8(uy), FL_HSUM8(uz));
     a->nrm = (float3)(FL_HSUM8(nx), FL_HSUM8(ny), FL_HSUM8(nz));
-    a->wV = a->wT = k * FL_HSUM8(sV);
-    a->dT = k * FL_HSUM8(sT);
-    a->dF = 0.5f * k * FL_HSUM8(sF);
-    a->wF = 0.5f * k * FL_HSUM8(sWF);
+    a->wV = a->wT = FL_HSUM8(sV);
+    a->dT = FL_HSUM8(sT);
+    a->dF = FL_HSUM8(sF);
+    a->wF = FL_HSUM8(sWF);
 #undef FL_HSUM8
     int4 n4 = nfl.lo + nfl.hi;
     return (uint)((n4.x + n4.y) + (n4.z + n4.w));

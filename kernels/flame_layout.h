@@ -1,6 +1,6 @@
 /* flame_layout.h — what server/effects/flame.c and kernels/flame.cl must agree on: the indices
  * of the parameter array (one __constant float array, FP_COUNT floats, packed by flame_params.c's
- * flame_params_pack), the particle flag bits, the error bits a step reports and the keys of the search grid. Valid C and
+ * flame_params_pack), the particle flag bits and the error bits a step reports. Valid C and
  * OpenCL C: flame.c (and flame.h's public flag enum) include it, and the build
  * (tools/embed_kernels.sh) prepends it to flame.cl, so the layout exists once. */
 #ifndef FLAME_LAYOUT_H
@@ -47,22 +47,6 @@
 #define FL_OBSTACLE 2u /* non-burning solid moved kinematically (digest §9 #16) */
 #define FL_TYPE 3u     /* mask of the type bits */
 #define FL_FLAME 4u    /* T > T_ign and F > fuel_eps */
-
-/* Keys of the search grid in a table of M = 2^b keys (b = 10..22): key(cx, cy, cz) =
- * (cx + cy 2^FL_SHIFT_Y(b) + cz 2^FL_SHIFT_Z(b)) mod M, the cells of a box of 2^sy x
- * 2^(sz-sy) x 2^(b-sz) cells in x-fastest order, repeated across space (from b = 17 on: 256
- * cells of h/8 = 32 h along x, 16 cells of 2h = 32 h along y, 32 h 2^(b-17) along z). A row
- * of cells along x is a run of keys, the rows next to it in y are 2^sy keys away and in z
- * 2^sz, so the sort leaves the particles in slabs and rows, and the rows a particle gathers
- * from were sorted just before or after its own: their cell starts, coordinates and state
- * are still in cache (the hash of rows this replaced scattered them over the table). Regions
- * larger than the box wrap onto the same keys: their particles are candidates of each other's
- * rows, rejected by distance. A particle's own rows never share a key: for row offsets |dy|,
- * |dz| <= 2 the starts differ by 32 to M - 32 keys (sy >= 5, sy + 2 <= sz <= b - 3), more than
- * the x cells one row spans (flame.c's fl_rows_disjoint checks it for the cells it is built
- * with). */
-#define FL_SHIFT_Y(b) ((b) - 5 < 8 ? (b) - 5 : 8)
-#define FL_SHIFT_Z(b) ((b) - 3 < FL_SHIFT_Y(b) + 4 ? (b) - 3 : FL_SHIFT_Y(b) + 4)
 
 /* Bits of the error flag a step sets (read back after every frame). */
 #define FL_ERR_NAN 1   /* a non-finite position, velocity, temperature or fuel */

@@ -34,11 +34,6 @@
 /* -cl-unsafe-math-optimizations (reassociation, reciprocals; not finite-math, so the NaN/Inf
  * runaway check still works): about 10% on bench_flame, device-vs-reference tests unchanged. */
 #define FL_BUILD_OPTS "-cl-mad-enable -cl-unsafe-math-optimizations -DFL_NL=" FL_STR(FL_NL)
-/* Keys of the search grid's table per particle (flame_layout.h): at 8, from 16k particles on
- * the key box is 32 h x 32 h x 64 h or more, the default flame's extent */
-#ifndef FL_KEYS
-#define FL_KEYS 8
-#endif
 #ifndef FL_LOCAL
 #define FL_LOCAL 64 /* work-group size of the per-particle kernels */
 #endif
@@ -239,11 +234,11 @@ static int fl_reserve(struct flame *fl, int want, struct fx_err *err)
     return 0;
 }
 
-/* Key table of M = 2^k >= FL_KEYS n keys (k in 10..22) and its cell-start array. */
+/* Hash table of M = 2^k >= 2n keys (k in 10..22) and its cell-start array. */
 static int fl_table(struct flame *fl, struct fx_err *err)
 {
     int bits = 10;
-    while (bits < 22 && (1 << bits) < FL_KEYS * fl->n) bits++;
+    while (bits < 22 && (1 << bits) < 4 * fl->n) bits++;
     fl->grid.mask = (1u << bits) - 1u;
     fl->grid.passes = (bits + 7) / 8;
     int want = (1 << bits) + 1;
@@ -653,33 +648,15 @@ static int fl_restart(struct flame *fl, struct fx_err *err)
     return rc ? -1 : 0;
 }
 
-/* fl_density's distance test alone counts each neighbour once only if a particle's own rows
- * never share a key (flame_layout.h): in every table the code can choose (2^10..2^22 keys),
- * the starts of two rows up to the rows a sphere of radius h reaches per axis apart are
- * farther apart, around the table, than the x cells one row spans. */
-static bool fl_rows_disjoint(void)
-{
-    const int axis = (int)floor(2.0002 * FL_CELLS_PER_H) + 2; /* cells the extent 2h (widened by 1.0001) touches */
-    /* a row's x cells lie within K + 1 of the particle's own (K = x cells per h, widened by 1.0001^2) */
-    const uint32_t span = 2u * ((uint32_t)floor(1.0002 * FL_CELLS_PER_H * FL_XCELLS) + 1u) + 1u;
-    for (uint32_t b = 10; b <= 22; b++) {
-        uint32_t m = 1u << b, sy = FL_SHIFT_Y(b), sz = FL_SHIFT_Z(b);
-        for (int dy = -axis + 1; dy < axis; dy++)
-            for (int dz = -axis + 1; dz < axis; dz++) {
-                uint32_t d = ((uint32_t)dy * (1u << sy) + (uint32_t)dz * (1u << sz)) & (m - 1u);
-                if ((dy || dz) && (d < span || m - d < span)) return false; /* the two rows' runs could meet */
-            }
-    }
-    return true;
-}
-
 static int fl_create_objects(struct flame *fl, struct fx_err *err)
 {
     cl_int rc = CL_SUCCESS;
-    if (!fl_rows_disjoint())
-        return fx_fail(err, "internal", "", "flame: the search cells (FL_CELLS_PER_H %g, FL_XCELLS %d) let a particle's "
-                       "rows share keys", (double)FL_CELLS_PER_H, FL_XCELLS);
-    cl_program prog = ocl_program(fl->ocl, FL_KERNEL_FILE, FL_BUILD_OPTS, err);
+    /* FL_ROWS: the rows of cells a sphere of radius h reaches at most (fl_density keeps their
+     * ranges): per axis, the cells its extent 2h (widened by the kernel's 1.0001) can touch */
+    int axis = (int)floor(2.0002 * FL_CELLS_PER_H) + 2;
+    char opts[sizeof FL_BUILD_OPTS + 32];
+    snprintf(opts, sizeof opts, "%s -DFL_ROWS=%d", FL_BUILD_OPTS, axis * axis);
+    cl_program prog = ocl_program(fl->ocl, FL_KERNEL_FILE, opts, err);
     if (!prog) return -1;
     for (int k = 0; k < FL_KERNEL_COUNT && rc == CL_SUCCESS; k++)
         fl->k[k] = clCreateKernel(prog, fl_kernel_names[k], &rc);

@@ -22,11 +22,9 @@
  * of bench_flame faster too; cells of 2.5h or 3h gain nothing more (docs/performance-log.md). */
 #define FL_CELLS_PER_H 0.5
 #endif
-/* Cells along x per cell of the other axes (flame.cl's FP_INV_CELLX): h/8, so each row is
- * trimmed to the sphere within h/8 (about 210 candidates for 32 neighbours in the dense
- * lattice; 240 with cells of h/2). */
+/* Cells along x per cell of the other axes (flame.cl's FP_INV_CELLX). */
 #ifndef FL_XCELLS
-#define FL_XCELLS 16
+#define FL_XCELLS 4
 #endif
 
 enum flame_obstacle_shape { FLAME_PLATE, FLAME_BOX };

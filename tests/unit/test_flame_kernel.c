@@ -19,6 +19,7 @@
 #include "../ref/flame_ref.h"
 #include "check.h"
 #include "effects/flame.h"
+#include "kernels.h"
 #include "ocl.h"
 #include "params.h"
 
@@ -297,35 +298,56 @@ static void test_eval_mixed(void) { tfk_eval_case("2000 mixed, 3 clusters", NULL
 
 static void test_eval_far_apart(void) { tfk_eval_case("1200 in 6 clusters ±1e3 h", NULL, 1200, 6, 1); }
 
-/* Forced key collisions for every table the code can choose (M = 2^b, b = 10..22): the
- * search grid's keys (flame_layout.h) repeat every 2^(b - FL_SHIFT_Z(b)) cells along z, so
- * cells a common multiple of those periods apart share every key. 500 groups of 4 particles
- * near the origin get exact twins that far up, so every occupied cell's key run after the
- * sort holds the particles of two places ~256 h apart, and each place's densities, forces
- * and neighbour counts must still match the reference's (a key run taken for a cell without
- * the distance test would count the twins). */
+/* The row hash's multiplier of cy or cz, read from the embedded kernel source so the test
+ * follows the kernel: "#define NAME 0x...u". 0 if absent. */
+static uint32_t tfk_kernel_hex(const char *name)
+{
+    const char *src = kernels_source("flame.cl"), *at = src ? strstr(src, name) : NULL;
+    return at ? (uint32_t)strtoul(at + strlen(name), NULL, 16) : 0;
+}
+
+/* Forced hash collisions for every table the code can choose (M = 2^k, k <= 22): cells of
+ * edge h along y and z (h/4 along x) hash to (cx + HP1 cy + HP2 cz) mod M, so the rows
+ * (cy, cz) and (cy + dy, cz + dz) share every key when dy HP1 + dz HP2 = 0 mod 2^22. The
+ * smallest such (dy, dz) (~2^11 cells) is found from the kernel's own multipliers; 500 groups
+ * of 4 particles near the origin get exact twins shifted by (dy, dz) cells, so every occupied
+ * cell's key run after the sort holds the particles of two places ~2000 h apart, and each
+ * place's densities, forces and neighbour counts must still match the reference's (a key run
+ * taken for a cell without the position and row tests would count the twins). */
 static void test_eval_hash_collisions(void)
 {
-    int wrap = 0; /* log2 of the common period, in cells */
-    for (int b = 10; b <= 22; b++) wrap = b - FL_SHIFT_Z(b) > wrap ? b - FL_SHIFT_Z(b) : wrap;
+    uint32_t hp1 = tfk_kernel_hex("#define FL_HP1"), hp2 = tfk_kernel_hex("#define FL_HP2");
+    const uint32_t m22 = (1u << 22) - 1u;
+    CHECK((hp2 & 1u) && hp1, "row hash multipliers found in flame.cl (%#x, %#x), the second odd", hp1, hp2);
+    if (!(hp2 & 1u) || !hp1) return;
+    uint32_t inv = hp2; /* hp2^-1 mod 2^32 by Newton's iteration */
+    for (int i = 0; i < 5; i++) inv *= 2u - hp2 * inv;
+    int dy = 0, dz = 0, best = 1 << 30;
+    for (int y = 1; y <= 4096; y++) {
+        int z = (int)((0u - (uint32_t)y * hp1) * inv & m22);
+        if (z > (1 << 21)) z -= 1 << 22;
+        if ((y > abs(z) ? y : abs(z)) < best) best = y > abs(z) ? y : abs(z), dy = y, dz = z;
+    }
+    CHECK((((uint32_t)dy * hp1 + (uint32_t)dz * hp2) & m22) == 0 && best <= 4096,
+          "rows (0,0) and (%d,%d) share every key of a table of up to 2^22", dy, dz);
     struct flame_ref_params rp;
     struct flame *fl = tfk_new(NULL, &rp);
     if (!fl) return;
-    const double c = rp.h / FL_CELLS_PER_H, dz = (double)(1 << wrap) * c; /* cell edge along y and z */
     const int n = 4000, half = n / 2;
     struct flame_ref_particle *ps = tfk_random_set(&rp, n, 1, 0);
     for (int i = 0; i < half; i += 4) { /* groups inside one y/z cell each, cells spread over 12 h */
-        double at[3] = {tfk_rand(-6, 6) * rp.h, (floor(tfk_rand(-6, 6) * rp.h / c) + 0.5) * c,
-                        (floor(tfk_rand(-6, 6) * rp.h / c) + 0.5) * c};
+        double c[3] = {tfk_rand(-6, 6) * rp.h, (floor(tfk_rand(-6, 6)) + 0.5) * rp.h,
+                       (floor(tfk_rand(-6, 6)) + 0.5) * rp.h};
         for (int j = i; j < i + 4; j++) {
-            for (int k = 0; k < 3; k++) ps[j].r[k] = at[k] + tfk_rand(-0.35, 0.35) * rp.h;
+            for (int k = 0; k < 3; k++) ps[j].r[k] = c[k] + tfk_rand(-0.35, 0.35) * rp.h;
             tfk_round(&ps[j]);
             ps[j + half] = ps[j];
-            ps[j + half].r[2] += dz;
+            ps[j + half].r[1] += dy * rp.h;
+            ps[j + half].r[2] += dz * rp.h;
             tfk_round(&ps[j + half]);
         }
     }
-    tfk_eval_compare("2000 particles and their twins on the same keys", fl, &rp, ps, n);
+    tfk_eval_compare("2000 particles and their twins in colliding rows", fl, &rp, ps, n);
     free(ps);
     flame_free(fl);
 }
