@@ -1,6 +1,7 @@
 """test_godot.py — the Godot add-on (clients/godot/addons/fxstream) in the real engine: runs
-tests/godot/test_main.gd in godot3-server against a real daemon and a fake server, and does
-what the engine cannot do from inside:
+tests/godot/test_main.gd in godot3-server against a real daemon, a daemon in cluster mode (on
+a redis-server of its own: it refuses particle budgets) and a fake server, and does what the
+engine cannot do from inside:
 
 * installs the add-on as a user would, by copying the folder into a project;
 * runs fxctl with both encodings while the scene dumps decoded flame frames, and compares the
@@ -30,6 +31,7 @@ import numpy as np
 import websockets
 
 from fxtest import HEADER, ROOT, Daemon, free_port
+from test_cluster import REDIS, Redis, cluster_daemon
 
 GODOT = shutil.which("godot3-server")
 FXCTL = os.path.join(ROOT, "build", "fxctl")
@@ -65,8 +67,9 @@ def read_ply(path):
     return np.frombuffer(body, dtype=np.dtype(props), count=n)
 
 
-def engine_particles(xyz, temp, seq, channel=7):
-    """A kind 1 frame in the engine encoding (PROTOCOL.md §7.8) of these particles."""
+def engine_particles(xyz, temp, seq, channel=7, total=0):
+    """A kind 1 frame in the engine encoding (PROTOCOL.md §7.8) of these particles (a budget's
+    subset of `total` when that is not 0)."""
     n = len(temp)
     lo, hi = xyz.min(0), xyz.max(0)
     origin = ((lo.astype(np.float64) + hi) / 2).astype(np.float32)
@@ -78,12 +81,12 @@ def engine_particles(xyz, temp, seq, channel=7):
     raw = texels.tobytes()
     z = subprocess.run(["zstd", "-3", "-q", "-c"], input=raw, stdout=subprocess.PIPE, check=True).stdout
     eh = b"FXE1" + struct.pack("<HHHHIIIII3f3fII", 1, 64, 1, 1, 1024, rows, n, len(raw), len(z), *origin, *extent, 0, 0)
-    return frame(1, 16, eh + z, n, 0, seq, channel)
+    return frame(1, 16, eh + z, n, 0, seq, channel, total=total)
 
 
-def frame(kind, codec, payload, w, h, seq, channel=7, payload_bytes=None):
+def frame(kind, codec, payload, w, h, seq, channel=7, payload_bytes=None, total=0):
     hdr = HEADER.pack(b"FXS1", 64, kind, channel, 1, seq, seq / 30.0, int(time.time() * 1e6), codec,
-                      len(payload) if payload_bytes is None else payload_bytes, w, h, 0, 0)
+                      len(payload) if payload_bytes is None else payload_bytes, w, h, 0, total)
     return hdr + payload
 
 
@@ -120,10 +123,10 @@ class Fake:
 
     async def _bad_then_good(self, ws):
         """Each in a game frame of its own (the client decodes only the newest frame of a
-        stream and kind that arrive together)."""
+        stream and kind that arrive together). The good frame is a budget's subset: 500 of 4000."""
         rng = np.random.default_rng(1)
         xyz = rng.normal(0, 0.02, (500, 3)).astype(np.float32)
-        good = engine_particles(xyz, np.full(500, 1500, np.float32), seq=1)
+        good = engine_particles(xyz, np.full(500, 1500, np.float32), seq=1, total=4000)
         hdr_only = good[:64 + 64]
         bad_raw = bytearray(good)
         struct.pack_into("<I", bad_raw, 64 + 24, 999)  # raw_bytes that fits no image
@@ -134,6 +137,7 @@ class Fake:
                   bytes(bad_raw),                                       # wrong raw size
                   frame(9, 16, good[64:], 500, 0, 3),                   # unknown kind
                   frame(1, 2, good[64:], 500, 0, 4),                    # a codec the add-on cannot read
+                  frame(1, 16, good[64:], 500, 0, 5, total=10),         # a subset larger than its total
                   bytes(bad_zstd),                                      # corrupt zstd
                   hdr_only,                                             # the headers alone
                   good[:30]]:                                           # shorter than a header
@@ -259,7 +263,7 @@ def check_demo(tmp, env):
 
 
 def run():
-    if not check(GODOT is not None, "godot3-server is installed (deploy/install-deps.sh)"):
+    if not check(GODOT is not None and os.access(REDIS, os.X_OK), "godot3-server and redis-server are installed (deploy/install-deps.sh)"):
         return
     tmp = tempfile.mkdtemp(prefix="fxs-godot-")
     proj, out, home = os.path.join(tmp, "project"), os.path.join(tmp, "out"), os.path.join(tmp, "home")
@@ -271,9 +275,11 @@ def run():
     state = tempfile.mkdtemp(prefix="fxs-godot-state-")
     nice = ("nice", "-n", "10")  # the scene times its calls: the daemon's solver must not crowd it out
     d = Daemon("--port", str(port), state_dir=state, wrapper=nice)
+    redis = Redis()
+    cluster = cluster_daemon(redis, "godot")
     fake = Fake(big_frame(d.url, tmp))
     env = dict(os.environ, HOME=home, XDG_DATA_HOME=os.path.join(home, "data"), XDG_CONFIG_HOME=os.path.join(home, "config"),
-               FXS_URL=d.url, FXS_FAKE_URL="ws://127.0.0.1:%d/v1/ws" % fake.port, FXS_OUT=out)
+               FXS_URL=d.url, FXS_CLUSTER_URL=cluster.url, FXS_FAKE_URL="ws://127.0.0.1:%d/v1/ws" % fake.port, FXS_OUT=out)
     g = subprocess.Popen([GODOT, "--path", proj, "-s", "res://test_main.gd"], stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True, env=env)
     lines = []
@@ -301,6 +307,9 @@ def run():
         for p in subs:
             p.wait(60)
         d.stop()
+        cluster.stop()
+        redis.kill()
+        shutil.rmtree(redis.dir, ignore_errors=True)
         fake.stop()
     scene = [l.rstrip("\n") for l in lines]
     global passed, failed
