@@ -246,7 +246,8 @@ def big_frame(url, tmp):
 
 def check_demo(tmp, env):
     """The demo opens in the editor (it imports, loads the plugin and parses every script) and
-    its scene instances with the add-on's nodes."""
+    its scene instances with the add-on's nodes, the flame with the budget FXSTREAM_MAX_PARTICLES
+    asks for, shown in the panel's menu."""
     demo = os.path.join(tmp, "demo")
     shutil.copytree(os.path.join(ROOT, "clients", "godot", "demo"), demo, symlinks=False)
     p = subprocess.run([GODOT, "-e", "--path", demo, "--quit"], capture_output=True, text=True, env=env, timeout=120)
@@ -255,11 +256,13 @@ def check_demo(tmp, env):
     with open(os.path.join(demo, "check_demo.gd"), "w") as f:
         f.write('extends SceneTree\nfunc _initialize():\n\tvar d = load("res://demo.tscn").instance()\n'
                 '\troot.add_child(d)\n\tprint("demo nodes: ", d.get_node("Flame").stream, " ", d.get_node("Wave").stream, " ",'
-                ' d.get_node("Rig").stream, " ", d.get_node("UI/Tuning").get_child_count())\n\tquit(0)\n')
+                ' d.get_node("Rig").stream, " ", d.get_node("UI/Tuning").get_child_count(), " budget ",'
+                ' d.get_node("Flame").get("max_particles"), " ", d.get_node("UI/Tuning").get("_budget").text)\n\tquit(0)\n')
     p = subprocess.run([GODOT, "--path", demo, "-s", "res://check_demo.gd"], capture_output=True, text=True,
-                       env=dict(env, FXSTREAM_URL="ws://127.0.0.1:1/v1/ws"), timeout=60)
-    check(p.returncode == 0 and "demo nodes: flame energy energy 1" in p.stdout,
-          "the demo scene instances: flame, energy wave, light rig, tuning panel")
+                       env=dict(env, FXSTREAM_URL="ws://127.0.0.1:1/v1/ws", FXSTREAM_MAX_PARTICLES="2000"), timeout=60)
+    check(p.returncode == 0 and "demo nodes: flame energy energy 1 budget 2000 flame: at most 2000 particles" in p.stdout,
+          "the demo scene instances: flame with a budget of 2000 (FXSTREAM_MAX_PARTICLES) shown in the panel, energy wave, "
+          "light rig, tuning panel (%s)" % [l for l in p.stdout.splitlines() if "demo nodes" in l])
 
 
 def run():

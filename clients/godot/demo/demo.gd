@@ -1,5 +1,6 @@
 # demo.gd — the demo scene's script: points the client at FXSTREAM_URL when that is set (else
-# the Client node's url, fxstreamd's default), turns the camera slowly around the scene, and
+# the Client node's url, fxstreamd's default) and the flame's particle budget at
+# FXSTREAM_MAX_PARTICLES when that is set (else every particle; the panel changes it), turns the camera slowly around the scene, and
 # with `--screenshot PATH` on the command line saves a picture once every stream has drawn and
 # quits (tools/screenshot_godot.sh takes README's picture so). The demo's addons/fxstream is a
 # link to clients/godot/addons/fxstream: copy the folder instead where links are not followed
@@ -14,6 +15,13 @@ extends Spatial
 
 var _shot := ""
 var _t := 0.0
+
+
+# Before the children's _ready: the flame subscribes with its budget, the panel shows it.
+func _enter_tree() -> void:
+	var budget := OS.get_environment("FXSTREAM_MAX_PARTICLES")
+	if budget != "":
+		$Flame.max_particles = int(budget)
 
 
 func _ready() -> void:
