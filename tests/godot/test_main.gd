@@ -30,6 +30,8 @@ var bad_frames := []    # what failed a per-frame check
 var events := []        # [client, signal, args]
 var max_gap_usec := 0     # longest wall time between two idle frames
 var max_loop_usec := 0    # ... less the time the thread waited for a CPU
+var max_loop_phase := ""  # the test running then
+var phase := ""
 var last_wait_usec := 0   # that wait in the latest interval
 var skip_interval := false # the test itself worked in this interval (a dump): not the add-on's
 var _last_idle := 0
@@ -51,7 +53,9 @@ func _idle(_delta: float) -> bool:
 	if _last_idle > 0 and not skip_interval:
 		last_wait_usec = wait - _last_wait
 		max_gap_usec = max(max_gap_usec, now - _last_idle)
-		max_loop_usec = max(max_loop_usec, now - _last_idle - last_wait_usec)
+		if now - _last_idle - last_wait_usec > max_loop_usec:
+			max_loop_usec = now - _last_idle - last_wait_usec
+			max_loop_phase = phase
 	skip_interval = false
 	_last_idle = now
 	_last_wait = wait
@@ -173,23 +177,17 @@ func _run() -> void:
 	yield(self, "idle_frame")
 	a = _client("a", OS.get_environment("FXS_URL"))
 	b = _client("b", OS.get_environment("FXS_URL"))
-	yield(_test_hello(), "completed")
-	yield(_measure_default(), "completed")
-	yield(_test_streams(), "completed")
-	yield(_test_eye(), "completed")
-	yield(_test_dump(), "completed")
-	yield(_test_set(), "completed")
-	yield(_test_look(), "completed")
-	yield(_test_unknown_stream(), "completed")
-	yield(_test_budget(), "completed")
-	yield(_test_budget_refused(), "completed")
-	yield(_test_restart(), "completed")
+	for t in ["_test_hello", "_measure_default", "_test_streams", "_test_eye", "_test_dump", "_test_set",
+			"_test_look", "_test_unknown_stream", "_test_budget", "_test_budget_refused", "_test_restart"]:
+		phase = t
+		yield(call(t), "completed")
 	for c in [a, b, p]:
 		_retire(c) # the daemon's streams pause: the fake server's frames are measured alone
+	phase = "_test_bad_input"
 	yield(_test_bad_input(), "completed")
 	_retire(fake)
-	check(max_loop_usec < BLOCK_LIMIT_USEC, "no game frame took 50 ms or more, waits for a CPU aside (longest %.1f ms; wall %.1f ms)" % [
-			max_loop_usec / 1000.0, max_gap_usec / 1000.0])
+	check(max_loop_usec < BLOCK_LIMIT_USEC, "no game frame took 50 ms or more, waits for a CPU aside (longest %.1f ms, in %s; wall %.1f ms)" % [
+			max_loop_usec / 1000.0, max_loop_phase, max_gap_usec / 1000.0])
 	for n in longest.keys():
 		print("game loop: client %s's longest idle-frame work %.1f ms (wall)" % [n, longest[n] / 1000.0])
 	print("test_godot_scene: %d passed, %d failed" % [passed, failed])
