@@ -1,10 +1,10 @@
 # demo.gd — the demo scene's script: points the client at FXSTREAM_URL when that is set (else
-# the Client node's url, fxstreamd's default) and the flame's particle budget at
-# FXSTREAM_MAX_PARTICLES when that is set (else every particle; the panel changes it), turns the camera slowly around the scene, and
-# with `--screenshot PATH` on the command line saves a picture once every stream has drawn and
-# quits (tools/screenshot_godot.sh takes README's picture so). The demo's addons/fxstream is a
-# link to clients/godot/addons/fxstream: copy the folder instead where links are not followed
-# (Windows).
+# the Client node's url, fxstreamd's default), gives the flame the particle budget
+# FXSTREAM_MAX_PARTICLES when that is set (else every particle; the panel changes it), turns
+# the camera slowly around the scene, and with `--screenshot PATH` on the command line saves a
+# picture once every stream has drawn and quits (tools/screenshot_godot.sh takes README's
+# picture so). The demo's addons/fxstream is a link to clients/godot/addons/fxstream: copy the
+# folder instead where links are not followed (Windows).
 # The scene: the flame, and the energy wave (Wave, an FxTexture) with its light rig (Rig, an
 # FxLightRig) under the same transform, so the rig's lights sit on the drawn ring; the stream's
 # shadow plane (y = -9 in its units, × 0.3) falls on the ground. Its Environment uses the

@@ -126,7 +126,7 @@ func _on_stream_frame(f) -> bool:
 	_line_mat.set_shader_param("rows", f.rows)
 	particles = f.count
 	stream_particles = int(max(f.total, f.count))
-	var grow := pow(float(stream_particles) / max(particles, 1), 1.0 / 3.0)
+	var grow := pow(float(f.total) / f.count, 1.0 / 3.0) if f.total > 0 and f.count > 0 else 1.0
 	if grow != particle_scale:
 		particle_scale = grow
 		_apply_look()
