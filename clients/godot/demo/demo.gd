@@ -1,9 +1,10 @@
 # demo.gd — the demo scene's script: points the client at FXSTREAM_URL when that is set (else
-# the Client node's url, fxstreamd's default), turns the camera slowly around the scene, and
-# with `--screenshot PATH` on the command line saves a picture once every stream has drawn and
-# quits (tools/screenshot_godot.sh takes README's picture so). The demo's addons/fxstream is a
-# link to clients/godot/addons/fxstream: copy the folder instead where links are not followed
-# (Windows).
+# the Client node's url, fxstreamd's default), gives the flame the particle budget
+# FXSTREAM_MAX_PARTICLES when that is set (else every particle; the panel changes it), turns
+# the camera slowly around the scene, and with `--screenshot PATH` on the command line saves a
+# picture once every stream has drawn and quits (tools/screenshot_godot.sh takes README's
+# picture so). The demo's addons/fxstream is a link to clients/godot/addons/fxstream: copy the
+# folder instead where links are not followed (Windows).
 # The scene: the flame, and the energy wave (Wave, an FxTexture) with its light rig (Rig, an
 # FxLightRig) under the same transform, so the rig's lights sit on the drawn ring; the stream's
 # shadow plane (y = -9 in its units, × 0.3) falls on the ground. Its Environment uses the
@@ -14,6 +15,13 @@ extends Spatial
 
 var _shot := ""
 var _t := 0.0
+
+
+# Before the children's _ready: the flame subscribes with its budget, the panel shows it.
+func _enter_tree() -> void:
+	var budget := OS.get_environment("FXSTREAM_MAX_PARTICLES")
+	if budget != "":
+		$Flame.max_particles = int(budget)
 
 
 func _ready() -> void:

@@ -1,6 +1,7 @@
 # tuning.gd — the demo's panel: a few sliders that `set` parameters of the flame and the energy
-# wave, and each stream's presets (`presets`, `preset_load`). Other clients' changes move the
-# sliders (params events); a refused value shows the server's message.
+# wave, each stream's presets (`presets`, `preset_load`), and the flame's particle budget (the
+# node's max_particles) with the particles drawn of the stream's. Other clients' changes move the
+# sliders (params events); a refused value or budget shows the server's message.
 extends PanelContainer
 
 # [stream, parameter, component (-1: a number), label, min, max]
@@ -11,8 +12,11 @@ const SLIDERS = [
 	["energy", "light_strength", -1, "wave: light strength", 0.0, 1.0],
 ]
 const PRESETS = {"flame": "flame", "energy": "energy_wave"}
+# The budget menu's choices (0: every particle); the daemon serves these steps as they are.
+const BUDGETS = [0, 1000, 2000, 5000, 10000, 20000, 50000, 100000]
 
 export(NodePath) var client_path := NodePath("../../Client")
+export(NodePath) var flame_path := NodePath("../../Flame")
 
 var _client: Node
 var _sliders := {}        # "stream/param" -> HSlider
@@ -20,6 +24,9 @@ var _docs := {}           # stream -> its latest params document
 var _pending := {}        # stream -> params to send (throttled)
 var _menus := {}          # stream -> OptionButton
 var _status := Label.new()
+var _flame: Node
+var _budget := OptionButton.new()
+var _particles := Label.new()
 var _since_send := 0.0
 
 
@@ -45,6 +52,13 @@ func _ready() -> void:
 		menu.connect("item_selected", self, "_on_preset", [stream])
 		box.add_child(menu)
 		_menus[stream] = menu
+	_flame = get_node(flame_path)
+	for n in BUDGETS:
+		_budget.add_item("flame: every particle" if n == 0 else "flame: at most %d particles" % n)
+	_budget.select(max(BUDGETS.find(_flame.max_particles), 0))
+	_budget.connect("item_selected", self, "_on_budget")
+	box.add_child(_budget)
+	box.add_child(_particles)
 	_status.autowrap = true
 	_status.rect_min_size = Vector2(220, 0)
 	box.add_child(_status)
@@ -52,6 +66,7 @@ func _ready() -> void:
 	_client.connect("params", self, "_on_params")
 	_client.connect("presets_received", self, "_on_presets")
 	_client.connect("error", self, "_on_error")
+	_client.connect("budget_refused", self, "_on_budget_refused")
 
 
 func _on_connected(_hello) -> void:
@@ -85,6 +100,7 @@ func _on_slider(value: float, s: Array) -> void:
 
 # At most ten sets a second while a slider is dragged.
 func _process(delta: float) -> void:
+	_show_particles()
 	_since_send += delta
 	if _since_send < 0.1 or _pending.empty():
 		return
@@ -108,6 +124,20 @@ func _on_preset(index: int, stream: String) -> void:
 	if index > 0:
 		_client.preset_load(stream, _menus[stream].get_item_text(index))
 		_menus[stream].select(0)
+
+
+func _on_budget(index: int) -> void:
+	_flame.max_particles = BUDGETS[index]
+
+
+func _on_budget_refused(_stream: String, message: String) -> void:
+	_status.text = "every particle: " + message
+
+
+func _show_particles() -> void:
+	var drawn: int = _flame.particles
+	var whole: int = _flame.stream_particles
+	_particles.text = "%d of %d particles (budget)" % [drawn, whole] if whole > drawn else "%d particles" % drawn
 
 
 func _on_error(code: String, message: String, _param: String, _id: int, _stream: String) -> void:

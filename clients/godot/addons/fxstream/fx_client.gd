@@ -5,7 +5,9 @@
 # drops it reconnects with backoff (reconnect_min_s doubling up to reconnect_max_s) and makes
 # its subscriptions again, so a restarted daemon resumes its streams without the game doing
 # anything. Requests made while disconnected wait for the next connection; one in flight when
-# the connection drops gets no reply.
+# the connection drops gets no reply. A subscription's particle budget (max_particles) that the
+# daemon refuses (cluster mode, an older daemon) is dropped for that connection: the stream is
+# subscribed again without it, with budget_refused and a warning saying why.
 #
 # Of the frames of one stream and kind that arrive within one game frame only the newest is
 # decoded (latest frame wins, as the daemon does). Frames and messages that do not follow the
@@ -25,6 +27,9 @@ signal params(stream, rev, params, request_id)
 signal created(stream, effect, rev)
 signal destroyed(stream)
 signal subscribed(stream, channel, encoding)
+# The daemon refused a subscription's max_particles (its message): subscribed again without it,
+# so its frames hold every particle until the next connection tries the budget again.
+signal budget_refused(stream, message)
 signal unsubscribed(stream, reason)
 signal reset_done(stream, request_id)
 signal presets_received(presets, request_id)
@@ -75,7 +80,7 @@ var _backoff := 0.0
 var _retry_at := 0
 var _next_id := 1
 var _queue := []          # requests made while not connected: [id, op, text]
-var _subs := {}           # stream -> {max_fps, encoding}: what is (re)subscribed on connect
+var _subs := {}           # stream -> {max_fps, encoding, max_particles, ...}: what is (re)subscribed on connect
 var _channels := {}       # channel -> stream, from the subscribed replies of this connection
 var _pending := {}        # id -> op of the requests sent on this connection and not answered
 
@@ -145,18 +150,44 @@ func preset_load(stream: String, preset: String) -> int:
 
 
 # Subscribes (again after every reconnection) to `stream`: at most max_fps steps a second (0:
-# the stream's own rate), particles and textures in `encoding` ("engine": what FxFrame decodes).
-# Made while disconnected, it goes out with the next connection; one the server refuses (an
-# `error` reply with this id, e.g. unknown_stream) is forgotten. Several users (nodes) may
-# subscribe to one stream: the latest call's settings apply, and the subscription lasts until
-# each has called unsubscribe.
-func subscribe(stream: String, max_fps := 0.0, encoding := ENCODING_ENGINE) -> int:
+# the stream's own rate), particles and textures in `encoding` ("engine": what FxFrame decodes),
+# at most max_particles particles a frame (0: every particle; PROTOCOL.md §3.5: the daemon serves
+# the largest step of its ladder 1000, 2000, 5000, ... at or below it, a subset each of whose
+# particles stands for FxFrame.total / count; served_max_particles says which step). Made while
+# disconnected, it goes out with the next connection; one the server refuses (an `error` reply
+# with this id, e.g. unknown_stream) is forgotten, except a refused budget (budget_refused).
+# Several users (nodes) may subscribe to one stream: the latest call's settings apply, and the
+# subscription lasts until each has called unsubscribe.
+func subscribe(stream: String, max_fps := 0.0, encoding := ENCODING_ENGINE, max_particles := 0) -> int:
 	var id := _take_id()
 	var users: int = _subs[stream]["users"] if _subs.has(stream) else 0
-	_subs[stream] = {"max_fps": max_fps, "encoding": encoding, "id": id, "sent_id": 0, "users": users + 1}
+	_subs[stream] = {"max_fps": max_fps, "encoding": encoding, "max_particles": max_particles, "id": id,
+			"sent_id": 0, "sent_budget": 0, "refused": false, "served": 0, "users": users + 1}
 	if is_open():
 		_send_subscribe(stream)
 	return id
+
+
+# Changes the particle budget of a subscription made with subscribe (0: every particle), keeping
+# its other settings and users. Returns the request's id, or 0 when not subscribed to `stream`
+# (or disconnected: the next connection asks for it).
+func set_max_particles(stream: String, max_particles: int) -> int:
+	if not _subs.has(stream):
+		return 0
+	_subs[stream]["max_particles"] = max_particles
+	_subs[stream]["refused"] = false
+	if not is_open():
+		return 0
+	var id := _take_id()
+	_subs[stream]["id"] = id
+	_send_subscribe(stream)
+	return id
+
+
+# The budget step the daemon serves `stream` (the latest `subscribed` reply's max_particles):
+# 0 when its frames hold every particle (no budget asked, or the budget was refused).
+func served_max_particles(stream: String) -> int:
+	return _subs[stream]["served"] if _subs.has(stream) else 0
 
 
 # Ends one user's subscription; the last one stops the stream's frames. Returns the request's
@@ -278,18 +309,48 @@ func _send_text(text: String) -> void:
 	_ws.get_peer(1).put_packet(text.to_utf8())
 
 
-# Sends the subscription of `stream`, with the id of the subscribe call the first time.
+# Sends the subscription of `stream`, with the id of the subscribe call the first time (an id
+# of the client's own afterwards: a refusal after a reconnection must find its subscription).
 func _send_subscribe(stream: String) -> void:
 	var s: Dictionary = _subs[stream]
 	var req := {"op": "subscribe", "stream": stream, "encoding": s["encoding"]}
 	if s["max_fps"] > 0.0:
 		req["max_fps"] = s["max_fps"]
-	if s["id"] > 0:
-		req["id"] = s["id"]
-		s["sent_id"] = s["id"]
-		s["id"] = 0
-		_pending[req["id"]] = "subscribe"
+	s["sent_budget"] = 0 if s["refused"] else s["max_particles"]
+	if s["sent_budget"] > 0:
+		req["max_particles"] = s["sent_budget"]
+	req["id"] = s["id"] if s["id"] > 0 else _take_id()
+	s["sent_id"] = req["id"]
+	s["id"] = 0
+	_pending[req["id"]] = "subscribe"
 	_send_text(to_json(req))
+
+
+# The subscription whose latest subscribe request had this id, or "".
+func _sub_of(id: int) -> String:
+	for stream in _subs.keys():
+		if _subs[stream]["sent_id"] == id:
+			return stream
+	return ""
+
+
+# A subscribe request was refused: a refused budget is subscribed again without it (true);
+# any other refusal forgets the subscription (false).
+func _on_subscribe_refused(id: int, m: Dictionary) -> bool:
+	var stream := _sub_of(id)
+	if stream == "":
+		return false
+	var s: Dictionary = _subs[stream]
+	if s["sent_budget"] == 0 or m.get("code") != "bad_request" or m.get("param") != "max_particles":
+		_subs.erase(stream)
+		return false
+	var why := str(m.get("message", ""))
+	s["refused"] = true
+	s["served"] = 0
+	_warn("%s: the daemon refused max_particles %d (%s); subscribed without a budget" % [stream, s["sent_budget"], why])
+	_send_subscribe(stream)
+	emit_signal("budget_refused", stream, why)
+	return true
 
 
 # Reads every waiting message: text at once, binary frames kept per stream and kind so only
@@ -344,11 +405,10 @@ func _on_text(text: String) -> void:
 	if id > 0:
 		var op = _pending.get(id)
 		_pending.erase(id)
-		if op == "subscribe" and m["op"] == "error": # that subscription does not exist: not again
-			for stream in _subs.keys():
-				if _subs[stream]["sent_id"] == id:
-					_subs.erase(stream)
+		var handled: bool = op == "subscribe" and m["op"] == "error" and _on_subscribe_refused(id, m)
 		emit_signal("reply", id, m)
+		if handled: # a refused budget: budget_refused, not error
+			return
 	_dispatch(m, id)
 
 
@@ -370,6 +430,8 @@ func _dispatch(m: Dictionary, id: int) -> void:
 			emit_signal("destroyed", stream)
 		"subscribed":
 			_channels[int(m.get("channel", 0))] = stream
+			if _subs.has(stream) and _subs[stream]["sent_id"] == id:
+				_subs[stream]["served"] = int(m.get("max_particles", 0))
 			emit_signal("subscribed", stream, int(m.get("channel", 0)), str(m.get("encoding", ENCODING_DEFAULT)))
 		"unsubscribed":
 			for ch in _channels.keys():
@@ -396,6 +458,7 @@ func _on_hello(m: Dictionary) -> void:
 	if token != "":
 		_send_text(to_json({"op": "auth", "token": token}))
 	for stream in _subs.keys():
+		_subs[stream]["refused"] = false # this daemon may offer budgets
 		_send_subscribe(stream)
 	for q in _queue:
 		_send_request(q[0], q[1], q[2])

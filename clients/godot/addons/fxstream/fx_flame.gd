@@ -3,6 +3,10 @@
 # in GDScript); one MultiMesh instance per particle reads its texel in flame.shader, a camera
 # facing additive sprite in the page's hdr colours; with velocity_lines, a second MultiMesh of
 # line segments reads the velocities (the stream's `velocities` parameter must be on).
+# With a particle budget (max_particles) a frame may be a subset of the stream's particles, each
+# standing for total / count of them (PROTOCOL.md §3.5): their spacing is (total / count)^(1/3)
+# times the stream's, so the sprites grow by that factor (particle_scale) and each adds as much
+# again of light, as the browser page draws it, and the flame keeps its extent and brightness.
 #
 # Units: the stream's positions are metres × its `space_scale`, with its `up` parameter as
 # the vertical; the node shows them in metres with `up` along its +Y, so its transform
@@ -28,6 +32,14 @@ export var velocity_scale := 0.005 setget set_velocity_scale
 
 # Particles drawn (the MultiMesh's visible instances): the latest frame's count.
 var particles := 0
+# The stream's particles in that frame: its header's total when it is a budget's subset, else
+# the count drawn.
+var stream_particles := 0
+# What each drawn particle's sprite size and light are multiplied by: (stream_particles /
+# particles)^(1/3), 1 for a whole frame.
+var particle_scale := 1.0
+# The sprite material's uniforms as last set (the engine keeps them; its headless renderer does not).
+var sprite_uniforms := {}
 
 var _stage := Spatial.new()        # the stream's frame: up to +Y, metres
 var _sprites := MultiMeshInstance.new()
@@ -80,12 +92,17 @@ func set_velocity_scale(v: float) -> void:
 
 
 func _apply_look() -> void:
-	_sprite_mat.set_shader_param("size", sprite_size * _space_scale)
-	_sprite_mat.set_shader_param("exposure", exposure)
+	_sprite_uniform("size", sprite_size * _space_scale * particle_scale)
+	_sprite_uniform("exposure", exposure * particle_scale)
 	_line_mat.set_shader_param("velocity_scale", velocity_scale)
 	for m in [_sprite_mat, _line_mat]:
 		m.set_shader_param("t_white", white_temperature)
 		m.set_shader_param("t_ambient", float(stream_params.get("T_amb", 300.0)))
+
+
+func _sprite_uniform(name: String, value) -> void:
+	_sprite_mat.set_shader_param(name, value)
+	sprite_uniforms[name] = value
 
 
 func _on_stream_params(doc: Dictionary) -> void:
@@ -107,13 +124,18 @@ func _on_stream_frame(f) -> bool:
 		m.set_shader_param("origin", f.origin)
 		m.set_shader_param("width", f.width)
 	_line_mat.set_shader_param("rows", f.rows)
-	var pad := Vector3.ONE * sprite_size * _space_scale
+	particles = f.count
+	stream_particles = int(max(f.total, f.count))
+	var grow := pow(float(f.total) / f.count, 1.0 / 3.0) if f.total > 0 and f.count > 0 else 1.0
+	if grow != particle_scale:
+		particle_scale = grow
+		_apply_look()
+	var pad := Vector3.ONE * sprite_size * _space_scale * particle_scale
 	var box := AABB(f.origin - f.extent - pad, 2.0 * (f.extent + pad))
 	if velocity_lines and f.velocities:
 		box = box.grow(velocity_scale * 20.0 * _space_scale) # a line reaches out by its velocity
 	_sprites.multimesh.mesh.custom_aabb = box
 	_lines.multimesh.mesh.custom_aabb = box
-	particles = f.count
 	_sprites.multimesh.visible_instance_count = f.count
 	_lines.multimesh.visible_instance_count = f.count if velocity_lines and f.velocities else 0
 	return true

@@ -40,6 +40,10 @@ var codec := 0
 var count_or_width := 0
 var height := 0
 var flags := 0
+# Kind 1: the particle count of the stream's frame this one is a subset of (a subscription's
+# max_particles budget, PROTOCOL.md §3.5), each particle standing for total / count of them;
+# 0 when the frame holds every particle (other kinds carry 0).
+var total := 0
 
 # Kinds 1 and 2 in the engine encoding: the texels as an Image (FORMAT_RGBAH, or FORMAT_RH for
 # a one-channel texture). Particles: `count` texels of (x, y, z - origin, T in K), `width` a
@@ -82,10 +86,13 @@ func parse(msg: PoolByteArray) -> bool:
 	count_or_width = sp.get_u32()
 	height = sp.get_u32()
 	flags = sp.get_u32()
+	total = sp.get_u32()
 	if hb < HEADER_BYTES or hb > n:
 		return _fail("header_bytes %d outside 64..%d" % [hb, n])
 	if payload_bytes != n - hb:
 		return _fail("payload_bytes %d, but %d bytes follow the header" % [payload_bytes, n - hb])
+	if kind == KIND_PARTICLES and total != 0 and (total < count_or_width or total > MAX_PARTICLES):
+		return _fail("a subset of %d particles of a frame of %d (total: 0, or %d to %d)" % [count_or_width, total, count_or_width, MAX_PARTICLES])
 	if (kind == KIND_PARTICLES or kind == KIND_TEXTURE) and codec == CODEC_ENGINE:
 		return _decode_engine(sp, msg, hb, n)
 	if kind == KIND_LIGHT_RIG and codec == CODEC_LIGHT_RIG:

@@ -8,6 +8,11 @@ export(NodePath) var client_path := NodePath("..")
 export var stream := ""
 # Steps a second at most (0: the stream's own fps).
 export var max_fps := 0.0
+# Particles a frame at most (0: every particle), for a game that cannot draw or download a large
+# flame: the daemon sends a subset drawn in proportion (PROTOCOL.md §3.5). Set at run time, it
+# subscribes again with the new budget. A daemon that offers no budgets (cluster mode) sends
+# every particle; the client warns (budget_refused).
+export var max_particles := 0 setget set_max_particles
 
 # The stream's complete parameter document and revision, once known.
 var stream_params := {}
@@ -44,8 +49,14 @@ func _exit_tree() -> void:
 		_subscribed = false
 
 
+func set_max_particles(n: int) -> void:
+	max_particles = n
+	if client != null and _subscribed:
+		client.set_max_particles(stream, n)
+
+
 func _subscribe() -> void:
-	client.subscribe(stream, max_fps)
+	client.subscribe(stream, max_fps, client.ENCODING_ENGINE, max_particles)
 	_subscribed = true
 	if client.is_open():
 		client.get_params(stream)
