@@ -78,7 +78,7 @@ typedef struct {
 } v3;
 
 typedef struct {
-    __global const float *pts, *lns, *tor, *cur, *wts;
+    __global const float *pts, *lns, *tor, *cur, *spl;
     int np, nl, nt, nc;
     float alpha, beta, eps;
 } ew_scene;
@@ -177,27 +177,33 @@ static fv ew_gather(__global const float *base, iv idx)
     return EW_GATHER(base, idx);
 }
 
-/* Clamped uniform knot u_i of (3.26) for nw weights: [0,0,0, 1/(nw−2), …, 1,1,1]. */
-static fv ew_knot(iv i, float inv_spans)
+/* S(t) = Σ w_i N_i²(t) from the host's quadratic of the span holding t (energy_wave_layout.h).
+ * digest 000 §8 #10: the last span is closed at t = 1 (half-open spans give S(1) = 0, a dark
+ * end cap). A few spans' coefficients are chosen by selects: cheaper than gathers, which
+ * PoCL's CPU targets run at several times the cost of an arithmetic instruction. */
+#define EW_SELECT_SPANS 8
+static fv ew_bspline(__global const float *spl, int spans, fv t)
 {
-    return clamp(EW_CONVERT_F(i - 2) * inv_spans, 0.0f, 1.0f);
-}
-
-/* S(t) = Σ w_i N_i²(t) by de Boor's algorithm on the span holding t. digest 000 §8 #10:
- * the last span is closed at t = 1 (half-open spans give S(1) = 0, a dark end cap). */
-static fv ew_bspline(__global const float *w, int nw, fv t)
-{
-    int spans = nw - 2;
-    float inv = 1.0f / (float)spans;
-    iv k = clamp(EW_CONVERT_I(t * (float)spans), 0, spans - 1) + 2; /* u_k <= t < u_{k+1} */
-    fv d0 = ew_gather(w, k - 2), d1 = ew_gather(w, k - 1), d2 = ew_gather(w, k);
-    fv u_km1 = ew_knot(k - 1, inv), u_k = ew_knot(k, inv), u_kp1 = ew_knot(k + 1, inv), u_kp2 = ew_knot(k + 2, inv);
-    fv a = (t - u_k) / (u_kp2 - u_k);
-    d2 = (1.0f - a) * d1 + a * d2;
-    a = (t - u_km1) / (u_kp1 - u_km1);
-    d1 = (1.0f - a) * d0 + a * d1;
-    a = (t - u_k) / (u_kp1 - u_k);
-    return (1.0f - a) * d1 + a * d2;
+    fv f = t * (float)spans;
+    iv k = clamp(EW_CONVERT_I(f), 0, spans - 1);
+    fv x = f - EW_CONVERT_F(k), c0, c1, c2;
+    if (spans > EW_SELECT_SPANS) {
+        k *= 3;
+        c0 = ew_gather(spl, k);
+        c1 = ew_gather(spl + 1, k);
+        c2 = ew_gather(spl + 2, k);
+    } else {
+        c0 = spl[0];
+        c1 = spl[1];
+        c2 = spl[2];
+        for (int s = 1; s < spans; s++) {
+            iv m = k >= s;
+            c0 = select(c0, (fv)(spl[3 * s]), m);
+            c1 = select(c1, (fv)(spl[3 * s + 1]), m);
+            c2 = select(c2, (fv)(spl[3 * s + 2]), m);
+        }
+    }
+    return mad(x, mad(x, c2, c1), c0);
 }
 
 /* ---- kernels of the primitives (digest §2.2) ------------------------------------- */
@@ -271,16 +277,16 @@ static fv ew_curve_nearest(__global const float *cv, v3 P, fv *t)
     return sqrt(best);
 }
 
-static __global const float *ew_curve_weights(const ew_scene *sc, __global const float *cv)
+static __global const float *ew_curve_spline(const ew_scene *sc, __global const float *cv)
 {
-    return sc->wts + (cv - sc->cur) / EW_CV_STRIDE * EW_MAX_W;
+    return sc->spl + (cv - sc->cur) / EW_CV_STRIDE * EW_SPL_ROW;
 }
 
 /* (3.27): coef · S(t*) / max(ε, L(P, curve)), with t* in *t and S(t*) in *str. */
 static fv ew_curve_kt(const ew_scene *sc, __global const float *cv, v3 P, fv *t, fv *str)
 {
     fv d = ew_curve_nearest(cv, P, t);
-    *str = ew_bspline(ew_curve_weights(sc, cv), (int)cv[13], *t);
+    *str = ew_bspline(ew_curve_spline(sc, cv), (int)cv[13], *t);
     return cv[3] * *str / fmax(sc->eps, d);
 }
 
@@ -305,9 +311,9 @@ static fv ew_psi(const ew_scene *sc, v3 P)
 
 static ew_scene ew_scene_make(__constant const float *cam, __global const float *pts, int np,
                               __global const float *lns, int nl, __global const float *tor, int nt,
-                              __global const float *cur, int nc, __global const float *wts)
+                              __global const float *cur, int nc, __global const float *spl)
 {
-    ew_scene sc = {pts, lns, tor, cur, wts, np, nl, nt, nc, cam[EW_CAM_ALPHA], cam[EW_CAM_BETA], cam[EW_CAM_EPS]};
+    ew_scene sc = {pts, lns, tor, cur, spl, np, nl, nt, nc, cam[EW_CAM_ALPHA], cam[EW_CAM_BETA], cam[EW_CAM_EPS]};
     return sc;
 }
 
@@ -344,12 +350,12 @@ static void ew_store(__global float *out, fv B, int i0, int j, int width)
  * n+1 samples k = 0…n with weights 1,4,2,…,4,1. */
 __kernel void ew_render_simpson(__global float *out, __constant const float *cam, __global const float *pts,
                                 int np, __global const float *lns, int nl, __global const float *tor, int nt,
-                                __global const float *cur, int nc, __global const float *wts, int width,
+                                __global const float *cur, int nc, __global const float *spl, int width,
                                 int height, int divisions)
 {
     int i0 = get_global_id(0) * EW_LANES, j = get_global_id(1);
     if (i0 >= width || j >= height) return;
-    ew_scene sc = ew_scene_make(cam, pts, np, lns, nl, tor, nt, cur, nc, wts);
+    ew_scene sc = ew_scene_make(cam, pts, np, lns, nl, tor, nt, cur, nc, spl);
     v3 S, Q;
     ew_texel_rays(cam, i0, j, width, height, &S, &Q);
     float inv_n = 1.0f / (float)divisions;
@@ -729,12 +735,12 @@ static void ew_curve_peaks(__global const float *cv, float eps, v3 S, v3 Q, ew_p
 
 __kernel void ew_render_adaptive(__global float *out, __constant const float *cam, __global const float *pts,
                                  int np, __global const float *lns, int nl, __global const float *tor, int nt,
-                                 __global const float *cur, int nc, __global const float *wts, int width,
+                                 __global const float *cur, int nc, __global const float *spl, int width,
                                  int height)
 {
     int i0 = get_global_id(0) * EW_LANES, j = get_global_id(1);
     if (i0 >= width || j >= height) return;
-    ew_scene sc = ew_scene_make(cam, pts, np, lns, nl, tor, nt, cur, nc, wts);
+    ew_scene sc = ew_scene_make(cam, pts, np, lns, nl, tor, nt, cur, nc, spl);
     v3 S, Q;
     ew_texel_rays(cam, i0, j, width, height, &S, &Q);
     ew_peaks pk;

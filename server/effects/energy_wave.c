@@ -27,8 +27,8 @@
 #include "light_rig.h"
 #include "wave_sources.h"
 
-/* The device's weight rows hold every weight a curve may have. */
-_Static_assert(WAVE_MAX_W <= EW_MAX_W, "curve weights do not fit the kernel's rows");
+/* The device's strength rows hold every span a curve may have. */
+_Static_assert(WAVE_MAX_W - 2 <= EW_MAX_SPANS, "curve strength spans do not fit the kernel's rows");
 
 static const char *const ew_mode_names[] = {[EW_MODE_SIMPSON] = "simpson", [EW_MODE_ADAPTIVE] = "adaptive", NULL};
 static const char *const ew_output_names[] = {[EW_OUTPUT_Y] = "Y", [EW_OUTPUT_RGBA] = "RGBA", NULL};
@@ -219,7 +219,7 @@ struct energy_wave {
     struct ocl *ocl;
     cl_kernel k_simpson, k_adaptive;
     int lanes; /* texels per work-item (the kernels' build option EW_LANES) */
-    cl_mem d_out, d_cam, d_pts, d_lns, d_tor, d_cur, d_wts;
+    cl_mem d_out, d_cam, d_pts, d_lns, d_tor, d_cur, d_spl;
     size_t out_texels;
     /* parameters, unpacked */
     enum ew_mode mode;
@@ -229,7 +229,7 @@ struct energy_wave {
     /* packed uploads */
     float cam[EW_CAM_FLOATS];
     float pts[WAVE_MAX_SRC * EW_PT_STRIDE], lns[WAVE_MAX_SRC * EW_LN_STRIDE], tor[WAVE_MAX_SRC * EW_TO_STRIDE];
-    float cur[WAVE_MAX_SRC * EW_CV_STRIDE], wts[WAVE_MAX_SRC * EW_MAX_W];
+    float cur[WAVE_MAX_SRC * EW_CV_STRIDE], spl[WAVE_MAX_SRC * EW_SPL_ROW];
     /* reused frame buffers: the frame in progress (luminance B, its colour map) and the last one
      * completed, its texels emitted; swapped when a frame completes, so what was emitted stays as
      * it is while the next frame is computed over several slices (effect.h) */
@@ -315,7 +315,8 @@ static void ew_pack_sources(struct energy_wave *ew)
 }
 
 /* One curve record: (3.10) C₂ = B₀ − 2B₁ + B₂, C₁ = 2(B₁ − B₀), C₀ = B₀, plus |C₂|²,
- * C₁·C₂, |C₁|², the weight count and the lit range [t_lo, t_hi] (S > 0 only there). */
+ * C₁·C₂, |C₁|², the strength's span count nw − 2 and the lit range [t_lo, t_hi] (S > 0 only
+ * there). */
 void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi)
 {
     double C0[3], C1[3], C2[3];
@@ -332,9 +333,24 @@ void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int n
     ew_put3(dst + 8, C2);
     dst[11] = (float)vec3_dot(C1, C2);
     dst[12] = (float)vec3_dot(C1, C1);
-    dst[13] = (float)nw;
+    dst[13] = (float)(nw - 2);
     dst[14] = (float)t_lo;
     dst[15] = (float)t_hi;
+}
+
+/* The strength S(t) of weights w[0..nw-1] as the kernel's span quadratics: S at both ends and
+ * the middle of span k gives c0 = S(0), c1 = 4S(½) − 3S(0) − S(1), c2 = 2S(1) − 4S(½) + 2S(0)
+ * in x = t·spans − k. */
+void energy_wave_pack_strength(float *dst, int nw, const double *w)
+{
+    int spans = nw - 2;
+    for (int k = 0; k < spans; k++) {
+        double s0 = light_rig_bspline(nw, w, (double)k / spans), sm = light_rig_bspline(nw, w, (k + 0.5) / spans);
+        double s1 = light_rig_bspline(nw, w, k + 1 == spans ? 1.0 : (double)(k + 1) / spans);
+        dst[3 * k] = (float)s0;
+        dst[3 * k + 1] = (float)(4.0 * sm - 3.0 * s0 - s1);
+        dst[3 * k + 2] = (float)(2.0 * s1 - 4.0 * sm + 2.0 * s0);
+    }
 }
 
 /* Packs the curves with their (animated) weights; curves whose strength is zero
@@ -345,18 +361,16 @@ static int ew_pack_curves(struct energy_wave *ew)
     for (int i = 0; i < ew->src.nc; i++) {
         const struct wave_curve *c = &ew->src.curve[i];
         int first = -1, last = -1;
-        float *w = ew->wts + nc * EW_MAX_W;
-        for (int k = 0; k < c->nw; k++) {
-            w[k] = (float)ew->w[i][k];
-            if (w[k] > 0.0f) {
+        for (int k = 0; k < c->nw; k++)
+            if (ew->w[i][k] > 0.0) {
                 if (first < 0) first = k;
                 last = k;
             }
-        }
         if (first < 0 || c->coef == 0.0) continue;
         /* N_i² is supported on [u_i, u_{i+3}] with u_i = clamp((i−2)/(nw−2), 0, 1) */
         double lo = (first - 2.0) / (c->nw - 2.0), hi = (last + 1.0) / (c->nw - 2.0);
         energy_wave_pack_curve(ew->cur + nc * EW_CV_STRIDE, c->b, c->coef, c->nw, lo < 0 ? 0 : lo, hi > 1 ? 1 : hi);
+        energy_wave_pack_strength(ew->spl + nc * EW_SPL_ROW, c->nw, ew->w[i]);
         nc++;
     }
     return nc;
@@ -392,13 +406,12 @@ static int ew_kernels_create(struct energy_wave *ew, struct fx_err *err)
     ew->k_simpson = clCreateKernel(prog, "ew_render_simpson", &rc);
     if (rc == CL_SUCCESS) ew->k_adaptive = clCreateKernel(prog, "ew_render_adaptive", &rc);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
-    const size_t f = sizeof(float);
     if (!(ew->d_cam = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cam, err))) return -1;
     if (!(ew->d_pts = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->pts, err))) return -1;
     if (!(ew->d_lns = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->lns, err))) return -1;
     if (!(ew->d_tor = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->tor, err))) return -1;
     if (!(ew->d_cur = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cur, err))) return -1;
-    if (!(ew->d_wts = ew_buffer(ew, CL_MEM_READ_ONLY, WAVE_MAX_SRC * EW_MAX_W * f, err))) return -1;
+    if (!(ew->d_spl = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->spl, err))) return -1;
     return 0;
 }
 
@@ -463,7 +476,7 @@ void energy_wave_free(struct energy_wave *ew)
 {
     if (!ew) return;
     if (ew->ocl) clFinish(ocl_queue(ew->ocl)); /* a failed step may leave uploads from ew's arrays queued */
-    cl_mem mems[] = {ew->d_out, ew->d_cam, ew->d_pts, ew->d_lns, ew->d_tor, ew->d_cur, ew->d_wts};
+    cl_mem mems[] = {ew->d_out, ew->d_cam, ew->d_pts, ew->d_lns, ew->d_tor, ew->d_cur, ew->d_spl};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
     if (ew->k_simpson) clReleaseKernel(ew->k_simpson);
@@ -486,7 +499,7 @@ static int ew_upload(struct energy_wave *ew, int nc, struct fx_err *err)
         {ew->d_lns, ew->lns, (size_t)ew->src.nl * EW_LN_STRIDE * f},
         {ew->d_tor, ew->tor, (size_t)ew->src.nt * EW_TO_STRIDE * f},
         {ew->d_cur, ew->cur, (size_t)nc * EW_CV_STRIDE * f},
-        {ew->d_wts, ew->wts, (size_t)nc * EW_MAX_W * f},
+        {ew->d_spl, ew->spl, (size_t)nc * EW_SPL_ROW * f},
     };
     for (size_t i = 0; i < sizeof up / sizeof up[0]; i++) {
         if (!up[i].bytes) continue;
@@ -503,7 +516,7 @@ static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, in
         {sizeof(cl_mem), &ew->d_out}, {sizeof(cl_mem), &ew->d_cam}, {sizeof(cl_mem), &ew->d_pts},
         {sizeof(int), &ew->src.np},   {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->src.nl},
         {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->src.nt},   {sizeof(cl_mem), &ew->d_cur},
-        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_wts}, {sizeof(int), &ew->width},
+        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_spl}, {sizeof(int), &ew->width},
         {sizeof(int), &ew->height},   {sizeof(int), &ew->divisions}};
     return ocl_set_args(k, name, a, k == ew->k_simpson ? 14 : 13, err);
 }

@@ -14,10 +14,10 @@ __kernel void ew_test_cubic(__global const float *abc, __global float *roots, __
     roots[3 * i + 2] = three.s0 ? r2.s0 : 0.0f;
 }
 
-__kernel void ew_test_bspline(__global const float *w, int nw, __global const float *t, __global float *out)
+__kernel void ew_test_bspline(__global const float *spl, int spans, __global const float *t, __global float *out)
 {
     int i = get_global_id(0);
-    out[i] = ew_bspline(w, nw, (fv)(t[i])).s0;
+    out[i] = ew_bspline(spl, spans, (fv)(t[i])).s0;
 }
 
 __kernel void ew_test_curve_nearest(__global const float *cv, __global const float *p, __global float *dist,
