@@ -77,6 +77,31 @@ typedef struct {
     fv x, y, z;
 } v3;
 
+/* any() and all() of a lane mask as an OR / AND tree: PoCL lowers the built-ins lane by lane,
+ * a test and a branch for every pair of lanes. */
+static int ew_any(iv m)
+{
+#if EW_LANES == EW_LANES_WIDE
+    int8 m8 = m.lo | m.hi;
+#else
+    int8 m8 = m;
+#endif
+    int4 m4 = m8.lo | m8.hi;
+    int2 m2 = m4.lo | m4.hi;
+    return (m2.x | m2.y) < 0;
+}
+static int ew_all(iv m)
+{
+#if EW_LANES == EW_LANES_WIDE
+    int8 m8 = m.lo & m.hi;
+#else
+    int8 m8 = m;
+#endif
+    int4 m4 = m8.lo & m8.hi;
+    int2 m2 = m4.lo & m4.hi;
+    return (m2.x & m2.y) < 0;
+}
+
 typedef struct {
     __global const float *pts, *lns, *tor, *cur, *spl;
     int np, nl, nt, nc;
@@ -140,14 +165,15 @@ static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
     fv q = a * a * a / 27.0f - a * b / 6.0f + c / 2.0f;
     fv disc = p * p * p + q * q, shift = -a / 3.0f;
     iv three = (p < 0.0f) & (disc <= 1e-5f * q * q);
+    int any3 = ew_any(three);
     fv x[3];
     x[0] = x[1] = x[2] = shift;
-    if (!all(three)) {
+    if (!ew_all(three)) {
         fv u = ew_cbrt(-q - copysign(sqrt(fmax(disc, 0.0f)), q));
         fv one = select(u - p / u, (fv)(0.0f), u == 0.0f) + shift;
         x[0] = x[1] = x[2] = one;
     }
-    if (any(three)) {
+    if (any3) {
         fv m = sqrt(fmax(-p, 0.0f)), X1 = 1.0f + clamp(-q / fmax(m * m * m, 1e-30f), -1.0f, 1.0f);
         fv z = 1.0f + sqrt(X1 * (2.0f / 3.0f)) - 0.0773503f * X1; /* 1 at cos φ = −1, 2 at 1 */
         for (int k = 0; k < 2; k++) {
@@ -159,9 +185,13 @@ static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
         x[1] = select(x[1], h + g, three);
         x[2] = select(x[2], big, three);
     }
-    for (int k = 0; k < 3; k++) {
+    for (int k = 0; k < (any3 ? 3 : 1); k++) { /* lanes with one root: x[0] = x[1] = x[2] */
         fv f = ((x[k] + a) * x[k] + b) * x[k] + c, fp = (3.0f * x[k] + 2.0f * a) * x[k] + b;
         x[k] = select(x[k] - f / fp, x[k], fp == 0.0f);
+    }
+    if (!any3) {
+        *r0 = *r1 = *r2 = x[0];
+        return three;
     }
     fv lo = fmin(x[0], x[1]), hi = fmax(x[0], x[1]);
     *r0 = fmin(lo, x[2]);
@@ -262,7 +292,7 @@ static fv ew_curve_nearest(__global const float *cv, v3 P, fv *t)
     }
     /* candidates: both ends and the roots clamped to [0,1] (r1, r2 repeat r0 unless three) */
     fv cand[5] = {0.0f, 1.0f, clamp(r0, 0.0f, 1.0f), clamp(r1, 0.0f, 1.0f), clamp(r2, 0.0f, 1.0f)};
-    int ncand = any(three) ? 5 : 3;
+    int ncand = ew_any(three) ? 5 : 3;
     /* C(t) − P = (C₀ − P) + t(C₁ + tC₂): relative to P, so no cancellation far from 0 */
     v3 v = v3_mad(D, cand[0], v3_mad(C1, cand[0], C2));
     fv best = v3_dot(v, v), bt = cand[0];
@@ -425,7 +455,7 @@ static fv ew_point_int(const ew_scene *sc, __global const float *pt, v3 S, v3 Q)
     fv A = v3_dot(Q, Q), B = v3_dot(Q, v), C = v3_dot(v, v), w;
     iv unstable;
     fv closed = pt[3] * ew_quad_int(sc, A, B, C, v3_dot(x, x), &unstable);
-    if (!any(unstable)) return closed;
+    if (!ew_any(unstable)) return closed;
     fv s = ew_quad_peak(sc, A, B, C, &w);
     return select(closed, ew_span(sc, 2, pt, S, Q, s, w, (fv)(0.0f), (fv)(1.0f)), unstable);
 }
@@ -441,7 +471,7 @@ static fv ew_line_int(const ew_scene *sc, __global const float *ln, v3 S, v3 Q)
     fv A1 = select(A, (fv)(1.0f), parallel);
     fv closed = ln[3] * select(ew_quad_int(sc, A1, B, C, v3_dot(x, x), &unstable), flat, parallel);
     unstable &= ~parallel;
-    if (!any(unstable)) return closed;
+    if (!ew_any(unstable)) return closed;
     fv s = ew_quad_peak(sc, A1, B, C, &w);
     return select(closed, ew_span(sc, 3, ln, S, Q, s, w, (fv)(0.0f), (fv)(1.0f)), unstable);
 }
@@ -539,7 +569,7 @@ static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S
     fv ja = 0.0f, jb = 0.0f, jta = 0.0f, jtb = 0.0f;
     fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &jumped, &ja, &jb, &jta,
                            &jtb);
-    if (!any(jumped)) return acc;
+    if (!ew_any(jumped)) return acc;
     fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb, jta, jtb), jumped); /* other lanes: plain redo */
     fv redo = ew_span_plain(sc, kind, prim, S, Q, c, w, a, sj) + ew_span_plain(sc, kind, prim, S, Q, c, w, sj, b);
     return select(acc, redo, jumped);
@@ -548,7 +578,7 @@ static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S
 /* [0,1] as one span per peak (split halfway between two peaks). */
 static fv ew_peaks_int(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, const ew_peaks *pk)
 {
-    if (!any(pk->two)) return ew_span(sc, kind, prim, S, Q, pk->s0, pk->w0, (fv)(0.0f), (fv)(1.0f));
+    if (!ew_any(pk->two)) return ew_span(sc, kind, prim, S, Q, pk->s0, pk->w0, (fv)(0.0f), (fv)(1.0f));
     fv mid = select((fv)(1.0f), 0.5f * (pk->s0 + pk->s1), pk->two);
     return ew_span(sc, kind, prim, S, Q, pk->s0, pk->w0, (fv)(0.0f), mid) +
            ew_span(sc, kind, prim, S, Q, pk->s1, pk->w1, mid, (fv)(1.0f));
@@ -686,7 +716,7 @@ static fv ew_torus_int(const ew_scene *sc, __global const float *to, v3 S, v3 Q)
     v3 Sl = ew_torus_local(to, S), Ql = ew_torus_local(to, v3_add(Q, v3_load(to)));
     ew_peaks pk;
     ew_torus_peaks(to, sc->eps, Sl, Ql, &pk);
-    if (!any(pk.two)) return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), (fv)(1.0f));
+    if (!ew_any(pk.two)) return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), (fv)(1.0f));
     fv mid = select((fv)(1.0f), 0.5f * (pk.s0 + pk.s1), pk.two);
     return ew_torus_span(sc, to, Sl, Ql, pk.s0, pk.w0, (fv)(0.0f), mid) +
            ew_torus_span(sc, to, Sl, Ql, pk.s1, pk.w1, mid, (fv)(1.0f));
