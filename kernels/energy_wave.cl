@@ -655,16 +655,17 @@ static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, 
     return ew_approach(eps, Sl, Ql, v3_make(R * a.c, R * a.s, (fv)(0.0f)), v3_make(-a.s, a.c, (fv)(0.0f)), w);
 }
 
-/* cos and sin of kπ/8, k = 0…15: the circle search's start points. */
-__constant float ew_circle16_c[16] = {1.0f,  0.923879533f,  0.707106781f,  0.382683432f, 0.0f, -0.382683432f,
-                                      -0.707106781f, -0.923879533f, -1.0f, -0.923879533f, -0.707106781f,
-                                      -0.382683432f, 0.0f, 0.382683432f, 0.707106781f, 0.923879533f};
-__constant float ew_circle16_s[16] = {0.0f, 0.382683432f, 0.707106781f, 0.923879533f, 1.0f, 0.923879533f,
-                                      0.707106781f, 0.382683432f, 0.0f, -0.382683432f, -0.707106781f,
-                                      -0.923879533f, -1.0f, -0.923879533f, -0.707106781f, -0.382683432f};
+/* cos and sin of kπ/4, k = 0…7: the circle search's start points. f is a trigonometric
+ * polynomial of degree 2 (at most two local minima); 8 samples find each minimum's
+ * neighbourhood (16 gave the same pictures within 0.7% of a texel's value, and the same RMS
+ * error against the converged reference, for a sixth more search time), and Newton steps of up to
+ * 0.4 rad cover the 0.39 rad to the nearest sample. */
+#define EW_CIRCLE_N 8
+__constant float ew_circle_c[EW_CIRCLE_N] = {1.0f, 0.707106781f, 0.0f, -0.707106781f, -1.0f, -0.707106781f, 0.0f, 0.707106781f};
+__constant float ew_circle_s[EW_CIRCLE_N] = {0.0f, 0.707106781f, 1.0f, 0.707106781f, 0.0f, -0.707106781f, -1.0f, -0.707106781f};
 
 /* Closest approaches of the ray line (Sl, Ql: in the torus frame) to the torus centre circle
- * (at most two local minima of the distance): 16-point search around the circle, then Newton. */
+ * (at most two local minima of the distance): 8-point search around the circle, then Newton. */
 static void ew_torus_peaks(__global const float *to, float eps, v3 Sl, v3 Ql, ew_peaks *pk)
 {
     fv R = (fv)(to[3]), inv = rsqrt(v3_dot(Ql, Ql));
@@ -673,15 +674,15 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 Sl, v3 Ql, ew
     v3 b = v3_mul(v3_mad(v3_make((fv)(0.0f), (fv)(1.0f), (fv)(0.0f)), -qn.y, qn), R);
     v3 c = v3_perp(Sl, qn);
     ew_circle K = {v3_dot(a, a), v3_dot(b, b), v3_dot(a, b), v3_dot(a, c), v3_dot(b, c), v3_dot(c, c)};
-    fv f[16];
-    for (int k = 0; k < 16; k++) f[k] = ew_circle_f(&K, ew_circle16_c[k], ew_circle16_s[k]);
+    fv f[EW_CIRCLE_N];
+    for (int k = 0; k < EW_CIRCLE_N; k++) f[k] = ew_circle_f(&K, ew_circle_c[k], ew_circle_s[k]);
     /* lanes without a strict minimum (a ray along the axis) keep φ = 0 */
     fv b0 = EW_BIG, b1 = EW_BIG;
     ew_angle a0 = {(fv)(1.0f), (fv)(0.0f)}, a1 = a0;
-    for (int k = 0; k < 16; k++) {
-        iv is_min = (f[k] <= f[(k + 15) & 15]) & (f[k] < f[(k + 1) & 15]);
+    for (int k = 0; k < EW_CIRCLE_N; k++) {
+        iv is_min = (f[k] <= f[(k + EW_CIRCLE_N - 1) % EW_CIRCLE_N]) & (f[k] < f[(k + 1) % EW_CIRCLE_N]);
         iv first = is_min & (f[k] < b0), second = is_min & ~first & (f[k] < b1);
-        fv ck = (fv)(ew_circle16_c[k]), sk = (fv)(ew_circle16_s[k]);
+        fv ck = (fv)(ew_circle_c[k]), sk = (fv)(ew_circle_s[k]);
         b1 = select(select(b1, f[k], second), b0, first);
         a1.c = select(select(a1.c, ck, second), a0.c, first);
         a1.s = select(select(a1.s, sk, second), a0.s, first);
