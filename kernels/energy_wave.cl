@@ -159,7 +159,7 @@ static fv ew_cbrt(fv x)
  * z = y/√(−p) ∈ [1, 2] of z³ − 3z = 2 cos φ by Newton from a fit exact at both ends, and
  * the other two from the quadratic left after dividing it out. One Newton step per root on
  * the cubic itself finishes them. No trigonometric call. */
-static iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
+static inline __attribute__((always_inline)) iv ew_cubic(fv a, fv b, fv c, fv *r0, fv *r1, fv *r2)
 {
     fv p = b / 3.0f - a * a / 9.0f;
     fv q = a * a * a / 27.0f - a * b / 6.0f + c / 2.0f;
@@ -274,11 +274,11 @@ static v3 ew_curve_at(__global const float *cv, fv t)
     return v3_mad(v3_mad(v3_load(cv), t, v3_load(cv + 4)), t * t, v3_load(cv + 8));
 }
 
-/* Nearest point of C(t) = C₂t² + C₁t + C₀, t in [0,1], to P: distance, and t* in *t.
+/* Nearest point of C(t) = C₂t² + C₁t + C₀, t in [0,1], to P: squared distance, and t* in *t.
  * digest 000 §8 #4: thesis eq. 3.12 lacks −2C₂·P in the t coefficient (and flips the
  * sign); the cubic is 2|C₂|²t³ + 3(C₁·C₂)t² + (2C₂·(C₀−P) + |C₁|²)t + C₁·(C₀−P) = 0,
  * normalised by 2|C₂|² (§8 #6), with the straight case C₂ ≈ 0 solved linearly. */
-static fv ew_curve_nearest(__global const float *cv, v3 P, fv *t)
+static fv ew_curve_nearest_sq(__global const float *cv, v3 P, fv *t)
 {
     v3 D = v3_sub(v3_load(cv), P), C1 = v3_load(cv + 4), C2 = v3_load(cv + 8);
     float c2sq = cv[7], c12 = cv[11], c1sq = cv[12];
@@ -304,7 +304,7 @@ static fv ew_curve_nearest(__global const float *cv, v3 P, fv *t)
         bt = select(bt, cand[k], better);
     }
     *t = bt;
-    return sqrt(best);
+    return best;
 }
 
 static __global const float *ew_curve_spline(const ew_scene *sc, __global const float *cv)
@@ -312,12 +312,14 @@ static __global const float *ew_curve_spline(const ew_scene *sc, __global const 
     return sc->spl + (cv - sc->cur) / EW_CV_STRIDE * EW_SPL_ROW;
 }
 
-/* (3.27): coef · S(t*) / max(ε, L(P, curve)), with t* in *t and S(t*) in *str. */
-static fv ew_curve_kt(const ew_scene *sc, __global const float *cv, v3 P, fv *t, fv *str)
+/* (3.27): coef · S(t*) / max(ε, L(P, curve)), with t* in *t and S(t*) in *str. Inlined, as is
+ * the cubic: a call costs PoCL's code a spill of every live vector register around it. */
+static inline __attribute__((always_inline)) fv ew_curve_kt(const ew_scene *sc, __global const float *cv, v3 P, fv *t,
+                                                            fv *str)
 {
-    fv d = ew_curve_nearest(cv, P, t);
+    fv d2 = ew_curve_nearest_sq(cv, P, t);
     *str = ew_bspline(ew_curve_spline(sc, cv), (int)cv[13], *t);
-    return cv[3] * *str / fmax(sc->eps, d);
+    return cv[3] * *str * fmin(1.0f / sc->eps, rsqrt(d2));
 }
 
 static fv ew_curve_k(const ew_scene *sc, __global const float *cv, v3 P)

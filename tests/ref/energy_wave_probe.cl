@@ -24,7 +24,7 @@ __kernel void ew_test_curve_nearest(__global const float *cv, __global const flo
                                     __global float *tparam)
 {
     int i = get_global_id(0);
-    fv t, d = ew_curve_nearest(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
-    dist[i] = d.s0;
+    fv t, d2 = ew_curve_nearest_sq(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
+    dist[i] = sqrt(d2.s0);
     tparam[i] = t.s0;
 }
