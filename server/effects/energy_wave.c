@@ -221,11 +221,8 @@ struct energy_wave {
     int lanes; /* texels per work-item (the kernels' build option EW_LANES) */
     cl_mem d_out, d_cam, d_pts, d_lns, d_tor, d_cur, d_spl;
     size_t out_texels;
-    /* parameters, unpacked */
-    enum ew_mode mode;
-    int width, height, divisions, output, compression, animate;
-    double anim_rate, color_e[3], color_b[3];
-    struct wave_sources src;
+    struct energy_wave_config cfg; /* the parameters in use */
+    struct wave_sources src;       /* and their sources, unpacked */
     /* packed uploads */
     float cam[EW_CAM_FLOATS];
     float pts[WAVE_MAX_SRC * EW_PT_STRIDE], lns[WAVE_MAX_SRC * EW_LN_STRIDE], tor[WAVE_MAX_SRC * EW_TO_STRIDE];
@@ -238,7 +235,6 @@ struct energy_wave {
     /* this frame's curve weights (W times the pulses), shared by the kernel and the rig */
     double w[WAVE_MAX_SRC][WAVE_MAX_W];
     /* light rig: its settings, this frame's rig and its payload */
-    int light_rig;
     struct light_rig lr;
     struct fxs_rig rig;
     uint8_t rig_payload[FXS_RIG_MAX_PAYLOAD];
@@ -274,7 +270,7 @@ static void ew_pack_camera(struct energy_wave *ew, const struct energy_wave_conf
     vec3_cross(f, up, r);
     vec3_normalize(r);
     vec3_cross(r, f, u);
-    double l = p->size, lh = l * ew->height / ew->width;
+    double l = p->size, lh = l * ew->cfg.height / ew->cfg.width;
     memset(ew->cam, 0, sizeof ew->cam);
     params_pack(energy_wave_params, p, ew->cam); /* nu, alpha, beta, epsilon */
     ew_put3(ew->cam + EW_CAM_CENTER, C);
@@ -418,7 +414,7 @@ static int ew_kernels_create(struct energy_wave *ew, struct fx_err *err)
 /* (Re)allocates the per-texel buffers when the texture grows. */
 static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
 {
-    size_t texels = (size_t)ew->width * (size_t)ew->height;
+    size_t texels = (size_t)ew->cfg.width * (size_t)ew->cfg.height;
     if (texels <= ew->out_texels) return 0;
     if (ew->d_out) clReleaseMemObject(ew->d_out);
     ew->d_out = NULL;
@@ -441,18 +437,10 @@ int energy_wave_set(struct energy_wave *ew, const struct energy_wave_config *par
 {
     ew->busy = 0; /* a frame in progress is dropped */
     ew->meter = (struct slice_meter){.probe = EW_PROBE_GROUPS};
-    ew->mode = (enum ew_mode)params->mode;
-    ew->width = params->width;
-    ew->height = params->height;
-    ew->divisions = params->divisions;
-    ew->output = params->output;
-    ew->compression = params->compression;
-    memcpy(ew->color_e, params->color_energy, sizeof ew->color_e);
-    memcpy(ew->color_b, params->color_background, sizeof ew->color_b);
+    ew->cfg = *params;
     ew_pack_camera(ew, params);
     wave_sources_read(params, &ew->src);
     ew_pack_sources(ew);
-    ew->light_rig = params->light_rig;
     light_rig_read(params, &ew->lr);
     return ew_frame_buffers(ew, err);
 }
@@ -516,23 +504,23 @@ static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, in
         {sizeof(cl_mem), &ew->d_out}, {sizeof(cl_mem), &ew->d_cam}, {sizeof(cl_mem), &ew->d_pts},
         {sizeof(int), &ew->src.np},   {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->src.nl},
         {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->src.nt},   {sizeof(cl_mem), &ew->d_cur},
-        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_spl}, {sizeof(int), &ew->width},
-        {sizeof(int), &ew->height},   {sizeof(int), &ew->divisions}};
+        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_spl}, {sizeof(int), &ew->cfg.width},
+        {sizeof(int), &ew->cfg.height}, {sizeof(int), &ew->cfg.divisions}};
     return ocl_set_args(k, name, a, k == ew->k_simpson ? 14 : 13, err);
 }
 
 static cl_kernel ew_kernel(const struct energy_wave *ew, const char **name)
 {
-    *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
-    return ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
+    *name = ew->cfg.mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
+    return ew->cfg.mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
 }
 
 /* Work-groups per row of the kernel's grid (EW_GROUP work-items of ew->lanes texels each), and in all. */
 static size_t ew_groups_x(const struct energy_wave *ew)
 {
-    return ((size_t)ew->width + EW_GROUP * ew->lanes - 1) / (EW_GROUP * ew->lanes);
+    return ((size_t)ew->cfg.width + EW_GROUP * ew->lanes - 1) / (EW_GROUP * ew->lanes);
 }
-static size_t ew_groups(const struct energy_wave *ew) { return ew_groups_x(ew) * (size_t)ew->height; }
+static size_t ew_groups(const struct energy_wave *ew) { return ew_groups_x(ew) * (size_t)ew->cfg.height; }
 
 /* Starts a frame at sim_time: the curve weights, the uploads and the kernel's arguments. */
 static int ew_frame_begin(struct energy_wave *ew, double sim_time, struct fx_err *err)
@@ -562,7 +550,7 @@ static double ew_event_ms(cl_event ev)
  * 0, or -1 with err. */
 static int ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *from, size_t *to, struct fx_err *err)
 {
-    const size_t gx = ew_groups_x(ew), w = (size_t)ew->width, j = ew->done / gx, x = ew->done % gx;
+    const size_t gx = ew_groups_x(ew), w = (size_t)ew->cfg.width, j = ew->done / gx, x = ew->done % gx;
     size_t groups[2] = {gx, n / gx};
     if (x > 0 || n < gx) { /* within a row */
         groups[0] = n < gx - x ? n : gx - x;
@@ -612,10 +600,11 @@ static float ew_clamp01(double v) { return (float)(v < 0.0 ? 0.0 : (v > 1.0 ? 1.
 /* digest §2.7 proposal: RGBA = clamp((1−B)C_b + B·C_e, 0, 1), A = clamp(B, 0, 1), texels [from, to). */
 static void ew_colour_map(const struct energy_wave *ew, size_t from, size_t to)
 {
+    const double *Cb = ew->cfg.color_background, *Ce = ew->cfg.color_energy;
     for (size_t i = from; i < to; i++) {
         double B = ew->img[i];
         float *px = ew->rgba + 4 * i;
-        for (int c = 0; c < 3; c++) px[c] = ew_clamp01((1.0 - B) * ew->color_b[c] + B * ew->color_e[c]);
+        for (int c = 0; c < 3; c++) px[c] = ew_clamp01((1.0 - B) * Cb[c] + B * Ce[c]);
         px[3] = ew_clamp01(B);
     }
 }
@@ -633,7 +622,7 @@ static int ew_encode(void *self, struct effect_frame *fr, struct fx_err *err)
 {
     struct energy_wave *ew = self;
     double t0 = clock_now() * 1e3;
-    struct exr_image im = {ew->width, ew->height, (int)fr->channels, fr->texels, ew->compression};
+    struct exr_image im = {ew->cfg.width, ew->cfg.height, (int)fr->channels, fr->texels, ew->cfg.compression};
     ew->exr.len = 0;
     if (exr_write_mem(&im, &ew->exr, err)) return -1;
     fr->codec = FXS_CODEC_EXR;
@@ -658,7 +647,7 @@ static int ew_render_slice(struct energy_wave *ew, double sim_time, double slice
             ew->busy = 0;
             return -1;
         }
-        if (ew->output == 1) ew_colour_map(ew, from, to);
+        if (ew->cfg.output == EW_OUTPUT_RGBA) ew_colour_map(ew, from, to);
         double t1 = clock_now();
         slice_record(&ew->meter, ew->done - before, t1 - t0);
         t0 = t1;
@@ -683,15 +672,15 @@ static int ew_step(void *self, double sim_time, double dt, double slice_end, eff
     if (rc) return rc;
     struct effect_frame fr = {
         .kind = FXS_KIND_TEXTURE,
-        .count_or_width = (uint32_t)ew->width,
-        .height = (uint32_t)ew->height,
+        .count_or_width = (uint32_t)ew->cfg.width,
+        .height = (uint32_t)ew->cfg.height,
         .encode = ew_encode,
         .self = ew,
-        .texels = ew->output == 1 ? ew->done_rgba : ew->done_img,
-        .channels = ew->output == 1 ? 4 : 1,
+        .texels = ew->cfg.output == EW_OUTPUT_RGBA ? ew->done_rgba : ew->done_img,
+        .channels = ew->cfg.output == EW_OUTPUT_RGBA ? 4 : 1,
     };
     if (emit(ctx, &fr)) return -1;
-    if (!ew->light_rig) return 0;
+    if (!ew->cfg.light_rig) return 0;
     /* The light rig at the same time as the texture. The constants (~150 bytes with 3 bands)
      * go into every frame: the hub keeps only the newest frame per kind for late
      * subscribers, and they cost far less than the texture (PROTOCOL.md §7.7). */
