@@ -660,11 +660,13 @@ static fv ew_circle_approach(__global const float *to, float eps, v3 Sl, v3 Ql, 
 /* cos and sin of kπ/4, k = 0…7: the circle search's start points. f is a trigonometric
  * polynomial of degree 2 (at most two local minima); 8 samples find each minimum's
  * neighbourhood (16 gave the same pictures within 0.7% of a texel's value, and the same RMS
- * error against the converged reference, for a sixth more search time), and Newton steps of up to
- * 0.4 rad cover the 0.39 rad to the nearest sample. */
+ * error against the converged reference, for a sixth more search time), and Newton steps of
+ * up to 0.4 rad cover the 0.39 rad to the nearest sample. */
 #define EW_CIRCLE_N 8
-__constant float ew_circle_c[EW_CIRCLE_N] = {1.0f, 0.707106781f, 0.0f, -0.707106781f, -1.0f, -0.707106781f, 0.0f, 0.707106781f};
-__constant float ew_circle_s[EW_CIRCLE_N] = {0.0f, 0.707106781f, 1.0f, 0.707106781f, 0.0f, -0.707106781f, -1.0f, -0.707106781f};
+__constant float ew_circle_c[EW_CIRCLE_N] = {1.0f,  0.707106781f,  0.0f, -0.707106781f,
+                                             -1.0f, -0.707106781f, 0.0f, 0.707106781f};
+__constant float ew_circle_s[EW_CIRCLE_N] = {0.0f, 0.707106781f,  1.0f,  0.707106781f,
+                                             0.0f, -0.707106781f, -1.0f, -0.707106781f};
 
 /* Closest approaches of the ray line (Sl, Ql: in the torus frame) to the torus centre circle
  * (at most two local minima of the distance): 8-point search around the circle, then Newton. */

@@ -1,7 +1,8 @@
 /* energy_wave_layout.h — the buffer layouts server/effects/energy_wave.c packs and
- * kernels/energy_wave.cl reads: one record per source (floats), the curves' strength polynomials,
- * the camera block, and the texels per work-item. Valid C and OpenCL C: energy_wave.c includes it and the
- * build (tools/embed_kernels.sh) prepends it to energy_wave.cl, so the layout exists once. */
+ * kernels/energy_wave.cl reads: one record per source (floats), the curves' strength
+ * polynomials, the camera block, and the texels per work-item. Valid C and OpenCL C:
+ * energy_wave.c includes it and the build (tools/embed_kernels.sh) prepends it to
+ * energy_wave.cl, so the layout exists once. */
 #ifndef ENERGY_WAVE_LAYOUT_H
 #define ENERGY_WAVE_LAYOUT_H
 
