@@ -510,39 +510,44 @@ static fv ew_sinh_node(fv c, fv w, fv ua, fv du, float x, fv *jac)
     return c + w * 0.5f * (e - ie);
 }
 
+/* Where S(t*) jumps between two nodes: the lanes, the bracket [a, b] and t* at its ends. */
+typedef struct {
+    iv jumped;
+    fv a, b, ta, tb;
+} ew_jump;
+
 /* ∫_a^b ψ_prim ζ ds with s = c + w·sinh(u) (c: a peak of half-width w, usually inside
  * [a, b]): in u the 1/distance peak is smooth, so one Gauss–Legendre rule covers it.
- * Lanes where S(t*) jumps between two nodes get the bracket [*ja, *jb] (t* there: *jta, *jtb)
- * flagged in *jumped. */
+ * The first jump of S(t*) between two nodes of each lane goes to *jp (kept in registers
+ * during the loop: through the pointer it was stored and loaded at every node). */
 static fv ew_span_nodes(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b,
-                        int n, __constant const float *gx, __constant const float *gw, iv *jumped, fv *ja, fv *jb,
-                        fv *jta, fv *jtb)
+                        int n, __constant const float *gx, __constant const float *gw, ew_jump *jp)
 {
     fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
     fv t, str, tprev = 0.0f, strprev = 0.0f, sprev = a;
-    *jumped = 0;
+    ew_jump j = {0, 0.0f, 0.0f, 0.0f, 0.0f};
     for (int k = 0; k < n; k++) {
         fv jac, s = ew_sinh_node(c, w, ua, du, gx[k], &jac);
         acc += gw[k] * jac * ew_prim_k(sc, kind, prim, v3_mad(S, s, Q), &t, &str) * ew_zeta(sc, s);
-        iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~*jumped & (fabs(t - tprev) > EW_JUMP_T) &
+        iv jump = (k > 0 ? (iv)(-1) : (iv)(0)) & ~j.jumped & (fabs(t - tprev) > EW_JUMP_T) &
                   (fabs(str - strprev) > EW_JUMP_S);
-        *ja = select(*ja, sprev, jump);
-        *jb = select(*jb, s, jump);
-        *jta = select(*jta, tprev, jump);
-        *jtb = select(*jtb, t, jump);
-        *jumped |= jump;
+        j.a = select(j.a, sprev, jump);
+        j.b = select(j.b, s, jump);
+        j.ta = select(j.ta, tprev, jump);
+        j.tb = select(j.tb, t, jump);
+        j.jumped |= jump;
         tprev = t;
         strprev = str;
         sprev = s;
     }
+    *jp = j;
     return acc * 0.5f * du * w;
 }
 
 static fv ew_span_plain(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
-    iv jumped;
-    fv ja, jb, jta, jtb;
-    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &jumped, &ja, &jb, &jta, &jtb);
+    ew_jump j;
+    return ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL8_N, ew_gl8_x, ew_gl8_w, &j);
 }
 
 /* Bisects [a, b] (t* there: ta, tb) for the jump of t*. */
@@ -564,14 +569,12 @@ static fv ew_jump_locate(const ew_scene *sc, __global const float *cv, v3 S, v3 
 /* One span; where S(t*) jumps, it is split at the jump and redone as two 8-point pieces. */
 static fv ew_span(const ew_scene *sc, int kind, __global const float *prim, v3 S, v3 Q, fv c, fv w, fv a, fv b)
 {
-    iv jumped;
-    fv ja = 0.0f, jb = 0.0f, jta = 0.0f, jtb = 0.0f;
-    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &jumped, &ja, &jb, &jta,
-                           &jtb);
-    if (!ew_any(jumped)) return acc;
-    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, ja, jb, jta, jtb), jumped); /* other lanes: plain redo */
+    ew_jump j;
+    fv acc = ew_span_nodes(sc, kind, prim, S, Q, c, w, a, b, EW_GL10_N, ew_gl10_x, ew_gl10_w, &j);
+    if (!ew_any(j.jumped)) return acc;
+    fv sj = select(b, ew_jump_locate(sc, prim, S, Q, j.a, j.b, j.ta, j.tb), j.jumped); /* other lanes: plain redo */
     fv redo = ew_span_plain(sc, kind, prim, S, Q, c, w, a, sj) + ew_span_plain(sc, kind, prim, S, Q, c, w, sj, b);
-    return select(acc, redo, jumped);
+    return select(acc, redo, j.jumped);
 }
 
 /* [0,1] as one span per peak (split halfway between two peaks). */
