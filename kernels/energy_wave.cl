@@ -14,9 +14,10 @@
  *                       found directly (circle search + Newton, or the nearest-point
  *                       cubic of the curve projected along the ray), and [0,1] is
  *                       integrated with s = s* + w·sinh(u) (w = peak half-width) and
- *                       12-point Gauss–Legendre in u, where the 1/distance peak is
- *                       smooth. Where S(t*) jumps (the curve's medial set) the span is
- *                       split at the jump, found by bisection.
+ *                       Gauss–Legendre in u, where the 1/distance peak is smooth (10
+ *                       nodes a curve's span, 6 either side of a torus's peak). Where
+ *                       S(t*) jumps (the curve's medial set) the span is split at the
+ *                       jump, found by bisection.
  * The unit tests reach the device functions through test-only kernels compiled after this
  * file (tests/ref/energy_wave_probe.cl); the daemon's program has none.
  * The buffer layouts (record strides, camera block) come from energy_wave_layout.h, which the
@@ -26,21 +27,18 @@
 
 /* Gauss–Legendre rules on [0,1], measured RMS error against the converged reference
  * (bench_energy_accuracy; the bound is 0.5%): curves take 10 points per span (Bézier
- * scenes 0.15-0.32%; 12 points: 0.11-0.15% at 1.2x the time), tori 12 (10 points: 0.57%,
- * 12: 0.32%). Points and lines use the closed form and these only near the eye. The two
- * pieces of a span redone at a jump take 8 points. */
+ * scenes 0.15-0.32%; 12 points: 0.11-0.15% at 1.2x the time), tori 6 on each side of the
+ * peak (Fig. 5.1's torus 0.18%; 5 a side: 0.35%; 12 across the peak: 0.32%, 10: 0.57%).
+ * Points and lines use the closed form and these only near the eye. The two pieces of a
+ * span redone at a jump take 8 points. */
 #define EW_GL10_N 10
 __constant float ew_gl10_x[10] = {0.013046736f, 0.067468317f, 0.160295216f, 0.283302303f, 0.425562831f,
                                   0.574437169f, 0.716697697f, 0.839704784f, 0.932531683f, 0.986953264f};
 __constant float ew_gl10_w[10] = {0.033335672f, 0.074725675f, 0.109543181f, 0.134633360f, 0.147762112f,
                                   0.147762112f, 0.134633360f, 0.109543181f, 0.074725675f, 0.033335672f};
-#define EW_GL12_N 12
-__constant float ew_gl12_x[12] = {0.009219683f, 0.047941372f, 0.115048663f, 0.206341023f, 0.316084251f,
-                                  0.437383296f, 0.562616704f, 0.683915749f, 0.793658977f, 0.884951337f,
-                                  0.952058628f, 0.990780317f};
-__constant float ew_gl12_w[12] = {0.023587668f, 0.053469663f, 0.080039164f, 0.101583713f, 0.116746268f,
-                                  0.124573523f, 0.124573523f, 0.116746268f, 0.101583713f, 0.080039164f,
-                                  0.053469663f, 0.023587668f};
+#define EW_GL6_N 6
+__constant float ew_gl6_x[6] = {0.033765243f, 0.169395307f, 0.380690407f, 0.619309593f, 0.830604693f, 0.966234757f};
+__constant float ew_gl6_w[6] = {0.085662246f, 0.180380787f, 0.233956967f, 0.233956967f, 0.180380787f, 0.085662246f};
 #define EW_GL8_N 8
 __constant float ew_gl8_x[8] = {0.019855072f, 0.101666761f, 0.237233795f, 0.408282679f,
                                 0.591717321f, 0.762766205f, 0.898333239f, 0.980144928f};
@@ -700,19 +698,30 @@ static void ew_torus_peaks(__global const float *to, float eps, v3 Sl, v3 Ql, ew
     ew_peaks_make(pk, s0, w0, s1, w1, b1 < EW_BIG);
 }
 
-/* ∫_a^b of the torus term ζ coef/max(ε, d) along the ray Sl + sQl (torus frame), with the
- * span's sinh map around the peak (c, w); 12 Gauss–Legendre nodes. */
-static fv ew_torus_span(const ew_scene *sc, __global const float *to, v3 Sl, v3 Ql, fv c, fv w, fv a, fv b)
+/* ∫ of the torus term ζ coef/max(ε, d) along the ray Sl + sQl (torus frame) over u in
+ * [u0, u0 + du] of the sinh map around the peak (c, w), by 6 Gauss–Legendre nodes. */
+static fv ew_torus_piece(const ew_scene *sc, __global const float *to, v3 Sl, v3 Ql, fv c, fv w, fv u0, fv du)
 {
     float R = to[3];
-    fv ua = asinh((a - c) / w), du = asinh((b - c) / w) - ua, acc = 0.0f;
-    for (int k = 0; k < EW_GL12_N; k++) {
-        fv jac, s = ew_sinh_node(c, w, ua, du, ew_gl12_x[k], &jac);
+    fv acc = 0.0f;
+    for (int k = 0; k < EW_GL6_N; k++) {
+        fv jac, s = ew_sinh_node(c, w, u0, du, ew_gl6_x[k], &jac);
         v3 P = v3_mad(Sl, s, Ql);
         fv dr = sqrt(P.x * P.x + P.y * P.y) - R;
-        acc += ew_gl12_w[k] * jac * ew_zeta(sc, s) / fmax(sc->eps, sqrt(dr * dr + P.z * P.z));
+        acc += ew_gl6_w[k] * jac * ew_zeta(sc, s) / fmax(sc->eps, sqrt(dr * dr + P.z * P.z));
     }
-    return acc * 0.5f * du * w * to[7];
+    return acc * du;
+}
+
+/* ∫_a^b of the torus term with the span's sinh map around the peak (c, w), in two pieces
+ * split at the peak (u = 0; halfway where the peak lies outside [a, b]): on each side the
+ * integrand in u is smoother than across the peak. */
+static fv ew_torus_span(const ew_scene *sc, __global const float *to, v3 Sl, v3 Ql, fv c, fv w, fv a, fv b)
+{
+    fv ua = asinh((a - c) / w), ub = asinh((b - c) / w), um = clamp((fv)(0.0f), ua, ub);
+    um = select(um, 0.5f * (ua + ub), (um == ua) | (um == ub));
+    fv acc = ew_torus_piece(sc, to, Sl, Ql, c, w, ua, um - ua) + ew_torus_piece(sc, to, Sl, Ql, c, w, um, ub - um);
+    return acc * 0.5f * w * to[7];
 }
 
 /* One torus: its closest approaches, then one span per peak (split halfway between two). */
