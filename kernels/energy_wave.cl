@@ -631,12 +631,14 @@ typedef struct {
     fv c, s;
 } ew_angle;
 
-/* Newton on f'(φ) = 0 from a coarse minimum, steps limited to ±0.4 rad. The angle is
- * carried as (c, s) and turned by each step with sin/cos series (error < 1e-4 rad at
- * 0.4) and a renormalisation, so the search calls no trigonometric function. */
+/* Newton on f'(φ) = 0 from a coarse minimum, steps limited to ±0.4 rad: two steps from the
+ * search's 0.39 rad at most (a third changed the RMS error against the converged reference
+ * by under 0.01% and cost 9% of a torus frame). The angle is carried as (c, s) and turned by
+ * each step with sin/cos series (error < 1e-4 rad at 0.4) and a renormalisation, so the
+ * search calls no trigonometric function. */
 static ew_angle ew_circle_refine(const ew_circle *K, ew_angle a)
 {
-    for (int it = 0; it < 3; it++) {
+    for (int it = 0; it < 2; it++) {
         fv c = a.c, s = a.s;
         fv g = (K->bb - K->aa) * s * c + K->ab * (c * c - s * s) + K->ac * s - K->bc * c;
         fv h = (K->bb - K->aa) * (c * c - s * s) - 4.0f * K->ab * s * c + K->ac * c + K->bc * s;
