@@ -204,9 +204,11 @@ static fv ew_gather(__global const float *base, iv idx)
 
 /* S(t) = Σ w_i N_i²(t) from the host's quadratic of the span holding t (energy_wave_layout.h).
  * digest 000 §8 #10: the last span is closed at t = 1 (half-open spans give S(1) = 0, a dark
- * end cap). A few spans' coefficients are chosen by selects: cheaper than gathers, which
- * PoCL's CPU targets run at several times the cost of an arithmetic instruction. */
-#define EW_SELECT_SPANS 8
+ * end cap). Up to 16 spans the coefficients are chosen by selects, beyond by gathers, which
+ * PoCL's AVX-512 code runs at several times the cost of an arithmetic instruction (a 512²
+ * frame of Fig. 5.6's curves: 4–10% faster by selects with 7 to 18 weights, 4–9% slower with
+ * 24 and 32). */
+#define EW_SELECT_SPANS 16
 static fv ew_bspline(__global const float *spl, int spans, fv t)
 {
     fv f = t * (float)spans;
