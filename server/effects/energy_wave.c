@@ -27,8 +27,8 @@
 #include "light_rig.h"
 #include "wave_sources.h"
 
-/* The device's weight rows hold every weight a curve may have. */
-_Static_assert(WAVE_MAX_W <= EW_MAX_W, "curve weights do not fit the kernel's rows");
+/* The device's strength rows hold every span a curve may have. */
+_Static_assert(WAVE_MAX_W - 2 <= EW_MAX_SPANS, "curve strength spans do not fit the kernel's rows");
 
 static const char *const ew_mode_names[] = {[EW_MODE_SIMPSON] = "simpson", [EW_MODE_ADAPTIVE] = "adaptive", NULL};
 static const char *const ew_output_names[] = {[EW_OUTPUT_Y] = "Y", [EW_OUTPUT_RGBA] = "RGBA", NULL};
@@ -219,17 +219,14 @@ struct energy_wave {
     struct ocl *ocl;
     cl_kernel k_simpson, k_adaptive;
     int lanes; /* texels per work-item (the kernels' build option EW_LANES) */
-    cl_mem d_out, d_cam, d_pts, d_lns, d_tor, d_cur, d_wts;
+    cl_mem d_out, d_cam, d_pts, d_lns, d_tor, d_cur, d_spl;
     size_t out_texels;
-    /* parameters, unpacked */
-    enum ew_mode mode;
-    int width, height, divisions, output, compression, animate;
-    double anim_rate, color_e[3], color_b[3];
-    struct wave_sources src;
+    struct energy_wave_config cfg; /* the parameters in use */
+    struct wave_sources src;       /* and their sources, unpacked */
     /* packed uploads */
     float cam[EW_CAM_FLOATS];
     float pts[WAVE_MAX_SRC * EW_PT_STRIDE], lns[WAVE_MAX_SRC * EW_LN_STRIDE], tor[WAVE_MAX_SRC * EW_TO_STRIDE];
-    float cur[WAVE_MAX_SRC * EW_CV_STRIDE], wts[WAVE_MAX_SRC * EW_MAX_W];
+    float cur[WAVE_MAX_SRC * EW_CV_STRIDE], spl[WAVE_MAX_SRC * EW_SPL_ROW];
     /* reused frame buffers: the frame in progress (luminance B, its colour map) and the last one
      * completed, its texels emitted; swapped when a frame completes, so what was emitted stays as
      * it is while the next frame is computed over several slices (effect.h) */
@@ -238,7 +235,6 @@ struct energy_wave {
     /* this frame's curve weights (W times the pulses), shared by the kernel and the rig */
     double w[WAVE_MAX_SRC][WAVE_MAX_W];
     /* light rig: its settings, this frame's rig and its payload */
-    int light_rig;
     struct light_rig lr;
     struct fxs_rig rig;
     uint8_t rig_payload[FXS_RIG_MAX_PAYLOAD];
@@ -274,7 +270,7 @@ static void ew_pack_camera(struct energy_wave *ew, const struct energy_wave_conf
     vec3_cross(f, up, r);
     vec3_normalize(r);
     vec3_cross(r, f, u);
-    double l = p->size, lh = l * ew->height / ew->width;
+    double l = p->size, lh = l * ew->cfg.height / ew->cfg.width;
     memset(ew->cam, 0, sizeof ew->cam);
     params_pack(energy_wave_params, p, ew->cam); /* nu, alpha, beta, epsilon */
     ew_put3(ew->cam + EW_CAM_CENTER, C);
@@ -315,7 +311,8 @@ static void ew_pack_sources(struct energy_wave *ew)
 }
 
 /* One curve record: (3.10) C₂ = B₀ − 2B₁ + B₂, C₁ = 2(B₁ − B₀), C₀ = B₀, plus |C₂|²,
- * C₁·C₂, |C₁|², the weight count and the lit range [t_lo, t_hi] (S > 0 only there). */
+ * C₁·C₂, |C₁|², the strength's span count nw − 2 and the lit range [t_lo, t_hi] (S > 0 only
+ * there). */
 void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi)
 {
     double C0[3], C1[3], C2[3];
@@ -332,9 +329,24 @@ void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int n
     ew_put3(dst + 8, C2);
     dst[11] = (float)vec3_dot(C1, C2);
     dst[12] = (float)vec3_dot(C1, C1);
-    dst[13] = (float)nw;
+    dst[13] = (float)(nw - 2);
     dst[14] = (float)t_lo;
     dst[15] = (float)t_hi;
+}
+
+/* The strength S(t) of weights w[0..nw-1] as the kernel's span quadratics: S at both ends and
+ * the middle of span k gives c0 = S(0), c1 = 4S(½) − 3S(0) − S(1), c2 = 2S(1) − 4S(½) + 2S(0)
+ * in x = t·spans − k. */
+void energy_wave_pack_strength(float *dst, int nw, const double *w)
+{
+    int spans = nw - 2;
+    for (int k = 0; k < spans; k++) {
+        double s0 = light_rig_bspline(nw, w, (double)k / spans), sm = light_rig_bspline(nw, w, (k + 0.5) / spans);
+        double s1 = light_rig_bspline(nw, w, k + 1 == spans ? 1.0 : (double)(k + 1) / spans);
+        dst[3 * k] = (float)s0;
+        dst[3 * k + 1] = (float)(4.0 * sm - 3.0 * s0 - s1);
+        dst[3 * k + 2] = (float)(2.0 * s1 - 4.0 * sm + 2.0 * s0);
+    }
 }
 
 /* Packs the curves with their (animated) weights; curves whose strength is zero
@@ -345,18 +357,16 @@ static int ew_pack_curves(struct energy_wave *ew)
     for (int i = 0; i < ew->src.nc; i++) {
         const struct wave_curve *c = &ew->src.curve[i];
         int first = -1, last = -1;
-        float *w = ew->wts + nc * EW_MAX_W;
-        for (int k = 0; k < c->nw; k++) {
-            w[k] = (float)ew->w[i][k];
-            if (w[k] > 0.0f) {
+        for (int k = 0; k < c->nw; k++)
+            if (ew->w[i][k] > 0.0) {
                 if (first < 0) first = k;
                 last = k;
             }
-        }
         if (first < 0 || c->coef == 0.0) continue;
         /* N_i² is supported on [u_i, u_{i+3}] with u_i = clamp((i−2)/(nw−2), 0, 1) */
         double lo = (first - 2.0) / (c->nw - 2.0), hi = (last + 1.0) / (c->nw - 2.0);
         energy_wave_pack_curve(ew->cur + nc * EW_CV_STRIDE, c->b, c->coef, c->nw, lo < 0 ? 0 : lo, hi > 1 ? 1 : hi);
+        energy_wave_pack_strength(ew->spl + nc * EW_SPL_ROW, c->nw, ew->w[i]);
         nc++;
     }
     return nc;
@@ -392,20 +402,19 @@ static int ew_kernels_create(struct energy_wave *ew, struct fx_err *err)
     ew->k_simpson = clCreateKernel(prog, "ew_render_simpson", &rc);
     if (rc == CL_SUCCESS) ew->k_adaptive = clCreateKernel(prog, "ew_render_adaptive", &rc);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "clCreateKernel: %s", ocl_errstr(rc));
-    const size_t f = sizeof(float);
     if (!(ew->d_cam = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cam, err))) return -1;
     if (!(ew->d_pts = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->pts, err))) return -1;
     if (!(ew->d_lns = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->lns, err))) return -1;
     if (!(ew->d_tor = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->tor, err))) return -1;
     if (!(ew->d_cur = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->cur, err))) return -1;
-    if (!(ew->d_wts = ew_buffer(ew, CL_MEM_READ_ONLY, WAVE_MAX_SRC * EW_MAX_W * f, err))) return -1;
+    if (!(ew->d_spl = ew_buffer(ew, CL_MEM_READ_ONLY, sizeof ew->spl, err))) return -1;
     return 0;
 }
 
 /* (Re)allocates the per-texel buffers when the texture grows. */
 static int ew_frame_buffers(struct energy_wave *ew, struct fx_err *err)
 {
-    size_t texels = (size_t)ew->width * (size_t)ew->height;
+    size_t texels = (size_t)ew->cfg.width * (size_t)ew->cfg.height;
     if (texels <= ew->out_texels) return 0;
     if (ew->d_out) clReleaseMemObject(ew->d_out);
     ew->d_out = NULL;
@@ -428,18 +437,10 @@ int energy_wave_set(struct energy_wave *ew, const struct energy_wave_config *par
 {
     ew->busy = 0; /* a frame in progress is dropped */
     ew->meter = (struct slice_meter){.probe = EW_PROBE_GROUPS};
-    ew->mode = (enum ew_mode)params->mode;
-    ew->width = params->width;
-    ew->height = params->height;
-    ew->divisions = params->divisions;
-    ew->output = params->output;
-    ew->compression = params->compression;
-    memcpy(ew->color_e, params->color_energy, sizeof ew->color_e);
-    memcpy(ew->color_b, params->color_background, sizeof ew->color_b);
+    ew->cfg = *params;
     ew_pack_camera(ew, params);
     wave_sources_read(params, &ew->src);
     ew_pack_sources(ew);
-    ew->light_rig = params->light_rig;
     light_rig_read(params, &ew->lr);
     return ew_frame_buffers(ew, err);
 }
@@ -463,7 +464,7 @@ void energy_wave_free(struct energy_wave *ew)
 {
     if (!ew) return;
     if (ew->ocl) clFinish(ocl_queue(ew->ocl)); /* a failed step may leave uploads from ew's arrays queued */
-    cl_mem mems[] = {ew->d_out, ew->d_cam, ew->d_pts, ew->d_lns, ew->d_tor, ew->d_cur, ew->d_wts};
+    cl_mem mems[] = {ew->d_out, ew->d_cam, ew->d_pts, ew->d_lns, ew->d_tor, ew->d_cur, ew->d_spl};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
     if (ew->k_simpson) clReleaseKernel(ew->k_simpson);
@@ -486,7 +487,7 @@ static int ew_upload(struct energy_wave *ew, int nc, struct fx_err *err)
         {ew->d_lns, ew->lns, (size_t)ew->src.nl * EW_LN_STRIDE * f},
         {ew->d_tor, ew->tor, (size_t)ew->src.nt * EW_TO_STRIDE * f},
         {ew->d_cur, ew->cur, (size_t)nc * EW_CV_STRIDE * f},
-        {ew->d_wts, ew->wts, (size_t)nc * EW_MAX_W * f},
+        {ew->d_spl, ew->spl, (size_t)nc * EW_SPL_ROW * f},
     };
     for (size_t i = 0; i < sizeof up / sizeof up[0]; i++) {
         if (!up[i].bytes) continue;
@@ -503,23 +504,23 @@ static int ew_set_args(struct energy_wave *ew, cl_kernel k, const char *name, in
         {sizeof(cl_mem), &ew->d_out}, {sizeof(cl_mem), &ew->d_cam}, {sizeof(cl_mem), &ew->d_pts},
         {sizeof(int), &ew->src.np},   {sizeof(cl_mem), &ew->d_lns}, {sizeof(int), &ew->src.nl},
         {sizeof(cl_mem), &ew->d_tor}, {sizeof(int), &ew->src.nt},   {sizeof(cl_mem), &ew->d_cur},
-        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_wts}, {sizeof(int), &ew->width},
-        {sizeof(int), &ew->height},   {sizeof(int), &ew->divisions}};
+        {sizeof(int), &nc},           {sizeof(cl_mem), &ew->d_spl}, {sizeof(int), &ew->cfg.width},
+        {sizeof(int), &ew->cfg.height}, {sizeof(int), &ew->cfg.divisions}};
     return ocl_set_args(k, name, a, k == ew->k_simpson ? 14 : 13, err);
 }
 
 static cl_kernel ew_kernel(const struct energy_wave *ew, const char **name)
 {
-    *name = ew->mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
-    return ew->mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
+    *name = ew->cfg.mode == EW_MODE_SIMPSON ? "ew_render_simpson" : "ew_render_adaptive";
+    return ew->cfg.mode == EW_MODE_SIMPSON ? ew->k_simpson : ew->k_adaptive;
 }
 
 /* Work-groups per row of the kernel's grid (EW_GROUP work-items of ew->lanes texels each), and in all. */
 static size_t ew_groups_x(const struct energy_wave *ew)
 {
-    return ((size_t)ew->width + EW_GROUP * ew->lanes - 1) / (EW_GROUP * ew->lanes);
+    return ((size_t)ew->cfg.width + EW_GROUP * ew->lanes - 1) / (EW_GROUP * ew->lanes);
 }
-static size_t ew_groups(const struct energy_wave *ew) { return ew_groups_x(ew) * (size_t)ew->height; }
+static size_t ew_groups(const struct energy_wave *ew) { return ew_groups_x(ew) * (size_t)ew->cfg.height; }
 
 /* Starts a frame at sim_time: the curve weights, the uploads and the kernel's arguments. */
 static int ew_frame_begin(struct energy_wave *ew, double sim_time, struct fx_err *err)
@@ -549,7 +550,7 @@ static double ew_event_ms(cl_event ev)
  * 0, or -1 with err. */
 static int ew_frame_piece(struct energy_wave *ew, size_t n, float *out, size_t *from, size_t *to, struct fx_err *err)
 {
-    const size_t gx = ew_groups_x(ew), w = (size_t)ew->width, j = ew->done / gx, x = ew->done % gx;
+    const size_t gx = ew_groups_x(ew), w = (size_t)ew->cfg.width, j = ew->done / gx, x = ew->done % gx;
     size_t groups[2] = {gx, n / gx};
     if (x > 0 || n < gx) { /* within a row */
         groups[0] = n < gx - x ? n : gx - x;
@@ -599,10 +600,11 @@ static float ew_clamp01(double v) { return (float)(v < 0.0 ? 0.0 : (v > 1.0 ? 1.
 /* digest §2.7 proposal: RGBA = clamp((1−B)C_b + B·C_e, 0, 1), A = clamp(B, 0, 1), texels [from, to). */
 static void ew_colour_map(const struct energy_wave *ew, size_t from, size_t to)
 {
+    const double *Cb = ew->cfg.color_background, *Ce = ew->cfg.color_energy;
     for (size_t i = from; i < to; i++) {
         double B = ew->img[i];
         float *px = ew->rgba + 4 * i;
-        for (int c = 0; c < 3; c++) px[c] = ew_clamp01((1.0 - B) * ew->color_b[c] + B * ew->color_e[c]);
+        for (int c = 0; c < 3; c++) px[c] = ew_clamp01((1.0 - B) * Cb[c] + B * Ce[c]);
         px[3] = ew_clamp01(B);
     }
 }
@@ -620,7 +622,7 @@ static int ew_encode(void *self, struct effect_frame *fr, struct fx_err *err)
 {
     struct energy_wave *ew = self;
     double t0 = clock_now() * 1e3;
-    struct exr_image im = {ew->width, ew->height, (int)fr->channels, fr->texels, ew->compression};
+    struct exr_image im = {ew->cfg.width, ew->cfg.height, (int)fr->channels, fr->texels, ew->cfg.compression};
     ew->exr.len = 0;
     if (exr_write_mem(&im, &ew->exr, err)) return -1;
     fr->codec = FXS_CODEC_EXR;
@@ -645,7 +647,7 @@ static int ew_render_slice(struct energy_wave *ew, double sim_time, double slice
             ew->busy = 0;
             return -1;
         }
-        if (ew->output == 1) ew_colour_map(ew, from, to);
+        if (ew->cfg.output == EW_OUTPUT_RGBA) ew_colour_map(ew, from, to);
         double t1 = clock_now();
         slice_record(&ew->meter, ew->done - before, t1 - t0);
         t0 = t1;
@@ -670,15 +672,15 @@ static int ew_step(void *self, double sim_time, double dt, double slice_end, eff
     if (rc) return rc;
     struct effect_frame fr = {
         .kind = FXS_KIND_TEXTURE,
-        .count_or_width = (uint32_t)ew->width,
-        .height = (uint32_t)ew->height,
+        .count_or_width = (uint32_t)ew->cfg.width,
+        .height = (uint32_t)ew->cfg.height,
         .encode = ew_encode,
         .self = ew,
-        .texels = ew->output == 1 ? ew->done_rgba : ew->done_img,
-        .channels = ew->output == 1 ? 4 : 1,
+        .texels = ew->cfg.output == EW_OUTPUT_RGBA ? ew->done_rgba : ew->done_img,
+        .channels = ew->cfg.output == EW_OUTPUT_RGBA ? 4 : 1,
     };
     if (emit(ctx, &fr)) return -1;
-    if (!ew->light_rig) return 0;
+    if (!ew->cfg.light_rig) return 0;
     /* The light rig at the same time as the texture. The constants (~150 bytes with 3 bands)
      * go into every frame: the hub keeps only the newest frame per kind for late
      * subscribers, and they cost far less than the texture (PROTOCOL.md §7.7). */

@@ -42,5 +42,8 @@ void energy_wave_last_split(const struct energy_wave *ew, struct energy_wave_spl
 /* The kernel's curve record (16 floats, kernels/energy_wave.cl) of the Bézier b with strength
  * coef, nw weights and the lit parameter range [t_lo, t_hi]. */
 void energy_wave_pack_curve(float *dst, const double b[3][3], double coef, int nw, double t_lo, double t_hi);
+/* The kernel's strength row of a curve with weights w[0..nw-1]: 3(nw − 2) floats, a quadratic
+ * per span (kernels/energy_wave_layout.h). */
+void energy_wave_pack_strength(float *dst, int nw, const double *w);
 
 #endif

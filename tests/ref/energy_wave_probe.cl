@@ -14,17 +14,17 @@ __kernel void ew_test_cubic(__global const float *abc, __global float *roots, __
     roots[3 * i + 2] = three.s0 ? r2.s0 : 0.0f;
 }
 
-__kernel void ew_test_bspline(__global const float *w, int nw, __global const float *t, __global float *out)
+__kernel void ew_test_bspline(__global const float *spl, int spans, __global const float *t, __global float *out)
 {
     int i = get_global_id(0);
-    out[i] = ew_bspline(w, nw, (fv)(t[i])).s0;
+    out[i] = ew_bspline(spl, spans, (fv)(t[i])).s0;
 }
 
 __kernel void ew_test_curve_nearest(__global const float *cv, __global const float *p, __global float *dist,
                                     __global float *tparam)
 {
     int i = get_global_id(0);
-    fv t, d = ew_curve_nearest(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
-    dist[i] = d.s0;
+    fv t, d2 = ew_curve_nearest_sq(cv, v3_make((fv)(p[3 * i]), (fv)(p[3 * i + 1]), (fv)(p[3 * i + 2])), &t);
+    dist[i] = sqrt(d2.s0);
     tparam[i] = t.s0;
 }

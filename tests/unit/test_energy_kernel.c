@@ -61,12 +61,15 @@ static int tek_dev_cubic(int n, const float *abc, float *roots, int *nroots, str
 }
 
 /* Quadratic B-spline strength S(t) (digest §2.3) of weights w[0..nw-1] at n parameters t. */
-static int tek_dev_bspline(int nw, const float *w, int n, const float *t, float *out, struct fx_err *err)
+static int tek_dev_bspline(int nw, const double *w, int n, const float *t, float *out, struct fx_err *err)
 {
     size_t f = sizeof(float);
+    float spl[3 * WAVE_MAX_W];
+    int spans = nw - 2;
+    energy_wave_pack_strength(spl, nw, w);
     const struct probe_arg args[] = {
-        {(size_t)nw * f, w, NULL, 0},
-        {0, &nw, NULL, sizeof nw},
+        {(size_t)spans * 3 * f, spl, NULL, 0},
+        {0, &spans, NULL, sizeof spans},
         {(size_t)n * f, t, NULL, 0},
         {(size_t)n * f, NULL, out, 0},
     };
@@ -365,17 +368,17 @@ static void test_dev_cubic(void)
 
 static void test_dev_bspline(void)
 {
-    enum { NT = 203 };
-    static const int nws[6] = {3, 4, 5, 7, 9, 12};
-    float t[NT], out[NT], w[12];
+    enum { NT = 203, NSETS = 7 };
+    static const int nws[NSETS] = {3, 4, 5, 7, 9, 12, WAVE_MAX_W};
+    float t[NT], out[NT];
     tek_rng = 777;
-    for (int s = 0; s < 6; s++) {
+    for (int s = 0; s < NSETS; s++) {
         int nw = nws[s];
-        double wd[12], U[16];
-        for (int k = 0; k < nw; k++) wd[k] = w[k] = (float)tek_rand(0, 1);
+        double w[WAVE_MAX_W], U[WAVE_MAX_W + 3];
+        for (int k = 0; k < nw; k++) w[k] = tek_rand(0, 1);
         if (s == 3) { /* the Fig 3.8 weights */
             static const double f38[7] = {1.0, 0.6, 0.2, 0.4, 0.8, 0.6, 1.0};
-            for (int k = 0; k < 7; k++) wd[k] = w[k] = (float)f38[k];
+            for (int k = 0; k < 7; k++) w[k] = f38[k];
         }
         int m = energy_ref_knots(nw, U), nt = 0;
         for (int k = 0; k < m; k++) t[nt++] = (float)U[k]; /* every knot, t = 0 and t = 1 included */
@@ -387,7 +390,7 @@ static void test_dev_bspline(void)
         if (rc) return;
         int bad = 0;
         for (int k = 0; k < NT; k++) {
-            double want = energy_ref_bspline(nw, wd, t[k]);
+            double want = energy_ref_bspline(nw, w, t[k]);
             if (!(fabs(out[k] - want) <= 2e-6) && bad++ < 5)
                 CHECK(0, "bspline nw=%d t=%.9g: device %.9g reference %.9g", nw, t[k], out[k], want);
         }
