@@ -28,7 +28,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fxtest import DAEMON, Client, Suite, parse_frame  # noqa: E402
 from test_cluster import (LEASE_TTL_S, SMALL, Redis, cluster_daemon, frame_made_after, get, http_json,  # noqa: E402
-                          leases, metric, names, require_redis, stop_all, until)
+                          leases, metric, names, owner, require_redis, stop_all, until)
 
 R = None
 P = Q = E = None  # compute, compute, edge
@@ -193,17 +193,19 @@ def idle_scores():
 async def test_spread(t):
     """Streams with subscribers spread over both compute daemons (least loaded takes). A daemon
     takes new streams while its score (engine load + 0.05 a lease) is the least, so the streams
-    are made once both daemons' scores are back to their leases' cost: the engine time an
-    earlier test left on one would otherwise rightly send all four to the other."""
+    are made once both daemons' scores are back to their leases' cost (the engine time an
+    earlier test left on one would otherwise rightly send all four to the other), and one at a
+    time, so each is taken on scores that count the work of the streams before it (four made at
+    once were all taken by one daemon in a quiet CI run)."""
     t.check(await until(idle_scores, timeout=10), "both compute daemons idle first: %s" %
             R.cmd("ZRANGE", "fxs:computes", 0, -1, "WITHSCORES"))
     e = await Client.connect(E)
-    made = ["sp%d" % i for i in range(4)]
+    made, subs = ["sp%d" % i for i in range(4)], []
     for n in made:
         await e.request("create", effect="energy_wave", stream=n, params=SMALL)
-    subs = [await subscriber(E, n) for n in made]
-    for c in subs:
-        await frames_after(c, 0, timeout=15)
+        subs.append(await subscriber(E, n))
+        await frames_after(subs[-1], 0, timeout=15)
+        await owner(n, [P, Q])
     held = {d: [n for n in made if n in leases(d)] for d in (P, Q)}
     t.check(sum(len(v) for v in held.values()) == 4 and all(held.values()),
             "4 streams over 2 compute daemons: %s" % sorted(len(v) for v in held.values()))
