@@ -65,11 +65,15 @@
 
 /* The latest output of a kind as the effect emitted it (its pointers valid as effect.h says),
  * the header its frames carry, the forms published of it (bits 1 << form, budget.h), and for
- * kind 1 its full frame in each encoding once made (a budget the output fits publishes it too). */
+ * kind 1 its full frame in each encoding once made (a budget the output fits publishes it too)
+ * and the subset of the budget step last cut from it (sub_step particles asked; both encodings
+ * of a step encode the one selection). */
 struct engine_kept {
     bool valid;
     uint32_t published;
     struct frame *full[FXS_ENCODING_COUNT];
+    struct fxs_particles sub;
+    uint32_t sub_step;
     struct effect_frame ef;
     struct fxs_header hdr;
 };
@@ -110,6 +114,7 @@ struct engine_slot {
 static void engine_kept_clear(struct engine_kept *k)
 {
     for (int e = 0; e < FXS_ENCODING_COUNT; e++) frame_unref(k->full[e]);
+    fxs_particles_free(&k->sub);
     *k = (struct engine_kept){0};
 }
 
@@ -239,38 +244,37 @@ static int engine_payload(struct engine_kept *k, enum fxs_encoding enc, const st
     return 0;
 }
 
+/* Cuts the kept output's subset of step particles into k->sub (budget_select, budget_gather),
+ * unless it holds that step's already. 0, or -1 with err. */
+static int engine_subset(struct engine_kept *k, uint32_t step, struct fx_err *err)
+{
+    const struct effect_frame *ef = &k->ef;
+    if (k->sub_step == step) return 0;
+    fxs_particles_free(&k->sub);
+    k->sub_step = 0;
+    if (!ef->ids) return fx_fail(err, "internal", "", "a particle output without ids: no subset of %u particles", step);
+    uint32_t *idx = malloc((size_t)step * sizeof *idx);
+    int64_t m = idx ? budget_select(ef->ids, ef->particles.n, step, idx) : -1;
+    int rc = m < 0 || budget_gather(&ef->particles, idx, (uint32_t)m, &k->sub);
+    free(idx);
+    if (rc) return fx_fail(err, "internal", "", "out of memory for a subset of %u particles", step);
+    k->sub_step = step;
+    return 0;
+}
+
 /* A new frame of the kept output in an encoding: of all its particles, or (step > 0) of the
  * subset of step of them (budget_select; total in its header). NULL with err. */
 static struct frame *engine_frame(struct engine_kept *k, enum fxs_encoding enc, uint32_t step, double *encode_ms,
                                   struct fx_err *err)
 {
     struct fxs_header h = k->hdr;
-    const struct effect_frame *ef = &k->ef;
-    struct fxs_particles sub = {0};
-    uint32_t *idx = NULL, total = 0;
-    int64_t m = 0;
-    if (step) {
-        if (!ef->ids) {
-            fx_fail(err, "internal", "", "a particle output without ids: no subset of %u particles", step);
-            return NULL;
-        }
-        idx = malloc((size_t)step * sizeof *idx);
-        m = idx ? budget_select(ef->ids, ef->particles.n, step, idx) : -1;
-        if (m < 0 || budget_gather(&ef->particles, idx, (uint32_t)m, &sub)) {
-            free(idx);
-            fx_fail(err, "internal", "", "out of memory for a subset of %u particles", step);
-            return NULL;
-        }
-        free(idx);
-        h.count_or_width = (uint32_t)m;
-        total = ef->particles.n;
-    }
+    if (step && engine_subset(k, step, err)) return NULL;
+    if (step) h.count_or_width = k->sub.n;
+    uint32_t total = step ? k->ef.particles.n : 0;
     const void *payload = NULL;
     size_t len = 0;
     uint8_t *buf;
-    int rc = engine_payload(k, enc, step ? &sub : NULL, &h, &payload, &len, &buf, encode_ms, err);
-    fxs_particles_free(&sub);
-    if (rc) return NULL;
+    if (engine_payload(k, enc, step ? &k->sub : NULL, &h, &payload, &len, &buf, encode_ms, err)) return NULL;
     h.server_time_us = clock_wall_us();
     struct frame *f = frame_new(&h, total, payload, len);
     free(buf);
