@@ -16,6 +16,9 @@
  *                     resampling decisions (§2.12, §9 #9-11) and the runaway flag
  *   fl_count/fl_scan_blocks/fl_compact   every resample_interval steps: survivors in order,
  *                     then inserted particles appended in parent order with fresh ids
+ * On a GPU the sort and the compaction run wide, one work item per element (fl_key_*, fl_scan_*,
+ * fl_compact_wide: a counting sort whose scan is the cell-start table, and scanned flags), in the
+ * same order as the serial-per-block passes above, which suit a CPU's few cores.
  *
  * Neighbour gather (§2.11): cells have edge c = h / FL_CELLS_PER_H (flame_params.h; 2h by default) and
  * key(cx,cy,cz) = (cx + P1 cy + P2 cz) mod M, so the cells of one (cy,cz) row with consecutive cx
@@ -136,6 +139,114 @@ __kernel void fl_cell_start(__global const uint *key, int n, uint m, __global ui
     if (p > n) return;
     uint from = p > 0 ? key[p - 1] + 1u : 0u, to = p < n ? key[p] : m;
     for (uint q = from; q <= to; q++) cs[q] = (uint)p;
+}
+
+/* ---- the sort and the compaction one work item per element (wide passes, GPU devices) ------
+ *
+ * The serial-per-block passes above suit a CPU's few cores; a GPU needs every element on its own
+ * work item. The sort becomes a counting sort: fl_key_count counts the particles of each key
+ * (an atomic increment, which also gives each particle a slot in its key's run), a scan of the
+ * counts is the cell-start table itself, fl_key_scatter places each particle's index in its run,
+ * and fl_key_rank puts each run in index order (the atomics' order is arbitrary): the result is
+ * the radix sort's, (key, index) ascending, bit for bit. A run holds one cell's particles (and
+ * those of cells hashed to the same key), a few dozen at most, so the rank's O(run^2) is small. */
+
+__kernel void fl_key_count(__global const uint *key, int n, __global uint *cnt, __global uint *slot)
+{
+    int i = get_global_id(0);
+    if (i < n) slot[i] = atomic_inc(&cnt[key[i]]);
+}
+
+__kernel void fl_key_scatter(__global const uint *key, __global const uint *slot, int n, __global const uint *cs,
+                             __global uint *run)
+{
+    int i = get_global_id(0);
+    if (i < n) run[cs[key[i]] + slot[i]] = (uint)i;
+}
+
+__kernel void fl_key_rank(__global const uint *key, __global const uint *run, int n, __global const uint *cs,
+                          __global uint *sorted)
+{
+    int p = get_global_id(0);
+    if (p >= n) return;
+    uint i = run[p], k = key[i], a = cs[k], b = cs[k + 1], r = 0;
+    for (uint q = a; q < b; q++) r += run[q] < i;
+    sorted[a + r] = i;
+}
+
+/* Exclusive scan of in[e * stride + off] for e < len into out[0 .. len) (sum of the first e),
+ * in three launches: fl_scan_reduce sums each tile of FL_SCAN_TILE elements, fl_scan_top scans
+ * the tile sums in one work-group (and stores the grand total in tot[tot_i]), fl_scan_down scans
+ * each tile from its offset. Work item l of a group takes the tile's elements l*E .. l*E+E-1. */
+#define FL_SCAN_TILE (FL_SCAN_WG * FL_SCAN_E) /* FL_SCAN_WG, FL_SCAN_E: flame_layout.h */
+
+/* The work-group's exclusive prefix of v (Hillis-Steele in local memory) and its total. */
+inline uint fl_group_scan(__local uint *s, uint v, uint *total)
+{
+    int l = get_local_id(0);
+    s[l] = v;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (int o = 1; o < FL_SCAN_WG; o <<= 1) {
+        uint t = l >= o ? s[l - o] : 0u;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        s[l] += t;
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    uint r = s[l] - v;
+    *total = s[FL_SCAN_WG - 1];
+    barrier(CLK_LOCAL_MEM_FENCE);
+    return r;
+}
+
+inline void fl_scan_load(__global const uint *in, int stride, int off, int len, uint *x)
+{
+    int e0 = get_group_id(0) * FL_SCAN_TILE + get_local_id(0) * FL_SCAN_E;
+    for (int e = 0; e < FL_SCAN_E; e++) x[e] = e0 + e < len ? in[(e0 + e) * stride + off] : 0u;
+}
+
+__kernel __attribute__((reqd_work_group_size(FL_SCAN_WG, 1, 1)))
+void fl_scan_reduce(__global const uint *in, int stride, int off, int len, __global uint *sums)
+{
+    __local uint s[FL_SCAN_WG];
+    uint x[FL_SCAN_E], v = 0, total;
+    fl_scan_load(in, stride, off, len, x);
+    for (int e = 0; e < FL_SCAN_E; e++) v += x[e];
+    fl_group_scan(s, v, &total);
+    if (get_local_id(0) == 0) sums[get_group_id(0)] = total;
+}
+
+/* One work-group: work item l scans its share of the `tiles` sums serially around the group scan. */
+__kernel __attribute__((reqd_work_group_size(FL_SCAN_WG, 1, 1)))
+void fl_scan_top(__global uint *sums, int tiles, __global uint *tot, int tot_i)
+{
+    __local uint s[FL_SCAN_WG];
+    int l = get_local_id(0), per = (tiles + FL_SCAN_WG - 1) / FL_SCAN_WG;
+    int lo = min(tiles, l * per), hi = min(tiles, lo + per);
+    uint v = 0, all;
+    for (int t = lo; t < hi; t++) v += sums[t];
+    uint run = fl_group_scan(s, v, &all);
+    for (int t = lo; t < hi; t++) {
+        uint x = sums[t];
+        sums[t] = run;
+        run += x;
+    }
+    if (l == 0) tot[tot_i] = all;
+}
+
+__kernel __attribute__((reqd_work_group_size(FL_SCAN_WG, 1, 1)))
+void fl_scan_down(__global const uint *in, int stride, int off, int len, __global const uint *sums,
+                  __global uint *out)
+{
+    __local uint s[FL_SCAN_WG];
+    uint x[FL_SCAN_E], v = 0, total;
+    fl_scan_load(in, stride, off, len, x);
+    for (int e = 0; e < FL_SCAN_E; e++) v += x[e];
+    uint run = sums[get_group_id(0)] + fl_group_scan(s, v, &total);
+    int e0 = get_group_id(0) * FL_SCAN_TILE + get_local_id(0) * FL_SCAN_E;
+    for (int e = 0; e < FL_SCAN_E; e++) {
+        if (e0 + e < len) out[e0 + e] = run;
+        run += x[e];
+    }
 }
 
 /* ---- neighbour gather ---------------------------------------------------------------- */
@@ -554,6 +665,42 @@ __kernel void fl_scan_blocks(__global uint *bsum, int nb, uint cap, __global uin
     tot[2] = min(cap, s0 + s1);
 }
 
+/* fl_compact's moves for one particle: a survivor to slot ko, an insertion to slot o (< nmax). */
+inline void fl_compact_one(int i, uint2 v, uint ko, uint o, uint nmax, uint id_new, prm_t P,
+                           __global const float4 *nrm, __global const float4 *pos, __global const float4 *vel,
+                           __global const uint *flags, __global const uint *id, __global const float2 *rho_p,
+                           __global const uint *counts, __global const float4 *force, __global const float2 *dTdF,
+                           __global float4 *opos, __global float4 *ovel, __global uint *oflags, __global uint *oid,
+                           __global float2 *orho_p, __global uint *ocounts, __global float4 *oforce,
+                           __global float2 *odTdF)
+{
+    if (v.x) {
+        opos[ko] = pos[i];
+        ovel[ko] = vel[i];
+        oflags[ko] = flags[i];
+        oid[ko] = id[i];
+        orho_p[ko] = rho_p[i];
+        ocounts[ko] = counts[i];
+        oforce[ko] = force[i];
+        odTdF[ko] = dTdF[i];
+    }
+    if (v.y && o < nmax) {
+        float4 p = pos[i];
+        p.xyz -= P[FP_DIAM] * nrm[i].xyz;
+        p.w = P[FP_TAMB];
+        float4 w = vel[i];
+        w.w = 0.0f;
+        opos[o] = p;
+        ovel[o] = w;
+        oflags[o] = FL_GAS;
+        oid[o] = id_new;
+        orho_p[o] = (float2)(0.0f);
+        ocounts[o] = 0u;
+        oforce[o] = (float4)(0.0f);
+        odTdF[o] = (float2)(0.0f);
+    }
+}
+
 /* Survivors keep their order; inserted particles follow them in parent order (§2.12): at
  * r_i - d n_i (§9 #9), T_amb, F = 0, v_i inherited (§9 #10), ids id_base + rank. Derived
  * fields travel with the survivors and are zero for the inserted. */
@@ -570,35 +717,28 @@ __kernel void fl_compact(__global const uint2 *keep_ins, int n, __global const u
     uint ko = bsum[b], so = bsum[nb + b], nk = tot[0], nmax = tot[2];
     for (int i = lo; i < hi; i++) {
         uint2 v = keep_ins[i];
-        if (v.x) {
-            opos[ko] = pos[i];
-            ovel[ko] = vel[i];
-            oflags[ko] = flags[i];
-            oid[ko] = id[i];
-            orho_p[ko] = rho_p[i];
-            ocounts[ko] = counts[i];
-            oforce[ko] = force[i];
-            odTdF[ko] = dTdF[i];
-            ko++;
-        }
-        if (v.y) {
-            uint o = nk + so;
-            if (o < nmax) {
-                float4 p = pos[i];
-                p.xyz -= P[FP_DIAM] * nrm[i].xyz;
-                p.w = P[FP_TAMB];
-                float4 w = vel[i];
-                w.w = 0.0f;
-                opos[o] = p;
-                ovel[o] = w;
-                oflags[o] = FL_GAS;
-                oid[o] = id_base + so;
-                orho_p[o] = (float2)(0.0f);
-                ocounts[o] = 0u;
-                oforce[o] = (float4)(0.0f);
-                odTdF[o] = (float2)(0.0f);
-            }
-            so++;
-        }
+        fl_compact_one(i, v, ko, nk + so, nmax, id_base + so, P, nrm, pos, vel, flags, id, rho_p, counts, force, dTdF,
+                       opos, ovel, oflags, oid, orho_p, ocounts, oforce, odTdF);
+        ko += v.x;
+        so += v.y;
     }
+}
+
+/* fl_compact one work item per particle (wide passes): ks and is are the exclusive scans of the
+ * keep and insert flags, tot[0] and tot[1] their totals; work item 0 stores the new count,
+ * min(cap, survivors + insertions), in tot[2] as fl_scan_blocks does. */
+__kernel void fl_compact_wide(__global const uint2 *keep_ins, int n, __global const uint *ks, __global const uint *is,
+                              __global uint *tot, uint cap, uint id_base, prm_t P, __global const float4 *nrm,
+                              __global const float4 *pos, __global const float4 *vel, __global const uint *flags,
+                              __global const uint *id, __global const float2 *rho_p, __global const uint *counts,
+                              __global const float4 *force, __global const float2 *dTdF, __global float4 *opos,
+                              __global float4 *ovel, __global uint *oflags, __global uint *oid, __global float2 *orho_p,
+                              __global uint *ocounts, __global float4 *oforce, __global float2 *odTdF)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    uint nk = tot[0], so = is[i], nmax = min(cap, nk + tot[1]);
+    if (i == 0) tot[2] = nmax;
+    fl_compact_one(i, keep_ins[i], ks[i], nk + so, nmax, id_base + so, P, nrm, pos, vel, flags, id,
+                   rho_p, counts, force, dTdF, opos, ovel, oflags, oid, orho_p, ocounts, oforce, odTdF);
 }

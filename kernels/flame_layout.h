@@ -52,4 +52,8 @@
 #define FL_ERR_NAN 1   /* a non-finite position, velocity, temperature or fuel */
 #define FL_ERR_SPEED 2 /* a speed above FP_VMAX: a runaway */
 
+/* The device scan of the wide passes (flame.cl's fl_scan_*): work-group size, elements per work item. */
+#define FL_SCAN_WG 256
+#define FL_SCAN_E 8
+
 #endif

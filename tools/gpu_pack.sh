@@ -8,7 +8,7 @@ set -eu
 cd "$(dirname "$0")/.."
 BINS="build/fxstreamd build/tests/test_flame_kernel build/tests/test_flame_behaviour build/tests/test_flame_shape
 build/tests/test_flame_frames build/tests/test_energy_kernel build/tests/test_eye_kernel build/bench/bench_flame
-build/bench/bench_flame_shape build/bench/bench_energy build/bench/bench_eye"
+build/bench/bench_flame_shape build/bench/bench_energy build/bench/bench_eye build/fxctl"
 rm -rf .gpu
 mkdir -p .gpu/bin .gpu/lib
 exclude=$(git rev-parse --git-path info/exclude)

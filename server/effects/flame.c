@@ -40,6 +40,8 @@
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
+#define FL_SCAN_TILE (FL_SCAN_WG * FL_SCAN_E)
+#define FL_SCAN_SUMS 4096 /* tiles of the longest scan: the cell table's 2^22 + 1 entries, or 2^22 particles */
 
 /* ---- state ------------------------------------------------------------------------- */
 
@@ -48,13 +50,17 @@ enum fl_kernel {
     FL_K_HASH, FL_K_RADIX_HIST, FL_K_SCAN_SERIAL, FL_K_RADIX_SCATTER, FL_K_REORDER, FL_K_CELL_START, /* sort */
     FL_K_DENSITY, FL_K_FORCES,                                                                     /* gather */
     FL_K_RESAMPLE_COUNT, FL_K_SCAN_BLOCKS, FL_K_COMPACT,                                           /* resample */
+    FL_K_KEY_COUNT, FL_K_KEY_SCATTER, FL_K_KEY_RANK, FL_K_SCAN_REDUCE, FL_K_SCAN_TOP, FL_K_SCAN_DOWN,
+    FL_K_COMPACT_WIDE, /* the wide passes' sort and resampling */
     FL_KERNEL_COUNT
 };
 static const char *const fl_kernel_names[FL_KERNEL_COUNT] = {
     [FL_K_HASH] = "fl_hash",           [FL_K_RADIX_HIST] = "fl_radix_hist",   [FL_K_SCAN_SERIAL] = "fl_scan_serial",
     [FL_K_RADIX_SCATTER] = "fl_radix_scatter", [FL_K_REORDER] = "fl_reorder", [FL_K_CELL_START] = "fl_cell_start",
     [FL_K_DENSITY] = "fl_density",     [FL_K_FORCES] = "fl_forces",           [FL_K_RESAMPLE_COUNT] = "fl_count",
-    [FL_K_SCAN_BLOCKS] = "fl_scan_blocks", [FL_K_COMPACT] = "fl_compact"};
+    [FL_K_SCAN_BLOCKS] = "fl_scan_blocks", [FL_K_COMPACT] = "fl_compact",     [FL_K_KEY_COUNT] = "fl_key_count",
+    [FL_K_KEY_SCATTER] = "fl_key_scatter", [FL_K_KEY_RANK] = "fl_key_rank",   [FL_K_SCAN_REDUCE] = "fl_scan_reduce",
+    [FL_K_SCAN_TOP] = "fl_scan_top",       [FL_K_SCAN_DOWN] = "fl_scan_down", [FL_K_COMPACT_WIDE] = "fl_compact_wide"};
 
 /* One state set: particle state plus derived fields, all in the same order. */
 struct fl_set {
@@ -68,6 +74,8 @@ struct fl_buffers {
     cl_mem key[2], val[2]; /* the radix sort's cell keys and particle indices, ping-pong */
     cl_mem hist;           /* the radix sort's histograms, 256 per block */
     cl_mem cs;             /* cell-start table of the hash grid */
+    cl_mem cnt;            /* wide passes: particles per key (as many entries as cs) */
+    cl_mem sums;           /* wide passes: the device scan's tile sums (FL_SCAN_SUMS) */
     cl_mem sxyz;           /* sorted x, y, z as three arrays of stride cap + FL_PAD (fl_reorder -> fl_density) */
     cl_mem nl;             /* neighbour lists, FL_NL slots per particle */
     cl_mem keep_ins, nrm;  /* resampling: what becomes of each particle, and its insertion normal */
@@ -121,7 +129,8 @@ struct fl_clock {
 struct flame {
     struct ocl *ocl;
     cl_kernel k[FL_KERNEL_COUNT];
-    int n; /* particles */
+    bool wide; /* the sort and the resampling one work item per element (GPU), not FL_BLOCKS serial blocks (CPU) */
+    int n;     /* particles */
     struct fl_buffers buf;
     struct fl_grid grid;
     struct fl_resample rs;
@@ -245,7 +254,9 @@ static int fl_table(struct flame *fl, struct fx_err *err)
     if (want <= fl->buf.cs_cap) return 0;
     cl_int rc;
     fl_release(&fl->buf.cs);
+    fl_release(&fl->buf.cnt);
     fl->buf.cs = fl_buffer(fl, sizeof(cl_uint) * (size_t)want, &rc);
+    if (rc == CL_SUCCESS) fl->buf.cnt = fl_buffer(fl, sizeof(cl_uint) * (size_t)want, &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "allocating the cell table", rc);
     fl->buf.cs_cap = want;
     return 0;
@@ -402,16 +413,11 @@ static int fl_upload(struct flame *fl, int n, const float *pos, const float *vel
 
 /* ---- one step on the device ---------------------------------------------------------- */
 
-/* Sorts the current set's particles by cell key into the other set (fl_hash, radix passes,
- * fl_reorder) and builds the cell-start table. Returns the index of the sorted set. */
-static int fl_sort(struct flame *fl, struct fx_err *err)
+/* The radix sort of the hashed keys, FL_BLOCKS serial blocks a pass (CPU devices), and the
+ * cell-start table from the sorted keys; *order: the sorted particle indices. */
+static int fl_sort_blocks(struct flame *fl, cl_mem *order, struct fx_err *err)
 {
-    struct fl_set *A = &fl->buf.st[fl->buf.cur], *B = &fl->buf.st[1 - fl->buf.cur];
     cl_int n = fl->n, nhist = 256 * FL_BLOCKS, m = (cl_int)fl->grid.mask + 1;
-    cl_uint mask = fl->grid.mask;
-    struct ocl_arg ha[] = {FL_MEM(A->pos), FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.val[0]), FL_INT(n), FL_INT(mask),
-                          FL_MEM(fl->buf.prm)};
-    if (fl_args(fl, FL_K_HASH, ha, 6, err) || fl_launch(fl, FL_K_HASH, (size_t)n, 0, err)) return -1;
     int s = 0;
     for (int p = 0; p < fl->grid.passes; p++, s ^= 1) {
         cl_int shift = 8 * p;
@@ -424,15 +430,66 @@ static int fl_sort(struct flame *fl, struct fx_err *err)
             fl_args(fl, FL_K_RADIX_SCATTER, sa, 7, err) || fl_launch(fl, FL_K_RADIX_SCATTER, FL_BLOCKS, 1, err))
             return -1;
     }
-    cl_int stride = fl->buf.cap + FL_PAD;
-    struct ocl_arg ra[] = {FL_MEM(fl->buf.val[s]), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
-                          FL_MEM(A->id), FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id),
-                          FL_MEM(fl->buf.sxyz), FL_INT(stride)};
     struct ocl_arg ca[] = {FL_MEM(fl->buf.key[s]), FL_INT(n), FL_INT(m), FL_MEM(fl->buf.cs)};
-    if (fl_args(fl, FL_K_REORDER, ra, 12, err) || fl_launch(fl, FL_K_REORDER, (size_t)n, 0, err) ||
-        fl_args(fl, FL_K_CELL_START, ca, 4, err) || fl_launch(fl, FL_K_CELL_START, (size_t)n + 1, 0, err))
+    *order = fl->buf.val[s];
+    return fl_args(fl, FL_K_CELL_START, ca, 4, err) || fl_launch(fl, FL_K_CELL_START, (size_t)n + 1, 0, err);
+}
+
+/* Exclusive scan on the device (wide passes): out[e] = the sum of in[k * stride + off] over
+ * k < e, for e < len; the total into tot[tot_i]. */
+static int fl_scan(struct flame *fl, cl_mem in, cl_int stride, cl_int off, cl_int len, cl_mem out, cl_int tot_i,
+                   struct fx_err *err)
+{
+    cl_int tiles = (len + FL_SCAN_TILE - 1) / FL_SCAN_TILE;
+    if (tiles > FL_SCAN_SUMS) return fx_fail(err, "internal", "", "flame: a scan of %d elements is too long", len);
+    struct ocl_arg ra[] = {FL_MEM(in), FL_INT(stride), FL_INT(off), FL_INT(len), FL_MEM(fl->buf.sums)};
+    struct ocl_arg ta[] = {FL_MEM(fl->buf.sums), FL_INT(tiles), FL_MEM(fl->buf.tot), FL_INT(tot_i)};
+    struct ocl_arg da[] = {FL_MEM(in), FL_INT(stride), FL_INT(off), FL_INT(len), FL_MEM(fl->buf.sums), FL_MEM(out)};
+    size_t wg = FL_SCAN_WG, global = (size_t)tiles * wg;
+    return fl_args(fl, FL_K_SCAN_REDUCE, ra, 5, err) || fl_launch(fl, FL_K_SCAN_REDUCE, global, wg, err) ||
+           fl_args(fl, FL_K_SCAN_TOP, ta, 4, err) || fl_launch(fl, FL_K_SCAN_TOP, wg, wg, err) ||
+           fl_args(fl, FL_K_SCAN_DOWN, da, 6, err) || fl_launch(fl, FL_K_SCAN_DOWN, global, wg, err);
+}
+
+/* The counting sort of the hashed keys, one work item per particle (GPU devices; flame.cl's
+ * wide passes): the same order as fl_sort_blocks, and the scan of the counts is the cell-start
+ * table. Scratch: val[0] the particles' slots, val[1] the unranked runs; *order is key[1]. */
+static int fl_sort_wide(struct flame *fl, cl_mem *order, struct fx_err *err)
+{
+    cl_int n = fl->n, len = (cl_int)fl->grid.mask + 2; /* cs[0 .. M] */
+    cl_uint zero = 0;
+    cl_int rc = clEnqueueFillBuffer(ocl_queue(fl->ocl), fl->buf.cnt, &zero, sizeof zero, 0, sizeof zero * (size_t)len,
+                                    0, NULL, NULL);
+    if (rc != CL_SUCCESS) return fl_clfail(err, "clearing the key counts", rc);
+    struct ocl_arg ka[] = {FL_MEM(fl->buf.key[0]), FL_INT(n), FL_MEM(fl->buf.cnt), FL_MEM(fl->buf.val[0])};
+    struct ocl_arg sa[] = {FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.val[0]), FL_INT(n), FL_MEM(fl->buf.cs),
+                           FL_MEM(fl->buf.val[1])};
+    struct ocl_arg ra[] = {FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.val[1]), FL_INT(n), FL_MEM(fl->buf.cs),
+                           FL_MEM(fl->buf.key[1])};
+    *order = fl->buf.key[1];
+    return fl_args(fl, FL_K_KEY_COUNT, ka, 4, err) || fl_launch(fl, FL_K_KEY_COUNT, (size_t)n, 0, err) ||
+           fl_scan(fl, fl->buf.cnt, 1, 0, len, fl->buf.cs, 3, err) ||
+           fl_args(fl, FL_K_KEY_SCATTER, sa, 5, err) || fl_launch(fl, FL_K_KEY_SCATTER, (size_t)n, 0, err) ||
+           fl_args(fl, FL_K_KEY_RANK, ra, 5, err) || fl_launch(fl, FL_K_KEY_RANK, (size_t)n, 0, err);
+}
+
+/* Sorts the current set's particles by cell key into the other set (fl_hash, the sort,
+ * fl_reorder) and builds the cell-start table. */
+static int fl_sort(struct flame *fl, struct fx_err *err)
+{
+    struct fl_set *A = &fl->buf.st[fl->buf.cur], *B = &fl->buf.st[1 - fl->buf.cur];
+    cl_int n = fl->n, stride = fl->buf.cap + FL_PAD;
+    cl_uint mask = fl->grid.mask;
+    cl_mem order;
+    struct ocl_arg ha[] = {FL_MEM(A->pos), FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.val[0]), FL_INT(n), FL_INT(mask),
+                          FL_MEM(fl->buf.prm)};
+    if (fl_args(fl, FL_K_HASH, ha, 6, err) || fl_launch(fl, FL_K_HASH, (size_t)n, 0, err) ||
+        (fl->wide ? fl_sort_wide(fl, &order, err) : fl_sort_blocks(fl, &order, err)))
         return -1;
-    return 0;
+    struct ocl_arg ra[] = {FL_MEM(order), FL_INT(n), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags), FL_MEM(A->id),
+                          FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(fl->buf.sxyz),
+                          FL_INT(stride)};
+    return fl_args(fl, FL_K_REORDER, ra, 12, err) || fl_launch(fl, FL_K_REORDER, (size_t)n, 0, err);
 }
 
 /* Density pass on the sorted set B into A's derived arrays, then forces and integration
@@ -480,25 +537,45 @@ static int fl_check(const struct flame *fl, cl_int errflag, struct fx_err *err)
     return 0;
 }
 
+/* The compaction's launches in FL_BLOCKS serial blocks (CPU devices); tail: fl_compact's
+ * arguments from id_base on. */
+static int fl_compact_blocks(struct flame *fl, cl_uint cap, const struct ocl_arg *tail, struct fx_err *err)
+{
+    cl_int n = fl->n, nb = FL_BLOCKS;
+    struct ocl_arg ca[] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.bsum)};
+    struct ocl_arg sa[] = {FL_MEM(fl->buf.bsum), FL_INT(nb), FL_INT(cap), FL_MEM(fl->buf.tot)};
+    struct ocl_arg xa[23] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.bsum), FL_MEM(fl->buf.tot)};
+    memcpy(xa + 4, tail, 19 * sizeof *tail);
+    return fl_args(fl, FL_K_RESAMPLE_COUNT, ca, 3, err) || fl_launch(fl, FL_K_RESAMPLE_COUNT, FL_BLOCKS, 1, err) ||
+           fl_args(fl, FL_K_SCAN_BLOCKS, sa, 4, err) || fl_launch(fl, FL_K_SCAN_BLOCKS, 1, 1, err) ||
+           fl_args(fl, FL_K_COMPACT, xa, 23, err) || fl_launch(fl, FL_K_COMPACT, FL_BLOCKS, 1, err);
+}
+
+/* The compaction one work item per particle (GPU devices): the keep and insert flags scanned
+ * into key[0] and key[1] (free once the step's sort is done). */
+static int fl_compact_wide(struct flame *fl, cl_uint cap, const struct ocl_arg *tail, struct fx_err *err)
+{
+    cl_int n = fl->n;
+    struct ocl_arg xa[25] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.key[1]),
+                             FL_MEM(fl->buf.tot), FL_INT(cap)};
+    memcpy(xa + 6, tail, 19 * sizeof *tail);
+    return fl_scan(fl, fl->buf.keep_ins, 2, 0, n, fl->buf.key[0], 0, err) ||
+           fl_scan(fl, fl->buf.keep_ins, 2, 1, n, fl->buf.key[1], 1, err) ||
+           fl_args(fl, FL_K_COMPACT_WIDE, xa, 25, err) || fl_launch(fl, FL_K_COMPACT_WIDE, (size_t)n, 0, err);
+}
+
 /* Birth and death (§2.12): count, scan, compact A into B, and the totals read without
  * waiting; fl_resample_end makes B current. */
 static int fl_resample_begin(struct flame *fl, struct fx_err *err)
 {
     struct fl_set *A = &fl->buf.st[fl->buf.cur], *B = &fl->buf.st[1 - fl->buf.cur];
-    cl_int n = fl->n, nb = FL_BLOCKS;
     cl_uint cap = (cl_uint)(fl->buf.cap < fl->params.max_particles ? fl->buf.cap : fl->params.max_particles),
             idb = fl->clock.next_id;
-    struct ocl_arg ca[] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.bsum)};
-    struct ocl_arg sa[] = {FL_MEM(fl->buf.bsum), FL_INT(nb), FL_INT(cap), FL_MEM(fl->buf.tot)};
-    struct ocl_arg xa[] = {FL_MEM(fl->buf.keep_ins), FL_INT(n), FL_MEM(fl->buf.bsum), FL_MEM(fl->buf.tot), FL_INT(idb),
-                          FL_MEM(fl->buf.prm), FL_MEM(fl->buf.nrm), FL_MEM(A->pos), FL_MEM(A->vel), FL_MEM(A->flags),
-                          FL_MEM(A->id), FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(A->force), FL_MEM(A->dTdF),
-                          FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id), FL_MEM(B->rho_p),
-                          FL_MEM(B->counts), FL_MEM(B->force), FL_MEM(B->dTdF)};
-    if (fl_args(fl, FL_K_RESAMPLE_COUNT, ca, 3, err) || fl_launch(fl, FL_K_RESAMPLE_COUNT, FL_BLOCKS, 1, err) ||
-        fl_args(fl, FL_K_SCAN_BLOCKS, sa, 4, err) || fl_launch(fl, FL_K_SCAN_BLOCKS, 1, 1, err) ||
-        fl_args(fl, FL_K_COMPACT, xa, 23, err) || fl_launch(fl, FL_K_COMPACT, FL_BLOCKS, 1, err))
-        return -1;
+    struct ocl_arg tail[19] = {FL_INT(idb), FL_MEM(fl->buf.prm), FL_MEM(fl->buf.nrm), FL_MEM(A->pos), FL_MEM(A->vel),
+                               FL_MEM(A->flags), FL_MEM(A->id), FL_MEM(A->rho_p), FL_MEM(A->counts), FL_MEM(A->force),
+                               FL_MEM(A->dTdF), FL_MEM(B->pos), FL_MEM(B->vel), FL_MEM(B->flags), FL_MEM(B->id),
+                               FL_MEM(B->rho_p), FL_MEM(B->counts), FL_MEM(B->force), FL_MEM(B->dTdF)};
+    if (fl->wide ? fl_compact_wide(fl, cap, tail, err) : fl_compact_blocks(fl, cap, tail, err)) return -1;
     cl_command_queue q = ocl_queue(fl->ocl);
     cl_int rc = clEnqueueReadBuffer(q, fl->buf.errflag, CL_FALSE, 0, sizeof fl->rs.err, &fl->rs.err, 0, NULL, NULL);
     if (rc == CL_SUCCESS)
@@ -663,7 +740,7 @@ static int fl_create_objects(struct flame *fl, struct fx_err *err)
     if (rc != CL_SUCCESS) return fl_clfail(err, "clCreateKernel", rc);
     struct { cl_mem *m; size_t bytes; } fixed[] = {
         {&fl->buf.hist, 4 * 256 * FL_BLOCKS}, {&fl->buf.bsum, 8 * FL_BLOCKS}, {&fl->buf.tot, 16},
-        {&fl->buf.errflag, 16}, {&fl->buf.prm, sizeof fl->params.P}};
+        {&fl->buf.errflag, 16}, {&fl->buf.prm, sizeof fl->params.P}, {&fl->buf.sums, 4 * FL_SCAN_SUMS}};
     for (size_t i = 0; i < sizeof fixed / sizeof fixed[0] && rc == CL_SUCCESS; i++)
         *fixed[i].m = fl_buffer(fl, fixed[i].bytes, &rc);
     return rc == CL_SUCCESS ? 0 : fl_clfail(err, "clCreateBuffer", rc);
@@ -677,6 +754,7 @@ struct flame *flame_new(struct ocl *ocl, const struct flame_config *c, struct fx
         return NULL;
     }
     fl->ocl = ocl;
+    fl->wide = !ocl_is_cpu(ocl);
     fl->params.h = c->h;
     fl->params.d = c->particle_diameter * fl->params.h;
     fl->params.max_particles = c->max_particles;
@@ -695,7 +773,7 @@ void flame_free(struct flame *fl)
     for (int s = 0; s < 2; s++)
         for (int i = 0; i < 8; i++) fl_release(fl_set_mem(&fl->buf.st[s], i));
     cl_mem *m[] = {&fl->buf.key[0], &fl->buf.key[1], &fl->buf.val[0], &fl->buf.val[1], &fl->buf.hist,
-                   &fl->buf.cs, &fl->buf.keep_ins, &fl->buf.nrm, &fl->buf.nl, &fl->buf.sxyz, &fl->buf.bsum,
+                   &fl->buf.cs, &fl->buf.cnt, &fl->buf.sums, &fl->buf.keep_ins, &fl->buf.nrm, &fl->buf.nl, &fl->buf.sxyz, &fl->buf.bsum,
                    &fl->buf.tot, &fl->buf.errflag, &fl->buf.prm};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
     for (int k = 0; k < FL_KERNEL_COUNT; k++)
@@ -761,6 +839,7 @@ int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err
 }
 
 int flame_count(const struct flame *fl) { return fl->n; }
+void flame_set_wide(struct flame *fl, bool wide) { fl->wide = wide; }
 uint64_t flame_steps(const struct flame *fl) { return fl->clock.steps; }
 double flame_sim_seconds(const struct flame *fl) { return fl->clock.sim_seconds; }
 

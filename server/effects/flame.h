@@ -61,6 +61,10 @@ int flame_run(struct flame *fl, int steps, struct fx_err *err);
 /* Reads the whole state back (allocates out; free with flame_particles_free). */
 int flame_read(struct flame *fl, struct flame_particles *out, struct fx_err *err);
 int flame_count(const struct flame *fl);
+/* How a step sorts and compacts: wide (one work item per element: a counting sort and device
+ * scans, for GPUs) or in FL_BLOCKS serial blocks (CPU devices). Both give the same state bit
+ * for bit; flame_new picks by the device, tests and benches may switch between steps. */
+void flame_set_wide(struct flame *fl, bool wide);
 uint64_t flame_steps(const struct flame *fl); /* steps since creation or reset */
 double flame_sim_seconds(const struct flame *fl); /* simulated seconds since creation or reset */
 void flame_free(struct flame *fl);

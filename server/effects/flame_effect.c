@@ -18,10 +18,11 @@
 
 /* On a GPU device a frame of 2 x 4096 particles or more is encoded as up to this many blocks
  * on as many of the host's cores (PROTOCOL.md §7.5.8), which are free during the device's
- * work: a 50k-particle frame encodes nearly 4x faster as 8 blocks, for 1-2% more bytes. On
+ * work: a 50k-particle frame encodes nearly 4x faster as 8 blocks, for 1-2% more bytes, and
+ * the `large` preset's 220k particles need 16 to leave room in a 30 fps frame (README). On
  * a CPU device (PoCL) one thread: the other cores are the ones PoCL's workers step on, so a
  * second encoding thread slows the simulation more than it speeds the encoding. */
-#define FL_ENC_THREADS_MAX 8
+#define FL_ENC_THREADS_MAX 16
 
 /* The frame's arrays: as read back (pos, vel 4 floats a particle, flags, stable ids), and as the
  * codec takes them (xyz and vel scaled, T, F, the flag byte). */

@@ -166,6 +166,12 @@ const struct effect_preset flame_presets[] = {
      "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.11,0.11,0],\"pos\":[0,0,-0.006],\"velocity\":[0,0,0]}]}"},
     {"gusty", "the default flame in a light breeze (wind_velocity 2 m/s along x): it leans downwind",
      "{\"wind_velocity\":[2,0,0]}"},
+    /* The default flame's shape at GPU scale: 5.4x the default's particles per volume (h 2 mm
+     * against 3.5 mm) over an 8 cm disc with 1.5x the fuel, on a plate 2 mm below it. */
+    {"large", "a big flame for GPUs: an 8 cm burner at fine resolution (h 2 mm), about 220k particles and 19 cm "
+              "tall; real time needs about 75 M particle-steps/s",
+     "{\"h\":0.002,\"sources\":[{\"radius\":0.04,\"F_init\":150}],"
+     "\"obstacles\":[{\"shape\":\"plate\",\"size\":[0.096,0.096,0],\"pos\":[0,0,-0.002],\"velocity\":[0,0,0]}]}"},
     {0},
 };
 

@@ -5,7 +5,8 @@
  * flame_shape.c: H90, W90, share below the source plane, flicker, centroid). Simulated time,
  * not wall time: the figures do not depend on the machine (real time is bench_flame's).
  * BENCH_FLAME_SCENE adds JSON overrides to every case, for experiments; BENCH_SHAPE_ONLY
- * names one case (default, difference, wind, candle, fire-pit). One line per figure. */
+ * names one case (default, difference, wind, candle, fire-pit, large: the GPU preset, run
+ * unnamed only on a GPU device). One line per figure. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -72,9 +73,9 @@ int main(int argc, char **argv)
                    calm.H90 > 0 ? (windy.centroid_lat[0] - calm.centroid_lat[0]) / calm.H90 : 0, winds[i].goal);
         }
     }
-    static const char *const presets[] = {"candle", "fire-pit"};
-    for (size_t i = 0; i < sizeof presets / sizeof presets[0]; i++)
-        if (!only || !strcmp(only, presets[i])) {
+    static const char *const presets[] = {"candle", "fire-pit", "large"};
+    for (size_t i = 0; i < sizeof presets / sizeof presets[0]; i++) /* large: on a GPU, or when named */
+        if (only ? !strcmp(only, presets[i]) : strcmp(presets[i], "large") || !ocl_is_cpu(ocl)) {
             struct flame_shape s;
             char name[64];
             snprintf(name, sizeof name, "preset %s", presets[i]);

@@ -9,7 +9,8 @@
  * rising flame: burning centroid >= 3 cm above the source within 3 s (measured over 2.5-3 s:
  * 6.8 cm), <= 10% below the source plane (0.8%). A sideways wind must move the burning
  * centroid by >= 30% of H90 (measured 0.37). The presets `candle` and `fire-pit` read as their
- * names (test_presets_shape). The binary takes ~60 s of CPU. */
+ * names (test_presets_shape); `large` keeps the default's shape at GPU scale (test_large_shape).
+ * The binary takes ~2 min of CPU. */
 #include <math.h>
 #include <stdio.h>
 
@@ -96,6 +97,21 @@ static void test_presets_shape(void)
     CHECK(2 * p.W90 >= p.H90 && p.H90 <= 0.06, "fire-pit: H90 %.4f m, W90 %.4f m: not broad and low", p.H90, p.W90);
 }
 
+/* `large`, the GPU's flame, keeps the default's shape at ~20x its particles: H90 >= 2 W90, <= 5%
+ * of the burning gas below the source plane, >= 200k particles on average (measured on PoCL
+ * over 2.5-4 s: H90 19.0 cm, W90 4.7 cm, 2.9% below, 222k particles). Its flicker needs a longer
+ * window than a CPU can simulate here (bench_flame_shape's 3 + 5 s on a GPU). ~60 s of CPU. */
+static void test_large_shape(void)
+{
+    struct flame_shape l;
+    if (tfs_run(flame_shape_preset("large"), 2.5, 1.5, &l)) return;
+    printf("  info: large H90 %.1f cm, W90 %.1f cm, %.1f%% below, flicker %.1f%%, %.0f particles\n", 100 * l.H90,
+           100 * l.W90, 100 * l.below, 100 * l.flicker, l.particles);
+    CHECK(l.H90 >= 2 * l.W90, "large: H90 %.4f m < 2 W90 (%.4f m)", l.H90, l.W90);
+    CHECK(l.below <= 0.05, "large: %.1f%% of the burning gas below the source", 100 * l.below);
+    CHECK(l.particles >= 200000, "large: %.0f particles on average (< 200k)", l.particles);
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -104,6 +120,7 @@ int main(void)
     RUN(test_difference_form_rises);
     RUN(test_wind_lean);
     RUN(test_presets_shape);
+    RUN(test_large_shape);
     ocl_close(tfs_ocl);
     return CHECK_DONE();
 }
