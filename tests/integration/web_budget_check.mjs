@@ -34,6 +34,7 @@ c.check(BUDGET_LADDER.every((s, i) => i === 0 || s > BUDGET_LADDER[i - 1]), 'the
 // The view: a subset of 1000 standing for 8000 particles.
 const v = new FlameView('flame'), n = 1000;
 const frame = (m) => ({ n: m, xyz: new Float32Array(3 * m), temp: new Float32Array(m).fill(1500), fuel: new Float32Array(m), flags: new Uint8Array(m), vel: null });
+v.params = { h: 0.0035, particle_diameter: 0.5 }; // the default stream's spacing, which the gains are set for
 v.showParticles(frame(n));
 v.setUniforms(320, 240);
 const r0 = v.splat.uniforms.radius.value, p0 = v.pbvr.uniforms.radius.value, g0 = v.hdr.uniforms.gain.value;
@@ -50,5 +51,18 @@ c.check(near(v.pbvr.uniforms.radius.value, Math.sqrt(8) * p0), 'pbvr\'s opaque s
 v.showParticles(frame(n), 0);
 v.setUniforms(320, 240);
 c.check(v.splat.uniforms.weight.value === 1 && near(v.splat.uniforms.radius.value, r0), 'the next whole frame: back to one particle each');
+// A finer stream (h 1.75 mm: half the spacing, 8x the particles in the same flame) draws each
+// particle's emission at half and half as many pbvr sprites a particle, a coarser one larger
+// sprites, so the flame keeps its brightness and coverage.
+v.params = { h: 0.00175, particle_diameter: 0.5 };
+v.setUniforms(320, 240);
+c.check(near(v.splat.uniforms.weight.value, 0.5) && near(v.hdr.uniforms.gain.value, 0.5 * g0) && near(v.hdr.uniforms.radius.value, 0.5 * r0),
+  'a finer stream: volume and hdr emission per particle in proportion to the spacing (x 1/2), kernels at its spacing');
+c.check(near(v.pbvr.uniforms.radius.value, 0.5 * p0) && near(v.pbvr.uniforms.fill.value, 0.5),
+  'a finer stream: pbvr\'s sprites at its spacing, half as many a particle, so their coverage holds');
+v.params = { h: 0.007, particle_diameter: 0.5 };
+v.setUniforms(320, 240);
+c.check(near(v.pbvr.uniforms.radius.value, 2 * Math.SQRT2 * p0) && v.pbvr.uniforms.fill.value === 1 && near(v.hdr.uniforms.gain.value, 2 * g0),
+  'a coarser stream (h 7 mm): pbvr\'s sprites x 2^(3/2), hdr emission x 2');
 c.summary();
 process.exit(c.failed ? 1 : 0);

@@ -13,7 +13,8 @@
 //   least 3% of its mean luminance;
 // - smoke: grey above the flame with smoke on, gone with it off; the ground grid hidden
 //   behind the flame (no grid-coloured pixels in the flame's core);
-// - a particle budget (?particles=2000) on the same paused frame keeps its extent, brightness and colour.
+// - a particle budget (?particles=2000) on the same paused frame keeps its extent, brightness and colour;
+// - 200k particles drawn in pbvr and hdr keep the flame's extent and brightness (denseLook).
 // With --shots DIR it also writes the README's pictures there. Last line: "test_web_look: N passed, M failed".
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
@@ -242,6 +243,47 @@ async function budgetLook(ctx, port, fxctl, page) {
   return sub;
 }
 
+// Many particles in the modes that draw each one (pbvr, hdr): the paused frame made into 50k and
+// 200k particles at the spacing of a finer stream (hooks.js flameDense), as the `large` preset's
+// stream would be. Correctness on SwiftShader: every particle is drawn (the view's count), and
+// the flame keeps its extent and brightness against the stream's own frame in the same mode
+// (silhouette area and mean luminance within 35%; pbvr's luminance within 45%: one pass draws a
+// whole number of sprites a particle, 1-2 at this spacing against 3-4). The time a draw takes is
+// printed: a software renderer's, not a GPU's, so only how it grows with the particles. pbvr
+// draws up to 8 sprites a particle in each of its `rl` passes (15 by default): here one pass.
+async function denseLook(ctx, port, fxctl) {
+  const page = await ctx.newPage();
+  const logs = collectErrors(page);
+  await page.setViewportSize({ width: 1200, height: 760 });
+  await page.goto(`http://127.0.0.1:${port}/?streams=flame&grid=1x1&aa=0&drawfps=1`, { timeout: 20000 });
+  const drawnOn = () => page.evaluate(() => window.fxs.stats().flame?.drawn ?? 0);
+  check(await until(async () => (await drawnOn()) > 2, 60000, 500), 'dense: the flame is drawn');
+  fxctl('set', 'flame', 'time_scale=0');
+  await sleep(1500);
+  const d0 = await drawnOn();
+  await until(async () => (await drawnOn()) > d0, 20000, 200);
+  const own = await page.evaluate(() => window.fxs.flame().count);
+  for (const mode of ['pbvr', 'hdr']) {
+    await page.evaluate((m) => { Object.assign(window.fxs.flameSettings, { mode: m, rl: 1 }); }, mode);
+    const rows = [];
+    for (const n of [own, 50000, 200000]) {
+      const count = await page.evaluate((k) => window.fxs.flameDense(k), n);
+      const ms = await page.evaluate(() => window.fxs.flameDrawMs(3));
+      rows.push({ n, count, ms, f: await page.evaluate(flameFigures) });
+    }
+    await page.screenshot({ path: join(ART, `web-look-flame-200k-${mode}.png`), timeout: 120000 });
+    console.log(`  info: ${mode} draw on SwiftShader: ` + rows.map((r) => `${r.n} particles ${r.ms.toFixed(0)} ms (area ${r.f.area.toFixed(4)}, lum ${r.f.lum.toFixed(1)})`).join(', '));
+    const [base, , big] = rows, rel = (a, b) => Math.abs(a - b) / Math.max(1e-9, b), lumTol = mode === 'pbvr' ? 0.45 : 0.35;
+    check(big.count === 200000, `${mode}: the view draws 200k particles`, `${big.count}`);
+    check(rel(big.f.area, base.f.area) <= 0.35 && rel(big.f.lum, base.f.lum) <= lumTol,
+      `${mode}: 200k particles at a finer spacing keep the flame's extent and brightness (area within 35%, mean luminance within ${100 * lumTol}%)`,
+      `area ${big.f.area.toFixed(4)} vs ${base.f.area.toFixed(4)}, lum ${big.f.lum.toFixed(1)} vs ${base.f.lum.toFixed(1)}`);
+  }
+  check(logs.length === 0, 'dense: no console errors', logs.slice(0, 5).join(' | '));
+  fxctl('set', 'flame', 'time_scale=1');
+  await page.close();
+}
+
 // The README's pictures: every view of the default page, one at a time, without the stats labels.
 async function viewShots(ctx, port) {
   const page = await ctx.newPage();
@@ -269,6 +311,7 @@ try {
   await flameLook(page, fxctl);
   const sub = await budgetLook(ctx, daemon.port, fxctl, page);
   const subLogs = collectErrors(sub);
+  await denseLook(ctx, daemon.port, fxctl);
   if (shotsAt) await viewShots(ctx, daemon.port);
   check(logs.length === 0 && subLogs.length === 0, 'no console errors', [...logs, ...subLogs].slice(0, 5).join(' | '));
 } catch (e) {

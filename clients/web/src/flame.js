@@ -52,6 +52,8 @@ export const FLAME_DEFAULTS = {
   whiteT: 4000, exposure: 1.0, velLines: false, velScale: 0.005, tongues: 1.0, smokeDensity: 1.0, density: 1.0, kernel: VOLUME_KERNEL,
 };
 const HDR_GAIN = 0.08; // hdr: a sprite's emission scale
+// The particle spacing the gains are set for: the default stream's (particle_diameter 0.5 x h 3.5 mm).
+const D_REF = 0.00175;
 const LINE_ALPHA = 0.3; // a hot particle's segment at the particle; × (0.35 + 0.65 heat), fading to the tip
 
 function mulberry32(seed) {
@@ -131,14 +133,14 @@ bool belowClip(vec3 p) { return dot(p - clipPoint, upW) < -radius; }`;
 
 const PBVR_VERT = /* glsl */ `${COMMON_VERT}
 uniform sampler2D randTex;
-uniform float pass, nmax, smokeT, smokeOn, smokeAlpha;
+uniform float pass, nmax, fill, smokeT, smokeOn, smokeAlpha;  // fill: the share of nmax a particle may use
 uniform vec3 smokeColor;
 void main() {
   vec4 rnd = texelFetch(randTex, ivec2(int(slot), int(pass)), 0);
   float u = texelFetch(randTex, ivec2(0, int(pass)), 0).w;   // the pass's dither
   bool hot = itemp >= smokeT;
   float smoke = clamp((itemp - tAmb) / max(smokeT - tAmb, 1.0), 0.0, 1.0);
-  float n = hot ? floor(nmax * heatOf(itemp) + u) : smokeOn * floor(0.5 * nmax * smoke + u);
+  float n = hot ? floor(nmax * fill * heatOf(itemp) + u) : smokeOn * floor(0.5 * nmax * fill * smoke + u);
   if (slot >= n || belowClip(ipos)) { hide(); return; }
   place(ipos + radius * (2.0 * rnd.xyz - 1.0), 3.0 * radius);
   vColor = hot ? blackbody(itemp) : smokeColor;
@@ -314,7 +316,7 @@ export class FlameView {
       vertexShader: PBVR_VERT, fragmentShader: PBVR_FRAG,
       uniforms: {
         ...common, radius: { value: 0.002 }, randTex: { value: randomTable() }, alphaTex: { value: spriteTexture(true) }, pass: { value: 0 },
-        nmax: { value: NMAX }, threshold: { value: 0.3 }, smokeT: { value: 1000 }, smokeOn: { value: 1 },
+        nmax: { value: NMAX }, fill: { value: 1 }, threshold: { value: 0.3 }, smokeT: { value: 1000 }, smokeOn: { value: 1 },
         smokeAlpha: { value: 0.5 }, smokeColor: { value: new THREE.Color(0.1, 0.1, 0.1) },
       },
       depthTest: true, depthWrite: true, blending: THREE.NoBlending,
@@ -520,15 +522,23 @@ export class FlameView {
     // their spacing is (total / count)^(1/3) times the stream's, so the kernels and sprites grow
     // by that and the summed emission (volume, hdr) by as much again per particle; pbvr's opaque
     // sprites cover the area the left-out ones would have, (total / count)^(1/2).
+    // Likewise a stream of another resolution (h: a finer one has more, smaller particles in the
+    // same flame) draws its particles' emission and pbvr's coverage in proportion to its spacing
+    // (res = d / D_REF), so a flame looks as bright and as dense at any resolution: a sprite
+    // column's light or coverage grows as 1 / spacing at a fixed emission and sprite count. pbvr
+    // takes fewer sprites a particle for a finer stream (fill; smaller sprites fall below a pixel)
+    // and larger ones for a coarser one.
     const stand = this.total / Math.max(1, this.count), grow = Math.cbrt(stand);
+    const res = (pr.particle_diameter ?? 0.5) * (pr.h ?? 0.01125) / D_REF;
     for (const m of [this.pbvr, this.hdr, this.splat]) {
       m.uniforms.tAmb.value = pr.T_amb ?? 300;
       m.uniforms.tMax.value = s.whiteT;
-      m.uniforms.radius.value = d * (m === this.pbvr ? Math.sqrt(stand) : grow);
+      m.uniforms.radius.value = d * (m === this.pbvr ? Math.sqrt(stand * Math.max(1, res)) : grow);
       m.uniforms.pointScale.value = h / (2 * Math.tan(THREE.MathUtils.degToRad(this.camera.fov / 2)));
     }
-    this.splat.uniforms.weight.value = grow;
-    this.hdr.uniforms.gain.value = HDR_GAIN * grow;
+    this.splat.uniforms.weight.value = grow * res;
+    this.pbvr.uniforms.fill.value = Math.min(1, res);
+    this.hdr.uniforms.gain.value = HDR_GAIN * grow * res;
     const u = this.pbvr.uniforms, lu = this.lineMat.uniforms;
     u.threshold.value = s.threshold;
     lu.velScale.value = s.velScale; // tAmb, tMax and the table: the uniforms all three materials share

@@ -76,6 +76,46 @@ function flameLook() {
   return { bright: bright / (w * h), white: white / bright, lower: third(lo, Math.round(lo + t)), upper: third(Math.round(hi - t), hi + 1), hash, rows: [lo, hi, h] };
 }
 
+// Drawing many particles (browser tests): the flame view's current frame made into n particles,
+// each copied with a jitter inside its spacing, the spacing shrunk by (count / n)^(1/3) as a finer
+// stream of the same flame (a smaller h) would have it. The view stops taking the stream's frames
+// from the first call. Returns the view's particle count.
+function flameDense(n) {
+  const v = app.views.find((x) => x.kind === 'flame');
+  if (!v.orig) {
+    v.orig = { n: v.count, xyz: v.ipos.array.slice(0, 3 * v.count), temp: v.itemp.array.slice(0, v.count), params: v.params };
+    v.onFrame = () => false;
+  }
+  const o = v.orig, d = v.frameOf().d * Math.cbrt(o.n / n);
+  let seed = 12345;
+  const rnd = () => { seed = (Math.imul(seed, 1664525) + 1013904223) >>> 0; return seed / 4294967296 - 0.5; };
+  const xyz = new Float32Array(3 * n), temp = new Float32Array(n);
+  for (let i = 0; i < n; i++) {
+    const j = i % o.n, jit = i < o.n ? 0 : d;
+    for (let c = 0; c < 3; c++) xyz[3 * i + c] = o.xyz[3 * j + c] + jit * rnd();
+    temp[i] = o.temp[j];
+  }
+  v.params = { ...o.params, h: o.params.h * Math.cbrt(o.n / n) };
+  v.showParticles({ n, xyz, temp, vel: null });
+  return v.count;
+}
+
+// The time one draw of the flame view takes, ms (the median of `draws`, each finished by a pixel read).
+function flameDrawMs(draws = 3) {
+  const e = app.layout.find((x) => x.view.kind === 'flame'), r = app.renderer, gl = r.getContext(), px = new Uint8Array(4);
+  const ms = [];
+  for (let k = 0; k < draws; k++) {
+    const t0 = performance.now();
+    r.setViewport(e.rect.x, e.rect.y, e.rect.w, e.rect.h);
+    r.setScissor(e.rect.x, e.rect.y, e.rect.w, e.rect.h);
+    r.setScissorTest(true);
+    e.view.render(r, e.rect, 0);
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    ms.push(performance.now() - t0);
+  }
+  return ms.sort((a, b) => a - b)[Math.floor((draws - 1) / 2)];
+}
+
 const { conn, streams, flameSettings } = app;
 window.fxs = {
   conn, streams, get views() { return app.views.map((v) => `${v.stream}:${v.kind}`); }, sample,
@@ -83,6 +123,8 @@ window.fxs = {
   flame: () => app.views.find((x) => x.kind === 'flame')?.info() ?? null,
   particleDecoder: particleDecoderStatus,
   flameLook,
+  flameDense,
+  flameDrawMs,
   flameSettings,
   waveSettings: app.waveSettings,
   scene: (stream) => app.views.find((x) => x.kind === 'scene' && (!stream || x.stream === stream))?.info() ?? null,
