@@ -518,6 +518,15 @@ func _test_budget() -> void:
 			and _near(node.get("sprite_uniforms").get("size") if node.get("sprite_uniforms") != null else null, node.sprite_size),
 			"budget 0: the node draws all %d particles at their own size (scale %s)" % [f.count, node.get("particle_scale")])
 	check(_served(p, "flame") == 0, "budget 0: no step served (%s)" % _served(p, "flame"))
+	# A finer stream (h 1.75 mm: half the default's spacing) at the node's sprite size: each
+	# sprite's light x (1/2)^3, as a particle holds an eighth of the volume.
+	var doc: Dictionary = node.stream_params.duplicate()
+	doc["h"] = 0.00175
+	node._on_stream_params(doc)
+	var fine = node.get("sprite_uniforms").get("exposure") if node.get("sprite_uniforms") != null else null
+	node._on_stream_params(node.stream_params)
+	check(_near(fine, node.exposure / 8.0) and node.get("resolution_scale") == 1.0,
+			"a finer stream (half the spacing): each sprite's light x 1/8, back to 1 for the default (%s)" % fine)
 	node.set("max_particles", 2000)
 
 

@@ -7,6 +7,9 @@
 # standing for total / count of them (PROTOCOL.md §3.5): their spacing is (total / count)^(1/3)
 # times the stream's, so the sprites grow by that factor (particle_scale) and each adds as much
 # again of light, as the browser page draws it, and the flame keeps its extent and brightness.
+# A stream of another resolution (its h: a finer one has more, smaller particles in the same
+# flame) draws each sprite's light in proportion to a particle's volume, (spacing / the default
+# stream's)^3 (resolution_scale), so at the node's fixed sprite size the flame is as bright.
 #
 # Units: the stream's positions are metres × its `space_scale`, with its `up` parameter as
 # the vertical; the node shows them in metres with `up` along its +Y, so its transform
@@ -20,6 +23,9 @@ const BLACKBODY_T = [800, 1000, 1200, 1500, 1800, 2000, 2200, 2500, 2800, 3000]
 const BLACKBODY_RGB = [Color(1, 0.059, 0), Color(1, 0.116, 0), Color(1, 0.189, 0), Color(1, 0.314, 0.009),
 		Color(1, 0.45, 0.088), Color(1, 0.543, 0.172), Color(1, 0.638, 0.283), Color(1, 0.778, 0.503),
 		Color(1, 0.914, 0.783), Color(1, 1, 1)]
+
+# The particle spacing `exposure` is set for: the default stream's (particle_diameter 0.5 × h 3.5 mm).
+const D_REF := 0.00175
 
 # Sprite diameter in metres.
 export var sprite_size := 0.01 setget set_sprite_size
@@ -38,6 +44,9 @@ var stream_particles := 0
 # What each drawn particle's sprite size and light are multiplied by: (stream_particles /
 # particles)^(1/3), 1 for a whole frame.
 var particle_scale := 1.0
+# What each sprite's light is multiplied by for the stream's resolution: (its particle spacing /
+# D_REF)^3, 1 for the default stream.
+var resolution_scale := 1.0
 # The sprite material's uniforms as last set (the engine keeps them; its headless renderer does not).
 var sprite_uniforms := {}
 
@@ -93,7 +102,7 @@ func set_velocity_scale(v: float) -> void:
 
 func _apply_look() -> void:
 	_sprite_uniform("size", sprite_size * _space_scale * particle_scale)
-	_sprite_uniform("exposure", exposure * particle_scale)
+	_sprite_uniform("exposure", exposure * particle_scale * resolution_scale)
 	_line_mat.set_shader_param("velocity_scale", velocity_scale)
 	for m in [_sprite_mat, _line_mat]:
 		m.set_shader_param("t_white", white_temperature)
@@ -107,6 +116,7 @@ func _sprite_uniform(name: String, value) -> void:
 
 func _on_stream_params(doc: Dictionary) -> void:
 	_space_scale = float(doc.get("space_scale", 1.0))
+	resolution_scale = pow(float(doc.get("particle_diameter", 0.5)) * float(doc.get("h", 0.0035)) / D_REF, 3.0)
 	var basis := up_to_y(vec3_of(doc.get("up"), Vector3(0, 0, 1)))
 	_stage.transform = Transform(basis.scaled(Vector3.ONE / _space_scale), Vector3())
 	_apply_look()
