@@ -8,7 +8,9 @@
  * current set, so after every step one set holds the state and its derived fields in the
  * same order. Resampling (every resample_interval steps, on the steps whose 0-based index is
  * a multiple of it; digest §2.12) compacts into the other set. The host reads back only
- * the resampling totals (3 ints), the error flag, and once per frame the particles.
+ * the resampling totals (3 ints), the error flag, and once per frame the particles. The sort
+ * and the compaction run in FL_BLOCKS serial blocks on a CPU device and one work item per
+ * element on a GPU ("wide": flame_set_wide), in the same order bit for bit.
  *
  * Digest fixes applied: §9 #1 pressure sign, #3 symmetric form option, #4 stabilised
  * diffusion (also capping viscosity, §2.15), #6 derived mass, #7 d = h/2, #8 insertion
@@ -74,12 +76,14 @@ struct fl_buffers {
     cl_mem key[2], val[2]; /* the radix sort's cell keys and particle indices, ping-pong */
     cl_mem hist;           /* the radix sort's histograms, 256 per block */
     cl_mem cs;             /* cell-start table of the hash grid */
+    /* (wide passes: key[0] the keys, val[] the counting sort's slots and runs, key[1] the sorted
+     * indices; after the sort key[0] and key[1] take the compaction's scanned flags) */
     cl_mem cnt;            /* wide passes: particles per key (as many entries as cs) */
     cl_mem sums;           /* wide passes: the device scan's tile sums (FL_SCAN_SUMS) */
     cl_mem sxyz;           /* sorted x, y, z as three arrays of stride cap + FL_PAD (fl_reorder -> fl_density) */
     cl_mem nl;             /* neighbour lists, FL_NL slots per particle */
     cl_mem keep_ins, nrm;  /* resampling: what becomes of each particle, and its insertion normal */
-    cl_mem bsum, tot;      /* resampling: per-block sums, and the totals the host reads */
+    cl_mem bsum, tot;      /* resampling: per-block sums, and the totals the host reads (tot[3]: the sort scan's) */
     cl_mem errflag;        /* FL_ERR_* bits of the last steps */
     cl_mem prm;            /* the parameter array (FP_*) */
     int cap, cs_cap;       /* particles the per-particle buffers hold; entries of cs */
@@ -773,8 +777,8 @@ void flame_free(struct flame *fl)
     for (int s = 0; s < 2; s++)
         for (int i = 0; i < 8; i++) fl_release(fl_set_mem(&fl->buf.st[s], i));
     cl_mem *m[] = {&fl->buf.key[0], &fl->buf.key[1], &fl->buf.val[0], &fl->buf.val[1], &fl->buf.hist,
-                   &fl->buf.cs, &fl->buf.cnt, &fl->buf.sums, &fl->buf.keep_ins, &fl->buf.nrm, &fl->buf.nl, &fl->buf.sxyz, &fl->buf.bsum,
-                   &fl->buf.tot, &fl->buf.errflag, &fl->buf.prm};
+                   &fl->buf.cs, &fl->buf.cnt, &fl->buf.sums, &fl->buf.keep_ins, &fl->buf.nrm, &fl->buf.nl,
+                   &fl->buf.sxyz, &fl->buf.bsum, &fl->buf.tot, &fl->buf.errflag, &fl->buf.prm};
     for (size_t i = 0; i < sizeof m / sizeof m[0]; i++) fl_release(m[i]);
     for (int k = 0; k < FL_KERNEL_COUNT; k++)
         if (fl->k[k]) clReleaseKernel(fl->k[k]);

@@ -78,13 +78,16 @@ function flameLook() {
 
 // Drawing many particles (browser tests): the flame view's current frame made into n particles,
 // each copied with a jitter inside its spacing, the spacing shrunk by (count / n)^(1/3) as a finer
-// stream of the same flame (a smaller h) would have it. The view stops taking the stream's frames
-// from the first call. Returns the view's particle count.
+// stream of the same flame (a smaller h) would have it. From the first call the view takes no
+// more of the stream's frames and the page's own loop no longer draws it (flameDrawMs does, and
+// flameShow(true) lets the page draw it again, for a screenshot). Returns the view's particle count.
 function flameDense(n) {
   const v = app.views.find((x) => x.kind === 'flame');
   if (!v.orig) {
     v.orig = { n: v.count, xyz: v.ipos.array.slice(0, 3 * v.count), temp: v.itemp.array.slice(0, v.count), params: v.params };
     v.onFrame = () => false;
+    v.draw = v.render.bind(v);
+    flameShow(false);
   }
   const o = v.orig, d = v.frameOf().d * Math.cbrt(o.n / n);
   let seed = 12345;
@@ -100,7 +103,15 @@ function flameDense(n) {
   return v.count;
 }
 
-// The time one draw of the flame view takes, ms (the median of `draws`, each finished by a pixel read).
+// Whether the page's loop draws the flame view (flameDense stops it: a software renderer takes
+// seconds a draw at 200k particles).
+function flameShow(on) {
+  const v = app.views.find((x) => x.kind === 'flame');
+  v.render = on ? v.draw : () => false;
+}
+
+// The time one draw of the flame view takes, ms (the median of `draws`, each finished by a pixel
+// read); the canvas keeps the last draw until the page's next frame clears it.
 function flameDrawMs(draws = 3) {
   const e = app.layout.find((x) => x.view.kind === 'flame'), r = app.renderer, gl = r.getContext(), px = new Uint8Array(4);
   const ms = [];
@@ -109,7 +120,7 @@ function flameDrawMs(draws = 3) {
     r.setViewport(e.rect.x, e.rect.y, e.rect.w, e.rect.h);
     r.setScissor(e.rect.x, e.rect.y, e.rect.w, e.rect.h);
     r.setScissorTest(true);
-    e.view.render(r, e.rect, 0);
+    (e.view.draw ?? e.view.render).call(e.view, r, e.rect, 0);
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
     ms.push(performance.now() - t0);
   }
@@ -125,6 +136,7 @@ window.fxs = {
   flameLook,
   flameDense,
   flameDrawMs,
+  flameShow,
   flameSettings,
   waveSettings: app.waveSettings,
   scene: (stream) => app.views.find((x) => x.kind === 'scene' && (!stream || x.stream === stream))?.info() ?? null,
