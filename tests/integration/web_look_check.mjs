@@ -276,6 +276,7 @@ async function denseLook(ctx, port, fxctl) {
     await sleep(4000); // the page's own draw (drawfps=1) of the 200k frame
     await page.screenshot({ path: join(ART, `web-look-flame-200k-${mode}.png`), timeout: 120000 });
     await page.evaluate(() => window.fxs.flameShow(false));
+    console.log(`  info: ${mode} draw on SwiftShader: ` + rows.map((r) => `${r.n} particles ${r.ms.toFixed(0)} ms (area ${r.f.area.toFixed(4)}, lum ${r.f.lum.toFixed(1)})`).join(', '));
     const [base, big] = rows, rel = (a, b) => Math.abs(a - b) / Math.max(1e-9, b), lumTol = mode === 'pbvr' ? 0.45 : 0.35;
     check(big.count === 200000, `${mode}: the view draws 200k particles`, `${big.count}`);
     check(rel(big.f.area, base.f.area) <= 0.35 && rel(big.f.lum, base.f.lum) <= lumTol,
