@@ -178,7 +178,7 @@ __kernel void fl_key_rank(__global const uint *key, __global const uint *run, in
  * in three launches: fl_scan_reduce sums each tile of FL_SCAN_TILE elements, fl_scan_top scans
  * the tile sums in one work-group (and stores the grand total in tot[tot_i]), fl_scan_down scans
  * each tile from its offset. Work item l of a group takes the tile's elements l*E .. l*E+E-1. */
-#define FL_SCAN_TILE (FL_SCAN_WG * FL_SCAN_E) /* FL_SCAN_WG, FL_SCAN_E: flame_layout.h */
+/* FL_SCAN_WG, FL_SCAN_E, FL_SCAN_TILE: flame_layout.h */
 
 /* The work-group's exclusive prefix of v (Hillis-Steele in local memory) and its total. */
 inline uint fl_group_scan(__local uint *s, uint v, uint *total)

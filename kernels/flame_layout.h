@@ -55,5 +55,6 @@
 /* The device scan of the wide passes (flame.cl's fl_scan_*): work-group size, elements per work item. */
 #define FL_SCAN_WG 256
 #define FL_SCAN_E 8
+#define FL_SCAN_TILE (FL_SCAN_WG * FL_SCAN_E) /* elements a work-group scans */
 
 #endif

@@ -42,7 +42,6 @@
 #define FL_PAD 8           /* spare elements after each sorted x, y, z array: fl_density reads 8 at a time */
 #define FL_BLOCKS 16       /* work items of the serial-per-block sort/scan/compaction kernels */
 #define FL_MAX_EVENTS 1024 /* profiling events kept until the next sync */
-#define FL_SCAN_TILE (FL_SCAN_WG * FL_SCAN_E)
 #define FL_SCAN_SUMS 4096 /* tiles of the longest scan: the cell table's 2^22 + 1 entries, or 2^22 particles */
 
 /* ---- state ------------------------------------------------------------------------- */
@@ -78,7 +77,7 @@ struct fl_buffers {
     cl_mem cs;             /* cell-start table of the hash grid */
     /* (wide passes: key[0] the keys, val[] the counting sort's slots and runs, key[1] the sorted
      * indices; after the sort key[0] and key[1] take the compaction's scanned flags) */
-    cl_mem cnt;            /* wide passes: particles per key (as many entries as cs) */
+    cl_mem cnt;            /* wide passes: particles per key (as many entries as cs; made by the first wide sort) */
     cl_mem sums;           /* wide passes: the device scan's tile sums (FL_SCAN_SUMS) */
     cl_mem sxyz;           /* sorted x, y, z as three arrays of stride cap + FL_PAD (fl_reorder -> fl_density) */
     cl_mem nl;             /* neighbour lists, FL_NL slots per particle */
@@ -260,7 +259,6 @@ static int fl_table(struct flame *fl, struct fx_err *err)
     fl_release(&fl->buf.cs);
     fl_release(&fl->buf.cnt);
     fl->buf.cs = fl_buffer(fl, sizeof(cl_uint) * (size_t)want, &rc);
-    if (rc == CL_SUCCESS) fl->buf.cnt = fl_buffer(fl, sizeof(cl_uint) * (size_t)want, &rc);
     if (rc != CL_SUCCESS) return fl_clfail(err, "allocating the cell table", rc);
     fl->buf.cs_cap = want;
     return 0;
@@ -462,8 +460,11 @@ static int fl_sort_wide(struct flame *fl, cl_mem *order, struct fx_err *err)
 {
     cl_int n = fl->n, len = (cl_int)fl->grid.mask + 2; /* cs[0 .. M] */
     cl_uint zero = 0;
-    cl_int rc = clEnqueueFillBuffer(ocl_queue(fl->ocl), fl->buf.cnt, &zero, sizeof zero, 0, sizeof zero * (size_t)len,
-                                    0, NULL, NULL);
+    cl_int rc = CL_SUCCESS;
+    if (!fl->buf.cnt) fl->buf.cnt = fl_buffer(fl, sizeof zero * (size_t)fl->buf.cs_cap, &rc);
+    if (rc != CL_SUCCESS) return fl_clfail(err, "allocating the key counts", rc);
+    rc = clEnqueueFillBuffer(ocl_queue(fl->ocl), fl->buf.cnt, &zero, sizeof zero, 0, sizeof zero * (size_t)len, 0, NULL,
+                             NULL);
     if (rc != CL_SUCCESS) return fl_clfail(err, "clearing the key counts", rc);
     struct ocl_arg ka[] = {FL_MEM(fl->buf.key[0]), FL_INT(n), FL_MEM(fl->buf.cnt), FL_MEM(fl->buf.val[0])};
     struct ocl_arg sa[] = {FL_MEM(fl->buf.key[0]), FL_MEM(fl->buf.val[0]), FL_INT(n), FL_MEM(fl->buf.cs),
