@@ -8,8 +8,8 @@
  * and the daemon's send capacity (3072 subscribers of the texture that only drain their
  * sockets) against raw loopback TCP measured the same way in the same run: as many
  * connections, messages of the texture frame's size, one writer and one reader thread,
- * three rounds of the two interleaved and the best raw round as the yardstick, so that the
- * daemon (which adds framing and a simulation to the same work) exceeds it only by noise.
+ * measured in pairs, raw loopback then the daemon, and only the pairs in which the raw
+ * writer moved more bytes count (bl_capacity says why), so the ratio cannot exceed 100%.
  * One line per figure on stdout. Total time bounded (~4 min).
  *
  * The client shares the machine with the daemon, so every figure is a property of
@@ -38,7 +38,8 @@
 #define BL_BUDGET_S 150.0      /* whole benchmark */
 #define BL_STREAM_BUDGET_S 70.0
 #define BL_DRAIN_N 3072 /* send capacity: 3072 x 30 fps x ~82 kB offers ~7.6 GB/s, above raw loopback (4-6 GB/s) */
-#define BL_ROUNDS 3     /* raw loopback and send capacity, interleaved */
+#define BL_PAIRS 3      /* valid pairs of raw loopback and send capacity measured */
+#define BL_PAIRS_MAX 6  /* pairs tried at most */
 
 static double bl_t0;
 
@@ -113,9 +114,9 @@ static double bl_drain(int port, const char *stream, int n, double seconds, int 
 /* ---- raw loopback TCP, measured as the daemon sends ------------------------------------- */
 
 /* The yardstick for the send capacity: as many loopback connections, read by the same reader
- * (bl_read_all), written by one thread (as the daemon's network thread) that sends whole
- * messages of the stream's frame size to every connection that can take more, as the
- * daemon's poll loop does, but without WebSocket framing and without a simulation beside it. */
+ * (bl_read_all), written by one thread (as the daemon's network thread) that fills every
+ * connection that can take more with messages of the stream's frame size until the kernel
+ * refuses, without WebSocket framing and without a simulation beside it. */
 struct bl_raw {
     int *fd;     /* the writing ends */
     size_t *off; /* bytes of the current message sent on each */
@@ -134,8 +135,9 @@ static void *bl_raw_writer(void *arg)
         if (poll(p, (nfds_t)r->n, 100) <= 0) continue;
         for (int i = 0; i < r->n; i++) {
             if (!(p[i].revents & POLLOUT)) continue;
-            ssize_t w = send(r->fd[i], buf + r->off[i], r->msg - r->off[i], MSG_DONTWAIT);
-            if (w > 0) r->off[i] = (r->off[i] + (size_t)w) % r->msg;
+            ssize_t w;
+            while ((w = send(r->fd[i], buf + r->off[i], r->msg - r->off[i], MSG_DONTWAIT)) > 0)
+                r->off[i] = (r->off[i] + (size_t)w) % r->msg;
         }
     }
     free(buf);
@@ -233,14 +235,17 @@ static void bl_report_searches(const struct trial_search *fl, const struct trial
            fastest->stream ? fastest->stream : "none", fastest->n, fastest->mbps, raw > 0 ? 100 * fastest->mbps / raw : 0);
 }
 
-/* Send capacity against its yardstick, BL_ROUNDS rounds, each raw loopback then the daemon,
- * with the same connections, reader and message size (bench_tex's frame: its payload, the
- * 64-byte frame header and the WebSocket header). The shared machine's speed moves by 2-3x
- * between rounds, so the yardstick is the best raw round: the mean capacity exceeds it only
- * where the daemon outsent every raw round at least once. */
+/* Send capacity against its yardstick in pairs, raw loopback then the daemon, with the same
+ * number of connections, reader and message size (bench_tex's frame: its payload, the 64-byte
+ * frame header and the WebSocket header). The daemon's network thread makes the raw writer's
+ * system calls and more, beside a simulation, so it cannot outsend it on the same machine; but
+ * loopback TCP on the shared VM moves by up to 2-3x from one 3 s window to the next, so a pair
+ * in which the daemon outsent the raw writer measured the machine's speed changing, not the
+ * daemon. Such a pair is reported and set aside, and pairs are measured until BL_PAIRS are
+ * valid (BL_PAIRS_MAX at most); the figure is the valid pairs' capacity over their yardstick. */
 struct bl_capacity {
-    double raw[BL_ROUNDS], cap[BL_ROUNDS], raw_best;
-    int drained[BL_ROUNDS];
+    double raw[BL_PAIRS_MAX], cap[BL_PAIRS_MAX], raw_sum, cap_sum;
+    int drained[BL_PAIRS_MAX], tried, valid;
     size_t msg;
 };
 
@@ -254,13 +259,20 @@ static void bl_capacity(struct trial_target *tg, int port, const struct trial_se
         trial_run(tg, 1, &one);
     }
     c->msg = one.frame_bytes ? (size_t)one.frame_bytes + 64 + 10 : 0;
-    for (int r = 0; r < BL_ROUNDS && c->msg; r++) {
+    for (int r = 0; c->msg && c->valid < BL_PAIRS && r < BL_PAIRS_MAX; r++, c->tried++) {
         c->raw[r] = bl_raw_loopback(BL_DRAIN_N, c->msg, TRIAL_WINDOW_S);
         c->cap[r] = bl_drain(port, "bench_tex", BL_DRAIN_N, TRIAL_WINDOW_S, &c->drained[r]);
-        c->raw_best = fmax(c->raw_best, c->raw[r]);
+        if (c->raw[r] > 0 && c->cap[r] <= c->raw[r]) {
+            c->valid++;
+            c->raw_sum += c->raw[r];
+            c->cap_sum += c->cap[r];
+        }
         sleep(1); /* the daemon closes the drained connections before the next raw round */
     }
 }
+
+/* The yardstick: the valid pairs' mean raw loopback rate, MB/s (0 when none). */
+static double bl_yardstick(const struct bl_capacity *c) { return c->valid ? c->raw_sum / c->valid : 0; }
 
 static void bl_report_capacity(const struct bl_capacity *c)
 {
@@ -268,17 +280,19 @@ static void bl_report_capacity(const struct bl_capacity *c)
         printf("bench_load: send capacity not measured (no frame of bench_tex arrived)\n");
         return;
     }
-    for (int r = 0; r < BL_ROUNDS; r++)
-        printf("bench_load: round %d: raw loopback, %d connections of %zu-byte messages, 1 writer + 1 reader thread: "
+    for (int r = 0; r < c->tried; r++)
+        printf("bench_load: pair %d: raw loopback, %d connections of %zu-byte messages, 1 writer + 1 reader thread: "
                "%.0f MB/s; server send capacity, %d subscribers of bench_tex that only drain their sockets: %.0f MB/s = "
-               "%.1f%% of it\n", r + 1, BL_DRAIN_N, c->msg, c->raw[r], c->drained[r], c->cap[r],
-               c->raw[r] > 0 ? 100 * c->cap[r] / c->raw[r] : 0);
-    double cap = 0;
-    for (int r = 0; r < BL_ROUNDS; r++) cap += c->cap[r];
-    cap /= BL_ROUNDS;
-    printf("bench_load: server send capacity %.0f MB/s (mean of %d rounds) = %.1f%% of raw loopback measured the same "
-           "way (the best of the %d interleaved rounds, %.0f MB/s; target >= 50%%)\n", cap, BL_ROUNDS,
-           c->raw_best > 0 ? 100 * cap / c->raw_best : 0, BL_ROUNDS, c->raw_best);
+               "%.1f%% of it%s\n", r + 1, BL_DRAIN_N, c->msg, c->raw[r], c->drained[r], c->cap[r],
+               c->raw[r] > 0 ? 100 * c->cap[r] / c->raw[r] : 0,
+               c->raw[r] > 0 && c->cap[r] <= c->raw[r] ? "" : " (set aside: the machine's speed moved)");
+    if (!c->valid) {
+        printf("bench_load: send capacity not measured (no valid pair in %d)\n", c->tried);
+        return;
+    }
+    printf("bench_load: server send capacity %.0f MB/s = %.1f%% of raw loopback measured the same way (%.0f MB/s; "
+           "the means of %d valid pairs of %d; target >= 50%%)\n", c->cap_sum / c->valid,
+           100 * c->cap_sum / c->raw_sum, bl_yardstick(c), c->valid, c->tried);
 }
 
 /* Both searches, after a 1-subscriber trial that lets the flame develop to its ~20k particles. */
@@ -334,7 +348,7 @@ int main(void)
     unlink(cfg);
     rmdir(dir);
 
-    if (searches) bl_report_searches(&fl, &tx, c.raw_best);
+    if (searches) bl_report_searches(&fl, &tx, bl_yardstick(&c));
     bl_report_capacity(&c);
     printf("bench_load: total %.0f s on %ld CPUs (daemon, its engine and the load generator share them)\n", trial_now() - bl_t0,
            sysconf(_SC_NPROCESSORS_ONLN));
