@@ -447,18 +447,55 @@ struct eye_shading {
     int pad0, pad1;
 };
 
-/* The baked view texture (digest §8.2), EYE_LANES atlas texels per work-item (npad / EYE_LANES of
- * them, which may run a range at a time). geo holds 16 planes of npad floats (plane i, texel k at geo[i * npad + k]):
- * P, u, N_face, v, dP/du, mask, dP/dv, 0, with u, v the raw OBJ texture coordinates;
- * eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
-__kernel void eye_bake(__global float4 *out, __global const float *geo, __global const float4 *pig, int pw, int ph,
-                       struct eye_optics o, struct eye_shading s, float4 dot_col, float4 base_col, int npad)
+/* The bake's geometry in its texel order: slot k of 16 planes of npad floats (plane i at
+ * planes[i * npad + k]) from texel order[k] of the atlas (16 floats a texel, eye_model.h), so
+ * that eye_bake loads a field of its lanes as one vector. One work-item a slot. */
+__kernel void eye_bake_gather(__global float *planes, __global const float16 *geo, __global const int *order, int npad)
+{
+    const int k = (int)get_global_id(0);
+    float g[16];
+    if (k >= npad) return;
+    vstore16(geo[order[k]], 0, g);
+    for (int i = 0; i < 16; i++) planes[i * npad + k] = g[i];
+}
+
+/* Writes lane l as out[texel[l]] = (x, y, z, w) and its cost for texel[l] < n. */
+static void eye_bake_store(__global float4 *out, __global uchar *cost, const int *texel, int n, fv x, fv y, fv z,
+                           fv w, iv c)
+{
+    float a[EYE_LANES], b[EYE_LANES], d[EYE_LANES], e[EYE_LANES];
+    int k[EYE_LANES];
+    EYE_VSTORE(x, 0, a);
+    EYE_VSTORE(y, 0, b);
+    EYE_VSTORE(z, 0, d);
+    EYE_VSTORE(w, 0, e);
+    EYE_VSTORE(c, 0, k);
+    for (int l = 0; l < EYE_LANES; l++)
+        if (texel[l] < n) {
+            out[texel[l]] = (float4)(a[l], b[l], d[l], e[l]);
+            cost[texel[l]] = (uchar)k[l];
+        }
+}
+
+/* The baked view texture (digest §8.2), EYE_LANES texels per work-item (npad / EYE_LANES of
+ * them, which may run a range at a time). Slot k0 + l traces texel order[k0 + l] (a permutation
+ * of 0 ... npad - 1; the texels from n on are padding) and writes its colour and cost (EYE_COST_*)
+ * there: the host orders the texels by their last cost so that a work-item's lanes run alike and
+ * none waits long for the slowest (compound_eye.c). A lane's result does not depend on its
+ * neighbours, so any order gives the same texture. geo holds the slots' geometry
+ * (eye_bake_gather), 16 planes of npad floats: P, u, N_face, v, dP/du, mask, dP/dv, 0, with u,
+ * v the raw OBJ texture coordinates; eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
+__kernel void eye_bake(__global float4 *out, __global uchar *cost, __global const float *geo,
+                       __global const int *order, __global const float4 *pig, int pw, int ph, struct eye_optics o,
+                       struct eye_shading s, float4 dot_col, float4 base_col, int n, int npad)
 {
     const int k0 = (int)get_global_id(0) * EYE_LANES;
+    int texel[EYE_LANES];
+    EYE_VSTORE(EYE_VLOAD(0, order + k0), 0, texel);
 #define EYE_GEO(i) EYE_VLOAD(0, geo + (i) * npad + k0)
     iv covered = EYE_GEO(11) != 0.0f;
     if (!any(covered)) {
-        eye_store(out, k0, npad, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f);
+        eye_bake_store(out, cost, texel, n, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f, (iv)EYE_COST_BARE);
         return;
     }
     const v3 up = v3_const(0.0f, 0.0f, 1.0f), eye = v3_const(s.eye.x, s.eye.y, s.eye.z);
@@ -487,6 +524,9 @@ __kernel void eye_bake(__global float4 *out, __global const float *geo, __global
     fv lit = s.ka + s.kd * diff, gloss = s.ks * spec; /* eq. 5.31 */
     fv cr = select((fv)base_col.x, ct.r, traced), cg = select((fv)base_col.y, ct.g, traced);
     fv cb = select((fv)base_col.z, ct.b, traced), zero = 0.0f;
-    eye_store(out, k0, npad, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
-              select(zero, cb * lit + gloss, covered), select(zero, (fv)1.0f, covered));
+    iv c = select(select(select((iv)EYE_COST_TRACED, min(EYE_COST_ENTERED + h.passes, (iv)EYE_COST_MAX), h.entered),
+                         (iv)EYE_COST_COVERED, ~traced),
+                  (iv)EYE_COST_BARE, ~covered);
+    eye_bake_store(out, cost, texel, n, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
+                   select(zero, cb * lit + gloss, covered), select(zero, (fv)1.0f, covered), c);
 }

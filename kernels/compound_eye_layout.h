@@ -20,6 +20,14 @@
 #define EYE_MISSED 1   /* never reaches the pigment: upward exit (G9), or TIR policy/bounce limit */
 #define EYE_ABSORBED 2 /* TIR under policy "absorb": reads as pigment */
 
+/* A baked texel's cost, as eye_bake writes it for the host's next texel order (the keys of a
+ * counting sort: work-items of texels alike run alike) */
+#define EYE_COST_BARE 0    /* no model surface */
+#define EYE_COST_COVERED 1 /* surface seen edge-on or from behind: not traced */
+#define EYE_COST_TRACED 2  /* traced, no lens entered */
+#define EYE_COST_ENTERED 3 /* + the internal passes */
+#define EYE_COST_MAX 255
+
 #define EYE_SQRT3 1.7320508f /* the hex lattice's period along b, in pitches */
 
 struct eye_optics {

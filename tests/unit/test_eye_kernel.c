@@ -428,6 +428,38 @@ static void test_sliced_steps(void)
     }
 }
 
+/* A view's texels are traced in the order of what they cost the view before (compound_eye.c):
+ * the second view of a stream, in that order, is the first, in atlas order, bit for bit, with
+ * busier lanes; a third keeps the order. */
+static void test_bake_order(void)
+{
+    cJSON *doc = params_defaults(compound_eye_params), *bake = NULL;
+    cJSON *partial = cJSON_Parse("{\"mode\":\"bake\",\"bake_size\":200,\"max_passes\":10}");
+    struct fx_err err = {0};
+    CHECK(params_merge(compound_eye_params, doc, partial, &bake, &err) == 0, "merge: %s", err.message);
+    struct compound_eye *ce = bake ? tek_new(bake, &err) : NULL;
+    CHECK(ce != NULL, "compound_eye_new: %s", err.message);
+    static float view[3][200 * 200 * 4];
+    struct compound_eye_split sp[3];
+    int ok = 1;
+    for (int v = 0; ce && ok && v < 3; v++) {
+        ok = compound_eye_bake(ce, view[v], &err) == 0;
+        compound_eye_split(ce, &sp[v]);
+    }
+    CHECK(ok, "bake: %s", err.message);
+    if (ce && ok) {
+        CHECK(!memcmp(view[0], view[1], sizeof view[0]) && !memcmp(view[0], view[2], sizeof view[0]),
+              "the views in atlas order and in cost order differ");
+        CHECK(sp[0].lane_use < 0.8 && sp[1].lane_use > 0.95 && sp[2].lane_use == sp[1].lane_use,
+              "lanes busy: %.3f in atlas order, %.3f and %.3f in cost order", sp[0].lane_use, sp[1].lane_use,
+              sp[2].lane_use);
+    }
+    compound_eye_free(ce);
+    cJSON_Delete(doc);
+    cJSON_Delete(partial);
+    cJSON_Delete(bake);
+}
+
 int main(void)
 {
     struct fx_err err = {0};
@@ -440,6 +472,7 @@ int main(void)
     RUN(test_table_matches_reference);
     RUN(test_atlas_gutters);
     RUN(test_sliced_steps);
+    RUN(test_bake_order);
     ocl_close(tek_ocl);
     return CHECK_DONE();
 }
