@@ -7,15 +7,20 @@
  * the buffer can be reused frame after frame. Chunks are encoded in order with one
  * encode pipeline whose buffers are reused between chunks; OpenEXRCore converts the
  * interleaved floats to half (round to nearest even, overflow to inf, NaN kept) while
- * packing, reading straight from the caller's pixels. Library errors are captured
- * by an error handler so the message reaches the caller instead of stderr. */
+ * packing, reading straight from the caller's pixels. RLE chunks are compressed by
+ * exr_rle.c (the same bytes as OpenEXRCore's, several times faster), in the pipeline's own
+ * buffers. Library errors are captured by an error handler so the message reaches the
+ * caller instead of stderr. */
 #include "exr.h"
 
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include <openexr.h>
+
+#include "exr_rle.h"
 
 const char *const exr_codec_names[] = {
     "none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", NULL,
@@ -101,6 +106,42 @@ static void exr_bind_channels(exr_encode_pipeline_t *pipe, const struct exr_imag
     }
 }
 
+/* The pipeline's buffers, all from malloc (alloc_fn and free_fn are set to these), so that
+ * exr_rle_chunk can size the ones it fills. */
+static void *exr_pipe_alloc(exr_transcoding_pipeline_buffer_id_t id, size_t n)
+{
+    (void)id;
+    return malloc(n);
+}
+
+static void exr_pipe_free(exr_transcoding_pipeline_buffer_id_t id, void *p)
+{
+    (void)id;
+    free(p);
+}
+
+/* A buffer of the pipeline at least n bytes long (its contents dropped). */
+static int exr_pipe_reserve(void **buf, size_t *size, size_t n)
+{
+    if (*buf && *size >= n) return 0;
+    free(*buf);
+    *size = 0;
+    if (!(*buf = malloc(n))) return -1;
+    *size = n;
+    return 0;
+}
+
+/* The pipeline's compress_fn for RLE. */
+static exr_result_t exr_rle_chunk(exr_encode_pipeline_t *pipe)
+{
+    size_t n = pipe->packed_bytes;
+    if (exr_pipe_reserve(&pipe->compressed_buffer, &pipe->compressed_alloc_size, EXR_RLE_OUT(n)) ||
+        exr_pipe_reserve(&pipe->scratch_buffer_1, &pipe->scratch_alloc_size_1, n))
+        return EXR_ERR_OUT_OF_MEMORY;
+    pipe->compressed_bytes = exr_rle_compress(pipe->packed_buffer, n, pipe->scratch_buffer_1, pipe->compressed_buffer);
+    return EXR_ERR_SUCCESS;
+}
+
 static exr_result_t exr_encode_chunk(exr_context_t ctxt, const struct exr_image *img, int y,
                                      exr_encode_pipeline_t *pipe)
 {
@@ -111,7 +152,12 @@ static exr_result_t exr_encode_chunk(exr_context_t ctxt, const struct exr_image 
     rv = first ? exr_encoding_initialize(ctxt, 0, &cinfo, pipe) : exr_encoding_update(ctxt, 0, &cinfo, pipe);
     if (rv != EXR_ERR_SUCCESS) return rv;
     exr_bind_channels(pipe, img, y);
-    if (first) rv = exr_encoding_choose_default_routines(ctxt, 0, pipe);
+    if (first) {
+        rv = exr_encoding_choose_default_routines(ctxt, 0, pipe);
+        pipe->alloc_fn = exr_pipe_alloc;
+        pipe->free_fn = exr_pipe_free;
+        if (img->compression == EXR_CODEC_RLE) pipe->compress_fn = exr_rle_chunk;
+    }
     return rv == EXR_ERR_SUCCESS ? exr_encoding_run(ctxt, 0, pipe) : rv;
 }
 

@@ -7,7 +7,8 @@
  * written here with double arithmetic (round to nearest even, overflow to inf).
  * Lossless codecs (none, rle, zips, zip, piz, and pxr24, which only rounds 32-bit
  * floats) must match bit for bit; b44/b44a must stay within the error their 4x4
- * block quantisation allows. Last, `exrheader` must accept the files. */
+ * block quantisation allows. exr_rle.c's compressor must give a plain reference's bytes
+ * (OpenEXR's RLE written here step by step). Last, `exrheader` must accept the files. */
 #include <errno.h>
 #include <math.h>
 #include <stdint.h>
@@ -20,6 +21,7 @@
 
 #include "check.h"
 #include "exr.h"
+#include "exr_rle.h"
 
 #define TEST_NCODECS (EXR_CODEC_B44A + 1)
 
@@ -567,6 +569,72 @@ static void test_exrheader(void)
     free(px);
 }
 
+/* ---- RLE against a plain reference ---- */
+
+/* OpenEXR's RLE of src[0..n) into out, step by step: even bytes then odd bytes; each but the
+ * first minus the one before plus 128; runs of 3 to 128 equal bytes as (length - 1, byte),
+ * else literals of up to 127 bytes, each ending where 3 equal bytes begin; the raw bytes when
+ * that is not smaller. */
+static size_t test_rle_ref(const uint8_t *src, size_t n, uint8_t *out)
+{
+    uint8_t *t = malloc(n + 1);
+    size_t h = (n + 1) / 2, o = 0;
+    for (size_t i = 0; i < n; i++) t[i % 2 ? h + i / 2 : i / 2] = src[i];
+    for (size_t i = n; i-- > 1;) t[i] = (uint8_t)(t[i] - t[i - 1] + 128);
+    for (size_t i = 0; i < n;) {
+        size_t run = 1;
+        while (i + run < n && run < 128 && t[i + run] == t[i]) run++;
+        if (run >= 3) {
+            out[o++] = (uint8_t)(run - 1);
+            out[o++] = t[i];
+            i += run;
+            continue;
+        }
+        size_t j = i + run;
+        while (j < n && j - i < 127 && !(j + 2 < n && t[j] == t[j + 1] && t[j + 1] == t[j + 2])) j++;
+        out[o++] = (uint8_t)-(int)(j - i);
+        memcpy(out + o, t + i, j - i);
+        o += j - i;
+        i = j;
+    }
+    free(t);
+    if (o < n) return o;
+    memcpy(out, src, n);
+    return n;
+}
+
+/* n bytes of runs of random lengths (1 to 300, mostly short) over a small alphabet, so that
+ * runs, pairs and literals of every length meet, and their differences repeat too. */
+static void test_rle_bytes(uint8_t *b, size_t n, unsigned *seed)
+{
+    for (size_t i = 0; i < n;) {
+        unsigned r = (unsigned)rand_r(seed);
+        size_t len = r % 8 == 0 ? 1 + (size_t)(r >> 8) % 300 : 1 + (size_t)(r >> 8) % 4;
+        uint8_t v = (uint8_t)(r % 3 == 0 ? (r >> 16) : (r >> 16) % 4);
+        for (; len-- && i < n; i++) b[i] = v;
+    }
+}
+
+static void test_rle_reference(void)
+{
+    enum { N = 4096 };
+    static uint8_t src[N], scratch[N], got[EXR_RLE_OUT(N)], want[EXR_RLE_OUT(N)];
+    unsigned seed = 7;
+    int bad = 0, compressed = 0, raw = 0;
+    for (int k = 0; k < 3000; k++) {
+        size_t n = k < 40 ? (size_t)k : 1 + (size_t)rand_r(&seed) % N;
+        test_rle_bytes(src, n, &seed);
+        if (k % 5 == 4) /* incompressible */
+            for (size_t i = 0; i < n; i++) src[i] = (uint8_t)rand_r(&seed);
+        size_t g = exr_rle_compress(src, n, scratch, got), w = test_rle_ref(src, n, want);
+        bad += g != w || memcmp(got, want, w);
+        compressed += n && w < n;
+        raw += n && w == n;
+    }
+    CHECK(bad == 0, "exr_rle_compress differs from the reference on %d of 3000 inputs", bad);
+    CHECK(compressed > 1000 && raw > 500, "inputs: %d compressed, %d stored raw", compressed, raw);
+}
+
 int main(void)
 {
     RUN(test_codec_names);
@@ -577,6 +645,7 @@ int main(void)
     RUN(test_b44a_flat);
     RUN(test_row0_top);
     RUN(test_chunk_order);
+    RUN(test_rle_reference);
     RUN(test_large);
     RUN(test_append_and_reuse);
     RUN(test_bad_input);
