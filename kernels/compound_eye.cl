@@ -364,6 +364,40 @@ static void eye_store(__global float4 *out, int k0, int n, fv x, fv y, fv z, fv 
     for (int i = 0; i < EYE_LANES && k0 + i < n; i++) out[k0 + i] = (float4)(a[i], b[i], c[i], e[i]);
 }
 
+/* The rays of work-item slots k0 ... k0 + EYE_LANES - 1 in the host's order (eye_order.h), into
+ * ray[]: their index vector. */
+static iv eye_rays(__global const int *order, int *ray)
+{
+    iv k = EYE_VLOAD(0, order + (int)get_global_id(0) * EYE_LANES);
+    EYE_VSTORE(k, 0, ray);
+    return k;
+}
+
+/* Writes lane l as out[ray[l]] = (x, y, z, w) and cost[ray[l]] = c (capped at EYE_COST_MAX)
+ * for ray[l] < n. */
+static void eye_store_rays(__global float4 *out, __global uchar *cost, const int *ray, int n, fv x, fv y, fv z, fv w,
+                           iv c)
+{
+    float a[EYE_LANES], b[EYE_LANES], d[EYE_LANES], e[EYE_LANES];
+    int k[EYE_LANES];
+    EYE_VSTORE(x, 0, a);
+    EYE_VSTORE(y, 0, b);
+    EYE_VSTORE(z, 0, d);
+    EYE_VSTORE(w, 0, e);
+    EYE_VSTORE(min(c, (iv)EYE_COST_MAX), 0, k);
+    for (int l = 0; l < EYE_LANES; l++)
+        if (ray[l] < n) {
+            out[ray[l]] = (float4)(a[l], b[l], d[l], e[l]);
+            cost[ray[l]] = (uchar)k[l];
+        }
+}
+
+/* What tracing a ray cost (EYE_COST_*): the lenses it passed through. */
+static iv eye_cost(const struct eye_hit *h)
+{
+    return select((iv)EYE_COST_TRACED, EYE_COST_ENTERED + h->passes, h->entered);
+}
+
 /* Lanes i of in[k0 + i] (the last element for k0 + i >= n). */
 static void eye_load(__global const float4 *in, int k0, int n, fv *x, fv *y, fv *z)
 {
@@ -390,13 +424,16 @@ static v3 eye_octa_dir(fv u, fv v)
 
 /* The lens LUT, EYE_LANES samples per work-item over the flat index k = slot * C*C + cj*C + ci of
  * the direction tiles to trace, tile tiles[slot] (global size ceil(ntiles*C*C / EYE_LANES); the
- * host copies the others by symmetry, server/effects/eye_lut.h). Output: out[k], the mean
- * over ss x ss sub-rays spread over the sample's footprint in the cell (digest §8.1). */
-__kernel void eye_lut(__global float4 *out, __global const float4 *pig, int pw, int ph, struct eye_optics o,
-                      __global const int *tiles, int ntiles, int cells, int dirs, int ss, float4 dot_col, float4 base_col)
+ * host copies the others by symmetry, server/effects/eye_lut.h), sample order[s] in work-item
+ * slot s (eye_order.h). Output: out[k], the mean over ss x ss sub-rays spread over the
+ * sample's footprint in the cell (digest §8.1), and cost[k], the sub-rays' summed cost. */
+__kernel void eye_lut(__global float4 *out, __global uchar *cost, __global const int *order, __global const float4 *pig,
+                      int pw, int ph, struct eye_optics o, __global const int *tiles, int ntiles, int cells, int dirs,
+                      int ss, float4 dot_col, float4 base_col)
 {
     const int per = cells * cells, total = per * ntiles;
-    iv k = eye_lane_index(), live = k < total;
+    int ray[EYE_LANES];
+    iv k = eye_rays(order, ray), live = k < total, c = 0;
     k = min(k, total - 1);
     int slot[EYE_LANES], t[EYE_LANES];
     EYE_VSTORE(k / per, 0, slot);
@@ -411,14 +448,15 @@ __kernel void eye_lut(__global float4 *out, __global const float4 *pig, int pw, 
         for (int sx = 0; sx < ss; sx++) {
             fv qx = (EYE_FLOATS(ci * ss + sx) + 0.5f) * inv, qy = (EYE_FLOATS(cj * ss + sy) + 0.5f) * inv * o.tile_h;
             struct eye_hit h = eye_trace(&o, qx, qy, d, live);
-            struct eye_rgba c = eye_shade(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
-            acc.r += c.r;
-            acc.g += c.g;
-            acc.b += c.b;
-            acc.a += c.a;
+            struct eye_rgba col = eye_shade(&h, pig, pw, ph, o.tile_h, dot_col, base_col);
+            acc.r += col.r;
+            acc.g += col.g;
+            acc.b += col.b;
+            acc.a += col.a;
+            c += eye_cost(&h);
         }
     float m = 1.0f / (float)(ss * ss);
-    eye_store(out, (int)get_global_id(0) * EYE_LANES, total, acc.r * m, acc.g * m, acc.b * m, acc.a * m);
+    eye_store_rays(out, cost, ray, total, acc.r * m, acc.g * m, acc.b * m, acc.a * m, c);
 }
 
 /* Raw traces for tests and benches, EYE_LANES rays per work-item (global size ceil(n / EYE_LANES)): ray k
@@ -459,30 +497,9 @@ __kernel void eye_bake_gather(__global float *planes, __global const float16 *ge
     for (int i = 0; i < 16; i++) planes[i * npad + k] = g[i];
 }
 
-/* Writes lane l as out[texel[l]] = (x, y, z, w) and its cost for texel[l] < n. */
-static void eye_bake_store(__global float4 *out, __global uchar *cost, const int *texel, int n, fv x, fv y, fv z,
-                           fv w, iv c)
-{
-    float a[EYE_LANES], b[EYE_LANES], d[EYE_LANES], e[EYE_LANES];
-    int k[EYE_LANES];
-    EYE_VSTORE(x, 0, a);
-    EYE_VSTORE(y, 0, b);
-    EYE_VSTORE(z, 0, d);
-    EYE_VSTORE(w, 0, e);
-    EYE_VSTORE(c, 0, k);
-    for (int l = 0; l < EYE_LANES; l++)
-        if (texel[l] < n) {
-            out[texel[l]] = (float4)(a[l], b[l], d[l], e[l]);
-            cost[texel[l]] = (uchar)k[l];
-        }
-}
-
 /* The baked view texture (digest §8.2), EYE_LANES texels per work-item (npad / EYE_LANES of
- * them, which may run a range at a time). Slot k0 + l traces texel order[k0 + l] (a permutation
- * of 0 ... npad - 1; the texels from n on are padding) and writes its colour and cost (EYE_COST_*)
- * there: the host orders the texels by their last cost so that a work-item's lanes run alike and
- * none waits long for the slowest (compound_eye.c). A lane's result does not depend on its
- * neighbours, so any order gives the same texture. geo holds the slots' geometry
+ * them, which may run a range at a time). Slot k0 + l traces texel order[k0 + l] (eye_order.h; the
+ * texels from n on are padding) and writes its colour and cost there. geo holds the slots' geometry
  * (eye_bake_gather), 16 planes of npad floats: P, u, N_face, v, dP/du, mask, dP/dv, 0, with u,
  * v the raw OBJ texture coordinates; eq. 5.1 scales them (and dP/du, dP/dv) by the density. */
 __kernel void eye_bake(__global float4 *out, __global uchar *cost, __global const float *geo,
@@ -491,11 +508,11 @@ __kernel void eye_bake(__global float4 *out, __global uchar *cost, __global cons
 {
     const int k0 = (int)get_global_id(0) * EYE_LANES;
     int texel[EYE_LANES];
-    EYE_VSTORE(EYE_VLOAD(0, order + k0), 0, texel);
+    eye_rays(order, texel);
 #define EYE_GEO(i) EYE_VLOAD(0, geo + (i) * npad + k0)
     iv covered = EYE_GEO(11) != 0.0f;
     if (!any(covered)) {
-        eye_bake_store(out, cost, texel, n, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f, (iv)EYE_COST_BARE);
+        eye_store_rays(out, cost, texel, n, (fv)0.0f, (fv)0.0f, (fv)0.0f, (fv)0.0f, (iv)EYE_COST_BARE);
         return;
     }
     const v3 up = v3_const(0.0f, 0.0f, 1.0f), eye = v3_const(s.eye.x, s.eye.y, s.eye.z);
@@ -524,9 +541,7 @@ __kernel void eye_bake(__global float4 *out, __global uchar *cost, __global cons
     fv lit = s.ka + s.kd * diff, gloss = s.ks * spec; /* eq. 5.31 */
     fv cr = select((fv)base_col.x, ct.r, traced), cg = select((fv)base_col.y, ct.g, traced);
     fv cb = select((fv)base_col.z, ct.b, traced), zero = 0.0f;
-    iv c = select(select(select((iv)EYE_COST_TRACED, min(EYE_COST_ENTERED + h.passes, (iv)EYE_COST_MAX), h.entered),
-                         (iv)EYE_COST_COVERED, ~traced),
-                  (iv)EYE_COST_BARE, ~covered);
-    eye_bake_store(out, cost, texel, n, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
+    iv c = select(select(eye_cost(&h), (iv)EYE_COST_COVERED, ~traced), (iv)EYE_COST_BARE, ~covered);
+    eye_store_rays(out, cost, texel, n, select(zero, cr * lit + gloss, covered), select(zero, cg * lit + gloss, covered),
                    select(zero, cb * lit + gloss, covered), select(zero, (fv)1.0f, covered), c);
 }

@@ -10,13 +10,9 @@
  * table is then packed in pieces too (eye_lut.h): the same work-items compute the same
  * samples, so the products do not depend on the slicing. Both are computed only after a change
  * or a reset, which end the life of the frame emitted before (effect.h), so they are computed in
- * place of its table or texels.
- *
- * A view's texels are traced in an order of their own (eye_bake_order): a work-item's lanes
- * wait for the slowest of them, and neighbouring texels differ widely in how many lenses their
- * rays pass through (on the default view 2.7 passes a traced texel, but 5.2 for the slowest of
- * 16 neighbours), so the texels are sorted by what each cost the view before. The first view
- * runs in atlas order; the texture does not depend on the order. */
+ * place of its table or texels. Both trace their rays in the order of what each cost the run
+ * before (eye_order.h: on the default view 2.7 passes a traced texel, but 5.2 for the slowest of
+ * 16 neighbours in atlas order); the first run of a size goes in index order. */
 #include "compound_eye.h"
 
 #include <math.h>
@@ -34,6 +30,7 @@
 #include "../slice.h"
 #include "eye_lut.h"
 #include "eye_model.h"
+#include "eye_order.h"
 #include "fxs_frame.h"
 
 
@@ -185,9 +182,7 @@ struct compound_eye {
     /* bake */
     int size, compression;
     float *rgba;
-    cl_mem d_atlas, d_order, d_cost; /* the model's atlas; the texel order the views trace in; costs */
-    uint8_t *cost;                   /* what each texel cost the last view (EYE_COST_*) */
-    int *order, *sorted;             /* the order in use; the last view's sorted */
+    cl_mem d_atlas; /* the model's atlas, 16 floats a texel (d_geo: laid out in the order) */
     struct fx_buf exr;
     /* the table or view in progress (eye_step): its stage, the kernel's work-items done and
      * what one costs, the packer of a table, and its time */
@@ -197,6 +192,7 @@ struct compound_eye {
     struct eye_lut_packer packer;
     double pack_ms;
     struct compound_eye_split split; /* of the last table or view */
+    struct eye_order order;          /* the rays' order, of the table or of the view */
 };
 
 enum { EYE_IDLE, EYE_TRACING, EYE_PACKING };
@@ -357,32 +353,28 @@ void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split
     out->launch_read = fmax(ce->split.launch_read - ce->split.kernel, 0.0);
 }
 
-/* Runs kernel k (its arguments set) over its 1-D range from work-group ce->done on, a piece at a
- * time until slice_end, reading each piece's results back into host (float4 each, ce->lanes per
- * work-item, n in all), or only waiting for it when host is NULL. 0 when every work-item ran,
+/* Runs kernel k (its arguments set) over its 1-D range of work-items for n rays from work-group
+ * ce->done on, a piece at a time until slice_end, waiting for each. 0 when every work-item ran,
  * EFFECT_MORE, or -1 with err. */
-static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_t n, cl_mem out, float *host,
-                   double slice_end, struct fx_err *err)
+static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_t n, double slice_end,
+                   struct fx_err *err)
 {
-    const size_t groups = eye_items(ce, n) / EYE_GROUP, lanes = (size_t)ce->lanes, f4 = 4 * sizeof(float), local = EYE_GROUP;
+    const size_t groups = eye_items(ce, n) / EYE_GROUP, local = EYE_GROUP;
     const size_t *wg = ocl_is_cpu(ce->ocl) ? &local : NULL;
-    cl_command_queue q = ocl_queue(ce->ocl);
     double t0 = clock_now();
     do {
         size_t m = slice_units(&ce->meter, groups - ce->done, t0, slice_end);
         size_t offset = ce->done * EYE_GROUP, global = m * EYE_GROUP;
-        size_t from = offset * lanes, to = (offset + global) * lanes < n ? (offset + global) * lanes : n;
         cl_event ev;
-        cl_int rc = clEnqueueNDRangeKernel(q, k, 1, &offset, &global, wg, 0, NULL, &ev);
+        cl_int rc = clEnqueueNDRangeKernel(ocl_queue(ce->ocl), k, 1, &offset, &global, wg, 0, NULL, &ev);
         if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
-        rc = host ? clEnqueueReadBuffer(q, out, CL_TRUE, from * f4, (to - from) * f4, host + 4 * from, 0, NULL, NULL)
-                  : clWaitForEvents(1, &ev);
+        rc = clWaitForEvents(1, &ev);
         if (rc == CL_SUCCESS) {
             ocl_record(ce->ocl, name, ev);
             ce->split.kernel += eye_event_ms(ev);
         }
         clReleaseEvent(ev);
-        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %s: %s", name, ocl_errstr(rc));
+        if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "%s: %s", name, ocl_errstr(rc));
         ce->done += m;
         double t1 = clock_now();
         ce->split.launch_read += (t1 - t0) * 1e3;
@@ -390,6 +382,19 @@ static int eye_run(struct compound_eye *ce, cl_kernel k, const char *name, size_
         t0 = t1;
     } while (ce->done < groups && t0 < slice_end);
     return ce->done < groups ? EFFECT_MORE : 0;
+}
+
+/* After a complete run of n rays: their results (float4 each) read back from out into host, in
+ * ray order, and the next run's order (eye_order_update: 1 when it changed). -1 with err. */
+static int eye_run_finish(struct compound_eye *ce, cl_mem out, float *host, size_t n, struct fx_err *err)
+{
+    double t0 = clock_now();
+    cl_int rc = clEnqueueReadBuffer(ocl_queue(ce->ocl), out, CL_TRUE, 0, n * 4 * sizeof(float), host, 0, NULL, NULL);
+    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of %zu rays: %s", n, ocl_errstr(rc));
+    int r = eye_order_update(&ce->order, ce->ocl, err);
+    ce->split.lane_use = ce->order.lane_use;
+    ce->split.launch_read += (clock_now() - t0) * 1e3;
+    return r;
 }
 
 /* ---- mode lut ---------------------------------------------------------------------- */
@@ -442,15 +447,19 @@ static int eye_lut_start(struct compound_eye *ce, struct fx_err *err)
         if (!(ce->d_lut = eye_buffer(ce, CL_MEM_WRITE_ONLY, bytes, NULL, err))) return -1;
         ce->d_lut_bytes = bytes;
     }
+    size_t npad = eye_items(ce, n) * (size_t)ce->lanes; /* a table of another size: index order */
+    if ((n != ce->order.n || npad != ce->order.npad) && eye_order_reset(&ce->order, ce->ocl, n, npad, ce->lanes, err))
+        return -1;
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
     const struct ocl_arg a[] = {
-        {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
-        {sizeof ce->optics, &ce->optics}, {sizeof(cl_mem), &ce->d_tiles}, {sizeof(int), &ce->traced},
-        {sizeof(int), &cells}, {sizeof(int), &dirs}, {sizeof(int), &ss}, {sizeof dot, &dot}, {sizeof base, &base}};
+        {sizeof(cl_mem), &ce->d_lut}, {sizeof(cl_mem), &ce->order.d_cost}, {sizeof(cl_mem), &ce->order.d_order},
+        {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph}, {sizeof ce->optics, &ce->optics},
+        {sizeof(cl_mem), &ce->d_tiles}, {sizeof(int), &ce->traced}, {sizeof(int), &cells}, {sizeof(int), &dirs},
+        {sizeof(int), &ss}, {sizeof dot, &dot}, {sizeof base, &base}};
     ce->done = 0;
     ce->pack_ms = 0;
     eye_split_start(ce);
-    return ocl_set_args(ce->k_lut, "eye_lut", a, 12, err);
+    return ocl_set_args(ce->k_lut, "eye_lut", a, 14, err);
 }
 
 /* Starts packing the traced samples. */
@@ -486,7 +495,8 @@ static int eye_table_slice(struct compound_eye *ce, double slice_end, struct fx_
         int cells, dirs, ss;
         eye_table_dims(ce, &cells, &dirs, &ss);
         size_t n = (size_t)cells * cells * ce->traced;
-        rc = eye_run(ce, ce->k_lut, "eye_lut", n, ce->d_lut, ce->samples, slice_end, err);
+        rc = eye_run(ce, ce->k_lut, "eye_lut", n, slice_end, err);
+        if (!rc && eye_run_finish(ce, ce->d_lut, ce->samples, n, err) < 0) rc = -1;
         if (!rc && !(rc = eye_lut_pack_start(ce, err))) ce->busy = EYE_PACKING;
         if (!rc && clock_now() >= slice_end) rc = EFFECT_MORE;
     }
@@ -515,7 +525,19 @@ int compound_eye_table(struct compound_eye *ce, const void **data, size_t *len, 
 
 /* ---- mode bake --------------------------------------------------------------------- */
 
-static int eye_bake_reorder(struct compound_eye *ce, struct fx_err *err);
+/* Lays the view's geometry out in the rays' order (eye_bake_gather). */
+static int eye_bake_layout(struct compound_eye *ce, struct fx_err *err)
+{
+    int npad = (int)ce->order.npad;
+    size_t global = ce->order.npad;
+    const struct ocl_arg a[] = {
+        {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_atlas}, {sizeof(cl_mem), &ce->order.d_order},
+        {sizeof(int), &npad}};
+    if (ocl_set_args(ce->k_gather, "eye_bake_gather", a, 4, err)) return -1;
+    cl_int rc = clEnqueueNDRangeKernel(ocl_queue(ce->ocl), ce->k_gather, 1, NULL, &global, NULL, 0, NULL, NULL);
+    if (rc == CL_SUCCESS) rc = clFinish(ocl_queue(ce->ocl));
+    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "eye_bake_gather: %s", ocl_errstr(rc));
+}
 
 static int eye_bake_setup(struct compound_eye *ce, const struct compound_eye_config *p, struct fx_err *err)
 {
@@ -526,10 +548,7 @@ static int eye_bake_setup(struct compound_eye *ce, const struct compound_eye_con
     /* the atlas, 16 floats a texel (eye_model.h), for npad texels: the padding is uncovered */
     float *atlas = calloc(npad * 16, sizeof(float));
     ce->rgba = malloc(texels * 4 * sizeof(float));
-    ce->cost = malloc(texels);
-    ce->order = malloc(npad * sizeof *ce->order);
-    ce->sorted = malloc(npad * sizeof *ce->sorted);
-    if (!atlas || !ce->rgba || !ce->cost || !ce->order || !ce->sorted) {
+    if (!atlas || !ce->rgba) {
         free(atlas);
         eye_mesh_free(&mesh);
         return fx_fail(err, "internal", "", "out of memory for a %d^2 bake", ce->size);
@@ -538,86 +557,11 @@ static int eye_bake_setup(struct compound_eye *ce, const struct compound_eye_con
     eye_mesh_free(&mesh);
     ce->d_atlas = eye_buffer(ce, CL_MEM_READ_ONLY | CL_MEM_COPY_HOST_PTR, npad * 16 * sizeof(float), atlas, err);
     free(atlas);
-    for (size_t k = 0; k < npad; k++) ce->order[k] = (int)k;
     if (!ce->d_atlas || !(ce->d_geo = eye_buffer(ce, CL_MEM_READ_WRITE, npad * 16 * sizeof(float), NULL, err)) ||
-        !(ce->d_order = eye_buffer(ce, CL_MEM_READ_ONLY, npad * sizeof *ce->order, NULL, err)) ||
-        !(ce->d_cost = eye_buffer(ce, CL_MEM_WRITE_ONLY, texels, NULL, err)) ||
-        !(ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, texels * 4 * sizeof(float), NULL, err)))
+        !(ce->d_out = eye_buffer(ce, CL_MEM_WRITE_ONLY, texels * 4 * sizeof(float), NULL, err)) ||
+        eye_order_reset(&ce->order, ce->ocl, texels, npad, ce->lanes, err))
         return -1;
-    return eye_bake_reorder(ce, err);
-}
-
-/* Uploads ce->order and lays the geometry out in it (eye_bake_gather). */
-static int eye_bake_reorder(struct compound_eye *ce, struct fx_err *err)
-{
-    int npad = (int)(eye_items(ce, (size_t)ce->size * ce->size) * (size_t)ce->lanes);
-    size_t global = (size_t)npad;
-    cl_command_queue q = ocl_queue(ce->ocl);
-    const struct ocl_arg a[] = {
-        {sizeof(cl_mem), &ce->d_geo}, {sizeof(cl_mem), &ce->d_atlas}, {sizeof(cl_mem), &ce->d_order}, {sizeof(int), &npad}};
-    cl_int rc = clEnqueueWriteBuffer(q, ce->d_order, CL_TRUE, 0, global * sizeof *ce->order, ce->order, 0, NULL, NULL);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "upload of the bake's texel order: %s", ocl_errstr(rc));
-    if (ocl_set_args(ce->k_gather, "eye_bake_gather", a, 4, err)) return -1;
-    rc = clEnqueueNDRangeKernel(q, ce->k_gather, 1, NULL, &global, NULL, 0, NULL, NULL);
-    if (rc == CL_SUCCESS) rc = clFinish(q);
-    return rc == CL_SUCCESS ? 0 : fx_fail(err, "internal", "", "eye_bake_gather: %s", ocl_errstr(rc));
-}
-
-/* Lane-slots a view in texel order `order` keeps busy: each work-item as long as its costliest
- * texel (the costs of the last view; the padding costs nothing). */
-static double eye_order_work(const struct compound_eye *ce, const int *order, size_t npad)
-{
-    size_t texels = (size_t)ce->size * ce->size, lanes = (size_t)ce->lanes;
-    double work = 0;
-    for (size_t k0 = 0; k0 < npad; k0 += lanes) {
-        int most = 0;
-        for (size_t l = 0; l < lanes; l++) {
-            size_t t = (size_t)order[k0 + l];
-            most = t < texels && ce->cost[t] > most ? ce->cost[t] : most;
-        }
-        work += (double)most * (double)lanes;
-    }
-    return work;
-}
-
-/* After a view: its lane use (the costs' sum over the lane-slots its order kept busy), and the
- * order sorted by the costs (a stable counting sort: texels alike stay in atlas order, near their
- * neighbours; the padding last), taken for the next view when it saves more than EYE_REORDER_GAIN
- * of the lane-slots (laying the geometry out again costs about a tenth of a view). */
-#define EYE_REORDER_GAIN 0.05
-static int eye_bake_order(struct compound_eye *ce, struct fx_err *err)
-{
-    size_t texels = (size_t)ce->size * ce->size, npad = eye_items(ce, texels) * (size_t)ce->lanes;
-    size_t at[EYE_COST_MAX + 2] = {0};
-    double total = 0;
-    for (size_t k = 0; k < texels; k++) at[ce->cost[k] + 1]++;
-    for (int c = 1; c <= EYE_COST_MAX + 1; c++) {
-        total += (double)(c - 1) * (double)at[c];
-        at[c] += at[c - 1];
-    }
-    for (size_t k = 0; k < texels; k++) ce->sorted[at[ce->cost[k]]++] = (int)k;
-    for (size_t k = texels; k < npad; k++) ce->sorted[k] = (int)k;
-    double now = eye_order_work(ce, ce->order, npad), best = eye_order_work(ce, ce->sorted, npad);
-    ce->split.lane_use = now > 0 ? total / now : 1.0;
-    if (now <= best * (1.0 + EYE_REORDER_GAIN)) return 0;
-    int *t = ce->order;
-    ce->order = ce->sorted;
-    ce->sorted = t;
-    return eye_bake_reorder(ce, err);
-}
-
-/* A traced view's texels and costs read back (rgba in atlas order), and the next view's order. */
-static int eye_bake_finish(struct compound_eye *ce, float *rgba, struct fx_err *err)
-{
-    double t0 = clock_now();
-    size_t texels = (size_t)ce->size * ce->size;
-    cl_command_queue q = ocl_queue(ce->ocl);
-    cl_int rc = clEnqueueReadBuffer(q, ce->d_out, CL_TRUE, 0, texels * 4 * sizeof(float), rgba, 0, NULL, NULL);
-    if (rc == CL_SUCCESS) rc = clEnqueueReadBuffer(q, ce->d_cost, CL_TRUE, 0, texels, ce->cost, 0, NULL, NULL);
-    if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of eye_bake: %s", ocl_errstr(rc));
-    int r = eye_bake_order(ce, err);
-    ce->split.launch_read += (clock_now() - t0) * 1e3;
-    return r;
+    return eye_bake_layout(ce, err);
 }
 
 int compound_eye_bake_size(const struct compound_eye *ce) { return ce->size; }
@@ -644,8 +588,8 @@ static int eye_bake_start(struct compound_eye *ce, struct fx_err *err)
     cl_float4 dot = eye_f4(ce->pigment.dot, 1.0), base = eye_f4(ce->pigment.base, 0.0);
     int n = ce->size * ce->size, npad = (int)(eye_items(ce, (size_t)n) * (size_t)ce->lanes);
     const struct ocl_arg a[] = {
-        {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->d_cost}, {sizeof(cl_mem), &ce->d_geo},
-        {sizeof(cl_mem), &ce->d_order}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
+        {sizeof(cl_mem), &ce->d_out}, {sizeof(cl_mem), &ce->order.d_cost}, {sizeof(cl_mem), &ce->d_geo},
+        {sizeof(cl_mem), &ce->order.d_order}, {sizeof(cl_mem), &ce->d_pig}, {sizeof(int), &ce->pw}, {sizeof(int), &ce->ph},
         {sizeof ce->optics, &ce->optics}, {sizeof s, &s}, {sizeof dot, &dot}, {sizeof base, &base}, {sizeof(int), &n},
         {sizeof(int), &npad}};
     ce->done = 0;
@@ -660,8 +604,12 @@ static int eye_bake_slice(struct compound_eye *ce, float *rgba, double slice_end
         if (eye_bake_start(ce, err)) return -1;
         ce->busy = EYE_TRACING;
     }
-    int rc = eye_run(ce, ce->k_bake, "eye_bake", (size_t)ce->size * ce->size, ce->d_out, NULL, slice_end, err);
-    if (!rc && eye_bake_finish(ce, rgba, err)) rc = -1;
+    size_t texels = (size_t)ce->size * ce->size;
+    int rc = eye_run(ce, ce->k_bake, "eye_bake", texels, slice_end, err);
+    if (!rc) {
+        int changed = eye_run_finish(ce, ce->d_out, rgba, texels, err);
+        rc = changed < 0 || (changed && eye_bake_layout(ce, err)) ? -1 : 0;
+    }
     if (rc <= 0) eye_abandon(ce);
     return rc;
 }
@@ -695,7 +643,7 @@ void compound_eye_free(struct compound_eye *ce)
 {
     if (!ce) return;
     eye_abandon(ce);
-    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out, ce->d_tiles, ce->d_atlas, ce->d_order, ce->d_cost};
+    cl_mem mems[] = {ce->d_pig, ce->d_lut, ce->d_geo, ce->d_out, ce->d_tiles, ce->d_atlas};
     for (size_t i = 0; i < sizeof mems / sizeof mems[0]; i++)
         if (mems[i]) clReleaseMemObject(mems[i]);
     if (ce->k_lut) clReleaseKernel(ce->k_lut);
@@ -704,9 +652,7 @@ void compound_eye_free(struct compound_eye *ce)
     free(ce->pig);
     free(ce->samples);
     free(ce->rgba);
-    free(ce->cost);
-    free(ce->order);
-    free(ce->sorted);
+    eye_order_free(&ce->order);
     fx_buf_free(&ce->table);
     fx_buf_free(&ce->exr);
     free(ce);

@@ -428,36 +428,46 @@ static void test_sliced_steps(void)
     }
 }
 
-/* A view's texels are traced in the order of what they cost the view before (compound_eye.c):
- * the second view of a stream, in that order, is the first, in atlas order, bit for bit, with
- * busier lanes; a third keeps the order. */
-static void test_bake_order(void)
+/* The rays are traced in the order of what they cost the run before (eye_order.h): a stream's
+ * second table or view, in that order, is its first, in index order, byte for byte, with busier
+ * lanes; a third keeps the order. */
+static void test_ray_order(void)
 {
-    cJSON *doc = params_defaults(compound_eye_params), *bake = NULL;
-    cJSON *partial = cJSON_Parse("{\"mode\":\"bake\",\"bake_size\":200,\"max_passes\":10}");
-    struct fx_err err = {0};
-    CHECK(params_merge(compound_eye_params, doc, partial, &bake, &err) == 0, "merge: %s", err.message);
-    struct compound_eye *ce = bake ? tek_new(bake, &err) : NULL;
-    CHECK(ce != NULL, "compound_eye_new: %s", err.message);
+    static const char *const partials[] = {"{\"lut_cells\":16,\"lut_dirs\":16,\"max_passes\":10}",
+                                           "{\"mode\":\"bake\",\"bake_size\":200,\"max_passes\":10}"};
     static float view[3][200 * 200 * 4];
-    struct compound_eye_split sp[3];
-    int ok = 1;
-    for (int v = 0; ce && ok && v < 3; v++) {
-        ok = compound_eye_bake(ce, view[v], &err) == 0;
-        compound_eye_split(ce, &sp[v]);
+    for (int i = 0; i < 2; i++) {
+        cJSON *doc = params_defaults(compound_eye_params), *p = cJSON_Parse(partials[i]), *full = NULL;
+        struct fx_err err = {0};
+        CHECK(params_merge(compound_eye_params, doc, p, &full, &err) == 0, "merge: %s", err.message);
+        struct compound_eye *ce = full ? tek_new(full, &err) : NULL;
+        CHECK(ce != NULL, "compound_eye_new: %s", err.message);
+        struct compound_eye_split sp[3];
+        uint8_t *table[3] = {0};
+        size_t len[3] = {0};
+        int ok = 1;
+        for (int v = 0; ce && ok && v < 3; v++) {
+            const void *data;
+            ok = i ? compound_eye_bake(ce, view[v], &err) == 0 : compound_eye_table(ce, &data, &len[v], &err) == 0;
+            if (ok && !i && (table[v] = malloc(len[v]))) memcpy(table[v], data, len[v]);
+            compound_eye_split(ce, &sp[v]);
+        }
+        CHECK(ok, "%s: %s", partials[i], err.message);
+        if (ce && ok) {
+            int same = i ? !memcmp(view[0], view[1], sizeof view[0]) && !memcmp(view[0], view[2], sizeof view[0])
+                         : table[0] && table[1] && table[2] && len[0] == len[1] && len[0] == len[2] &&
+                               !memcmp(table[0], table[1], len[0]) && !memcmp(table[0], table[2], len[0]);
+            CHECK(same, "%s: the products in index order and in cost order differ", partials[i]);
+            CHECK(sp[0].lane_use < 0.8 && sp[1].lane_use > 0.95 && sp[2].lane_use == sp[1].lane_use,
+                  "%s: lanes busy %.3f in index order, %.3f and %.3f in cost order", partials[i], sp[0].lane_use,
+                  sp[1].lane_use, sp[2].lane_use);
+        }
+        for (int v = 0; v < 3; v++) free(table[v]);
+        compound_eye_free(ce);
+        cJSON_Delete(doc);
+        cJSON_Delete(p);
+        cJSON_Delete(full);
     }
-    CHECK(ok, "bake: %s", err.message);
-    if (ce && ok) {
-        CHECK(!memcmp(view[0], view[1], sizeof view[0]) && !memcmp(view[0], view[2], sizeof view[0]),
-              "the views in atlas order and in cost order differ");
-        CHECK(sp[0].lane_use < 0.8 && sp[1].lane_use > 0.95 && sp[2].lane_use == sp[1].lane_use,
-              "lanes busy: %.3f in atlas order, %.3f and %.3f in cost order", sp[0].lane_use, sp[1].lane_use,
-              sp[2].lane_use);
-    }
-    compound_eye_free(ce);
-    cJSON_Delete(doc);
-    cJSON_Delete(partial);
-    cJSON_Delete(bake);
 }
 
 int main(void)
@@ -472,7 +482,7 @@ int main(void)
     RUN(test_table_matches_reference);
     RUN(test_atlas_gutters);
     RUN(test_sliced_steps);
-    RUN(test_bake_order);
+    RUN(test_ray_order);
     ocl_close(tek_ocl);
     return CHECK_DONE();
 }
