@@ -6,7 +6,7 @@
  * per kind for late subscribers, so all products travel together); "bake" renders the
  * model's view texture (eye_model.h) and emits a kind 2 EXR whenever anything changed.
  * A step with nothing new emits nothing. A table or view that would hold the engine past its
- * slice (effect.h) is traced a range of work-items at a time, each read back at once, and a
+ * slice (effect.h) is traced a range of work-items at a time, read back once whole, and a
  * table is then packed in pieces too (eye_lut.h): the same work-items compute the same
  * samples, so the products do not depend on the slicing. Both are computed only after a change
  * or a reset, which end the life of the frame emitted before (effect.h), so they are computed in
