@@ -10,8 +10,8 @@
  * from the caller's pixels: a line at a time by the CPU's F16C instructions where it has
  * them (exr_pack_f16c, the same halves, quiet NaNs for signalling ones), else by
  * OpenEXRCore's packer. RLE chunks are compressed by exr_rle.c (the same bytes as
- * OpenEXRCore's, several times faster), in the pipeline's own buffers. Library errors are captured by an error handler so the message reaches the
- * caller instead of stderr. */
+ * OpenEXRCore's, several times faster), in the pipeline's own buffers. Library errors are
+ * captured by an error handler so the message reaches the caller instead of stderr. */
 #include "exr.h"
 
 #include <stdint.h>
@@ -166,10 +166,9 @@ static exr_result_t exr_pack_f16c(exr_encode_pipeline_t *pipe)
     const int nch = pipe->channel_count, width = ch[0].width;
     const uint8_t *row = ch[0].encode_from_ptr; /* the chunk's first pixel: its first channel in memory */
     for (int c = 1; c < nch; c++) row = ch[c].encode_from_ptr < row ? ch[c].encode_from_ptr : row;
-    size_t line = (size_t)width * (size_t)nch;
-    if (nch > 4 || exr_pipe_reserve(&pipe->scratch_buffer_2, &pipe->scratch_alloc_size_2, line * sizeof(uint16_t)))
+    size_t line = (size_t)width * (size_t)nch, at[4]; /* 1 or 4 channels (exr_check_image) */
+    if (exr_pipe_reserve(&pipe->scratch_buffer_2, &pipe->scratch_alloc_size_2, line * sizeof(uint16_t)))
         return EXR_ERR_OUT_OF_MEMORY;
-    size_t at[4];
     for (int c = 0; c < nch; c++) at[c] = (size_t)(ch[c].encode_from_ptr - row) / sizeof(float);
     uint16_t *h = pipe->scratch_buffer_2, *dst = pipe->packed_buffer;
     for (int y = 0; y < pipe->chunk.height; y++, row += ch[0].user_line_stride) {

@@ -20,8 +20,8 @@
 #define EYE_MISSED 1   /* never reaches the pigment: upward exit (G9), or TIR policy/bounce limit */
 #define EYE_ABSORBED 2 /* TIR under policy "absorb": reads as pigment */
 
-/* A baked texel's cost, as eye_bake writes it for the host's next texel order (the keys of a
- * counting sort: work-items of texels alike run alike) */
+/* What a ray cost, as the kernels write it for the host's next order (eye_order.h: the keys of
+ * a counting sort, so that a work-item's rays run alike); a table sample sums its sub-rays' */
 #define EYE_COST_BARE 0    /* no model surface */
 #define EYE_COST_COVERED 1 /* surface seen edge-on or from behind: not traced */
 #define EYE_COST_TRACED 2  /* traced, no lens entered */
