@@ -1,16 +1,16 @@
 /* bench_eye.c — performance of effect compound_eye through PoCL (or any OpenCL device).
  *
  * One line per figure, the targets of the performance issue beside theirs: the default lens
- * table (a stream's second, in cost order, and its first beside it), then where its time goes (compound_eye_split: the kernel, its launch and read-back,
- * the packing stages, and the pigment tile made when parameters are set); the tracer's rays
- * per second (random rays on the default optics, l = 8); and bake frames per second on the
- * built-in hemisphere, 512² at l = 10 first (the target), then 512² and 1024² at l = 0, 3 and
- * 10: the whole frame as the stream sends it (kernel, read-back and the EXR encoding with the
- * default compression), each with its split. A view's texels are traced in the order of what
- * they cost the view before (compound_eye.c): each run makes a new stream, whose first view
- * runs in atlas order and second in cost order, so both are measured side by side, the second
- * as the figure. Times are the best of several runs, the median beside it (the machine is
- * shared); a split is the best run's. */
+ * table, then where its time goes (compound_eye_split: the kernel, its launch, read-back and
+ * ordering, the packing stages, the share of its lanes that did work, and the pigment tile
+ * made when parameters are set); the tracer's rays per second (random rays on the default
+ * optics, l = 8); and bake frames per second on the built-in hemisphere, 512² at l = 10 first
+ * (the target), then 512² and 1024² at l = 0, 3 and 10: the whole frame as the stream sends
+ * it (kernel, read-back and the EXR encoding with the default compression), each with its
+ * split. A stream traces its rays in the order of what they cost its run before (eye_order.h),
+ * so each run makes a new stream and measures its first table or view (index order) and its
+ * second (cost order, the figure) side by side. Times are the best of several runs, the
+ * median beside it (the machine is shared); a split is the best run's. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
