@@ -22,6 +22,7 @@
 #include <openexr.h>
 
 #if defined(__x86_64__)
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 
@@ -185,7 +186,9 @@ static exr_result_t exr_pack_f16c(exr_encode_pipeline_t *pipe)
 static void exr_choose_pack(exr_encode_pipeline_t *pipe)
 {
 #if defined(__x86_64__)
-    if (__builtin_cpu_supports("f16c")) pipe->convert_and_pack_fn = exr_pack_f16c;
+    unsigned a, b, c, d; /* F16C: CPUID leaf 1 (the compilers' cpu_supports do not all name it) */
+    if (__builtin_cpu_supports("avx") && __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C))
+        pipe->convert_and_pack_fn = exr_pack_f16c;
 #else
     (void)pipe;
 #endif
