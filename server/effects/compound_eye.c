@@ -10,9 +10,9 @@
  * table is then packed in pieces too (eye_lut.h): the same work-items compute the same
  * samples, so the products do not depend on the slicing. Both are computed only after a change
  * or a reset, which end the life of the frame emitted before (effect.h), so they are computed in
- * place of its table or texels. Both trace their rays in the order of what each cost the run
- * before (eye_order.h: on the default view 2.7 passes a traced texel, but 5.2 for the slowest of
- * 16 neighbours in atlas order); the first run of a size goes in index order. */
+ * place of its table or texels. On a CPU both trace their rays in the order of what each cost
+ * the run before (eye_order.h: on the default view 2.7 passes a traced texel, but 5.2 for the
+ * slowest of 16 neighbours in atlas order); the first run of a size goes in index order. */
 #include "compound_eye.h"
 
 #include <math.h>

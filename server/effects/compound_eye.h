@@ -54,7 +54,7 @@ int compound_eye_bake_size(const struct compound_eye *ce);
  * stages (eye_lut.h: atlas layout, macro map, zstd). */
 struct compound_eye_split {
     double kernel, launch_read, pigment, atlas, macro, zstd;
-    double lane_use; /* a view: the share of its lane-slots that did work (compound_eye.c) */
+    double lane_use; /* the share of its lane-slots that did work (eye_order.h; NAN: a GPU, index order) */
 };
 void compound_eye_split(const struct compound_eye *ce, struct compound_eye_split *out);
 

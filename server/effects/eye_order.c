@@ -6,6 +6,7 @@
  * saves EYE_ORDER_GAIN of the lane-slots; a run in the order it already uses changes nothing. */
 #include "eye_order.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -34,7 +35,7 @@ int eye_order_reset(struct eye_order *o, struct ocl *ocl, size_t n, size_t npad,
 {
     cl_int rc = CL_SUCCESS, rc2 = CL_SUCCESS;
     eye_order_free(o);
-    *o = (struct eye_order){.n = n, .npad = npad, .lanes = lanes, .lane_use = 1.0};
+    *o = (struct eye_order){.n = n, .npad = npad, .lanes = lanes, .sorting = ocl_is_cpu(ocl), .lane_use = NAN};
     o->order = malloc(npad * sizeof *o->order);
     o->sorted = malloc(npad * sizeof *o->sorted);
     o->cost = malloc(n ? n : 1);
@@ -66,6 +67,7 @@ int eye_order_update(struct eye_order *o, struct ocl *ocl, struct fx_err *err)
 {
     size_t at[EYE_COST_MAX + 2] = {0};
     double total = 0;
+    if (!o->sorting) return 0;
     cl_int rc = clEnqueueReadBuffer(ocl_queue(ocl), o->d_cost, CL_TRUE, 0, o->n, o->cost, 0, NULL, NULL);
     if (rc != CL_SUCCESS) return fx_fail(err, "internal", "", "read-back of the rays' costs: %s", ocl_errstr(rc));
     for (size_t k = 0; k < o->n; k++) at[o->cost[k] + 1]++;

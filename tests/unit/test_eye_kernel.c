@@ -430,7 +430,7 @@ static void test_sliced_steps(void)
 
 /* The rays are traced in the order of what they cost the run before (eye_order.h): a stream's
  * second table or view, in that order, is its first, in index order, byte for byte, with busier
- * lanes; a third keeps the order. */
+ * lanes; a third keeps the order. A GPU device keeps index order (no lanes measured). */
 static void test_ray_order(void)
 {
     static const char *const partials[] = {"{\"lut_cells\":16,\"lut_dirs\":16,\"max_passes\":10}",
@@ -458,9 +458,14 @@ static void test_ray_order(void)
                          : table[0] && table[1] && table[2] && len[0] == len[1] && len[0] == len[2] &&
                                !memcmp(table[0], table[1], len[0]) && !memcmp(table[0], table[2], len[0]);
             CHECK(same, "%s: the products in index order and in cost order differ", partials[i]);
-            CHECK(sp[0].lane_use < 0.8 && sp[1].lane_use > 0.95 && sp[2].lane_use == sp[1].lane_use,
-                  "%s: lanes busy %.3f in index order, %.3f and %.3f in cost order", partials[i], sp[0].lane_use,
-                  sp[1].lane_use, sp[2].lane_use);
+            if (ocl_is_cpu(tek_ocl))
+                CHECK(sp[0].lane_use < 0.8 && sp[1].lane_use > 0.95 && sp[2].lane_use == sp[1].lane_use,
+                      "%s: lanes busy %.3f in index order, %.3f and %.3f in cost order", partials[i], sp[0].lane_use,
+                      sp[1].lane_use, sp[2].lane_use);
+            else
+                CHECK(isnan(sp[0].lane_use) && isnan(sp[1].lane_use) && isnan(sp[2].lane_use),
+                      "%s: a GPU sorted its rays (lanes busy %.3f, %.3f, %.3f)", partials[i], sp[0].lane_use,
+                      sp[1].lane_use, sp[2].lane_use);
         }
         for (int v = 0; v < 3; v++) free(table[v]);
         compound_eye_free(ce);
