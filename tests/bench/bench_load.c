@@ -19,6 +19,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <signal.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -249,6 +250,9 @@ struct bl_capacity {
     size_t msg;
 };
 
+/* Whether pair r measured the daemon against a raw writer that moved at least as many bytes. */
+static bool bl_pair_valid(const struct bl_capacity *c, int r) { return c->raw[r] > 0 && c->cap[r] <= c->raw[r]; }
+
 static void bl_capacity(struct trial_target *tg, int port, const struct trial_search *tx, struct bl_capacity *c)
 {
     struct trial_result one = {0};
@@ -262,7 +266,7 @@ static void bl_capacity(struct trial_target *tg, int port, const struct trial_se
     for (int r = 0; c->msg && c->valid < BL_PAIRS && r < BL_PAIRS_MAX; r++, c->tried++) {
         c->raw[r] = bl_raw_loopback(BL_DRAIN_N, c->msg, TRIAL_WINDOW_S);
         c->cap[r] = bl_drain(port, "bench_tex", BL_DRAIN_N, TRIAL_WINDOW_S, &c->drained[r]);
-        if (c->raw[r] > 0 && c->cap[r] <= c->raw[r]) {
+        if (bl_pair_valid(c, r)) {
             c->valid++;
             c->raw_sum += c->raw[r];
             c->cap_sum += c->cap[r];
@@ -285,7 +289,7 @@ static void bl_report_capacity(const struct bl_capacity *c)
                "%.0f MB/s; server send capacity, %d subscribers of bench_tex that only drain their sockets: %.0f MB/s = "
                "%.1f%% of it%s\n", r + 1, BL_DRAIN_N, c->msg, c->raw[r], c->drained[r], c->cap[r],
                c->raw[r] > 0 ? 100 * c->cap[r] / c->raw[r] : 0,
-               c->raw[r] > 0 && c->cap[r] <= c->raw[r] ? "" : " (set aside: the machine's speed moved)");
+               bl_pair_valid(c, r) ? "" : " (set aside: the machine's speed moved)");
     if (!c->valid) {
         printf("bench_load: send capacity not measured (no valid pair in %d)\n", c->tried);
         return;
